@@ -1,0 +1,111 @@
+"""The slot-block record: what the engine yields and what every sink and reader speaks.
+
+Arrays use 0-based arm and state indices; files and people see them from 1 (the sinks add 1,
+the reader subtracts it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ._version import __version__
+from .errors import ConfigError
+from .instance import Instance
+from .policies import PolicySpec
+
+#: Per-slot columns of a block, in log order.
+SCALAR_FIELDS = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "override")
+ARM_FIELDS = ("mu_hat", "pulls", "candidates")
+FIELDS = ("t",) + SCALAR_FIELDS + ARM_FIELDS
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything that determines a run: with it, a log replays with nothing else."""
+
+    instance: Instance
+    policy: PolicySpec
+    seed: int
+    horizon: int
+    version: str = __version__
+
+    def __post_init__(self) -> None:
+        check_horizon(self.horizon)
+        check_seed(self.seed)
+
+    @property
+    def label(self) -> str:
+        return f"{self.policy.name}-{self.instance.name}-s{self.seed}"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "instance": self.instance.to_dict(),
+            "policy": self.policy.to_dict(),
+            "seed": int(self.seed),
+            "horizon": int(self.horizon),
+            "version": self.version,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunConfig:
+        return cls(
+            instance=Instance.from_dict(data["instance"], where="run configuration"),
+            policy=PolicySpec.from_dict(data["policy"]),
+            seed=int(data["seed"]),
+            horizon=int(data["horizon"]),
+            version=str(data.get("version", "unknown")),
+        )
+
+
+def check_horizon(horizon: int) -> None:
+    if not isinstance(horizon, (int, np.integer)) or horizon < 1:
+        raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
+
+
+def check_seed(seed: int) -> None:
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+
+
+@dataclass
+class SlotBlock:
+    """Consecutive slots of one run. Shapes: (B,) per slot, (B, K) per slot and arm.
+
+    ``mu_hat`` and ``pulls`` are after the slot's update; ``candidates`` is the set the arm
+    was chosen from (A_t + {k_emp} for the correlated policies, every arm otherwise);
+    ``override`` says that the AoI-aware rule chose the arm; ``regret`` is the pathwise
+    regret sum(aoi - oracle_aoi) up to the slot; ``estimator`` the paper's
+    sum(aoi) - t / mu*.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    arm: np.ndarray
+    success: np.ndarray
+    aoi: np.ndarray
+    oracle_aoi: np.ndarray
+    regret: np.ndarray
+    estimator: np.ndarray
+    override: np.ndarray
+    mu_hat: np.ndarray
+    pulls: np.ndarray
+    candidates: np.ndarray
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def column(self, name: str) -> np.ndarray:
+        return getattr(self, name)  # type: ignore[no-any-return]
+
+    @classmethod
+    def concat(cls, blocks: list[SlotBlock]) -> SlotBlock:
+        if not blocks:
+            raise ValueError("no blocks to concatenate")
+        return cls(**{f: np.concatenate([b.column(f) for b in blocks]) for f in FIELDS})
+
+    def equals(self, other: SlotBlock) -> bool:
+        return all(np.array_equal(self.column(f), other.column(f)) for f in FIELDS)

@@ -1,0 +1,203 @@
+"""The simulation engine: many runs of one policy, block by block, in compiled code.
+
+Randomness: run ``i`` of a batch started at ``seed`` uses the integer seed ``seed + i``;
+``SeedSequence(seed).spawn(2)`` gives its latent stream and its policy stream (both SFC64).
+So the hidden path of a run depends on (instance, seed) only -- every policy sees the same
+X path (common random numbers) -- and run ``i`` of a sweep is exactly the run that
+``corraoi record --seed <seed + i>`` records.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _kernel
+from .block import SlotBlock, check_horizon, check_seed
+from .errors import ConfigError
+from .instance import Instance
+from .policies import PolicySpec
+from .theory import analyse, policy_pseudo_rewards
+
+DEFAULT_BLOCK = 1000
+
+
+def streams_for_seed(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(latent, policy) SFC64 states for one integer seed, as NumPy would seed them."""
+    lat_ss, pol_ss = np.random.SeedSequence(int(seed)).spawn(2)
+    lat = np.random.SFC64(lat_ss).state["state"]["state"]
+    pol = np.random.SFC64(pol_ss).state["state"]["state"]
+    return np.array(lat, dtype=np.uint64), np.array(pol, dtype=np.uint64)
+
+
+@dataclass
+class RunsBlock:
+    """Consecutive slots of R runs: arrays (R, B) and (R, B, K)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    arm: np.ndarray
+    success: np.ndarray
+    aoi: np.ndarray
+    oracle_aoi: np.ndarray
+    regret: np.ndarray
+    estimator: np.ndarray
+    override: np.ndarray
+    mu_hat: np.ndarray
+    pulls: np.ndarray
+    candidates: np.ndarray
+
+    def run(self, i: int) -> SlotBlock:
+        return SlotBlock(
+            t=self.t,
+            x=self.x[i],
+            arm=self.arm[i],
+            success=self.success[i],
+            aoi=self.aoi[i],
+            oracle_aoi=self.oracle_aoi[i],
+            regret=self.regret[i],
+            estimator=self.estimator[i],
+            override=self.override[i],
+            mu_hat=self.mu_hat[i],
+            pulls=self.pulls[i],
+            candidates=self.candidates[i],
+        )
+
+
+class Simulation:
+    """The state of R runs of one policy on one instance, advanced by :meth:`advance`."""
+
+    def __init__(
+        self, instance: Instance, policy: PolicySpec, seeds: Sequence[int], horizon: int
+    ) -> None:
+        check_horizon(horizon)
+        if len(seeds) < 1:
+            raise ConfigError("at least one run is needed (runs must be >= 1)")
+        for s in seeds:
+            check_seed(s)
+        self.instance = instance
+        self.policy = policy
+        self.seeds = [int(s) for s in seeds]
+        self.horizon = int(horizon)
+        theory = analyse(instance)
+        self.best = theory.best_arm
+        self.mu_star = theory.mu_star
+        if self.mu_star <= 0:
+            raise ConfigError(
+                f"instance {instance.name}: every arm has mean 0, the AoI grows without bound "
+                "and regret is not defined"
+            )
+        R, K = len(self.seeds), instance.K
+        self._cdf = np.cumsum(instance.p)
+        self._Y = np.ascontiguousarray(instance.Y, dtype=np.int8)
+        self._spol = np.ascontiguousarray(policy_pseudo_rewards(instance))
+        self.lat = np.empty((R, 4), dtype=np.uint64)
+        self.pol = np.empty((R, 4), dtype=np.uint64)
+        for i, s in enumerate(self.seeds):
+            self.lat[i], self.pol[i] = streams_for_seed(s)
+        self.ncache = np.zeros((R, 2))
+        self.pulls = np.zeros((R, K), dtype=np.int64)
+        self.succ = np.zeros((R, K), dtype=np.int64)
+        self.aoi = np.ones(R, dtype=np.int64)
+        self.oracle_aoi = np.ones(R, dtype=np.int64)
+        self.regret = np.zeros(R, dtype=np.int64)
+        self.aoisum = np.zeros(R, dtype=np.int64)
+        self.t = 0
+
+    @property
+    def runs(self) -> int:
+        return len(self.seeds)
+
+    @property
+    def estimator(self) -> np.ndarray:
+        """The paper's estimator sum(aoi) - t / mu* of each run, at the current slot."""
+        return self.aoisum - self.t / self.mu_star
+
+    def advance(self, nslots: int, *, record: bool = True) -> RunsBlock | None:
+        """Simulate the next ``nslots`` slots (capped at the horizon) of every run."""
+        nslots = min(int(nslots), self.horizon - self.t)
+        if nslots <= 0:
+            return None
+        R, K = self.pulls.shape
+        B = nslots if record else 0
+        o_x = np.empty((R, B), dtype=np.int16)
+        o_arm = np.empty((R, B), dtype=np.int16)
+        o_succ = np.empty((R, B), dtype=np.bool_)
+        o_aoi = np.empty((R, B), dtype=np.int64)
+        o_oaoi = np.empty((R, B), dtype=np.int64)
+        o_regret = np.empty((R, B), dtype=np.int64)
+        o_override = np.empty((R, B), dtype=np.bool_)
+        o_cand = np.empty((R, B, K), dtype=np.bool_)
+        o_pulls = np.empty((R, B, K), dtype=np.int64)
+        o_muhat = np.empty((R, B, K), dtype=np.float64)
+        aoisum_before = self.aoisum.copy() if record else None
+        p = self.policy
+        _kernel.advance(
+            self._cdf, self._Y, self._spol, self.best,
+            p.base, p.correlated, p.aoi_aware, p.c, p.beta,
+            self.t, nslots,
+            self.lat, self.pol, self.ncache, self.pulls, self.succ,
+            self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+            record, o_x, o_arm, o_succ, o_aoi, o_oaoi, o_regret, o_override,
+            o_cand, o_pulls, o_muhat,
+        )  # fmt: skip
+        t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)
+        self.t += nslots
+        if not record:
+            return None
+        assert aoisum_before is not None
+        estimator = aoisum_before[:, None] + np.cumsum(o_aoi, axis=1) - t[None, :] / self.mu_star
+        return RunsBlock(
+            t=t,
+            x=o_x.astype(np.int64),
+            arm=o_arm.astype(np.int64),
+            success=o_succ,
+            aoi=o_aoi,
+            oracle_aoi=o_oaoi,
+            regret=o_regret,
+            estimator=estimator,
+            override=o_override,
+            mu_hat=o_muhat,
+            pulls=o_pulls,
+            candidates=o_cand,
+        )
+
+
+def simulate(
+    instance: Instance,
+    policy: PolicySpec,
+    seeds: Sequence[int],
+    horizon: int,
+    *,
+    block: int = DEFAULT_BLOCK,
+) -> Iterator[RunsBlock]:
+    """Yield blocks of ``block`` consecutive slots of every run until the horizon."""
+    if block < 1:
+        raise ConfigError(f"block size must be >= 1, got {block}")
+    sim = Simulation(instance, policy, seeds, horizon)
+    while (out := sim.advance(block)) is not None:
+        yield out
+
+
+def simulate_run(
+    instance: Instance, policy: PolicySpec, seed: int, horizon: int, *, block: int = DEFAULT_BLOCK
+) -> Iterator[SlotBlock]:
+    """One run, block by block (what ``corraoi record`` streams to its sinks)."""
+    for b in simulate(instance, policy, [seed], horizon, block=block):
+        yield b.run(0)
+
+
+def set_workers(workers: int | None) -> int:
+    """Use ``workers`` threads in the kernel (default: every core). Returns the count used."""
+    import numba
+
+    top = numba.config.NUMBA_NUM_THREADS
+    if workers is None:
+        workers = top
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
+    workers = min(int(workers), top)
+    numba.set_num_threads(workers)
+    return workers

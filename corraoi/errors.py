@@ -1,0 +1,31 @@
+"""Typed errors. Each says what was expected and what came; the CLI prints one line."""
+
+from __future__ import annotations
+
+
+class CorraoiError(Exception):
+    """Base class of every error corraoi raises on purpose.
+
+    ``exit_code`` is what the CLI exits with: 2 for usage errors (bad input named on the
+    command line), 1 for failures while working.
+    """
+
+    exit_code = 1
+
+
+class UsageError(CorraoiError):
+    """A bad argument, option value or input file."""
+
+    exit_code = 2
+
+
+class InstanceError(UsageError):
+    """A malformed instance (file or arrays)."""
+
+
+class PolicyError(UsageError):
+    """An unknown policy or a bad policy parameter."""
+
+
+class ConfigError(UsageError):
+    """A bad run setting (horizon, runs, seed, ...)."""

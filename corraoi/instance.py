@@ -1,0 +1,268 @@
+"""Correlated bandit instances: the distribution ``p`` of the hidden state and the 0/1 table ``Y``.
+
+Internally arms and states are numbered from 0; everything a person or a file sees numbers
+them from 1 (``arm_names`` default to ``"1".."K"``).
+
+Two file formats are read:
+
+* the community text format: line 1 is ``p`` (space-separated), then one line per arm with
+  ``Y_k(x)`` as space-separated 0/1 (blank lines and ``#`` comments are ignored);
+* JSON (``.json``) or TOML (``.toml``), self-describing::
+
+      name = "I1"
+      p = [0.2, 0.3, 0.3, 0.2]
+      Y = [[1, 0, 0, 0], [0, 1, 1, 0], [0, 0, 1, 1], [0, 0, 0, 1]]
+      arms = ["los", "nlos-a", "nlos-b", "relay"]      # optional
+      states = ["clear", "rain", "fog", "crowd"]      # optional
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InstanceError
+
+P_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Instance:
+    """A validated correlated bandit instance. ``Y`` has shape (K, n), ``p`` shape (n,)."""
+
+    name: str
+    p: np.ndarray
+    Y: np.ndarray
+    arm_names: tuple[str, ...] = field(default=())
+    state_names: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.p, dtype=np.float64)
+        Y = np.asarray(self.Y)
+        where = self.name
+        if p.ndim != 1 or p.size == 0:
+            raise InstanceError(f"{where}: p must be a non-empty vector, got shape {p.shape}")
+        if Y.ndim != 2:
+            raise InstanceError(f"{where}: Y must be a K x n table, got shape {Y.shape}")
+        if not np.all(np.isfinite(p)) or np.any(p < 0):
+            raise InstanceError(f"{where}: probabilities must be finite and >= 0, got {p.tolist()}")
+        if abs(float(p.sum()) - 1.0) > P_TOLERANCE:
+            raise InstanceError(
+                f"{where}: probabilities must sum to 1 (within {P_TOLERANCE:g}), "
+                f"they sum to {float(p.sum())!r}"
+            )
+        if Y.shape[0] < 2:
+            raise InstanceError(f"{where}: an instance needs at least 2 arms, got {Y.shape[0]}")
+        if Y.shape[1] != p.size:
+            raise InstanceError(
+                f"{where}: each arm needs {p.size} rewards (one per state), got {Y.shape[1]}"
+            )
+        if not np.all((Y == 0) | (Y == 1)):
+            raise InstanceError(f"{where}: rewards Y must be 0 or 1")
+        arms = tuple(self.arm_names) or tuple(str(k + 1) for k in range(Y.shape[0]))
+        states = tuple(self.state_names) or tuple(f"x{x + 1}" for x in range(p.size))
+        if len(arms) != Y.shape[0]:
+            raise InstanceError(f"{where}: {len(arms)} arm names for {Y.shape[0]} arms")
+        if len(states) != p.size:
+            raise InstanceError(f"{where}: {len(states)} state names for {p.size} states")
+        p = p.copy()
+        Yi = Y.astype(np.int8)
+        p.setflags(write=False)
+        Yi.setflags(write=False)
+        object.__setattr__(self, "p", p)
+        object.__setattr__(self, "Y", Yi)
+        object.__setattr__(self, "arm_names", arms)
+        object.__setattr__(self, "state_names", states)
+
+    @property
+    def K(self) -> int:  # noqa: N802 - the paper's notation
+        return int(self.Y.shape[0])
+
+    @property
+    def n_states(self) -> int:
+        return int(self.p.size)
+
+    @property
+    def mu(self) -> np.ndarray:
+        """Mean reward of each arm, ``mu_k = sum_x p_x Y[k, x]``."""
+        return self.Y.astype(np.float64) @ self.p
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Instance):
+            return NotImplemented
+        return (
+            self.name == other.name
+            and np.array_equal(self.p, other.p)
+            and np.array_equal(self.Y, other.Y)
+            and self.arm_names == other.arm_names
+            and self.state_names == other.state_names
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.p.tobytes(), self.Y.tobytes()))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description; ``from_dict`` inverts it exactly."""
+        return {
+            "name": self.name,
+            "p": [float(v) for v in self.p],
+            "Y": self.Y.astype(int).tolist(),
+            "arms": list(self.arm_names),
+            "states": list(self.state_names),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, where: str = "instance") -> Instance:
+        if not isinstance(data, dict):
+            raise InstanceError(f"{where}: expected a table with keys p and Y")
+        missing = [k for k in ("p", "Y") if k not in data]
+        if missing:
+            raise InstanceError(f"{where}: missing key(s) {', '.join(missing)} (expected p and Y)")
+        p, Y = data["p"], data["Y"]
+        if not isinstance(p, list) or not all(_is_number(v) for v in p):
+            raise InstanceError(f"{where}: p must be a list of numbers")
+        if not isinstance(Y, list) or not all(isinstance(r, list) for r in Y):
+            raise InstanceError(f"{where}: Y must be a list of rows (one list per arm)")
+        for k, row in enumerate(Y):
+            if len(row) != len(p):
+                raise InstanceError(
+                    f"{where}: Y row {k + 1} has {len(row)} entries, expected {len(p)} "
+                    "(one per state)"
+                )
+            bad = [v for v in row if not _is_number(v) or v not in (0, 1)]
+            if bad:
+                raise InstanceError(f"{where}: Y row {k + 1}: reward {bad[0]!r} is not 0 or 1")
+        return cls(
+            name=str(data.get("name", where)),
+            p=np.array(p, dtype=np.float64),
+            Y=np.array(Y, dtype=np.int64).reshape(len(Y), len(p)),
+            arm_names=tuple(str(a) for a in data.get("arms", ()) or ()),
+            state_names=tuple(str(s) for s in data.get("states", ()) or ()),
+        )
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(float(v))
+
+
+BUILTINS: dict[str, dict[str, Any]] = {
+    "I1": {
+        "name": "I1",
+        "p": [0.2, 0.3, 0.3, 0.2],
+        "Y": [[1, 0, 0, 0], [0, 1, 1, 0], [0, 0, 1, 1], [0, 0, 0, 1]],
+    },
+    "I2": {
+        "name": "I2",
+        "p": [0.1, 0.1, 0.5, 0.3],
+        "Y": [[1, 0, 0, 0], [1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]],
+    },
+}
+
+
+def builtin_names() -> list[str]:
+    return list(BUILTINS)
+
+
+def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
+    """A built-in name (``I1``, ``I2``, case-insensitive) or a path to an instance file."""
+    if isinstance(spec, Instance):
+        return spec
+    text = os.fspath(spec)
+    for name, data in BUILTINS.items():
+        if text.upper() == name:
+            return Instance.from_dict(data, where=name)
+    path = Path(text)
+    if not path.exists():
+        known = ", ".join(BUILTINS)
+        raise InstanceError(f"{text}: no such instance file (built-in instances: {known})")
+    if path.is_dir():
+        raise InstanceError(f"{text}: is a directory, expected an instance file")
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InstanceError(f"{text}: cannot read instance file: {exc}") from None
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        try:
+            data = json.loads(raw)
+        except json.JSONDecodeError as exc:
+            raise InstanceError(f"{text}:{exc.lineno}: invalid JSON: {exc.msg}") from None
+        return _named(Instance.from_dict(data, where=text), data, path)
+    if suffix == ".toml":
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            raise InstanceError(f"{text}: TOML instances need Python >= 3.11") from None
+        try:
+            data = tomllib.loads(raw)
+        except tomllib.TOMLDecodeError as exc:
+            raise InstanceError(f"{text}: invalid TOML: {exc}") from None
+        return _named(Instance.from_dict(data, where=text), data, path)
+    return parse_text_instance(raw, where=text, name=path.stem)
+
+
+def _named(inst: Instance, data: dict[str, Any], path: Path) -> Instance:
+    if "name" in data:
+        return inst
+    return Instance(path.stem, inst.p, inst.Y, inst.arm_names, inst.state_names)
+
+
+def parse_text_instance(raw: str, *, where: str = "<text>", name: str = "instance") -> Instance:
+    """Parse the community text format, naming file and line in every error."""
+    rows: list[tuple[int, list[str]]] = []
+    for lineno, line in enumerate(raw.splitlines(), start=1):
+        body = line.split("#", 1)[0].strip()
+        if body:
+            rows.append((lineno, body.replace(",", " ").split()))
+    if not rows:
+        raise InstanceError(f"{where}: empty instance file (expected p on line 1, then Y rows)")
+    p_line, p_tokens = rows[0]
+    p_vals: list[float] = []
+    for tok in p_tokens:
+        try:
+            v = float(tok)
+        except ValueError:
+            raise InstanceError(
+                f"{where}:{p_line}: probability {tok!r} is not a number"
+            ) from None
+        if not math.isfinite(v) or v < 0:
+            raise InstanceError(f"{where}:{p_line}: probability {tok!r} must be >= 0")
+        p_vals.append(v)
+    total = math.fsum(p_vals)
+    if abs(total - 1.0) > P_TOLERANCE:
+        raise InstanceError(
+            f"{where}:{p_line}: probabilities sum to {total!r}, expected 1 "
+            f"(within {P_TOLERANCE:g})"
+        )
+    if len(rows) < 3:
+        raise InstanceError(
+            f"{where}: {len(rows) - 1} arm row(s), an instance needs at least 2 arms"
+        )
+    Y: list[list[int]] = []
+    for lineno, tokens in rows[1:]:
+        if len(tokens) != len(p_vals):
+            raise InstanceError(
+                f"{where}:{lineno}: {len(tokens)} rewards, expected {len(p_vals)} "
+                "(one per state, as many as probabilities on line "
+                f"{p_line})"
+            )
+        row = []
+        for tok in tokens:
+            if tok not in ("0", "1"):
+                raise InstanceError(f"{where}:{lineno}: reward {tok!r} is not 0 or 1")
+            row.append(int(tok))
+        Y.append(row)
+    return Instance(name=name, p=np.array(p_vals), Y=np.array(Y, dtype=np.int64))
+
+
+def format_text_instance(inst: Instance) -> str:
+    """The community text format of an instance (round-trips through ``parse_text_instance``)."""
+    lines = [" ".join(repr(float(v)) for v in inst.p)]
+    lines += [" ".join(str(int(v)) for v in row) for row in inst.Y]
+    return "\n".join(lines) + "\n"

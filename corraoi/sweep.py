@@ -1,0 +1,163 @@
+"""Monte Carlo sweeps: every policy over the same paired seeds, summarised with 95% CIs."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .engine import Simulation
+from .errors import ConfigError
+from .instance import Instance
+from .policies import PolicySpec
+from .theory import analyse
+
+# Student t 0.975 quantiles for 1..30 degrees of freedom.
+_T975 = (
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+    2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+)  # fmt: skip
+
+
+def t975(df: int) -> float:
+    """Two-sided 95% Student t quantile (table to 30 df, Cornish-Fisher beyond)."""
+    if df < 1:
+        return math.nan
+    if df <= 30:
+        return _T975[df - 1]
+    z = 1.959963984540054
+    return z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
+
+
+def mean_ci95(values: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and 95% CI half-width (Student t) along ``axis``; half-width NaN for one value."""
+    values = np.asarray(values, dtype=np.float64)
+    n = values.shape[axis]
+    mean = values.mean(axis=axis)
+    if n < 2:
+        return mean, np.full_like(mean, np.nan)
+    sd = values.std(axis=axis, ddof=1)
+    return mean, t975(n - 1) * sd / math.sqrt(n)
+
+
+@dataclass
+class PolicyResult:
+    """Final figures of one policy over all runs of a sweep."""
+
+    policy: PolicySpec
+    regret: np.ndarray  # (R,) pathwise regret at T
+    estimator: np.ndarray  # (R,) sum(aoi) - T / mu*
+    pulls: np.ndarray  # (R, K)
+    best_arm: int
+    wall_s: float
+
+    def summary(self) -> dict[str, Any]:
+        m, h = mean_ci95(self.regret)
+        em, eh = mean_ci95(self.estimator)
+        total = self.pulls.sum(axis=1)
+        share = float((self.pulls[:, self.best_arm] / total).mean())
+        return {
+            "regret_mean": float(m),
+            "regret_ci95": _finite(float(h)),
+            "estimator_mean": float(em),
+            "estimator_ci95": _finite(float(eh)),
+            "best_arm_share": share,
+            "pulls_mean": [float(v) for v in self.pulls.mean(axis=0)],
+            "wall_s": round(self.wall_s, 4),
+        }
+
+
+def _finite(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
+#: Called after each checkpoint with (policy, simulation) and once more at the end.
+CheckpointHook = Callable[[PolicySpec, Simulation], None]
+
+
+def run_policy(
+    instance: Instance,
+    policy: PolicySpec,
+    *,
+    seeds: Sequence[int],
+    horizon: int,
+    checkpoints: Sequence[int] = (),
+    on_checkpoint: CheckpointHook | None = None,
+    on_slots: Callable[[int], None] | None = None,
+) -> PolicyResult:
+    """Simulate ``policy`` for every seed to ``horizon`` without keeping per-slot columns."""
+    start = time.perf_counter()
+    sim = Simulation(instance, policy, seeds, horizon)
+    stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {horizon})
+    for stop in stops:
+        step = stop - sim.t
+        sim.advance(step, record=False)
+        if on_slots is not None:
+            on_slots(step)
+        if on_checkpoint is not None:
+            on_checkpoint(policy, sim)
+    return PolicyResult(
+        policy=policy,
+        regret=sim.regret.astype(np.float64),
+        estimator=sim.estimator.astype(np.float64),
+        pulls=sim.pulls.copy(),
+        best_arm=sim.best,
+        wall_s=time.perf_counter() - start,
+    )
+
+
+def run_sweep(
+    instance: Instance,
+    policies: Sequence[PolicySpec],
+    *,
+    runs: int,
+    horizon: int,
+    seed: int = 0,
+    checkpoints: Sequence[int] = (),
+    on_checkpoint: CheckpointHook | None = None,
+    on_slots: Callable[[int], None] | None = None,
+) -> list[PolicyResult]:
+    """Every policy over the same seeds ``seed .. seed + runs - 1`` (paired runs)."""
+    if runs < 1:
+        raise ConfigError(f"runs must be >= 1, got {runs}")
+    seeds = list(range(seed, seed + runs))
+    return [
+        run_policy(
+            instance, p, seeds=seeds, horizon=horizon, checkpoints=checkpoints,
+            on_checkpoint=on_checkpoint, on_slots=on_slots,
+        )  # fmt: skip
+        for p in policies
+    ]
+
+
+def sweep_report(
+    instance: Instance,
+    results: Sequence[PolicyResult],
+    *,
+    runs: int,
+    horizon: int,
+    seed: int,
+    workers: int,
+) -> dict[str, Any]:
+    """The JSON object of ``corraoi sweep --json``."""
+    theory = analyse(instance)
+    return {
+        "instance": instance.to_dict(),
+        "theory": {
+            "mu": [float(v) for v in theory.mu],
+            "best_arm": theory.best_arm + 1,
+            "competitive": [a + 1 for a in theory.competitive],
+            "C": theory.C,
+        },
+        "runs": runs,
+        "horizon": horizon,
+        "seed": seed,
+        "seeds": [seed, seed + runs - 1],
+        "workers": workers,
+        "policies": {r.policy.name: {**r.summary(), "params": r.policy.params} for r in results},
+    }
