@@ -29,7 +29,7 @@ BASE_UCB, BASE_TS_BETA, BASE_TS_GAUSS = 0, 1, 2
 
 
 @njit(inline="always", cache=True)
-def _next_u64(st):  # type: ignore[no-untyped-def]
+def _next_u64(st):
     a = st[0]
     b = st[1]
     c = st[2]
@@ -43,12 +43,12 @@ def _next_u64(st):  # type: ignore[no-untyped-def]
 
 
 @njit(inline="always", cache=True)
-def _uniform(st):  # type: ignore[no-untyped-def]
+def _uniform(st):
     return float(_next_u64(st) >> _S11) * _INV53
 
 
 @njit(cache=True)
-def _normal(st, cache):  # type: ignore[no-untyped-def]
+def _normal(st, cache):
     """Standard normal by the polar method; the spare value waits in ``cache[1]``."""
     if cache[0] != 0.0:
         cache[0] = 0.0
@@ -66,7 +66,7 @@ def _normal(st, cache):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _gamma(st, cache, shape):  # type: ignore[no-untyped-def]
+def _gamma(st, cache, shape):
     """Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang 2000)."""
     d = shape - 1.0 / 3.0
     c = 1.0 / math.sqrt(9.0 * d)
@@ -85,14 +85,14 @@ def _gamma(st, cache, shape):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _beta(st, cache, a, b):  # type: ignore[no-untyped-def]
+def _beta(st, cache, a, b):
     ga = _gamma(st, cache, a)
     gb = _gamma(st, cache, b)
     return ga / (ga + gb)
 
 
 @njit(cache=True)
-def _argmax_random(vals, mask, st, K):  # type: ignore[no-untyped-def]
+def _argmax_random(vals, mask, st, K):
     """Index of the largest ``vals[k]`` with ``mask[k]``; ties uniformly at random.
 
     Reservoir sampling: one uniform draw per extra tied arm, none without ties.
@@ -116,7 +116,7 @@ def _argmax_random(vals, mask, st, K):  # type: ignore[no-untyped-def]
 
 
 @njit(parallel=True, cache=True)
-def advance(  # type: ignore[no-untyped-def]
+def advance(
     cdf,  # (n,) float64 cumulative distribution of X
     Y,  # (K, n) int8 rewards
     spol,  # (K, K, 2) float64 policy pseudo-rewards s[k, l, r]
@@ -256,7 +256,7 @@ def advance(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def sfc64_doubles(st, count):  # type: ignore[no-untyped-def]
+def sfc64_doubles(st, count):
     """``count`` uniforms from one SFC64 state (used by tests against NumPy)."""
     out = np.empty(count)
     for i in range(count):

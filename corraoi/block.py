@@ -6,7 +6,7 @@ the reader subtracts it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -93,13 +93,13 @@ class SlotBlock:
     mu_hat: np.ndarray
     pulls: np.ndarray
     candidates: np.ndarray
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
     def column(self, name: str) -> np.ndarray:
-        return getattr(self, name)  # type: ignore[no-any-return]
+        value: np.ndarray = getattr(self, name)
+        return value
 
     @classmethod
     def concat(cls, blocks: list[SlotBlock]) -> SlotBlock:

@@ -84,7 +84,9 @@ def instance_show(spec: str, as_json: bool) -> None:
         click.echo(json.dumps(out, indent=2))
         return
     click.echo(f"instance {inst.name}: K={inst.K} arms, {inst.n_states} hidden states")
-    click.echo("p      " + "  ".join(f"{s}={v:g}" for s, v in zip(inst.state_names, inst.p)))
+    click.echo(
+        "p      " + "  ".join(f"{s}={v:g}" for s, v in zip(inst.state_names, inst.p, strict=True))
+    )
     click.echo("")
     header = f"{'arm':>4} {'name':>10} {'Y(x)':>{max(6, 2 * inst.n_states)}} "
     header += f"{'mu':>7} {'gap':>7} {'phi':>7} {'p-gap':>7}  role"
@@ -177,9 +179,7 @@ def sweep(
     used = set_workers(workers)
     start = time.perf_counter()
     with Progress(len(specs) * horizon, "sweep") as bar:
-        results = run_sweep(
-            inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update
-        )
+        results = run_sweep(inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update)
     report = sweep_report(inst, results, runs=runs, horizon=horizon, seed=seed, workers=used)
     report["wall_s"] = round(time.perf_counter() - start, 4)
     if as_json:
@@ -189,7 +189,8 @@ def sweep(
         f"instance {inst.name}, {runs} runs (seeds {seed}..{seed + runs - 1}), horizon {horizon}"
     )
     click.echo(
-        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9} {'wall s':>7}"
+        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9}"
+        f" {'wall s':>7}"
     )
     for name, s in report["policies"].items():
         ci = s["regret_ci95"]

@@ -54,7 +54,8 @@ def instance_option(func: F) -> F:
         default="I1",
         show_default=True,
         metavar="NAME|PATH",
-        help="Built-in instance (I1, I2) or an instance file (.txt community format, .json, .toml).",
+        help="Built-in instance (I1, I2) or an instance file (.txt community format, "
+        ".json, .toml).",
     )(func)
 
 

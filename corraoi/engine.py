@@ -193,7 +193,7 @@ def set_workers(workers: int | None) -> int:
     """Use ``workers`` threads in the kernel (default: every core). Returns the count used."""
     import numba
 
-    top = numba.config.NUMBA_NUM_THREADS
+    top = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     if workers is None:
         workers = top
     if workers < 1:

@@ -228,17 +228,14 @@ def parse_text_instance(raw: str, *, where: str = "<text>", name: str = "instanc
         try:
             v = float(tok)
         except ValueError:
-            raise InstanceError(
-                f"{where}:{p_line}: probability {tok!r} is not a number"
-            ) from None
+            raise InstanceError(f"{where}:{p_line}: probability {tok!r} is not a number") from None
         if not math.isfinite(v) or v < 0:
             raise InstanceError(f"{where}:{p_line}: probability {tok!r} must be >= 0")
         p_vals.append(v)
     total = math.fsum(p_vals)
     if abs(total - 1.0) > P_TOLERANCE:
         raise InstanceError(
-            f"{where}:{p_line}: probabilities sum to {total!r}, expected 1 "
-            f"(within {P_TOLERANCE:g})"
+            f"{where}:{p_line}: probabilities sum to {total!r}, expected 1 (within {P_TOLERANCE:g})"
         )
     if len(rows) < 3:
         raise InstanceError(

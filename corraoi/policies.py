@@ -41,7 +41,7 @@ class PolicySpec:
     """A policy with its parameters, validated on construction."""
 
     name: str
-    params: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
+    params: dict[str, float] = field(init=False, default_factory=dict, compare=False, hash=False)
     c: float = 2.0
     beta: float = 1.0
 
@@ -73,7 +73,9 @@ class PolicySpec:
     def used_params(self) -> dict[str, float]:
         """The parameters this policy reads, with their values."""
         return {
-            p: float(getattr(self, p)) for p, (_, bases, _) in PARAMETERS.items() if self.base in bases
+            p: float(getattr(self, p))
+            for p, (_, bases, _) in PARAMETERS.items()
+            if self.base in bases
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -128,8 +128,13 @@ def run_sweep(
     seeds = list(range(seed, seed + runs))
     return [
         run_policy(
-            instance, p, seeds=seeds, horizon=horizon, checkpoints=checkpoints,
-            on_checkpoint=on_checkpoint, on_slots=on_slots,
+            instance,
+            p,
+            seeds=seeds,
+            horizon=horizon,
+            checkpoints=checkpoints,
+            on_checkpoint=on_checkpoint,
+            on_slots=on_slots,
         )  # fmt: skip
         for p in policies
     ]

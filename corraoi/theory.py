@@ -75,7 +75,10 @@ class InstanceTheory:
         """The JSON of ``corraoi instance show --json``: arms numbered from 1."""
         K = self.mu.size
         table = {
-            f"{l + 1},{k + 1}": [_num(self.pseudo_rewards[l, k, 0]), _num(self.pseudo_rewards[l, k, 1])]
+            f"{l + 1},{k + 1}": [
+                _num(self.pseudo_rewards[l, k, 0]),
+                _num(self.pseudo_rewards[l, k, 1]),
+            ]
             for l in range(K)
             for k in range(K)
         }

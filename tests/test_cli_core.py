@@ -1,0 +1,117 @@
+"""CLI: instance list/show, policies, sweep (text and JSON), and bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from corraoi.cli import main
+from corraoi.policies import POLICY_NAMES
+
+
+def run(*args: str):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_instance_list():
+    res = run("instance", "list")
+    assert res.exit_code == 0
+    assert "I1" in res.output and "best arm 2" in res.output and "C=1" in res.output
+    assert "I2" in res.output and "best arm 4" in res.output and "C=0" in res.output
+
+
+def test_instance_show_json_i1():
+    res = run("instance", "show", "I1", "--json")
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.output)
+    assert d["mu"] == [0.2, 0.6, 0.5, 0.2]
+    assert d["best_arm"] == 2
+    assert d["gaps"] == [0.4, 0.0, 0.1, 0.4]
+    assert [d["phi"][i] for i in (0, 2, 3)] == [0.4, 1.0, 0.4]
+    assert d["competitive"] == [3] and d["strictly_competitive"] == [3] and d["C"] == 1
+    assert d["pseudo_gap"][2] == -0.4
+
+
+def test_instance_show_text_and_i2():
+    res = run("instance", "show", "I2")
+    assert res.exit_code == 0
+    assert "best arm k* = 4" in res.output and "C = 0" in res.output
+    d = json.loads(run("instance", "show", "I2", "--json").output)
+    assert d["best_arm"] == 4 and d["C"] == 0 and d["competitive"] == []
+
+
+def test_instance_show_file_and_errors(tmp_path: Path):
+    good = tmp_path / "g.txt"
+    good.write_text("0.5 0.5\n1 0\n1 1\n")
+    res = run("instance", "show", str(good), "--json")
+    assert json.loads(res.output)["best_arm"] == 2
+    bad = tmp_path / "b.txt"
+    bad.write_text("0.5 0.4\n1 0\n1 1\n")
+    res = run("instance", "show", str(bad))
+    assert res.exit_code == 2
+    assert res.output.strip().count("\n") == 0
+    assert f"{bad}:1: probabilities sum to" in res.output
+    assert "Traceback" not in res.output
+    res = run("instance", "show", str(tmp_path / "missing.txt"))
+    assert res.exit_code == 2 and "no such instance file" in res.output
+
+
+def test_policies_lists_twelve():
+    res = run("policies")
+    assert res.exit_code == 0
+    for name in POLICY_NAMES:
+        assert name in res.output
+
+
+def test_sweep_json_fields_and_pairing():
+    res = run("sweep", "--policy", "ucb,cucb", "-p", "ts", "--runs", "8", "--horizon", "500",
+              "--seed", "3", "--json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.output)
+    assert list(d["policies"]) == ["ucb", "cucb", "ts"]
+    assert d["runs"] == 8 and d["horizon"] == 500 and d["seed"] == 3
+    for s in d["policies"].values():
+        assert set(s) >= {"regret_mean", "regret_ci95", "estimator_mean", "best_arm_share",
+                          "wall_s"}  # fmt: skip
+        assert 0 <= s["best_arm_share"] <= 1 and s["regret_ci95"] > 0
+    # the same settings give the same numbers
+    again = json.loads(
+        run("sweep", "-p", "cucb", "-n", "8", "-T", "500", "-s", "3", "--json").output
+    )
+    assert again["policies"]["cucb"]["regret_mean"] == d["policies"]["cucb"]["regret_mean"]
+
+
+def test_sweep_values_match_library():
+    import numpy as np
+
+    from corraoi.engine import Simulation
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policy
+
+    d = json.loads(run("sweep", "-p", "cts", "-n", "5", "-T", "300", "--json").output)
+    sim = Simulation(load_instance("I1"), make_policy("cts"), list(range(5)), 300)
+    sim.advance(300, record=False)
+    assert d["policies"]["cts"]["regret_mean"] == float(np.mean(sim.regret))
+
+
+def test_sweep_text_table():
+    res = run("sweep", "-p", "ucb", "-n", "4", "-T", "200")
+    assert res.exit_code == 0
+    assert "ucb" in res.output and "regret" in res.output
+
+
+def test_sweep_bad_input():
+    for args, needle in (
+        (("-p", "cucv"), "did you mean cucb"),
+        (("-p", "ucb", "--beta", "2"), "does not apply"),
+        (("-p", "ucb", "--c", "-1"), "c must be > 0"),
+        (("--instance", "nope"), "no such instance file"),
+    ):
+        res = run("sweep", "-n", "2", "-T", "10", *args)
+        assert res.exit_code == 2, (args, res.output)
+        assert needle in res.output and "Traceback" not in res.output
+    for args in (("--runs", "0"), ("--horizon", "0")):
+        res = run("sweep", *args)
+        assert res.exit_code == 2 and "is not in the range" in res.output

@@ -1,0 +1,1 @@
+"""Replay, compare, diff and inspect recorded corraoi runs. Reads logs; never simulates."""
