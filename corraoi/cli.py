@@ -66,21 +66,32 @@ def instance_list() -> None:
 
 @instance.command("show")
 @click.argument("spec", metavar="NAME|PATH")
+@click.option("--horizon", "-T", type=click.IntRange(min=1), default=10_000, show_default=True,
+              help="Horizon at which the regret bounds are evaluated.")  # fmt: skip
+@click.option("--bound-beta", type=float, default=None,
+              help="beta of Theorem 3 (CTS, Gaussian priors; needs beta > 1) "
+              "[default: 2].")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
 @handle_errors
-def instance_show(spec: str, as_json: bool) -> None:
+def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bool) -> None:
     """Show an instance and its theory: mu, gaps, phi, pseudo-gaps, competitive arms, C.
 
     Arms and states are numbered from 1. phi is the expected pseudo-reward of each arm with
     respect to the best arm k*; an arm l != k* is competitive when mu* - phi_{l,k*} <= 0.
     """
+    from .bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
     from .instance import load_instance
     from .theory import analyse
 
     inst = load_instance(spec)
     th = analyse(inst)
+    bounds = {
+        "cucb": cucb_bound(inst, horizon),
+        "cts": cts_bound(inst, horizon, DEFAULT_BOUND_BETA if bound_beta is None else bound_beta),
+    }
     if as_json:
         out: dict[str, Any] = {"name": inst.name, "instance": inst.to_dict(), **th.to_dict()}
+        out["bounds"] = {k: b.to_dict() for k, b in bounds.items()}
         click.echo(json.dumps(out, indent=2))
         return
     click.echo(f"instance {inst.name}: K={inst.K} arms, {inst.n_states} hidden states")
@@ -112,6 +123,10 @@ def instance_show(spec: str, as_json: bool) -> None:
         tied = ", ".join(str(a + 1) for a in th.best_tied)
         click.echo(f"note: arms {tied} tie for the best mean; k* is the lowest index")
     click.echo(f"competitive sub-optimal arms: {comp}   C = {th.C}")
+    click.echo(f"upper bounds on the expected AoI regret at T = {horizon}:")
+    for b in bounds.values():
+        value = f"{b.value:.6g}" if b.value is not None else "n/a"
+        click.echo(f"  {b.theorem:28s} {value:>12}  ({b.note})")
 
 
 # ---------------------------------------------------------------------------- policies

@@ -76,8 +76,54 @@ def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
 
 
-#: Called after each checkpoint with (policy, simulation) and once more at the end.
+#: Called after each checkpoint with (policy, simulation); the horizon is always one.
 CheckpointHook = Callable[[PolicySpec, Simulation], None]
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """Aggregates over the runs of one policy at checkpoint slot ``t`` (one row of a curve)."""
+
+    policy: str
+    t: int
+    regret_mean: float
+    regret_ci95: float | None  # half-width; None with a single run
+    estimator_mean: float
+    estimator_ci95: float | None
+    pull_share: np.ndarray  # (K,) mean over runs of pulls_k / t
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "policy": self.policy,
+            "t": self.t,
+            "regret_mean": self.regret_mean,
+            "regret_ci95": self.regret_ci95,
+            "estimator_mean": self.estimator_mean,
+            "estimator_ci95": self.estimator_ci95,
+            "pull_share": [float(v) for v in self.pull_share],
+        }
+
+
+def checkpoint_point(policy: PolicySpec, sim: Simulation) -> SweepPoint:
+    """The :class:`SweepPoint` of a simulation at its current slot."""
+    m, h = mean_ci95(sim.regret)
+    em, eh = mean_ci95(sim.estimator)
+    return SweepPoint(
+        policy=policy.name,
+        t=sim.t,
+        regret_mean=float(m),
+        regret_ci95=_finite(float(h)),
+        estimator_mean=float(em),
+        estimator_ci95=_finite(float(eh)),
+        pull_share=(sim.pulls / sim.t).mean(axis=0),
+    )
+
+
+def default_checkpoints(horizon: int, points: int = 200) -> list[int]:
+    """About ``points`` checkpoint slots: half evenly spaced, half log-spaced, plus T."""
+    even = np.linspace(0, horizon, points // 2 + 1)[1:]
+    logs = np.geomspace(1, horizon, points // 2)
+    return sorted({int(round(v)) for v in np.concatenate([even, logs])} | {horizon})
 
 
 def run_policy(
@@ -165,4 +211,27 @@ def sweep_report(
         "seeds": [seed, seed + runs - 1],
         "workers": workers,
         "policies": {r.policy.name: {**r.summary(), "params": r.policy.params} for r in results},
+    }
+
+
+def sweep_config(
+    instance: Instance,
+    policies: Sequence[PolicySpec],
+    *,
+    runs: int,
+    horizon: int,
+    seed: int,
+    checkpoints: Sequence[int],
+) -> dict[str, Any]:
+    """Everything that determines a sweep (stored inside its log)."""
+    from ._version import __version__
+
+    return {
+        "instance": instance.to_dict(),
+        "policies": [p.to_dict() for p in policies],
+        "runs": int(runs),
+        "horizon": int(horizon),
+        "seed": int(seed),
+        "checkpoints": [int(c) for c in checkpoints],
+        "version": __version__,
     }
