@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from typing import Any
 
 import click
@@ -16,11 +15,6 @@ import click
 from ._version import __version__
 from .cli_common import (
     handle_errors,
-    horizon_option,
-    instance_option,
-    param_options,
-    policy_option,
-    seed_option,
 )
 
 
@@ -146,79 +140,11 @@ def policies_cmd() -> None:
         click.echo(f"--{pname} (default {default:g}): {text}")
 
 
-# ---------------------------------------------------------------------------- sweep
-
-
-@main.command()
-@instance_option
-@policy_option(default=("all",))
-@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
-              help="Monte Carlo runs per policy (seeds seed .. seed+runs-1, shared by all "
-              "policies).")  # fmt: skip
-@horizon_option(10_000)
-@seed_option
-@param_options
-@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
-              help="Threads for the engine [default: every core].")  # fmt: skip
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
-@handle_errors
-def sweep(
-    instance: str,
-    policy: tuple[str, ...],
-    runs: int,
-    horizon: int,
-    seed: int,
-    c: float | None,
-    beta: float | None,
-    workers: int | None,
-    as_json: bool,
-) -> None:
-    """Run policies over paired seeds and report the AoI regret at the horizon.
-
-    Per policy: the mean pathwise AoI regret sum_t (aoi_t - oracle_aoi_t) at T with its 95%
-    confidence half-width, the paper's estimator sum_t aoi_t - T/mu*, the share of pulls on
-    the best arm, and the wall time.
-
-    \b
-    Example:
-      corraoi sweep --instance I1 --policy all --runs 200 --horizon 10000
-    """
-    from .engine import set_workers
-    from .instance import load_instance
-    from .policies import make_policies
-    from .progress import Progress
-    from .sweep import run_sweep, sweep_report
-
-    inst = load_instance(instance)
-    specs = make_policies(policy, c=c, beta=beta)
-    used = set_workers(workers)
-    start = time.perf_counter()
-    with Progress(len(specs) * horizon, "sweep") as bar:
-        results = run_sweep(inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update)
-    report = sweep_report(inst, results, runs=runs, horizon=horizon, seed=seed, workers=used)
-    report["wall_s"] = round(time.perf_counter() - start, 4)
-    if as_json:
-        click.echo(json.dumps(report, indent=2))
-        return
-    click.echo(
-        f"instance {inst.name}, {runs} runs (seeds {seed}..{seed + runs - 1}), horizon {horizon}"
-    )
-    click.echo(
-        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9}"
-        f" {'wall s':>7}"
-    )
-    for name, s in report["policies"].items():
-        ci = s["regret_ci95"]
-        ci_text = f"{ci:9.1f}" if ci is not None else f"{'n/a':>9}"
-        click.echo(
-            f"{name:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
-            f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}"
-        )
-    click.echo(f"total wall time {report['wall_s']:.2f} s on {used} thread(s)", err=True)
-
-
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
+from .cli_sweep import sweep  # noqa: E402
+
+main.add_command(sweep)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -14,7 +14,6 @@ from .engine import Simulation
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
-from .theory import analyse
 
 # Student t 0.975 quantiles for 1..30 degrees of freedom.
 _T975 = (
@@ -184,34 +183,6 @@ def run_sweep(
         )  # fmt: skip
         for p in policies
     ]
-
-
-def sweep_report(
-    instance: Instance,
-    results: Sequence[PolicyResult],
-    *,
-    runs: int,
-    horizon: int,
-    seed: int,
-    workers: int,
-) -> dict[str, Any]:
-    """The JSON object of ``corraoi sweep --json``."""
-    theory = analyse(instance)
-    return {
-        "instance": instance.to_dict(),
-        "theory": {
-            "mu": [float(v) for v in theory.mu],
-            "best_arm": theory.best_arm + 1,
-            "competitive": [a + 1 for a in theory.competitive],
-            "C": theory.C,
-        },
-        "runs": runs,
-        "horizon": horizon,
-        "seed": seed,
-        "seeds": [seed, seed + runs - 1],
-        "workers": workers,
-        "policies": {r.policy.name: {**r.summary(), "params": r.policy.params} for r in results},
-    }
 
 
 def sweep_config(

@@ -25,7 +25,7 @@ def test_instance_list():
 def test_instance_show_json_i1():
     res = run("instance", "show", "I1", "--json")
     assert res.exit_code == 0, res.output
-    d = json.loads(res.output)
+    d = json.loads(res.stdout)
     assert d["mu"] == [0.2, 0.6, 0.5, 0.2]
     assert d["best_arm"] == 2
     assert d["gaps"] == [0.4, 0.0, 0.1, 0.4]
@@ -38,7 +38,7 @@ def test_instance_show_text_and_i2():
     res = run("instance", "show", "I2")
     assert res.exit_code == 0
     assert "best arm k* = 4" in res.output and "C = 0" in res.output
-    d = json.loads(run("instance", "show", "I2", "--json").output)
+    d = json.loads(run("instance", "show", "I2", "--json").stdout)
     assert d["best_arm"] == 4 and d["C"] == 0 and d["competitive"] == []
 
 
@@ -46,7 +46,7 @@ def test_instance_show_file_and_errors(tmp_path: Path):
     good = tmp_path / "g.txt"
     good.write_text("0.5 0.5\n1 0\n1 1\n")
     res = run("instance", "show", str(good), "--json")
-    assert json.loads(res.output)["best_arm"] == 2
+    assert json.loads(res.stdout)["best_arm"] == 2
     bad = tmp_path / "b.txt"
     bad.write_text("0.5 0.4\n1 0\n1 1\n")
     res = run("instance", "show", str(bad))
@@ -69,7 +69,7 @@ def test_sweep_json_fields_and_pairing():
     res = run("sweep", "--policy", "ucb,cucb", "-p", "ts", "--runs", "8", "--horizon", "500",
               "--seed", "3", "--json")  # fmt: skip
     assert res.exit_code == 0, res.output
-    d = json.loads(res.output)
+    d = json.loads(res.stdout)
     assert list(d["policies"]) == ["ucb", "cucb", "ts"]
     assert d["runs"] == 8 and d["horizon"] == 500 and d["seed"] == 3
     for s in d["policies"].values():
@@ -78,7 +78,7 @@ def test_sweep_json_fields_and_pairing():
         assert 0 <= s["best_arm_share"] <= 1 and s["regret_ci95"] > 0
     # the same settings give the same numbers
     again = json.loads(
-        run("sweep", "-p", "cucb", "-n", "8", "-T", "500", "-s", "3", "--json").output
+        run("sweep", "-p", "cucb", "-n", "8", "-T", "500", "-s", "3", "--json").stdout
     )
     assert again["policies"]["cucb"]["regret_mean"] == d["policies"]["cucb"]["regret_mean"]
 
@@ -90,7 +90,7 @@ def test_sweep_values_match_library():
     from corraoi.instance import load_instance
     from corraoi.policies import make_policy
 
-    d = json.loads(run("sweep", "-p", "cts", "-n", "5", "-T", "300", "--json").output)
+    d = json.loads(run("sweep", "-p", "cts", "-n", "5", "-T", "300", "--json").stdout)
     sim = Simulation(load_instance("I1"), make_policy("cts"), list(range(5)), 300)
     sim.advance(300, record=False)
     assert d["policies"]["cts"]["regret_mean"] == float(np.mean(sim.regret))
@@ -115,3 +115,35 @@ def test_sweep_bad_input():
     for args in (("--runs", "0"), ("--horizon", "0")):
         res = run("sweep", *args)
         assert res.exit_code == 2 and "is not in the range" in res.output
+
+
+def test_sweep_json_has_theory_bounds_and_ranking():
+    res = run("sweep", "-i", "I2", "-p", "cucb,ucb", "-n", "6", "-T", "400", "--json")
+    d = json.loads(res.stdout)
+    assert d["theory"]["C"] == 0 and d["theory"]["best_arm"] == 4
+    assert d["policies"]["cucb"]["bound"]["theorem"] == "Theorem 2 (CUCB)"
+    assert "bound" not in d["policies"]["ucb"]
+    assert d["ranking"] == sorted(d["policies"], key=lambda n: d["policies"][n]["regret_mean"])
+    assert [d["policies"][n]["rank"] for n in d["ranking"]] == [1, 2]
+
+
+def test_sweep_states_a_tie_for_the_best_arm(tmp_path: Path):
+    tie = tmp_path / "tie.txt"
+    tie.write_text("0.5 0.5\n1 0\n0 1\n0 0\n")
+    res = run("sweep", "-i", str(tie), "-p", "ucb", "-n", "4", "-T", "100", "--json")
+    assert res.exit_code == 0
+    assert "arms 1, 2 tie for the best mean" in res.stderr
+    assert "tie for the best mean" in json.loads(res.stdout)["theory"]["notes"][0]
+
+
+def test_sweep_out_dir_refusals(tmp_path: Path):
+    afile = tmp_path / "f"
+    afile.write_text("x")
+    res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "-o", str(afile))
+    assert res.exit_code == 2 and "is not a directory" in res.output
+    held = tmp_path / "held"
+    held.mkdir()
+    (held / "summary.json").write_text("{}")
+    res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "-o", str(held))
+    assert res.exit_code == 2 and "already holds a sweep" in res.output
+    assert (held / "summary.json").read_text() == "{}"

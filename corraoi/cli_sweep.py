@@ -1,0 +1,210 @@
+"""``corraoi sweep``: Monte Carlo sweeps, optionally streamed to a directory of logs and figures.
+
+recorder and viewer are imported inside the command (only with ``-o``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from .cli_common import (
+    handle_errors,
+    horizon_option,
+    instance_option,
+    param_options,
+    policy_option,
+    seed_option,
+    warn,
+)
+from .errors import ConfigError
+
+#: What ``sweep -o DIR`` writes; a DIR holding any of them is refused without --force.
+SWEEP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
+
+
+def check_out_dir(out: Path, *, force: bool) -> None:
+    """Refuse a file, an unwritable directory, or one that already holds a sweep."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
+    if out.is_dir():
+        present = [f for f in SWEEP_FILES if (out / f).exists()]
+        if present and not force:
+            raise ConfigError(
+                f"{out}: already holds a sweep ({', '.join(present)}); use --force to overwrite"
+            )
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ConfigError(f"{out}: directory is not writable")
+        return
+    parent = out.parent if str(out.parent) else Path(".")
+    probe = parent
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+        raise ConfigError(f"{out}: cannot create the directory ({probe} is not writable)")
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+@click.command()
+@instance_option
+@policy_option(default=("all",))
+@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
+              help="Monte Carlo runs per policy (seeds seed .. seed+runs-1, shared by all "
+              "policies).")  # fmt: skip
+@horizon_option(10_000)
+@seed_option
+@param_options
+@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
+              help="Threads for the engine [default: every core].")  # fmt: skip
+@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=None,
+              metavar="DIR", help="Stream the curves to DIR/sweep.mcap and DIR/sweep.rrd and "
+              "write DIR/summary.json, DIR/summary.md and DIR/figure.png.")  # fmt: skip
+@click.option("--checkpoints", type=click.IntRange(min=2), default=200, show_default=True,
+              help="With -o: about this many checkpoint slots per curve.")  # fmt: skip
+@click.option("--force", is_flag=True, help="With -o: overwrite a DIR that holds a sweep.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
+@handle_errors
+def sweep(
+    instance: str,
+    policy: tuple[str, ...],
+    runs: int,
+    horizon: int,
+    seed: int,
+    c: float | None,
+    beta: float | None,
+    workers: int | None,
+    out: Path | None,
+    checkpoints: int,
+    force: bool,
+    as_json: bool,
+) -> None:
+    """Run policies over paired seeds and report the AoI regret at the horizon.
+
+    Per policy: the mean pathwise AoI regret sum_t (aoi_t - oracle_aoi_t) at T with its 95%
+    confidence half-width, the paper's estimator sum_t aoi_t - T/mu*, the share of pulls on
+    the best arm, the wall time, and the paper's bound where a theorem covers the policy.
+
+    \b
+    Examples:
+      corraoi sweep --instance I1 --policy all --runs 200 --horizon 10000
+      corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
+      corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
+    """
+    from .engine import set_workers
+    from .instance import load_instance
+    from .policies import make_policies
+    from .progress import Progress
+    from .summary import instance_notes, summary_markdown, sweep_summary
+    from .sweep import default_checkpoints, run_sweep
+
+    inst = load_instance(instance)
+    specs = make_policies(policy, c=c, beta=beta)
+    if out is not None:
+        check_out_dir(out, force=force)
+    used = set_workers(workers)
+    for note in instance_notes(inst):
+        warn(note)
+    start = time.perf_counter()
+    with Progress(len(specs) * horizon, "sweep") as bar:
+        if out is None:
+            results = run_sweep(
+                inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update
+            )
+        else:
+            stops = default_checkpoints(horizon, checkpoints)
+            results = _sweep_to_dir(
+                out, inst, specs, runs=runs, horizon=horizon, seed=seed, stops=stops,
+                on_slots=bar.update,
+            )  # fmt: skip
+    summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=used)
+    summary["wall_s"] = round(time.perf_counter() - start, 4)
+    if out is not None:
+        _write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        _write_text(out / "summary.md", summary_markdown(summary))
+        _draw(out, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        _print_table(summary)
+    if out is not None:
+        click.echo(f"wrote {out}/: " + ", ".join(f for f in SWEEP_FILES if (out / f).exists()))
+    click.echo(f"total wall time {summary['wall_s']:.2f} s on {used} thread(s)", err=True)
+
+
+def _sweep_to_dir(
+    out: Path,
+    inst: Any,
+    specs: Any,
+    *,
+    runs: int,
+    horizon: int,
+    seed: int,
+    stops: list[int],
+    on_slots: Any,
+) -> Any:
+    from recorder.sweep_log import SweepMcapSink
+    from recorder.sweep_rerun import open_sweep_recording
+
+    from .sweep import checkpoint_point, run_sweep, sweep_config
+
+    out.mkdir(parents=True, exist_ok=True)
+    config = sweep_config(inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops)
+    with (
+        SweepMcapSink(out / "sweep.mcap", config) as mcap_sink,
+        open_sweep_recording(out / "sweep.rrd", config) as rerun_sink,
+    ):
+
+        def hook(policy: Any, sim: Any) -> None:
+            point = checkpoint_point(policy, sim)
+            mcap_sink.write(point)
+            rerun_sink.write(point)
+
+        return run_sweep(
+            inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
+            on_checkpoint=hook, on_slots=on_slots,
+        )  # fmt: skip
+
+
+def _draw(out: Path, summary: dict[str, Any]) -> None:
+    """figure.png, drawn from the log alone; skipped with a warning without matplotlib."""
+    from recorder.sweep_log import read_sweep
+    from viewer.figure import FigureUnavailable, draw_figure
+
+    try:
+        draw_figure(read_sweep(out / "sweep.mcap"), out / "figure.png")
+    except FigureUnavailable as exc:
+        warn(f"figure.png not written: {exc}")
+
+
+def _print_table(summary: dict[str, Any]) -> None:
+    name = summary["instance"]["name"]
+    runs, seed = summary["runs"], summary["seed"]
+    click.echo(
+        f"instance {name}, {runs} runs (seeds {seed}..{seed + runs - 1}), "
+        f"horizon {summary['horizon']}, C = {summary['theory']['C']}"
+    )
+    click.echo(
+        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9}"
+        f" {'wall s':>7}  bound at T"
+    )
+    for pname, s in summary["policies"].items():
+        ci = s["regret_ci95"]
+        ci_text = f"{ci:9.1f}" if ci is not None else f"{'n/a':>9}"
+        bound = s.get("bound")
+        btext = ""
+        if bound is not None:
+            btext = f"  {bound['value']:.4g}" if bound["value"] is not None else "  n/a"
+        click.echo(
+            f"{pname:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
+            f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
+        )
