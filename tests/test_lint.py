@@ -30,7 +30,5 @@ def test_ruff_clean():
 
 
 def test_mypy_clean():
-    res = subprocess.run(
-        [_tool("mypy"), *PACKAGES], cwd=ROOT, capture_output=True, text=True
-    )
+    res = subprocess.run([_tool("mypy"), *PACKAGES], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
