@@ -1,0 +1,553 @@
+"""The sweep log: the aggregated curves of a sweep, streamed to MCAP as the sweep runs.
+
+One JSON message per (policy, checkpoint slot) on :data:`TOPIC` (schema
+:data:`SCHEMA_NAME`), in the order the sweep produces them: all checkpoints of the first
+policy, then the next policy, ... The configuration of the sweep (instance, policies,
+runs, horizon, seed, checkpoints, version) is stored in the metadata record
+:data:`SWEEP_METADATA`, so a figure can be redrawn from the file alone.
+``docs/sweep-log-format.md`` is the human description; this module is the code.
+
+The writer is byte-reproducible: no wall clock anywhere (log_time = publish_time =
+``t * NS_PER_SLOT``, sequence = 1-based index of the message in the file). It writes
+``<path>.partial`` and renames it to ``path`` only when closed normally.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO
+
+import numpy as np
+import orjson
+from mcap.records import Channel, Header, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from corraoi._version import __version__
+from corraoi.sweep import SweepPoint
+
+from .errors import LogError, WriteError
+from .paths import PARTIAL_SUFFIX, open_partial, partial_path, publish, reason
+
+#: Name of the format, stored under ``format`` in the sweep metadata.
+FORMAT_NAME = "corraoi.sweep-log"
+#: Version this code writes and the newest it reads.
+FORMAT_VERSION = 1
+TOPIC = "/corraoi/sweep"
+SCHEMA_NAME = "corraoi.SweepPoint"
+MESSAGE_ENCODING = "json"
+SCHEMA_ENCODING = "jsonschema"
+#: Metadata record written when the file is opened: the sweep configuration.
+SWEEP_METADATA = "corraoi.sweep"
+#: Metadata record written when the file is finished: how the sweep ended.
+END_METADATA = "corraoi.sweep.end"
+#: log_time = publish_time = t * NS_PER_SLOT: slot t shows as t seconds in MCAP tools.
+NS_PER_SLOT = 1_000_000_000
+#: A chunk is closed and flushed to the OS after every FLUSH_EVERY messages and whenever
+#: the policy changes, so a killed sweep loses at most that many checkpoints.
+FLUSH_EVERY = 32
+#: Message keys in the order the writer writes them.
+MESSAGE_KEYS = (
+    "policy",
+    "t",
+    "regret_mean",
+    "regret_ci95",
+    "estimator_mean",
+    "estimator_ci95",
+    "pull_share",
+)
+_MAGIC = b"\x89MCAP0\r\n"
+_SLOT_SCHEMA = "corraoi.SlotEvent"
+
+
+class SweepLogError(LogError):
+    """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
+
+
+# ---------------------------------------------------------------------------- format
+
+
+def _arms(config: dict[str, Any]) -> int:
+    try:
+        K = len(config["instance"]["Y"])
+    except (KeyError, TypeError) as exc:
+        raise ValueError(
+            f"sweep config needs instance.Y (the K x n table), missing {exc}"
+        ) from None
+    if K < 1:
+        raise ValueError("sweep config: instance.Y has no arms")
+    return K
+
+
+def sweep_schema(K: int) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of one :data:`SCHEMA_NAME` message for K arms."""
+    nullable = {"type": ["number", "null"], "minimum": 0}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": f"urn:corraoi:sweep-point:v{FORMAT_VERSION}",
+        "title": SCHEMA_NAME,
+        "description": f"Aggregates over the runs of one policy at one checkpoint slot "
+        f"({FORMAT_NAME} version {FORMAT_VERSION}); arms are numbered from 1.",
+        "type": "object",
+        "properties": {
+            "policy": {"type": "string", "minLength": 1, "description": "policy name"},
+            "t": {"type": "integer", "minimum": 1, "description": "checkpoint slot, 1..horizon"},
+            "regret_mean": {
+                "type": "number",
+                "description": "mean over runs of the pathwise AoI regret "
+                "sum_{s<=t} (aoi_s - oracle_aoi_s), in slots",
+            },
+            "regret_ci95": {
+                **nullable,
+                "description": "half-width of the 95% Student t confidence interval of "
+                "regret_mean, in slots; null with a single run",
+            },
+            "estimator_mean": {
+                "type": "number",
+                "description": "mean over runs of the paper's estimator "
+                "sum_{s<=t} aoi_s - t / mu*, in slots",
+            },
+            "estimator_ci95": {
+                **nullable,
+                "description": "half-width of the 95% confidence interval of estimator_mean, "
+                "in slots; null with a single run",
+            },
+            "pull_share": {
+                "type": "array",
+                "description": f"mean over runs of pulls_k / t for arms k = 1..{K} (in arm "
+                "order; sums to 1)",
+                "items": {"type": "number", "minimum": 0, "maximum": 1},
+                "minItems": K,
+                "maxItems": K,
+            },
+        },
+        "required": list(MESSAGE_KEYS),
+        "additionalProperties": False,
+    }
+
+
+def sweep_metadata(config: dict[str, Any], *, flush_every: int = FLUSH_EVERY) -> dict[str, str]:
+    """The :data:`SWEEP_METADATA` record: flat strings, plus the full config as JSON."""
+    inst = config.get("instance") or {}
+    policies = [p["name"] if isinstance(p, dict) else str(p) for p in config.get("policies", [])]
+    return {
+        "format": FORMAT_NAME,
+        "format_version": str(FORMAT_VERSION),
+        "corraoi_version": str(config.get("version", __version__)),
+        "instance": str(inst.get("name", "")),
+        "arms": str(_arms(config)),
+        "policies": json.dumps(policies),
+        "runs": str(config.get("runs", "")),
+        "horizon": str(config.get("horizon", "")),
+        "seed": str(config.get("seed", "")),
+        "checkpoints": str(len(config.get("checkpoints", []))),
+        "numbering": "arms from 1 (pull_share is in arm order)",
+        "log_time": f"t * {NS_PER_SLOT} ns",
+        "flush_every": str(flush_every),
+        "config": json.dumps(config, sort_keys=True),
+    }
+
+
+# ---------------------------------------------------------------------------- writer
+
+
+class SweepMcapSink:
+    """Streams :class:`~corraoi.sweep.SweepPoint` rows of a sweep into an MCAP file.
+
+    ``with SweepMcapSink(path, config) as sink: sink.write(point)``. The file is written as
+    ``<path>.partial`` and renamed to ``path`` by :meth:`close`; leaving the ``with`` block
+    through an exception (or calling :meth:`abort`) finishes the file but leaves it under
+    its ``.partial`` name with ``status = interrupted``. Closing twice is safe.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        config: dict[str, Any],
+        *,
+        overwrite: bool = True,
+        flush_every: int = FLUSH_EVERY,
+    ) -> None:
+        if flush_every < 1:
+            raise ValueError(f"flush_every must be >= 1, got {flush_every}")
+        self.path = Path(path)
+        self.config = config
+        self.K = _arms(config)
+        self.flush_every = int(flush_every)
+        self._overwrite = overwrite
+        self._count = 0
+        self._last_t: dict[str, int] = {}
+        self._policy: str | None = None
+        self._closed = False
+        metadata = sweep_metadata(config, flush_every=self.flush_every)
+        self._stream: BinaryIO = open_partial(self.path, overwrite=overwrite, what="sweep log")
+        try:
+            self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
+            self._writer.start(profile="", library=f"corraoi/{config.get('version', __version__)}")
+            self._writer.add_metadata(SWEEP_METADATA, metadata)
+            schema_id = self._writer.register_schema(
+                name=SCHEMA_NAME,
+                encoding=SCHEMA_ENCODING,
+                data=json.dumps(sweep_schema(self.K), indent=1).encode(),
+            )
+            self._channel = self._writer.register_channel(
+                topic=TOPIC, message_encoding=MESSAGE_ENCODING, schema_id=schema_id
+            )
+            self._writer.flush()
+        except OSError as exc:
+            self._stream.close()
+            raise WriteError(f"{self.part}: cannot write the sweep log: {reason(exc)}") from None
+
+    @property
+    def part(self) -> Path:
+        """Where the file lives until it is closed."""
+        return partial_path(self.path)
+
+    @property
+    def count(self) -> int:
+        """Messages written so far."""
+        return self._count
+
+    def encode(self, point: SweepPoint) -> bytes:
+        """The JSON message of ``point`` (checked: finite means, K shares, increasing t)."""
+        if not isinstance(point.policy, str) or not point.policy:
+            raise ValueError(
+                f"sweep point: policy must be a non-empty string, got {point.policy!r}"
+            )
+        t = int(point.t)
+        if t < 1:
+            raise ValueError(f"sweep point {point.policy}: t must be >= 1, got {point.t}")
+        last = self._last_t.get(point.policy, 0)
+        if t <= last:
+            raise ValueError(
+                f"sweep point {point.policy}: t must increase, got t={t} after t={last}"
+            )
+        for name in ("regret_mean", "estimator_mean"):
+            if not math.isfinite(getattr(point, name)):
+                raise ValueError(f"sweep point {point.policy} t={t}: {name} is not finite")
+        share = np.asarray(point.pull_share, dtype=np.float64).reshape(-1)
+        if share.size != self.K:
+            raise ValueError(
+                f"sweep point {point.policy} t={t}: pull_share has {share.size} entries, "
+                f"the instance has {self.K} arms"
+            )
+        return orjson.dumps(
+            {
+                "policy": point.policy,
+                "t": t,
+                "regret_mean": float(point.regret_mean),
+                "regret_ci95": _opt(point.regret_ci95),
+                "estimator_mean": float(point.estimator_mean),
+                "estimator_ci95": _opt(point.estimator_ci95),
+                "pull_share": share.tolist(),
+            }
+        )
+
+    def write(self, point: SweepPoint) -> None:
+        """Append one point; flushes a chunk every ``flush_every`` points and per policy."""
+        if self._closed:
+            raise ValueError(f"{self.path}: the sweep log is closed")
+        data = self.encode(point)
+        try:
+            if self._policy is not None and point.policy != self._policy:
+                self._writer.flush()  # the previous policy's curve is complete: keep it
+            self._policy = point.policy
+            self._count += 1
+            log_time = int(point.t) * NS_PER_SLOT
+            self._writer.add_message(
+                self._channel,
+                log_time=log_time,
+                data=data,
+                publish_time=log_time,
+                sequence=self._count,
+            )
+            self._last_t[point.policy] = int(point.t)
+            if self._count % self.flush_every == 0:
+                self._writer.flush()
+        except OSError as exc:
+            raise WriteError(f"{self.part}: cannot write the sweep log: {reason(exc)}") from None
+
+    def _finish(self, status: str) -> None:
+        self._closed = True
+        try:
+            self._writer.add_metadata(
+                END_METADATA,
+                {
+                    "status": status,
+                    "messages": str(self._count),
+                    "policies": json.dumps(list(self._last_t)),
+                },
+            )
+            self._writer.finish()
+            self._stream.flush()
+            os.fsync(self._stream.fileno())
+        except OSError as exc:
+            raise WriteError(f"{self.part}: cannot finish the sweep log: {reason(exc)}") from None
+        finally:
+            self._stream.close()
+
+    def close(self) -> None:
+        """Finish the file and rename it into place. Safe to call twice."""
+        if self._closed:
+            return
+        self._finish("complete")
+        publish(self.path, overwrite=self._overwrite)
+
+    def abort(self) -> None:
+        """Finish the file as interrupted and leave it at ``<path>.partial``."""
+        if self._closed:
+            return
+        self._finish("interrupted")
+
+    def __enter__(self) -> SweepMcapSink:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def _opt(v: float | None) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+# ---------------------------------------------------------------------------- reader
+
+
+@dataclass(frozen=True, eq=False)
+class SweepCurve:
+    """One policy's curve: arrays over its checkpoints (NaN where a half-width is null)."""
+
+    policy: str
+    t: np.ndarray  # (n,) int64
+    regret_mean: np.ndarray  # (n,) float64
+    regret_ci95: np.ndarray
+    estimator_mean: np.ndarray
+    estimator_ci95: np.ndarray
+    pull_share: np.ndarray  # (n, K), arm order (arm k + 1 in column k)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(eq=False)
+class SweepLog:
+    """A sweep log read back: its config, its policies in order, and their curves."""
+
+    path: Path
+    config: dict[str, Any]
+    policies: list[str]
+    curves: dict[str, SweepCurve]
+    library: str = ""
+    status: str = "complete"  # complete | interrupted | truncated
+    messages: int = 0
+    metadata: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        return self.status == "complete"
+
+    @property
+    def instance_name(self) -> str:
+        inst = self.config.get("instance") or {}
+        return str(inst.get("name", "?"))
+
+    @property
+    def runs(self) -> int | None:
+        v = self.config.get("runs")
+        return int(v) if v is not None else None
+
+    @property
+    def horizon(self) -> int | None:
+        v = self.config.get("horizon")
+        return int(v) if v is not None else None
+
+    @property
+    def K(self) -> int:
+        return _arms(self.config)
+
+
+def _check_file(path: Path) -> None:
+    if path.is_dir():
+        hint = ""
+        if (path / "sweep.mcap").is_file():
+            hint = f" (did you mean {path / 'sweep.mcap'}?)"
+        raise SweepLogError(f"{path}: is a directory, not a sweep log{hint}")
+    if not path.exists():
+        part = partial_path(path)
+        hint = f" ({part} exists: the sweep did not finish)" if part.is_file() else ""
+        raise SweepLogError(f"{path}: no such sweep log{hint}")
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(len(_MAGIC))
+    except OSError as exc:
+        raise SweepLogError(f"{path}: cannot read the sweep log: {reason(exc)}") from None
+    if magic != _MAGIC:
+        raise SweepLogError(f"{path}: not an MCAP file (expected a sweep log, sweep.mcap)")
+
+
+def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
+    """Read a sweep log (also a ``.partial`` file or one cut short: every complete chunk)."""
+    p = Path(path)
+    _check_file(p)
+    schemas: dict[int, Schema] = {}
+    channel_id: int | None = None
+    payloads: list[bytes] = []
+    meta: dict[str, str] | None = None
+    end: dict[str, str] | None = None
+    library = ""
+    truncated = False
+    other_schemas: set[str] = set()
+    try:
+        with open(p, "rb") as f:
+            for record in StreamReader(f).records:
+                if isinstance(record, Message):
+                    if record.channel_id == channel_id:
+                        payloads.append(record.data)
+                elif isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    sch = schemas.get(record.schema_id)
+                    if (
+                        record.topic == TOPIC
+                        and sch is not None
+                        and sch.name == SCHEMA_NAME
+                        and channel_id is None
+                    ):
+                        channel_id = record.id
+                    elif sch is not None:
+                        other_schemas.add(sch.name)
+                elif isinstance(record, Metadata):
+                    if record.name == SWEEP_METADATA and meta is None:
+                        meta = dict(record.metadata)
+                    elif record.name == END_METADATA:
+                        end = dict(record.metadata)
+                elif isinstance(record, Header):
+                    library = record.library
+    except OSError as exc:
+        raise SweepLogError(f"{p}: cannot read the sweep log: {reason(exc)}") from None
+    except Exception:  # noqa: BLE001 - a damaged tail: keep every complete record before it
+        truncated = True
+    if channel_id is None or meta is None:
+        if _SLOT_SCHEMA in other_schemas:
+            raise SweepLogError(
+                f"{p}: a per-slot run log, not a sweep log (figures read the sweep.mcap "
+                "written by `corraoi sweep -o DIR`)"
+            )
+        what = "is cut short before its header" if truncated else "is not a corraoi sweep log"
+        raise SweepLogError(f"{p}: {what} (no {SCHEMA_NAME} channel {TOPIC} with its metadata)")
+    return _build(p, meta, end, payloads, library=library, truncated=truncated)
+
+
+def _build(
+    p: Path,
+    meta: dict[str, str],
+    end: dict[str, str] | None,
+    payloads: list[bytes],
+    *,
+    library: str,
+    truncated: bool,
+) -> SweepLog:
+    version = meta.get("format_version", "")
+    if not version.isdigit():
+        raise SweepLogError(f"{p}: the sweep metadata has no valid format_version ({version!r})")
+    if int(version) > FORMAT_VERSION:
+        raise SweepLogError(
+            f"{p}: written by a newer corraoi (sweep log format version {version}; this one "
+            f"reads up to {FORMAT_VERSION}): upgrade corraoi"
+        )
+    try:
+        config = json.loads(meta["config"])
+        K = _arms(config)
+    except (KeyError, ValueError) as exc:
+        raise SweepLogError(f"{p}: the sweep metadata holds no valid config ({exc})") from None
+    try:
+        rows = orjson.loads(b"[" + b",".join(payloads) + b"]")
+    except orjson.JSONDecodeError as exc:
+        raise SweepLogError(f"{p}: a sweep message is not valid JSON ({exc})") from None
+    grouped: dict[str, list[dict[str, Any]]] = {}
+    for i, row in enumerate(rows):
+        if not isinstance(row, dict) or not isinstance(row.get("policy"), str):
+            raise SweepLogError(f"{p}: sweep message {i + 1} has no policy name")
+        grouped.setdefault(row["policy"], []).append(row)
+    curves = {name: _curve(p, name, group, K) for name, group in grouped.items()}
+    if truncated:
+        status = "truncated"
+    elif end is None:
+        status = "interrupted"
+    else:
+        status = end.get("status", "interrupted")
+    if p.name.endswith(PARTIAL_SUFFIX) and status == "complete":
+        status = "interrupted"
+    return SweepLog(
+        path=p,
+        config=config,
+        policies=list(grouped),
+        curves=curves,
+        library=library,
+        status=status,
+        messages=len(rows),
+        metadata=meta,
+    )
+
+
+def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve:
+    def column(key: str) -> np.ndarray:
+        return np.array([np.nan if r[key] is None else r[key] for r in rows], dtype=np.float64)
+
+    try:
+        t = np.array([r["t"] for r in rows], dtype=np.int64)
+        curve = SweepCurve(
+            policy=name,
+            t=t,
+            regret_mean=column("regret_mean"),
+            regret_ci95=column("regret_ci95"),
+            estimator_mean=column("estimator_mean"),
+            estimator_ci95=column("estimator_ci95"),
+            pull_share=np.array([r["pull_share"] for r in rows], dtype=np.float64).reshape(
+                len(rows), K
+            ),
+        )
+    except KeyError as exc:
+        raise SweepLogError(f"{p}: a sweep message of {name} lacks the field {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise SweepLogError(
+            f"{p}: a sweep message of {name} has a field of the wrong type or size ({exc})"
+        ) from None
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        raise SweepLogError(f"{p}: the checkpoints of {name} are not in increasing order")
+    return curve
+
+
+__all__ = [
+    "END_METADATA",
+    "FLUSH_EVERY",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "NS_PER_SLOT",
+    "SCHEMA_NAME",
+    "SWEEP_METADATA",
+    "TOPIC",
+    "SweepCurve",
+    "SweepLog",
+    "SweepLogError",
+    "SweepMcapSink",
+    "read_sweep",
+    "sweep_metadata",
+    "sweep_schema",
+]
