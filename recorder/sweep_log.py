@@ -29,6 +29,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
+from corraoi.policies import AOI_PREFIX
 from corraoi.sweep import SweepPoint
 
 from .errors import LogError, WriteError
@@ -67,6 +68,62 @@ _SLOT_SCHEMA = "corraoi.SlotEvent"
 
 class SweepLogError(LogError):
     """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
+
+
+# ---------------------------------------------------------------------------- styling
+# Shared by the Rerun sink and the figure, so both draw a policy in the same colour.
+
+RGB = tuple[int, int, int]
+
+#: One colour per base policy; its ``aoi-aware-`` variant uses the same colour.
+POLICY_COLORS: dict[str, RGB] = {
+    "ucb": (31, 119, 180),  # blue
+    "ts": (255, 127, 14),  # orange
+    "ts-gauss": (140, 86, 75),  # brown
+    "cucb": (44, 160, 44),  # green
+    "cts": (214, 39, 40),  # red
+    "cts-gauss": (148, 103, 189),  # purple
+}
+_EXTRA_COLORS: tuple[RGB, ...] = ((227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
+#: Colours of arms 1, 2, ... in the pulls views (cycled beyond eight arms).
+ARM_COLORS: tuple[RGB, ...] = (
+    (102, 194, 165),
+    (252, 141, 98),
+    (141, 160, 203),
+    (231, 138, 195),
+    (166, 216, 84),
+    (255, 217, 47),
+    (229, 196, 148),
+    (179, 179, 179),
+)
+
+
+def base_policy(name: str) -> str:
+    """``aoi-aware-cts`` -> ``cts``; any other name unchanged."""
+    return name.removeprefix(AOI_PREFIX)
+
+
+def is_aoi_aware(name: str) -> bool:
+    return name.startswith(AOI_PREFIX)
+
+
+def policy_color(name: str) -> RGB:
+    """The colour of a policy: its base policy's (unknown bases get a stable extra colour)."""
+    base = base_policy(name)
+    if base in POLICY_COLORS:
+        return POLICY_COLORS[base]
+    return _EXTRA_COLORS[sum(base.encode()) % len(_EXTRA_COLORS)]
+
+
+def lighter(rgb: RGB, amount: float = 0.5) -> RGB:
+    """``rgb`` mixed with white (``amount`` = 0: unchanged, 1: white)."""
+    r, g, b = (round(c + (255 - c) * amount) for c in rgb)
+    return (r, g, b)
+
+
+def arm_color(k: int) -> RGB:
+    """Colour of the arm with 0-based index ``k``."""
+    return ARM_COLORS[k % len(ARM_COLORS)]
 
 
 # ---------------------------------------------------------------------------- format
@@ -178,6 +235,9 @@ class SweepMcapSink:
         self.path = Path(path)
         self.config = config
         self.K = _arms(config)
+        horizon = int(config.get("horizon", 0) or 0)
+        if horizon * NS_PER_SLOT >= 2**64:
+            raise ValueError(f"horizon {horizon} is too long for an MCAP sweep log")
         self.flush_every = int(flush_every)
         self._overwrite = overwrite
         self._count = 0
@@ -220,8 +280,8 @@ class SweepMcapSink:
                 f"sweep point: policy must be a non-empty string, got {point.policy!r}"
             )
         t = int(point.t)
-        if t < 1:
-            raise ValueError(f"sweep point {point.policy}: t must be >= 1, got {point.t}")
+        if t < 1 or t * NS_PER_SLOT >= 2**64:
+            raise ValueError(f"sweep point {point.policy}: t out of range, got {point.t}")
         last = self._last_t.get(point.policy, 0)
         if t <= last:
             raise ValueError(
@@ -535,14 +595,21 @@ def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve
 
 
 __all__ = [
+    "ARM_COLORS",
     "END_METADATA",
     "FLUSH_EVERY",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "NS_PER_SLOT",
+    "POLICY_COLORS",
     "SCHEMA_NAME",
     "SWEEP_METADATA",
     "TOPIC",
+    "arm_color",
+    "base_policy",
+    "is_aoi_aware",
+    "lighter",
+    "policy_color",
     "SweepCurve",
     "SweepLog",
     "SweepLogError",

@@ -1,0 +1,328 @@
+"""SweepRerunSink: the aggregated curves of a sweep, streamed into a Rerun recording.
+
+Entities (timeline ``slot``, a sequence; arms numbered from 1):
+
+* ``sweep/regret/<policy>``: mean pathwise AoI regret at each checkpoint;
+  ``sweep/regret/<policy>/lo`` and ``.../hi``: the 95% confidence band (mean -/+ half-width;
+  absent with a single run), thin lines in a lighter shade of the policy's colour;
+* ``sweep/estimator/<policy>``: the paper's estimator sum aoi - t / mu*;
+* ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t.
+
+Styling (``SeriesLines``/``SeriesPoints`` colours, names, widths) is logged once as static.
+Each base policy has a colour (``recorder.sweep_log.POLICY_COLORS``); its ``aoi-aware-``
+variant uses the same colour with a thinner line plus a cross marker at every checkpoint,
+since Rerun 0.41 lines cannot be dashed. :func:`sweep_blueprint` is the default layout: the
+regret overlay on top, the pulls per arm of each policy in tabs below.
+
+No global Rerun state: everything goes through the ``RecordingStream`` passed in. With
+``set_log_time_enabled(False)`` (done here) and an explicit recording id, two runs of the
+same sweep give recordings that ``rerun rrd compare`` finds equal (the bytes differ: Rerun's
+row ids and the blueprint's ids are time-based or random).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from corraoi.sweep import SweepPoint
+
+from .errors import WriteError
+from .paths import partial_path, publish, reason
+from .sweep_log import FLUSH_EVERY, arm_color, is_aoi_aware, lighter, policy_color
+
+TIMELINE = "slot"
+ROOT = "sweep"
+#: Line widths (UI points) of the mean curves, AoI-aware curves and band lines.
+WIDTH_BASE = 2.0
+WIDTH_AOI_AWARE = 1.25
+WIDTH_BAND = 0.75
+#: Marker of the AoI-aware variants (Rerun has no dashed lines).
+AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
+AOI_AWARE_MARKER_SIZE = 2.5
+
+
+def _part(name: str) -> str:
+    return rr.escape_entity_path_part(name)
+
+
+def regret_path(policy: str) -> str:
+    return f"{ROOT}/regret/{_part(policy)}"
+
+
+def estimator_path(policy: str) -> str:
+    return f"{ROOT}/estimator/{_part(policy)}"
+
+
+def pulls_path(policy: str, arm: int | None = None) -> str:
+    """``sweep/pulls/<policy>`` or, with ``arm`` (numbered from 1), one arm's entity."""
+    base = f"{ROOT}/pulls/{_part(policy)}"
+    return base if arm is None else f"{base}/{arm}"
+
+
+def _policy_names(config: dict[str, Any]) -> list[str]:
+    return [p["name"] if isinstance(p, dict) else str(p) for p in config.get("policies", [])]
+
+
+def _arm_labels(config: dict[str, Any]) -> list[str]:
+    inst = config.get("instance") or {}
+    K = len(inst.get("Y", []))
+    names = list(inst.get("arms") or [str(k + 1) for k in range(K)])
+    return [
+        f"arm {k + 1}" if names[k] == str(k + 1) else f"arm {k + 1} ({names[k]})" for k in range(K)
+    ]
+
+
+def sweep_recording_id(config: dict[str, Any]) -> str:
+    """A recording id that depends on the sweep configuration only."""
+    digest = hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()
+    return f"corraoi-sweep-{digest[:16]}"
+
+
+def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
+    """The default layout: the regret overlay (and estimator tab), pulls per policy below."""
+    inst = config.get("instance") or {}
+    title = (
+        f"AoI regret, {inst.get('name', '?')}: {config.get('runs', '?')} runs, mean and 95% band"
+    )
+    top = rrb.Tabs(
+        rrb.TimeSeriesView(
+            origin=f"{ROOT}/regret",
+            name=title,
+            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop),
+        ),
+        rrb.TimeSeriesView(
+            origin=f"{ROOT}/estimator",
+            name="estimator sum aoi - t / mu*",
+            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop),
+        ),
+        active_tab=0,
+    )
+    pulls = [
+        rrb.TimeSeriesView(origin=pulls_path(p), name=f"pull share, {p}")
+        for p in _policy_names(config)
+    ]
+    parts: list[rrb.Container | rrb.View] = [top]
+    if pulls:
+        parts.append(rrb.Tabs(*pulls, active_tab=0, name="pull share per arm"))
+    return rrb.Blueprint(
+        rrb.Vertical(*parts, row_shares=[3, 2] if pulls else None),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False,
+    )
+
+
+def open_sweep_recording(
+    path: str | os.PathLike[str],
+    config: dict[str, Any],
+    *,
+    recording_id: str | None = None,
+    overwrite: bool = True,
+) -> SweepRerunSink:
+    """A sink that writes ``path`` (.rrd with the default blueprint) and owns its recording.
+
+    The recording id defaults to :func:`sweep_recording_id`; see :meth:`SweepRerunSink.to_file`.
+    """
+    return SweepRerunSink.to_file(path, config, recording_id=recording_id, overwrite=overwrite)
+
+
+class SweepRerunSink:
+    """Streams :class:`~corraoi.sweep.SweepPoint` rows into a Rerun recording.
+
+    ``with SweepRerunSink(recording, config) as sink: sink.write(point)``. Points are
+    buffered per policy and sent with ``send_columns`` every ``flush_every`` points, when
+    the policy changes and on :meth:`close` (which also flushes the recording). The caller
+    owns ``recording`` (and its ``save``/``disconnect``) unless the sink was made with
+    :meth:`to_file`. Closing twice is safe.
+    """
+
+    def __init__(
+        self,
+        recording: rr.RecordingStream,
+        config: dict[str, Any],
+        *,
+        flush_every: int = FLUSH_EVERY,
+    ) -> None:
+        if flush_every < 1:
+            raise ValueError(f"flush_every must be >= 1, got {flush_every}")
+        self.recording = recording
+        self.config = config
+        self.flush_every = int(flush_every)
+        self.arm_labels = _arm_labels(config)
+        self.K = len(self.arm_labels)
+        self._buffer: list[SweepPoint] = []
+        self._styled: set[str] = set()
+        self._closed = False
+        self._owned_path: Path | None = None
+        self._overwrite = True
+        recording.set_log_time_enabled(False)
+        for name in _policy_names(config):
+            self._style(name)
+
+    @classmethod
+    def to_file(
+        cls,
+        path: str | os.PathLike[str],
+        config: dict[str, Any],
+        *,
+        recording_id: str | None = None,
+        application_id: str = "corraoi",
+        overwrite: bool = True,
+        flush_every: int = FLUSH_EVERY,
+    ) -> SweepRerunSink:
+        """A sink that owns its recording: saved to ``<path>.partial`` with the default
+        blueprint, disconnected and renamed to ``path`` on :meth:`close`."""
+        target = Path(path)
+        rec = rr.RecordingStream(
+            application_id, recording_id=recording_id or sweep_recording_id(config)
+        )
+        rec.set_log_time_enabled(False)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            rec.save(partial_path(target), default_blueprint=sweep_blueprint(config))
+        except OSError as exc:
+            raise WriteError(f"{partial_path(target)}: cannot write: {reason(exc)}") from None
+        sink = cls(rec, config, flush_every=flush_every)
+        sink._owned_path = target
+        sink._overwrite = overwrite
+        return sink
+
+    # ------------------------------------------------------------------ styling
+
+    def _style(self, name: str) -> None:
+        if name in self._styled:
+            return
+        self._styled.add(name)
+        rec = self.recording
+        color = policy_color(name)
+        aware = is_aoi_aware(name)
+        width = WIDTH_AOI_AWARE if aware else WIDTH_BASE
+        for path in (regret_path(name), estimator_path(name)):
+            parts: list[Any] = [rr.SeriesLines(colors=[color], widths=[width], names=[name])]
+            if aware:
+                parts.append(
+                    rr.SeriesPoints(
+                        colors=[color],
+                        markers=[AOI_AWARE_MARKER],
+                        marker_sizes=[AOI_AWARE_MARKER_SIZE],
+                        names=[name],
+                    )
+                )
+            rec.log(path, *parts, static=True)
+        band = rr.SeriesLines(
+            colors=[lighter(color, 0.45)], widths=[WIDTH_BAND], names=[f"{name} 95% band"]
+        )
+        rec.log(f"{regret_path(name)}/lo", band, static=True)
+        rec.log(f"{regret_path(name)}/hi", band, static=True)
+        for k, label in enumerate(self.arm_labels):
+            rec.log(
+                pulls_path(name, k + 1),
+                rr.SeriesLines(colors=[arm_color(k)], widths=[1.5], names=[label]),
+                static=True,
+            )
+
+    # ------------------------------------------------------------------ data
+
+    def write(self, point: SweepPoint) -> None:
+        """Buffer one point; sends when ``flush_every`` points wait or the policy changes."""
+        if self._closed:
+            raise ValueError("the sweep Rerun sink is closed")
+        share = np.asarray(point.pull_share, dtype=np.float64).reshape(-1)
+        if share.size != self.K:
+            raise ValueError(
+                f"sweep point {point.policy} t={point.t}: pull_share has {share.size} "
+                f"entries, the instance has {self.K} arms"
+            )
+        if self._buffer and self._buffer[-1].policy != point.policy:
+            self.flush()
+        self._style(point.policy)
+        self._buffer.append(point)
+        if len(self._buffer) >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Send the buffered points (all of one policy) as columns."""
+        if not self._buffer:
+            return
+        points, self._buffer = self._buffer, []
+        name = points[0].policy
+        rec = self.recording
+        t = np.array([p.t for p in points], dtype=np.int64)
+        mean = np.array([p.regret_mean for p in points], dtype=np.float64)
+        half = np.array(
+            [np.nan if p.regret_ci95 is None else p.regret_ci95 for p in points], dtype=np.float64
+        )
+        est = np.array([p.estimator_mean for p in points], dtype=np.float64)
+        share = np.array([np.asarray(p.pull_share, dtype=np.float64) for p in points])
+
+        def send(path: str, times: np.ndarray, values: np.ndarray) -> None:
+            if times.size:
+                rec.send_columns(
+                    path,
+                    indexes=[rr.TimeColumn(TIMELINE, sequence=times)],
+                    columns=rr.Scalars.columns(scalars=values),
+                )
+
+        send(regret_path(name), t, mean)
+        band = np.isfinite(half)
+        send(f"{regret_path(name)}/lo", t[band], (mean - half)[band])
+        send(f"{regret_path(name)}/hi", t[band], (mean + half)[band])
+        send(estimator_path(name), t, est)
+        for k in range(self.K):
+            send(pulls_path(name, k + 1), t, np.ascontiguousarray(share[:, k]))
+
+    def close(self) -> None:
+        """Send what is buffered and flush the recording (an owned one is also
+        disconnected and its file renamed into place). Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self.flush()
+        self.recording.flush()
+        if self._owned_path is not None:
+            self.recording.disconnect()
+            publish(self._owned_path, overwrite=self._overwrite)
+
+    def abort(self) -> None:
+        """Like :meth:`close`, but an owned file stays at ``<path>.partial``."""
+        if self._closed:
+            return
+        self._closed = True
+        self.flush()
+        self.recording.flush()
+        if self._owned_path is not None:
+            self.recording.disconnect()
+
+    def __enter__(self) -> SweepRerunSink:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+__all__ = [
+    "TIMELINE",
+    "SweepRerunSink",
+    "estimator_path",
+    "open_sweep_recording",
+    "pulls_path",
+    "regret_path",
+    "sweep_blueprint",
+    "sweep_recording_id",
+]
