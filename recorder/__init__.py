@@ -1,0 +1,48 @@
+"""corraoi's recorder: sinks a simulation streams into, and the reader of its logs.
+
+* :class:`McapSink` writes the MCAP slot log (``docs/log-format.md``);
+* :func:`open_log` reads it back into the same SlotBlocks (:class:`RunLog`);
+* :class:`RerunSink` sends the slots to a Rerun ``RecordingStream`` (file or viewer), with
+  :func:`one_run_blueprint` as the default layout.
+
+The Rerun parts are imported on first use, so reading logs does not import rerun.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from .errors import LogError, OutputError, ViewerError, WriteError
+from .format import FORMAT_VERSION, TOPIC
+from .mcap_sink import McapSink
+from .reader import RunLog, open_log
+
+if TYPE_CHECKING:
+    from .rerun_sink import RerunSink, RrdOutput, new_recording, one_run_blueprint
+
+_LAZY = {"RerunSink", "RrdOutput", "new_recording", "one_run_blueprint"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        from . import rerun_sink
+
+        return getattr(rerun_sink, name)
+    raise AttributeError(f"module 'recorder' has no attribute {name!r}")
+
+
+__all__ = [
+    "FORMAT_VERSION",
+    "LogError",
+    "McapSink",
+    "OutputError",
+    "RerunSink",
+    "RrdOutput",
+    "RunLog",
+    "TOPIC",
+    "ViewerError",
+    "WriteError",
+    "new_recording",
+    "one_run_blueprint",
+    "open_log",
+]

@@ -1,0 +1,29 @@
+"""Errors of the recorder: reading logs, choosing output paths, writing files.
+
+Each carries a one-line message that names the file; the CLI prints it as
+``corraoi: error: <message>`` and exits with ``exit_code``.
+"""
+
+from __future__ import annotations
+
+from corraoi.errors import CorraoiError, UsageError
+
+
+class LogError(UsageError):
+    """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
+
+
+class OutputError(UsageError):
+    """An output path that cannot be used: it exists (without --force), is a directory, ..."""
+
+
+class WriteError(CorraoiError):
+    """An I/O failure while writing a log (disk full, file too large, device gone, ...)."""
+
+    exit_code = 1
+
+
+class ViewerError(CorraoiError):
+    """A Rerun viewer that cannot be reached or started. The files are still written."""
+
+    exit_code = 1

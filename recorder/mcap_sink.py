@@ -1,0 +1,223 @@
+"""McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
+
+The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
+so a file at ``<path>`` is always complete. Every :data:`~recorder.format.FLUSH_EVERY`
+slots the current chunk is closed and handed to the operating system, so a writer killed
+with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
+the ``.partial`` file and says the log was cut short.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from types import TracebackType
+from typing import BinaryIO
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+from corraoi.block import RunConfig, SlotBlock
+from corraoi.errors import ConfigError
+
+from .errors import WriteError
+from .format import (
+    END_METADATA,
+    FLUSH_EVERY,
+    MAX_SLOT,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    RUN_METADATA,
+    SCHEMA_ENCODING,
+    SCHEMA_NAME,
+    TOPIC,
+    BlockEncoder,
+    end_metadata,
+    library_name,
+    run_metadata,
+    schema_bytes,
+)
+from .paths import check_output, open_partial, partial_path, publish, reason
+
+#: Chunks are closed by slot count (FLUSH_EVERY), not by size; this only caps a huge chunk.
+_CHUNK_BYTES = 64 * 1024 * 1024
+#: Slots whose log_time t * 1e9 still fits a signed 64-bit integer (numpy fast path).
+_I64_SAFE = (2**63 - 1) // NS_PER_SLOT
+
+
+class McapSink:
+    """Write one run's slots to ``path`` (an MCAP file), block by block.
+
+    ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
+    normally or by KeyboardInterrupt finishes the file with the slots written so far and
+    renames it into place; any other exception leaves the ``.partial`` file as it is (the
+    reader recovers its complete chunks). Closing twice is safe.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        config: RunConfig,
+        *,
+        overwrite: bool = False,
+        flush_every: int = FLUSH_EVERY,
+        fsync: bool = True,
+    ) -> None:
+        if flush_every < 1:
+            raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
+        if config.horizon > MAX_SLOT:
+            raise ConfigError(
+                f"horizon {config.horizon} is too long for an MCAP log (at most {MAX_SLOT} "
+                "slots, since log_time is t seconds in nanoseconds)"
+            )
+        self.path: Path = check_output(path, overwrite=overwrite, what="MCAP log")
+        self.partial_path: Path = partial_path(self.path)
+        self.config = config
+        self.overwrite = overwrite
+        self.flush_every = int(flush_every)
+        self.slots = 0
+        self.closed = False
+        self.finished = False
+        self._fsync = fsync
+        self._torn = False
+        self._last: SlotBlock | None = None
+        self._encoder = BlockEncoder(config.instance.K)
+        self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
+        try:
+            self._writer = Writer(
+                self._file, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD
+            )
+            self._writer.start(profile="", library=library_name(config.version))
+            schema_id = self._writer.register_schema(
+                name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
+            )
+            self._channel = self._writer.register_channel(
+                topic=TOPIC,
+                message_encoding=MESSAGE_ENCODING,
+                schema_id=schema_id,
+                metadata={"format_version": run_metadata(config)["format_version"]},
+            )
+            self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
+            self._file.flush()
+        except OSError as exc:
+            self._torn = True
+            self._close_file()
+            raise self._write_error(exc) from None
+
+    # ------------------------------------------------------------------ writing
+
+    def write(self, block: SlotBlock) -> None:
+        """Append the block's slots; they must follow the slots written so far."""
+        if self.closed or self._torn:
+            raise ValueError(f"{self.path}: write() after close() or a failed write")
+        n = len(block)
+        if n == 0:
+            return
+        K = self.config.instance.K
+        if block.mu_hat.shape != (n, K):
+            raise ValueError(f"block has {block.mu_hat.shape[1]} arms, the run has {K}")
+        first = int(block.t[0])
+        if first != self.slots + 1 or int(block.t[-1]) != self.slots + n:
+            raise ValueError(
+                f"block covers slots {first}..{int(block.t[-1])}, expected to start at "
+                f"{self.slots + 1} with consecutive slots"
+            )
+        if self.slots + n > self.config.horizon:
+            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+        messages = self._encoder.encode(block)
+        t = block.t.astype(np.int64, copy=False)
+        times = (
+            (t * NS_PER_SLOT).tolist()
+            if t[-1] <= _I64_SAFE
+            else [v * NS_PER_SLOT for v in t.tolist()]
+        )
+        sequences = (t & 0xFFFFFFFF).tolist()  # MCAP sequence is 32-bit: t modulo 2**32
+        ends = (t % self.flush_every == 0).tolist()
+        add = self._writer.add_message
+        flush = self._writer.flush
+        channel = self._channel
+        self._torn = True  # until this block is fully handed to the writer
+        try:
+            for ns, seq, data, end in zip(times, sequences, messages, ends, strict=True):
+                add(channel, ns, data, ns, seq)
+                if end:
+                    flush()
+        except OSError as exc:
+            raise self._write_error(exc) from None
+        self._torn = False
+        self.slots += n
+        self._last = block
+
+    # ------------------------------------------------------------------ closing
+
+    def close(self) -> Path:
+        """Finish the file (summary, footer), sync it and rename it into place.
+
+        Returns the final path. Safe to call twice. If finishing fails (disk full, ...),
+        the ``.partial`` file is left and :class:`WriteError` says so.
+        """
+        if self.closed:
+            return self.path if self.finished else self.partial_path
+        if self._torn:  # a write was cut off half-way: keep what is surely whole
+            return self.abort()
+        self.closed = True
+        try:
+            self._writer.flush()
+            self._writer.add_metadata(
+                END_METADATA,
+                end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last),
+            )
+            self._writer.finish()
+            self._file.flush()
+            if self._fsync:
+                os.fsync(self._file.fileno())
+            self._file.close()
+        except OSError as exc:
+            self._close_file()
+            raise self._write_error(exc) from None
+        publish(self.path, overwrite=self.overwrite)
+        self.finished = True
+        return self.path
+
+    def abort(self) -> Path:
+        """Stop without finishing: the ``.partial`` file stays (readable up to its last chunk)."""
+        if not self.closed:
+            self.closed = True
+            try:
+                if not self._torn:
+                    self._writer.flush()
+            except OSError:
+                pass
+            self._close_file()
+        return self.partial_path
+
+    def _close_file(self) -> None:
+        try:
+            self._file.close()
+        except OSError:
+            pass
+
+    def _write_error(self, exc: OSError) -> WriteError:
+        return WriteError(
+            f"{self.partial_path}: cannot write the MCAP log: {reason(exc)} "
+            f"(the unfinished log is left as {self.partial_path})"
+        )
+
+    def __enter__(self) -> McapSink:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        interrupted = exc_type is not None and issubclass(exc_type, (KeyboardInterrupt, SystemExit))
+        if exc_type is None or (interrupted and not self._torn):
+            self.close()
+        else:
+            self.abort()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else "open"
+        return f"McapSink({str(self.path)!r}, {self.config.label}, {self.slots} slots, {state})"

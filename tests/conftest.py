@@ -1,0 +1,64 @@
+"""Shared fixtures of the recorder tests: run configurations, engine output, recorded logs."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from corraoi.block import RunConfig, SlotBlock
+from corraoi.engine import simulate_run
+from corraoi.instance import load_instance
+from corraoi.policies import make_policy
+
+Recorded = tuple[Path, RunConfig, SlotBlock]
+
+
+def _config(
+    policy: str = "cucb", instance: str = "I1", seed: int = 0, horizon: int = 2500
+) -> RunConfig:
+    return RunConfig(load_instance(instance), make_policy(policy), seed, horizon)
+
+
+def _engine(config: RunConfig, block: int = 1000) -> list[SlotBlock]:
+    return list(
+        simulate_run(config.instance, config.policy, config.seed, config.horizon, block=block)
+    )
+
+
+@pytest.fixture
+def make_config() -> Callable[..., RunConfig]:
+    """make_config(policy="cucb", instance="I1", seed=0, horizon=2500) -> RunConfig."""
+    return _config
+
+
+@pytest.fixture
+def engine() -> Callable[..., list[SlotBlock]]:
+    """engine(config, block=1000) -> the engine's blocks for the run."""
+    return _engine
+
+
+@pytest.fixture
+def record_mcap(tmp_path: Path) -> Callable[..., Recorded]:
+    """record_mcap(policy, horizon=, seed=, name=, block=) -> (path, config, engine output)."""
+    from recorder.mcap_sink import McapSink
+
+    def record(
+        policy: str = "cucb",
+        *,
+        instance: str = "I1",
+        seed: int = 0,
+        horizon: int = 2500,
+        name: str | None = None,
+        block: int = 1000,
+    ) -> Recorded:
+        config = _config(policy, instance, seed, horizon)
+        path = tmp_path / (name or f"{config.label}.mcap")
+        blocks = _engine(config, block)
+        with McapSink(path, config, fsync=False) as sink:
+            for b in blocks:
+                sink.write(b)
+        return path, config, SlotBlock.concat(blocks)
+
+    return record
