@@ -49,8 +49,8 @@ SWEEP_METADATA = "corraoi.sweep"
 END_METADATA = "corraoi.sweep.end"
 #: log_time = publish_time = t * NS_PER_SLOT: slot t shows as t seconds in MCAP tools.
 NS_PER_SLOT = 1_000_000_000
-#: A chunk is closed and flushed to the OS after every FLUSH_EVERY messages and whenever
-#: the policy changes, so a killed sweep loses at most that many checkpoints.
+#: The open chunk is closed and handed to the OS once FLUSH_EVERY messages wait in it and
+#: whenever the policy changes, so a killed sweep loses fewer than FLUSH_EVERY checkpoints.
 FLUSH_EVERY = 32
 #: Message keys in the order the writer writes them.
 MESSAGE_KEYS = (
@@ -229,6 +229,7 @@ class SweepMcapSink:
         *,
         overwrite: bool = True,
         flush_every: int = FLUSH_EVERY,
+        fsync: bool = True,
     ) -> None:
         if flush_every < 1:
             raise ValueError(f"flush_every must be >= 1, got {flush_every}")
@@ -240,7 +241,9 @@ class SweepMcapSink:
             raise ValueError(f"horizon {horizon} is too long for an MCAP sweep log")
         self.flush_every = int(flush_every)
         self._overwrite = overwrite
+        self._fsync = fsync
         self._count = 0
+        self._pending = 0
         self._last_t: dict[str, int] = {}
         self._policy: str | None = None
         self._closed = False
@@ -315,7 +318,7 @@ class SweepMcapSink:
         data = self.encode(point)
         try:
             if self._policy is not None and point.policy != self._policy:
-                self._writer.flush()  # the previous policy's curve is complete: keep it
+                self._flush()  # the previous policy's curve is complete: keep it
             self._policy = point.policy
             self._count += 1
             log_time = int(point.t) * NS_PER_SLOT
@@ -327,10 +330,16 @@ class SweepMcapSink:
                 sequence=self._count,
             )
             self._last_t[point.policy] = int(point.t)
-            if self._count % self.flush_every == 0:
-                self._writer.flush()
+            self._pending += 1
+            if self._pending >= self.flush_every:
+                self._flush()
         except OSError as exc:
             raise WriteError(f"{self.part}: cannot write the sweep log: {reason(exc)}") from None
+
+    def _flush(self) -> None:
+        if self._pending:
+            self._writer.flush()
+            self._pending = 0
 
     def _finish(self, status: str) -> None:
         self._closed = True
@@ -345,7 +354,8 @@ class SweepMcapSink:
             )
             self._writer.finish()
             self._stream.flush()
-            os.fsync(self._stream.fileno())
+            if self._fsync:
+                os.fsync(self._stream.fileno())
         except OSError as exc:
             raise WriteError(f"{self.part}: cannot finish the sweep log: {reason(exc)}") from None
         finally:

@@ -126,12 +126,15 @@ def open_sweep_recording(
     *,
     recording_id: str | None = None,
     overwrite: bool = True,
+    flush_every: int = FLUSH_EVERY,
 ) -> SweepRerunSink:
     """A sink that writes ``path`` (.rrd with the default blueprint) and owns its recording.
 
     The recording id defaults to :func:`sweep_recording_id`; see :meth:`SweepRerunSink.to_file`.
     """
-    return SweepRerunSink.to_file(path, config, recording_id=recording_id, overwrite=overwrite)
+    return SweepRerunSink.to_file(
+        path, config, recording_id=recording_id, overwrite=overwrite, flush_every=flush_every
+    )
 
 
 class SweepRerunSink:
