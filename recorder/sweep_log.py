@@ -20,7 +20,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 import orjson
@@ -30,10 +30,12 @@ from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
 from corraoi.policies import AOI_PREFIX
-from corraoi.sweep import SweepPoint
 
 from .errors import LogError, WriteError
 from .paths import PARTIAL_SUFFIX, open_partial, partial_path, publish, reason
+
+if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
+    from corraoi.sweep import SweepPoint
 
 #: Name of the format, stored under ``format`` in the sweep metadata.
 FORMAT_NAME = "corraoi.sweep-log"

@@ -1,0 +1,247 @@
+"""The sweep figure and ``corraoi figure``: drawn from the log alone, in the paper's style,
+with clear errors (unknown policies, existing output, bad logs, matplotlib missing)."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from corraoi.cli import main
+from recorder.sweep_log import POLICY_COLORS, SweepMcapSink, read_sweep
+from viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, FigureUnavailable, draw_figure
+
+from .test_sweep_log import POLICIES, small_sweep, write_log
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+MATPLOTLIB_MODULES = (
+    "matplotlib",
+    "matplotlib.figure",
+    "matplotlib.backends.backend_agg",
+    "matplotlib.lines",
+    "matplotlib.patches",
+)
+
+
+@pytest.fixture(scope="module")
+def log_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_log(tmp_path_factory.mktemp("sweep") / "sweep.mcap", small_sweep())
+
+
+def run(*args: str):
+    return CliRunner().invoke(main, list(args))
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", data[16:24])
+    return width, height
+
+
+def has_color(path: Path, rgb: tuple[int, int, int], tol: int = 2) -> bool:
+    from matplotlib.image import imread
+
+    img = np.round(imread(path)[..., :3] * 255).astype(int)
+    return bool((np.abs(img - np.array(rgb)).max(axis=-1) <= tol).any())
+
+
+def capture_figures(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """Keep every matplotlib Figure saved from now on, to inspect what was drawn."""
+    from matplotlib.figure import Figure
+
+    saved: list[Any] = []
+    original = Figure.savefig
+
+    def savefig(self: Any, *args: Any, **kwargs: Any) -> Any:
+        saved.append(self)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return saved
+
+
+# ---------------------------------------------------------------------------- draw_figure
+
+
+def test_png_of_the_expected_size_with_each_policy_colour(tmp_path: Path, log_path: Path):
+    pytest.importorskip("matplotlib")
+    out = draw_figure(read_sweep(log_path), tmp_path / "fig.png")
+    assert out == tmp_path / "fig.png" and not (tmp_path / "fig.png.partial").exists()
+    assert png_size(out) == (round(FIGSIZE[0] * DPI), round(FIGSIZE[1] * DPI))
+    for name in ("ucb", "cucb", "cts"):  # the drawn policies' colours (aoi-aware-cucb: green)
+        assert has_color(out, POLICY_COLORS[name]), name
+    for name in ("ts", "cts-gauss"):  # not in this sweep
+        assert not has_color(out, POLICY_COLORS[name]), name
+
+
+def test_paper_style_lines_bands_dashes_legend_title(tmp_path: Path, log_path: Path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    saved = capture_figures(monkeypatch)
+    sweep = read_sweep(log_path)
+    draw_figure(sweep, tmp_path / "fig.png")
+    (fig,) = saved
+    (ax,) = fig.axes
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    assert list(lines) == list(POLICIES)
+    for name in POLICIES:
+        curve = sweep.curves[name]
+        x, y = lines[name].get_data()
+        assert np.array_equal(x, curve.t) and np.array_equal(y, curve.regret_mean)
+    green = tuple(v / 255 for v in POLICY_COLORS["cucb"])
+    assert lines["cucb"].get_color() == lines["aoi-aware-cucb"].get_color() == green
+    assert lines["cucb"].get_linestyle() == "-"
+    assert lines["aoi-aware-cucb"].get_linestyle() == "--"
+    assert len(ax.collections) == len(POLICIES)  # one shaded band per policy
+    band = ax.collections[1].get_paths()[0].vertices[:, 1]
+    c = sweep.curves["cucb"]
+    assert band.max() == pytest.approx((c.regret_mean + c.regret_ci95).max())
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend[: len(POLICIES)] == list(POLICIES) and "95% confidence band" in legend
+    title = ax.get_title()
+    assert "I1" in title and "6 runs" in title and "T = 300" in title
+    assert ax.get_xscale() == "linear" and ax.get_xlabel() == "slot t"
+
+
+def test_log_x_and_policy_subset_in_the_order_asked(tmp_path: Path, log_path: Path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    saved = capture_figures(monkeypatch)
+    out = draw_figure(read_sweep(log_path), tmp_path / "f.png", log_x=True, policies=["cts", "ucb"])
+    (ax,) = saved[0].axes
+    assert [line.get_label() for line in ax.get_lines()] == ["cts", "ucb"]
+    assert ax.get_xscale() == "log"
+    assert has_color(out, POLICY_COLORS["cts"]) and not has_color(out, POLICY_COLORS["cucb"])
+
+
+def test_same_log_same_bytes_and_other_formats(tmp_path: Path, log_path: Path):
+    pytest.importorskip("matplotlib")
+    sweep = read_sweep(log_path)
+    a = draw_figure(sweep, tmp_path / "a.png")
+    b = draw_figure(sweep, tmp_path / "b.png")
+    assert a.read_bytes() == b.read_bytes()
+    svg = draw_figure(sweep, tmp_path / "f.svg")
+    assert svg.read_text().lstrip().startswith("<?xml") and "cucb" in svg.read_text()
+
+
+def test_missing_matplotlib_is_one_clear_line(tmp_path: Path, log_path: Path, monkeypatch):
+    for name in MATPLOTLIB_MODULES:
+        monkeypatch.setitem(sys.modules, name, None)  # import raises ImportError
+    with pytest.raises(FigureUnavailable) as exc:
+        draw_figure(read_sweep(log_path), tmp_path / "fig.png")
+    assert (
+        str(exc.value)
+        == MISSING_MATPLOTLIB
+        == "figures need matplotlib: pip install 'corraoi[plot]'"
+    )
+    res = run("figure", str(log_path), "-o", str(tmp_path / "fig.png"))
+    assert res.exit_code == 1
+    assert res.output.strip() == f"corraoi: error: {MISSING_MATPLOTLIB}"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unknown_policy_and_empty_log(tmp_path: Path, log_path: Path):
+    sweep = read_sweep(log_path)
+    from corraoi.errors import UsageError
+
+    with pytest.raises(UsageError, match="no curve for ts, nope in this sweep log"):
+        draw_figure(sweep, tmp_path / "x.png", policies=["cucb", "ts", "nope"])
+    config, _ = small_sweep(("ts",), runs=2, horizon=10)
+    with SweepMcapSink(tmp_path / "empty.mcap", config, fsync=False):
+        pass
+    pytest.importorskip("matplotlib")
+    with pytest.raises(UsageError, match="holds no points"):
+        draw_figure(read_sweep(tmp_path / "empty.mcap"), tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
+
+
+# ---------------------------------------------------------------------------- CLI
+
+
+def test_cli_figure_writes_and_refuses_to_overwrite(tmp_path: Path, log_path: Path):
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "fig.png"
+    res = run(
+        "figure", str(log_path), "-o", str(out), "--log-x", "--policies", "cucb,aoi-aware-cucb"
+    )
+    assert res.exit_code == 0, res.output
+    assert f"wrote {out}: 2 policies, instance I1, 6 runs, horizon 300" in res.output
+    assert png_size(out) == (1500, 900)
+    assert has_color(out, POLICY_COLORS["cucb"]) and not has_color(out, POLICY_COLORS["ucb"])
+    before = out.read_bytes()
+    res = run("figure", str(log_path), "-o", str(out))
+    assert res.exit_code == 2
+    assert (
+        res.output.strip() == f"corraoi: error: {out}: already exists (use --force to overwrite it)"
+    )
+    assert out.read_bytes() == before
+    res = run("figure", str(log_path), "-o", str(out), "--force", "--policies", "ucb")
+    assert res.exit_code == 0, res.output
+    assert out.read_bytes() != before and has_color(out, POLICY_COLORS["ucb"])
+
+
+@pytest.mark.parametrize(
+    "case, expected",
+    [
+        ("unknown", "no curve for ts in this sweep log (it has: ucb, cucb, aoi-aware-cucb, cts)"),
+        ("missing", "no such sweep log"),
+        ("directory", "is a directory, not a sweep log"),
+        ("not-mcap", "not an MCAP file"),
+        ("out-dir", "is a directory; give a file name for the figure"),
+    ],
+)
+def test_cli_figure_errors(tmp_path: Path, log_path: Path, case: str, expected: str):
+    out = tmp_path / "fig.png"
+    args = [str(log_path), "-o", str(out)]
+    if case == "unknown":
+        args += ["--policies", "cucb", "--policies", "ts"]
+    elif case == "missing":
+        args[0] = str(tmp_path / "none.mcap")
+    elif case == "directory":
+        args[0] = str(tmp_path)
+    elif case == "not-mcap":
+        (tmp_path / "x.mcap").write_text("not mcap")
+        args[0] = str(tmp_path / "x.mcap")
+    elif case == "out-dir":
+        args[2] = str(tmp_path)
+    res = run("figure", *args)
+    assert res.exit_code == 2, res.output
+    assert expected in res.output
+    assert res.output.startswith("corraoi: error: ") and res.output.count("\n") == 1
+    assert "Traceback" not in res.output and not out.exists()
+
+
+def test_cli_figure_of_an_interrupted_sweep_warns(tmp_path: Path):
+    pytest.importorskip("matplotlib")
+    config, points = small_sweep(("ucb", "cts"), runs=3, horizon=100)
+    with pytest.raises(KeyboardInterrupt), SweepMcapSink(tmp_path / "s.mcap", config) as sink:
+        for p in points[:12]:
+            sink.write(p)
+        raise KeyboardInterrupt
+    res = run("figure", str(tmp_path / "s.mcap.partial"), "-o", str(tmp_path / "f.png"))
+    assert res.exit_code == 0, res.output
+    assert "the sweep did not finish (interrupted); drawing the 12 checkpoint(s)" in res.output
+    assert png_size(tmp_path / "f.png") == (1500, 900)
+
+
+def test_cli_figure_never_simulates(tmp_path: Path, log_path: Path):
+    pytest.importorskip("matplotlib")
+    code = (
+        "import sys\n"
+        "from corraoi.cli import main\n"
+        "try:\n"
+        f"    main(['figure', {str(log_path)!r}, '-o', {str(tmp_path / 'f.png')!r}])\n"
+        "except SystemExit as e:\n"
+        "    assert not e.code, e.code\n"
+        "heavy = [m for m in ('corraoi.engine', 'corraoi._kernel', 'numba', 'rerun')"
+        " if m in sys.modules]\n"
+        "assert not heavy, heavy\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert png_size(tmp_path / "f.png") == (1500, 900)
