@@ -159,7 +159,7 @@ class McapSink:
         if self.closed:
             return self.path if self.finished else self.partial_path
         if self._torn:  # a write was cut off half-way: keep what is surely whole
-            return self.abort()
+            return self.abort() or self.partial_path
         self.closed = True
         try:
             self._writer.flush()
@@ -179,8 +179,9 @@ class McapSink:
         self.finished = True
         return self.path
 
-    def abort(self) -> Path:
-        """Stop without finishing: the ``.partial`` file stays (readable up to its last chunk)."""
+    def abort(self) -> Path | None:
+        """Stop without finishing: the ``.partial`` file stays (readable up to its last
+        chunk), unless no slot was written, in which case it is deleted (None)."""
         if not self.closed:
             self.closed = True
             try:
@@ -189,6 +190,10 @@ class McapSink:
             except OSError:
                 pass
             self._close_file()
+            if self.slots == 0:
+                self.partial_path.unlink(missing_ok=True)
+        if self.slots == 0:
+            return None
         return self.partial_path
 
     def _close_file(self) -> None:

@@ -1,0 +1,530 @@
+"""RerunSink: one run's slots streamed into a Rerun recording, a block at a time.
+
+Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
+``runs/<label>`` (:func:`run_path`):
+
+==================  =====================================================================
+``aoi``             age of information after the slot (line)
+``oracle_aoi``      age of the oracle playing the best arm on the same hidden path (line)
+``regret``          pathwise AoI regret sum (aoi - oracle_aoi) (line)
+``estimator``       the paper's estimator sum aoi - t / mu* (line)
+``arm/success``     the arm played, at the slots where it delivered (points)
+``arm/failure``     the arm played, at the slots where it failed (points)
+``override``        the arm played, at the slots where the AoI-aware rule chose it (points)
+``x``               the hidden state X_t (points)
+``mu_hat``          empirical mean of every arm after the slot, K series
+``pulls``           pulls of every arm after the slot, K series
+``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
+``about``           the run configuration (static markdown)
+==================  =====================================================================
+
+Styling (names, colours, markers) is logged once as static data when the sink is made.
+Data go with ``send_columns``, one call per entity and block: ``rr.log`` per slot would
+cost ~50 us a call. No global Rerun state: the caller passes a ``RecordingStream``
+(:func:`new_recording` makes one with reproducible settings) and owns where it goes;
+:class:`RrdOutput` is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from corraoi.block import RunConfig, SlotBlock
+from corraoi.theory import analyse
+
+from .errors import ViewerError, WriteError
+from .paths import check_output, open_partial, partial_path, publish, reason
+from .sweep_log import arm_color, lighter, policy_color
+
+APPLICATION_ID = "corraoi"
+TIMELINE = "slot"
+ROOT = "runs"
+#: Slots shown by the windowed views (AoI, arms, states, candidates) left of the cursor.
+WINDOW = 300
+
+ORACLE_COLOR = (150, 150, 150)
+SUCCESS_COLOR = (46, 160, 67)
+FAILURE_COLOR = (214, 39, 40)
+OVERRIDE_COLOR = (255, 187, 0)
+STATE_COLOR = (90, 90, 160)
+
+#: Entities of a run, relative to :func:`run_path` (``candidates`` has one child per arm).
+ENTITIES = (
+    "aoi",
+    "oracle_aoi",
+    "regret",
+    "estimator",
+    "arm/success",
+    "arm/failure",
+    "override",
+    "x",
+    "mu_hat",
+    "pulls",
+    "candidates",
+    "about",
+)
+
+
+def run_path(label: str) -> str:
+    """``runs/<label>``, the label escaped as one entity path part."""
+    return f"{ROOT}/{rr.escape_entity_path_part(label)}"
+
+
+def run_recording_id(config: RunConfig) -> str:
+    """A recording id that depends on the run configuration only (reproducible files)."""
+    digest = hashlib.sha256(json.dumps(config.to_dict(), sort_keys=True).encode()).hexdigest()
+    return f"corraoi-run-{digest[:16]}"
+
+
+def new_recording(
+    config: RunConfig,
+    *,
+    recording_id: str | None = None,
+    application_id: str = APPLICATION_ID,
+) -> rr.RecordingStream:
+    """A RecordingStream for one run: explicit id, no wall-clock timeline, named by label.
+
+    It starts with a buffered sink: attach destinations (``set_sinks``, ``save``, ...)
+    before sending data, or use :class:`RrdOutput`.
+    """
+    rec = rr.RecordingStream(
+        application_id,
+        recording_id=recording_id or run_recording_id(config),
+        send_properties=False,
+    )
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    rec.send_recording_name(config.label)
+    return rec
+
+
+def _arm_names(config: RunConfig) -> list[str]:
+    names = config.instance.arm_names
+    return [
+        f"arm {k + 1}" if name == str(k + 1) else f"arm {k + 1} ({name})"
+        for k, name in enumerate(names)
+    ]
+
+
+def about_markdown(config: RunConfig) -> str:
+    """The run configuration as markdown (the ``about`` entity and the blueprint's note)."""
+    inst = config.instance
+    th = analyse(inst)
+    params = ", ".join(f"{k}={v:g}" for k, v in config.policy.params.items()) or "none"
+    lines = [
+        f"## {config.label}",
+        "",
+        f"policy **{config.policy.name}** ({params}), instance **{inst.name}**, "
+        f"seed {config.seed}, horizon {config.horizon}, corraoi {config.version}",
+        "",
+        "| arm | Y(x) | mu | role |",
+        "|---|---|---|---|",
+    ]
+    for k in range(inst.K):
+        row = " ".join(str(int(v)) for v in inst.Y[k])
+        if k == th.best_arm:
+            role = "best (k*)"
+        elif k in th.competitive:
+            role = "competitive"
+        else:
+            role = "non-competitive"
+        lines.append(f"| {_arm_names(config)[k]} | {row} | {th.mu[k]:.4g} | {role} |")
+    p = "  ".join(f"{s}={v:g}" for s, v in zip(inst.state_names, inst.p, strict=True))
+    lines += [
+        "",
+        f"p: {p}",
+        "",
+        "Arms and states are numbered from 1. AoI and regret are in slots; the regret is "
+        "the pathwise sum (aoi - oracle_aoi), the oracle playing k* on the same hidden path.",
+    ]
+    return "\n".join(lines)
+
+
+def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
+    """The default layout of one run.
+
+    Top: AoI against the oracle's (the last ``window`` slots before the cursor) and the
+    regret with the paper's estimator (whole run). Middle: the arm played (successes and
+    failures apart, AoI-aware overrides marked) and the candidate set, windowed. Bottom:
+    the empirical means (whole run), the pulls, the hidden state and the configuration.
+    """
+    base = run_path(label)
+    K = config.instance.K
+    n = config.instance.n_states
+    recent = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
+    window_axis = rrb.TimeAxis(view_range=recent)
+    window_query = rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end)
+    everything = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+    whole_axis = rrb.TimeAxis(view_range=everything)
+    whole_query = rrb.VisibleTimeRange(TIMELINE, start=everything.start, end=everything.end)
+    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
+
+    def windowed(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
+        return rrb.TimeSeriesView(
+            origin=base,
+            contents=contents,
+            name=name,
+            axis_x=window_axis,
+            axis_y=rrb.ScalarAxis(range=y, zoom_lock=True) if y else None,
+            time_ranges=[window_query],
+            plot_legend=legend,
+        )
+
+    aoi = windowed(f"AoI vs oracle (last {window} slots)", ["$origin/aoi", "$origin/oracle_aoi"])
+    def whole(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
+        return rrb.TimeSeriesView(
+            origin=base,
+            contents=contents,
+            name=name,
+            axis_x=whole_axis,
+            axis_y=rrb.ScalarAxis(range=y) if y else None,
+            time_ranges=[whole_query],
+            plot_legend=legend,
+        )
+
+    regret = whole(
+        "AoI regret (pathwise) and the paper's estimator", ["$origin/regret", "$origin/estimator"]
+    )
+    arms = windowed(
+        "channel played: success / failure / AoI-aware override",
+        ["$origin/arm/**", "$origin/override"],
+        (0.5, K + 0.5),
+    )
+    candidates = windowed("candidate set", ["$origin/candidates/**"], (0.5, K + 0.5))
+    means = whole("empirical means mu_hat", ["$origin/mu_hat"], (0.0, 1.0))
+    pulls = whole("pulls per arm", ["$origin/pulls"])
+    state = windowed("hidden state x", ["$origin/x"], (0.5, n + 0.5))
+    about = rrb.TextDocumentView(origin=f"{base}/about", name="run")
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(aoi, regret, column_shares=[3, 2]),
+            rrb.Horizontal(arms, candidates, column_shares=[3, 2]),
+            rrb.Horizontal(
+                rrb.Tabs(means, pulls, active_tab=0),
+                state,
+                about,
+                column_shares=[2, 2, 1],
+            ),
+            row_shares=[3, 3, 2],
+        ),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False,
+    )
+
+
+class RerunSink:
+    """Send one run's SlotBlocks to ``recording`` under ``runs/<label>``.
+
+    ``with RerunSink(recording, label, config) as sink: sink.write(block)``. The static
+    styling and the ``about`` note are logged when the sink is made. :meth:`close` flushes
+    the recording (at most ``flush_timeout`` seconds); the caller keeps owning the
+    recording's destinations. Closing twice is safe.
+    """
+
+    def __init__(
+        self,
+        recording: rr.RecordingStream,
+        label: str,
+        config: RunConfig,
+        *,
+        flush_timeout: float = 30.0,
+    ) -> None:
+        self.recording = recording
+        self.label = label
+        self.config = config
+        self.base = run_path(label)
+        self.K = config.instance.K
+        self.slots = 0
+        self.closed = False
+        self.flush_timeout = flush_timeout
+        self.problem: str | None = None
+        self._arm_values = np.arange(1, self.K + 1, dtype=np.float64)
+        self._style()
+
+    def _style(self) -> None:
+        rec, base = self.recording, self.base
+        color = policy_color(self.config.policy.name)
+        names = _arm_names(self.config)
+        colors = [arm_color(k) for k in range(self.K)]
+
+        def line(path: str, rgb: Any, name: str, width: float = 1.5) -> None:
+            rec.log(
+                f"{base}/{path}",
+                rr.SeriesLines(colors=[rgb], widths=[width], names=[name]),
+                static=True,
+            )
+
+        def points(path: str, rgb: Any, name: str, marker: Any, size: float) -> None:
+            rec.log(
+                f"{base}/{path}",
+                rr.SeriesPoints(colors=[rgb], names=[name], markers=[marker], marker_sizes=[size]),
+                static=True,
+            )
+
+        shape = rr.components.MarkerShape
+        line("aoi", color, "AoI", 2.0)
+        line("oracle_aoi", ORACLE_COLOR, "oracle AoI (best arm)", 1.0)
+        line("regret", color, "pathwise regret sum(aoi - oracle_aoi)", 2.0)
+        line("estimator", lighter(color, 0.5), "estimator sum(aoi) - t/mu*", 1.0)
+        points("arm/success", SUCCESS_COLOR, "success", shape.Circle, 2.5)
+        points("arm/failure", FAILURE_COLOR, "failure", shape.Cross, 2.5)
+        points("override", OVERRIDE_COLOR, "AoI-aware override", shape.Diamond, 4.0)
+        points("x", STATE_COLOR, "hidden state x", shape.Square, 2.0)
+        rec.log(
+            f"{base}/mu_hat",
+            rr.SeriesLines(colors=colors, widths=[1.5] * self.K, names=names),
+            static=True,
+        )
+        rec.log(
+            f"{base}/pulls",
+            rr.SeriesLines(colors=colors, widths=[1.5] * self.K, names=names),
+            static=True,
+        )
+        for k in range(self.K):
+            points(f"candidates/{k + 1}", colors[k], names[k], shape.Square, 2.0)
+        rec.log(
+            f"{base}/about",
+            rr.TextDocument(about_markdown(self.config), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+
+    def write(self, block: SlotBlock) -> None:
+        """Send the block's slots, one ``send_columns`` per entity."""
+        if self.closed:
+            raise ValueError(f"RerunSink {self.label}: write() after close()")
+        n = len(block)
+        if n == 0:
+            return
+        send, base = self.recording.send_columns, self.base
+        t = np.ascontiguousarray(block.t, dtype=np.int64)
+
+        def column(path: str, times: np.ndarray, values: np.ndarray) -> None:
+            if times.size:
+                send(
+                    f"{base}/{path}",
+                    indexes=[rr.TimeColumn(TIMELINE, sequence=times)],
+                    columns=rr.Scalars.columns(scalars=values),
+                )
+
+        f64 = np.float64
+        column("aoi", t, block.aoi.astype(f64))
+        column("oracle_aoi", t, block.oracle_aoi.astype(f64))
+        column("regret", t, block.regret.astype(f64))
+        column("estimator", t, np.ascontiguousarray(block.estimator, dtype=f64))
+        arm = (block.arm + 1).astype(f64)
+        ok = np.asarray(block.success, dtype=bool)
+        column("arm/success", t[ok], arm[ok])
+        column("arm/failure", t[~ok], arm[~ok])
+        over = np.asarray(block.override, dtype=bool)
+        column("override", t[over], arm[over])
+        column("x", t, (block.x + 1).astype(f64))
+        column("mu_hat", t, np.ascontiguousarray(block.mu_hat, dtype=f64))
+        column("pulls", t, block.pulls.astype(f64))
+        cand = np.asarray(block.candidates, dtype=bool)
+        for k in range(self.K):
+            member = cand[:, k]
+            column(f"candidates/{k + 1}", t[member], np.full(int(member.sum()), k + 1.0))
+        self.slots += n
+
+    def close(self) -> str | None:
+        """Flush the recording (blocking up to ``flush_timeout`` s). Safe to call twice.
+
+        Returns the problem Rerun reported while delivering the data (a viewer that
+        stopped answering, a file writer that failed), or None when all went well. The
+        owner of the recording's destinations (e.g. :class:`RrdOutput`) decides what it
+        means.
+        """
+        if self.closed:
+            return self.problem
+        self.closed = True
+        try:
+            self.recording.flush(timeout_sec=self.flush_timeout)
+        except RuntimeError as exc:
+            self.problem = _first_line(exc)
+        return self.problem
+
+    def __enter__(self) -> RerunSink:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]
+
+
+class RrdOutput:
+    """Where one run's Rerun recording goes: an ``.rrd`` file and/or a viewer (gRPC URL).
+
+    The file is written as ``<path>.partial`` (with the default blueprint embedded) and
+    renamed to ``path`` by :meth:`close`; :meth:`abort` leaves the ``.partial`` file.
+    ``recording`` is made here (:func:`new_recording`); hand it to :class:`RerunSink`.
+    """
+
+    def __init__(
+        self,
+        config: RunConfig,
+        *,
+        rrd_path: str | os.PathLike[str] | None = None,
+        viewer_url: str | None = None,
+        label: str | None = None,
+        overwrite: bool = False,
+        blueprint: rrb.Blueprint | None = None,
+        recording_id: str | None = None,
+        flush_timeout: float = 30.0,
+    ) -> None:
+        if rrd_path is None and viewer_url is None:
+            raise ValueError("RrdOutput needs an .rrd path, a viewer URL or both")
+        self.config = config
+        self.label = label or config.label
+        self.path: Path | None = None
+        self.viewer_url = viewer_url
+        self.overwrite = overwrite
+        self.flush_timeout = flush_timeout
+        self.closed = False
+        self.finished = False
+        sinks: list[Any] = []
+        if rrd_path is not None:
+            self.path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording")
+            # create (or truncate) the .partial file here, so that an unwritable place is
+            # one clear error now rather than a log line from Rerun's writer thread later
+            open_partial(self.path, overwrite=overwrite, what="Rerun recording").close()
+            sinks.append(rr.FileSink(str(partial_path(self.path))))
+        if viewer_url is not None:
+            sinks.append(rr.GrpcSink(viewer_url))
+        self.recording = new_recording(config, recording_id=recording_id)
+        try:
+            self.recording.set_sinks(
+                *sinks,
+                default_blueprint=blueprint or one_run_blueprint(self.label, config),
+            )
+        except (OSError, RuntimeError, ValueError) as exc:
+            if self.path is not None:
+                partial_path(self.path).unlink(missing_ok=True)
+            raise WriteError(f"{self._where()}: cannot start the Rerun recording: {exc}") from None
+
+    def _where(self) -> str:
+        return str(partial_path(self.path)) if self.path is not None else str(self.viewer_url)
+
+    def _finish(self) -> str | None:
+        """Flush and disconnect; returns the problem Rerun reported, if any."""
+        problem = None
+        try:
+            self.recording.flush(timeout_sec=self.flush_timeout)
+        except RuntimeError as exc:
+            problem = _first_line(exc)
+        self.recording.disconnect()
+        return problem
+
+    def close(self) -> Path | None:
+        """Deliver everything, check the file and rename it into place. Safe twice.
+
+        Returns the .rrd path (None without a file). A file Rerun could not write
+        completely raises :class:`WriteError` and stays at ``<path>.partial``; a viewer
+        that could not be reached raises :class:`ViewerError` after the file is in place.
+        """
+        if self.closed:
+            return self.path if self.finished else None
+        self.closed = True
+        problem = self._finish()
+        if self.path is not None:
+            self._check_file(problem)
+            publish(self.path, overwrite=self.overwrite)
+            self.finished = True
+        if problem and self.viewer_url is not None:
+            raise ViewerError(f"viewer {self.viewer_url}: {problem}")
+        return self.path
+
+    def abort(self, *, discard: bool = False) -> Path | None:
+        """Stop; the file (if any) stays at ``<path>.partial`` (deleted with ``discard``)."""
+        if not self.closed:
+            self.closed = True
+            self._finish()
+        if self.path is None:
+            return None
+        part = partial_path(self.path)
+        if discard:
+            part.unlink(missing_ok=True)
+            return None
+        return part
+
+    def _check_file(self, problem: str | None) -> None:
+        """Refuse to present a damaged .rrd as complete: its footer must read back."""
+        assert self.path is not None
+        part = partial_path(self.path)
+        why = None
+        try:
+            if part.stat().st_size == 0:
+                why = "the file is empty"
+        except OSError as exc:
+            why = f"the file is gone ({reason(exc)})"
+        if why is None:
+            import warnings
+
+            from rerun.chunk import RrdReader
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    RrdReader(str(part)).store()
+                except Exception as exc:  # noqa: BLE001 - any failure means an unusable file
+                    why = problem or _first_line(exc)
+        if why is not None:
+            raise WriteError(
+                f"{part}: Rerun could not write the whole recording ({why}; disk full?); "
+                f"the incomplete file is left as {part}"
+            )
+
+    def __enter__(self) -> RrdOutput:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
+            try:
+                self.close()
+            except ViewerError:
+                if exc_type is None:
+                    raise
+        else:
+            self.abort()
+
+
+__all__ = [
+    "APPLICATION_ID",
+    "ENTITIES",
+    "ROOT",
+    "TIMELINE",
+    "RerunSink",
+    "RrdOutput",
+    "about_markdown",
+    "new_recording",
+    "one_run_blueprint",
+    "run_path",
+    "run_recording_id",
+]
