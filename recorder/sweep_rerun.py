@@ -93,21 +93,31 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
     title = (
         f"AoI regret, {inst.get('name', '?')}: {config.get('runs', '?')} runs, mean and 95% band"
     )
+    horizon = config.get("horizon")
+    # The whole horizon, not a window around the time cursor.
+    axis = (
+        rrb.TimeAxis(
+            view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.absolute(seq=0),
+                end=rrb.TimeRangeBoundary.absolute(seq=int(horizon)),
+            )
+        )
+        if isinstance(horizon, int) and horizon > 0
+        else None
+    )
+    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
     top = rrb.Tabs(
-        rrb.TimeSeriesView(
-            origin=f"{ROOT}/regret",
-            name=title,
-            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop),
-        ),
+        rrb.TimeSeriesView(origin=f"{ROOT}/regret", name=title, plot_legend=legend, axis_x=axis),
         rrb.TimeSeriesView(
             origin=f"{ROOT}/estimator",
             name="estimator sum aoi - t / mu*",
-            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop),
+            plot_legend=legend,
+            axis_x=axis,
         ),
         active_tab=0,
     )
     pulls = [
-        rrb.TimeSeriesView(origin=pulls_path(p), name=f"pull share, {p}")
+        rrb.TimeSeriesView(origin=pulls_path(p), name=f"pull share, {p}", axis_x=axis)
         for p in _policy_names(config)
     ]
     parts: list[rrb.Container | rrb.View] = [top]
@@ -220,9 +230,9 @@ class SweepRerunSink:
                     )
                 )
             rec.log(path, *parts, static=True)
-        band = rr.SeriesLines(
-            colors=[lighter(color, 0.45)], widths=[WIDTH_BAND], names=[f"{name} 95% band"]
-        )
+        # Named like the mean curve: the legend shows one entry per policy (hiding it there
+        # hides the band too) instead of three.
+        band = rr.SeriesLines(colors=[lighter(color, 0.45)], widths=[WIDTH_BAND], names=[name])
         rec.log(f"{regret_path(name)}/lo", band, static=True)
         rec.log(f"{regret_path(name)}/hi", band, static=True)
         for k, label in enumerate(self.arm_labels):
