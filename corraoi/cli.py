@@ -143,9 +143,10 @@ def policies_cmd() -> None:
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
 from .cli_figure import figure  # noqa: E402
-from .cli_sweep import sweep  # noqa: E402
+from .cli_sweep import reproduce, sweep  # noqa: E402
 
 main.add_command(sweep)
+main.add_command(reproduce)
 main.add_command(figure)
 
 

@@ -103,19 +103,46 @@ def sweep(
     from .engine import set_workers
     from .instance import load_instance
     from .policies import make_policies
-    from .progress import Progress
-    from .summary import instance_notes, summary_markdown, sweep_summary
-    from .sweep import default_checkpoints, run_sweep
 
     inst = load_instance(instance)
     specs = make_policies(policy, c=c, beta=beta)
     if out is not None:
         check_out_dir(out, force=force)
     used = set_workers(workers)
+    summary = sweep_instance(
+        inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
+        checkpoints=checkpoints,
+    )  # fmt: skip
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        print_table(summary)
+    if out is not None:
+        click.echo(f"wrote {out}/: " + ", ".join(f for f in SWEEP_FILES if (out / f).exists()))
+    click.echo(f"total wall time {summary['wall_s']:.2f} s on {used} thread(s)", err=True)
+
+
+def sweep_instance(
+    inst: Any,
+    specs: Any,
+    *,
+    runs: int,
+    horizon: int,
+    seed: int,
+    workers: int,
+    out: Path | None,
+    checkpoints: int = 200,
+    label: str = "sweep",
+) -> dict[str, Any]:
+    """One instance's sweep with a progress bar; with ``out``, its logs, summary and figure."""
+    from .progress import Progress
+    from .summary import instance_notes, summary_markdown, sweep_summary
+    from .sweep import default_checkpoints, run_sweep
+
     for note in instance_notes(inst):
         warn(note)
     start = time.perf_counter()
-    with Progress(len(specs) * horizon, "sweep") as bar:
+    with Progress(len(specs) * horizon, label) as bar:
         if out is None:
             results = run_sweep(
                 inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update
@@ -126,19 +153,13 @@ def sweep(
                 out, inst, specs, runs=runs, horizon=horizon, seed=seed, stops=stops,
                 on_slots=bar.update,
             )  # fmt: skip
-    summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=used)
+    summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=workers)
     summary["wall_s"] = round(time.perf_counter() - start, 4)
     if out is not None:
         _write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
         _write_text(out / "summary.md", summary_markdown(summary))
-        _draw(out, summary)
-    if as_json:
-        click.echo(json.dumps(summary, indent=2))
-    else:
-        _print_table(summary)
-    if out is not None:
-        click.echo(f"wrote {out}/: " + ", ".join(f for f in SWEEP_FILES if (out / f).exists()))
-    click.echo(f"total wall time {summary['wall_s']:.2f} s on {used} thread(s)", err=True)
+        _draw(out)
+    return summary
 
 
 def _sweep_to_dir(
@@ -175,7 +196,7 @@ def _sweep_to_dir(
         )  # fmt: skip
 
 
-def _draw(out: Path, summary: dict[str, Any]) -> None:
+def _draw(out: Path) -> None:
     """figure.png, drawn from the log alone; skipped with a warning without matplotlib."""
     from recorder.sweep_log import read_sweep
     from viewer.figure import FigureUnavailable, draw_figure
@@ -186,7 +207,7 @@ def _draw(out: Path, summary: dict[str, Any]) -> None:
         warn(f"figure.png not written: {exc}")
 
 
-def _print_table(summary: dict[str, Any]) -> None:
+def print_table(summary: dict[str, Any]) -> None:
     name = summary["instance"]["name"]
     runs, seed = summary["runs"], summary["seed"]
     click.echo(
@@ -208,3 +229,68 @@ def _print_table(summary: dict[str, Any]) -> None:
             f"{pname:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
             f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
         )
+
+
+#: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
+PAPER_INSTANCES = ("I1", "I2")
+
+
+@click.command()
+@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=Path("paper"),
+              show_default=True, metavar="DIR",
+              help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
+@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
+              help="Monte Carlo runs per policy.")  # fmt: skip
+@horizon_option(10_000)
+@seed_option
+@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
+              help="Threads for the engine [default: every core].")  # fmt: skip
+@click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
+@handle_errors
+def reproduce(
+    out: Path, runs: int, horizon: int, seed: int, workers: int | None, force: bool
+) -> None:
+    """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
+
+    Each instance gets the logs, summary and figure of `corraoi sweep -o`; DIR/summary.md
+    puts the two ranked tables side by side.
+
+    \b
+    Example:
+      corraoi reproduce -o paper && open paper/I1/figure.png
+    """
+    from .engine import set_workers
+    from .instance import load_instance
+    from .policies import make_policies
+    from .summary import summary_markdown
+
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
+    if out.is_dir() and (out / "summary.md").exists() and not force:
+        raise ConfigError(f"{out}: already holds a reproduction; use --force to overwrite")
+    for name in PAPER_INSTANCES:
+        check_out_dir(out / name, force=force)
+    used = set_workers(workers)
+    specs = make_policies(["all"])
+    start = time.perf_counter()
+    parts = []
+    for name in PAPER_INSTANCES:
+        summary = sweep_instance(
+            load_instance(name), specs, runs=runs, horizon=horizon, seed=seed, workers=used,
+            out=out / name, label=f"sweep {name}",
+        )  # fmt: skip
+        print_table(summary)
+        click.echo("")
+        parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
+    head = (
+        "# The paper's simulations, regenerated\n\n"
+        f"`corraoi reproduce --runs {runs} --horizon {horizon} --seed {seed}`; figures in "
+        + ", ".join(f"`{n}/figure.png`" for n in PAPER_INSTANCES)
+        + ".\n\n"
+    )
+    _write_text(
+        out / "summary.md",
+        head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
+    )
+    click.echo(f"wrote {out}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES) + ", summary.md")
+    click.echo(f"total wall time {time.perf_counter() - start:.2f} s on {used} thread(s)", err=True)

@@ -354,6 +354,7 @@ def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
     assert static["/sweep/regret/ucb"]["SeriesLines:colors"] == [[_rgba(policy_color("ucb"))]]
     band = static["/sweep/regret/cucb/lo"]
     assert band["SeriesLines:colors"] == [[_rgba(lighter(POLICY_COLORS["cucb"], 0.45))]]
+    assert band["SeriesLines:names"] == [["cucb"]]  # one legend entry per policy
     assert static["/sweep/pulls/cts/3"]["SeriesLines:names"] == [["arm 3"]]
 
 
