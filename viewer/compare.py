@@ -1,0 +1,345 @@
+"""``corraoi compare``: several recorded runs in one Rerun recording, side by side.
+
+Each run goes through the same :class:`recorder.rerun_sink.RerunSink` as ``record`` and
+``replay``, under ``runs/<label>/...`` (labels from the policy names, made unique with the
+instance, seed, horizon or parameters where needed). The embedded blueprint puts one
+column per run -- its AoI against the oracle's, the channel played, the empirical means
+and the candidate (competitive) set -- above one overlay panel of every run's regret
+curve and the summary table. The summary figures are gathered while the blocks stream
+through, so every log is read once. Nothing is simulated.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .info import summary_rows
+from .runs import LogLike, as_log, unique_labels
+from .summary import RunSummary, SummaryAccumulator
+
+if TYPE_CHECKING:
+    import rerun.blueprint as rrb
+
+    from recorder.reader import RunLog
+
+#: Slots per block handed to the sinks.
+BLOCK = 1000
+#: Entity of the summary table (a markdown document) in a compare recording.
+SUMMARY_ENTITY = "compare/summary"
+#: Slots shown left of the cursor in the windowed views (AoI, arms, candidates).
+WINDOW = 300
+
+RGB = tuple[int, int, int]
+
+
+@dataclass
+class ComparedRun:
+    """One run of a comparison: its label in the recording, colour and summary figures."""
+
+    label: str
+    log: RunLog
+    color: RGB
+    summary: RunSummary | None = None
+
+    @property
+    def config(self) -> Any:
+        return self.log.config
+
+
+@dataclass
+class Comparison:
+    """What :func:`compare` sent; ``table()`` is the summary printed side by side."""
+
+    runs: list[ComparedRun]
+    warnings: list[str] = field(default_factory=list)
+    path: Path | None = None
+
+    def table(self) -> str:
+        return summary_table(self.runs)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "path": None if self.path is None else str(self.path),
+            "warnings": list(self.warnings),
+            "runs": [
+                {
+                    "label": r.label,
+                    "path": str(r.log.path),
+                    "policy": r.config.policy.name,
+                    "instance": r.config.instance.name,
+                    "seed": r.config.seed,
+                    "horizon": r.config.horizon,
+                    "status": r.log.status,
+                    "summary": None if r.summary is None else r.summary.to_dict(),
+                }
+                for r in self.runs
+            ],
+        }
+
+
+def comparability_warnings(logs: Sequence[RunLog]) -> list[str]:
+    """Warnings for runs whose regret curves cannot be compared (or only partly)."""
+    out = []
+    instances = {log.config.instance.name for log in logs}
+    same_instance = all(log.config.instance == logs[0].config.instance for log in logs)
+    if not same_instance:
+        names = ", ".join(sorted(instances))
+        what = f"instances {names}" if len(instances) > 1 else f"different instances named {names}"
+        out.append(f"the runs are on {what}: their regret is not comparable")
+    horizons = sorted({log.config.horizon for log in logs})
+    if len(horizons) > 1:
+        out.append(
+            "the runs have different horizons ("
+            + ", ".join(str(h) for h in horizons)
+            + "): regret at the end is not comparable"
+        )
+    short = [log for log in logs if log.cut_short]
+    for log in short:
+        out.append(f"{log.path}: {log.summary}")
+    if same_instance and len(horizons) == 1:
+        seeds = {log.config.seed for log in logs}
+        if len(seeds) > 1:
+            out.append(
+                "the runs use different seeds (hidden paths differ): their regret differs by "
+                "chance as well as by policy"
+            )
+    return out
+
+
+def run_colors(logs: Sequence[RunLog]) -> list[RGB]:
+    """A colour per run: its policy's, in lighter shades for runs that would share one."""
+    from recorder.sweep_log import lighter, policy_color
+
+    seen: dict[RGB, int] = {}
+    out = []
+    for log in logs:
+        base = policy_color(log.config.policy.name)
+        i = seen.get(base, 0)
+        seen[base] = i + 1
+        out.append(base if i == 0 else lighter(base, min(0.2 * i, 0.7)))
+    return out
+
+
+def compare_recording_id(runs: Sequence[ComparedRun]) -> str:
+    """A recording id that depends on the labels and configurations only."""
+    text = json.dumps([[r.label, r.config.to_dict()] for r in runs], sort_keys=True)
+    return "corraoi-compare-" + hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> rrb.Blueprint:
+    """One column per run above an overlay of every run's regret and the summary table."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    from recorder.rerun_sink import TIMELINE, run_path
+
+    recent = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
+    window_axis = rrb.TimeAxis(view_range=recent)
+    window_query = rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end)
+    whole = rrb.TimeAxis(
+        view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+        )
+    )
+    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
+    hidden = rrb.PlotLegend(visible=False)
+
+    def windowed(base: str, name: str, contents: list[str], K: int | None = None) -> Any:
+        return rrb.TimeSeriesView(
+            origin=base,
+            contents=contents,
+            name=name,
+            axis_x=window_axis,
+            axis_y=rrb.ScalarAxis(range=(0.5, K + 0.5), zoom_lock=True) if K else None,
+            time_ranges=[window_query],
+            plot_legend=hidden,
+        )
+
+    columns = []
+    for r in runs:
+        base = run_path(r.label)
+        K = r.config.instance.K
+        columns.append(
+            rrb.Vertical(
+                windowed(base, f"{r.label}: AoI vs oracle", ["$origin/aoi", "$origin/oracle_aoi"]),
+                windowed(base, f"{r.label}: channel played", ["$origin/arm/**",
+                                                               "$origin/override"], K),
+                rrb.TimeSeriesView(
+                    origin=base,
+                    contents=["$origin/mu_hat"],
+                    name=f"{r.label}: empirical means",
+                    axis_x=whole,
+                    axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+                    plot_legend=hidden,
+                ),
+                windowed(base, f"{r.label}: candidate set", ["$origin/candidates/**"], K),
+                name=r.label,
+            )
+        )  # fmt: skip
+    overrides = {
+        f"{run_path(r.label)}/regret": rr.SeriesLines.from_fields(
+            names=[r.label], colors=[r.color], widths=[2.0]
+        )
+        for r in runs
+    }
+    overlay = rrb.TimeSeriesView(
+        origin="/",
+        contents=[f"{run_path(r.label)}/regret" for r in runs],
+        name="AoI regret (pathwise), every run",
+        axis_x=whole,
+        overrides=overrides,  # type: ignore[arg-type]
+        plot_legend=legend,
+    )
+    summary = rrb.TextDocumentView(origin=SUMMARY_ENTITY, name="summary")
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(*columns, name="runs"),
+            rrb.Horizontal(overlay, summary, column_shares=[3, 2]),
+            row_shares=[3, 1.4],
+        ),
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        rrb.BlueprintPanel(state="hidden"),
+        rrb.SelectionPanel(state="hidden"),
+    )
+
+
+def prepare(logs: Sequence[LogLike]) -> tuple[list[ComparedRun], list[str]]:
+    """Open every log (LogError on the first bad one), label and colour the runs."""
+    if not logs:
+        from corraoi.errors import UsageError
+
+        raise UsageError("compare needs at least one log")
+    opened = [as_log(x) for x in logs]
+    labels = unique_labels(opened)
+    colors = run_colors(opened)
+    runs = [
+        ComparedRun(lab, log, col) for lab, log, col in zip(labels, opened, colors, strict=True)
+    ]
+    return runs, comparability_warnings(opened)
+
+
+def compare(
+    logs: Sequence[LogLike],
+    *,
+    rrd_path: str | os.PathLike[str] | None = None,
+    viewer_url: str | None = None,
+    overwrite: bool = False,
+    block: int = BLOCK,
+    on_block: Callable[[int], None] | None = None,
+) -> Comparison:
+    """Send every run of ``logs`` into one recording (an ``.rrd`` and/or a viewer).
+
+    With neither ``rrd_path`` nor ``viewer_url`` nothing is sent and only the summary
+    figures are gathered. Every log is opened (and checked) before anything is written.
+    """
+    runs, warnings = prepare(logs)
+    if rrd_path is None and viewer_url is None:
+        for r in runs:
+            acc = SummaryAccumulator(r.config)
+            for b in r.log.blocks(4096):
+                acc.update(b)
+                if on_block is not None:
+                    on_block(len(b))
+            r.summary = acc.result()
+        return Comparison(runs, warnings, None)
+
+    import rerun as rr
+
+    from recorder.rerun_sink import RerunSink, RrdOutput
+    from recorder.sweep_log import policy_color
+
+    with RrdOutput(
+        runs[0].config,
+        rrd_path=rrd_path,
+        viewer_url=viewer_url,
+        overwrite=overwrite,
+        label="compare",
+        blueprint=compare_blueprint(runs),
+        recording_id=compare_recording_id(runs),
+    ) as out:
+        for r in runs:
+            acc = SummaryAccumulator(r.config)
+            with RerunSink(out.recording, r.label, r.config) as sink:
+                if r.color != policy_color(r.config.policy.name):
+                    _restyle(out.recording, r)
+                for b in r.log.blocks(block):
+                    sink.write(b)
+                    acc.update(b)
+                    if on_block is not None:
+                        on_block(len(b))
+            r.summary = acc.result()
+        out.recording.log(
+            SUMMARY_ENTITY,
+            rr.TextDocument(summary_markdown(runs, warnings), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+    return Comparison(runs, warnings, out.path)
+
+
+def _restyle(recording: Any, run: ComparedRun) -> None:
+    """Give the run's AoI line the run's colour (runs of one policy get distinct shades)."""
+    import rerun as rr
+
+    from recorder.rerun_sink import run_path
+
+    recording.log(
+        f"{run_path(run.label)}/aoi",
+        rr.SeriesLines(colors=[run.color], widths=[1.5], names=[f"AoI {run.label}"]),
+        static=True,
+    )
+
+
+# ---------------------------------------------------------------------------- tables
+
+
+def _rows(runs: Sequence[ComparedRun]) -> tuple[list[str], list[list[str]]]:
+    names = ["policy", "instance", "seed", "slots"]
+    cells: list[list[str]] = []
+    for r in runs:
+        s = r.summary
+        assert s is not None
+        status = "" if not r.log.cut_short else f" of {r.config.horizon} (cut short)"
+        col = [r.config.policy.name, r.config.instance.name, str(r.config.seed),
+               f"{s.slots}{status}"]  # fmt: skip
+        rows = summary_rows(s)
+        col += [v for _, v in rows]
+        cells.append(col)
+    names += [k for k, _ in summary_rows(runs[0].summary)] if runs[0].summary else []
+    return names, cells
+
+
+def summary_table(runs: Sequence[ComparedRun]) -> str:
+    """The summary figures side by side: one column per run, one row per figure."""
+    names, cells = _rows(runs)
+    first = max(len(n) for n in names) + 2
+    widths = [
+        max(len(r.label), *(len(c) for c in col)) + 2 for r, col in zip(runs, cells, strict=True)
+    ]
+    lines = [" " * first + "".join(f"{r.label:>{w}}" for r, w in zip(runs, widths, strict=True))]
+    for i, name in enumerate(names):
+        row = "".join(f"{col[i]:>{w}}" for col, w in zip(cells, widths, strict=True))
+        lines.append(f"{name:<{first}}{row}")
+    return "\n".join(lines)
+
+
+def summary_markdown(runs: Sequence[ComparedRun], warnings: Sequence[str]) -> str:
+    """The summary table as markdown (shown in the compare recording)."""
+    names, cells = _rows(runs)
+    lines = ["| | " + " | ".join(r.label for r in runs) + " |",
+             "|---|" + "---:|" * len(runs)]  # fmt: skip
+    for i, name in enumerate(names):
+        lines.append(f"| {name} | " + " | ".join(col[i] for col in cells) + " |")
+    if warnings:
+        lines.append("")
+        lines += [f"**warning:** {w}" for w in warnings]
+    lines += ["", "Arms numbered from 1. Regret in slots, pathwise: sum(aoi - oracle_aoi)."]
+    return "\n".join(lines)

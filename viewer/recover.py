@@ -1,0 +1,294 @@
+"""``corraoi recover``: rewrite a log whose writer died into a finished, indexed MCAP file.
+
+A writer killed mid-run leaves a file (usually ``RUN.mcap.partial``) without summary or
+footer: the corraoi reader and ``mcap.stream_reader`` read its complete chunks, but the
+indexed readers (``mcap.reader.make_reader``, most MCAP tools) find nothing. ``recover``
+copies the header, the run metadata, the schema, the channel and every message of the
+complete chunks -- payloads byte for byte, chunked as the writer chunks them -- and
+finishes the copy with the ``corraoi.end`` record, chunk indexes, summary and footer.
+
+The copy is written to a temporary file beside the destination, read back with the
+corraoi reader, and only then renamed into place, so an error leaves nothing behind and
+an existing file is never replaced without ``overwrite``. ``recover RUN.mcap.partial -o
+RUN.mcap`` is the usual call; the source is never modified.
+"""
+
+from __future__ import annotations
+
+import errno
+import io
+import os
+import struct
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from recorder.reader import RunLog
+
+#: Chunks of the copy are closed by slot count like the writer's; this only caps a chunk.
+_CHUNK_BYTES = 64 * 1024 * 1024
+
+
+@dataclass(frozen=True)
+class Recovered:
+    """What :func:`recover` wrote."""
+
+    source: Path
+    path: Path
+    slots: int
+    horizon: int
+    #: How the source ended: "truncated" (killed), "interrupted" or "complete".
+    source_status: str
+    #: How the copy reads back: "complete" or "interrupted" (finished, fewer slots).
+    status: str
+    #: Bytes at the end of the source that held no complete record (the torn tail).
+    dropped_bytes: int
+
+
+def recover(
+    source: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+) -> Recovered:
+    """Rewrite the corraoi log ``source`` into a finished, indexed log at ``out``.
+
+    Raises :class:`~recorder.errors.LogError` when ``source`` is not a readable corraoi log
+    (missing, not MCAP, another tool's, a newer format, a damaged chunk) and
+    :class:`~recorder.errors.OutputError` when ``out`` exists (unless ``overwrite``), is a
+    directory, or is the source itself. Nothing is written on error.
+    """
+    from recorder.errors import OutputError
+    from recorder.reader import open_log
+
+    src = Path(source)
+    log = open_log(src)
+    dest = _check_dest(src, Path(out), overwrite=overwrite)
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".recover", dir=dest.parent)
+    except OSError as exc:
+        raise OutputError(f"{dest}: cannot create the recovered log: {_reason(exc)}") from None
+    tmp = Path(name)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+        with src.open("rb") as fin, os.fdopen(fd, "wb") as fout:
+            consumed = _copy(log, fin, fout)
+            fout.flush()
+            os.fsync(fout.fileno())
+        size = src.stat().st_size
+        check = open_log(tmp)
+        if check.n_slots != log.n_slots or not check.finished:
+            from recorder.errors import LogError
+
+            raise LogError(f"{src}: the rewritten log does not read back ({check.summary})")
+        _publish(tmp, dest, overwrite=overwrite)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return Recovered(
+        source=src,
+        path=dest,
+        slots=log.n_slots,
+        horizon=log.config.horizon,
+        source_status=log.status,
+        status=check.status,
+        dropped_bytes=max(size - consumed, 0) if not log.finished else 0,
+    )
+
+
+def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
+    """Copy the records of ``log`` (open as ``fin``) into a new MCAP writer on ``fout``.
+
+    Returns the byte offset after the last complete record read from the source.
+    """
+    from mcap.exceptions import EndOfFile, McapError
+    from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import CompressionType, Writer
+
+    from recorder.errors import LogError
+    from recorder.format import END_METADATA, FLUSH_EVERY, NS_PER_SLOT, TOPIC, decode_messages
+    from recorder.format import end_metadata as make_end
+
+    src, cfg, n_slots = log.path, log.config, log.n_slots
+    try:
+        every = max(int(log.metadata.get("flush_every", FLUSH_EVERY)), 1)
+    except ValueError:
+        every = FLUSH_EVERY
+    complete = _complete_length(fin)
+    fin.seek(0)
+    writer = Writer(fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD)
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    slot_channels: set[int] = set()
+    started = False
+    written = 0
+    last_payload: bytes | None = None
+    try:
+        for rec in StreamReader(_Bounded(fin, complete), validate_crcs=True).records:
+            if isinstance(rec, Header):
+                writer.start(profile=rec.profile, library=rec.library)
+                started = True
+            elif isinstance(rec, Metadata):
+                if rec.name != END_METADATA:
+                    writer.add_metadata(rec.name, dict(rec.metadata))
+            elif isinstance(rec, Schema):
+                if rec.id not in schemas:
+                    schemas[rec.id] = writer.register_schema(
+                        name=rec.name, encoding=rec.encoding, data=rec.data
+                    )
+            elif isinstance(rec, Channel):
+                if rec.id not in channels:
+                    channels[rec.id] = writer.register_channel(
+                        topic=rec.topic,
+                        message_encoding=rec.message_encoding,
+                        schema_id=schemas.get(rec.schema_id, 0),
+                        metadata=dict(rec.metadata),
+                    )
+                    if rec.topic == TOPIC:
+                        slot_channels.add(rec.id)
+            elif isinstance(rec, Message):
+                if rec.channel_id not in channels:
+                    continue
+                is_slot = rec.channel_id in slot_channels
+                t = rec.log_time // NS_PER_SLOT
+                if is_slot and t > n_slots:
+                    continue
+                writer.add_message(
+                    channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
+                    rec.sequence,
+                )  # fmt: skip
+                if is_slot:
+                    written += 1
+                    last_payload = rec.data
+                    if t % every == 0:
+                        writer.flush()
+            elif isinstance(rec, (DataEnd, Footer)):
+                break
+    except EndOfFile:
+        pass  # the end of the complete records of a killed writer's file
+    except (McapError, struct.error, ValueError) as exc:
+        raise LogError(f"{src}: damaged MCAP data ({exc or type(exc).__name__})") from None
+    if not started:
+        raise LogError(f"{src}: no MCAP header record")
+    if written != n_slots:
+        raise LogError(f"{src}: found {written} slot messages where the reader found {n_slots}")
+    last = None
+    if last_payload is not None:
+        K, n = cfg.instance.K, cfg.instance.n_states
+        last = decode_messages([last_payload], K, n, where=str(src))
+    end: dict[str, Any] = make_end(slots=n_slots, horizon=cfg.horizon, last=last)
+    end["recovered_from"] = f"{src.name} ({log.status}, {n_slots} slots)"
+    writer.add_metadata(END_METADATA, end)
+    writer.finish()
+    return complete
+
+
+_MAGIC = b"\x89MCAP0\r\n"
+_RECORD = struct.Struct("<BQ")
+_FOOTER = 0x02
+
+
+def _complete_length(f: IO[bytes]) -> int:
+    """Bytes from the start of the file to the end of its last complete record."""
+    size = os.fstat(f.fileno()).st_size
+    f.seek(0)
+    if f.read(len(_MAGIC)) != _MAGIC:
+        return 0
+    pos = len(_MAGIC)
+    while True:
+        head = f.read(_RECORD.size)
+        if len(head) < _RECORD.size:
+            return pos
+        opcode, length = _RECORD.unpack(head)
+        end = pos + _RECORD.size + length
+        if end > size:
+            return pos  # the writer died inside this record
+        pos = end
+        if opcode == _FOOTER:
+            return min(pos + len(_MAGIC), size)
+        f.seek(pos)
+
+
+class _Bounded(io.RawIOBase):
+    """The first ``limit`` bytes of ``f``, as a readable stream."""
+
+    def __init__(self, f: IO[bytes], limit: int) -> None:
+        super().__init__()
+        self.f = f
+        self.left = limit
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        data = self.read(len(buffer))
+        buffer[: len(data)] = data
+        return len(data)
+
+    def read(self, n: int = -1) -> bytes:
+        if n is None or n < 0 or n > self.left:
+            n = self.left
+        data = self.f.read(n)
+        self.left -= len(data)
+        return data
+
+
+def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
+    from recorder.errors import OutputError
+
+    if str(dest) == "" or dest.name in ("", ".", ".."):
+        raise OutputError(f"{dest!s}: not a file name for the recovered log")
+    if dest.is_dir():
+        raise OutputError(f"{dest}: is a directory; give a file path for the recovered log")
+    if dest.exists() or dest.is_symlink():
+        try:
+            same = os.path.samefile(src, dest)
+        except OSError:
+            same = False
+        if same:
+            raise OutputError(f"{dest}: is the log being recovered; give another path with -o")
+        if not overwrite:
+            raise OutputError(f"{dest}: already exists (use --force to overwrite it)")
+    for up in dest.parents:
+        if up.exists():
+            if not up.is_dir():
+                raise OutputError(f"{dest}: {up} is not a directory")
+            if not os.access(up, os.W_OK | os.X_OK):
+                raise OutputError(f"{dest}: directory {up} is not writable")
+            break
+    return dest
+
+
+def _publish(tmp: Path, dest: Path, *, overwrite: bool) -> None:
+    """Move the finished copy into place; without ``overwrite`` never replace a file."""
+    from recorder.errors import OutputError
+
+    if overwrite:
+        os.replace(tmp, dest)
+        return
+    try:
+        os.link(tmp, dest)
+    except FileExistsError:
+        raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.EXDEV, errno.ENOTSUP, errno.EOPNOTSUPP):
+            raise
+        if dest.exists():
+            raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
+        os.replace(tmp, dest)
+        return
+    tmp.unlink()
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _reason(exc: OSError) -> str:
+    return exc.strerror or str(exc)

@@ -1,0 +1,72 @@
+"""``corraoi replay``: re-render one log into Rerun, through the sink ``corraoi record`` uses.
+
+The log is read back into the SlotBlocks that were recorded and handed, block by block,
+to the very :class:`recorder.rerun_sink.RerunSink` that ``record`` streams into, with the
+same label, recording id and default blueprint (:class:`recorder.rerun_sink.RrdOutput`).
+So the replayed ``.rrd`` of a finished log equals the live one under ``rerun rrd
+compare``. Nothing is simulated.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from .runs import LogLike, as_log
+
+#: Slots per block handed to the sink: the engine's block, as ``corraoi record`` uses.
+BLOCK = 1000
+
+
+@dataclass(frozen=True)
+class Replayed:
+    """What :func:`replay` sent."""
+
+    label: str
+    slots: int
+    horizon: int
+    status: str
+    cut_short: bool
+    description: str
+    path: Path | None
+
+
+def replay(
+    log: LogLike,
+    *,
+    rrd_path: str | os.PathLike[str] | None = None,
+    viewer_url: str | None = None,
+    overwrite: bool = False,
+    block: int = BLOCK,
+    on_block: Callable[[int], None] | None = None,
+) -> Replayed:
+    """Send every recorded slot of ``log`` to an ``.rrd`` file and/or a viewer (gRPC URL).
+
+    ``on_block(n)`` is called after each block of ``n`` slots (for a progress bar). Raises
+    :class:`~recorder.errors.LogError` for an unreadable log (before anything is written),
+    :class:`~recorder.errors.OutputError` for an output that must not be written, and
+    :class:`~recorder.errors.ViewerError` when the viewer cannot be reached.
+    """
+    from recorder.rerun_sink import RerunSink, RrdOutput
+
+    run = as_log(log)
+    config = run.config
+    with (
+        RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite) as out,
+        RerunSink(out.recording, out.label, config) as sink,
+    ):
+        for b in run.blocks(block):
+            sink.write(b)
+            if on_block is not None:
+                on_block(len(b))
+    return Replayed(
+        label=out.label,
+        slots=run.n_slots,
+        horizon=config.horizon,
+        status=run.status,
+        cut_short=run.cut_short,
+        description=run.summary,
+        path=out.path,
+    )

@@ -1,0 +1,104 @@
+"""Summary figures of one recorded run, accumulated block by block (one pass, no recompute).
+
+Every figure comes from the logged slots; nothing is simulated. Arms are 0-based in the
+Python objects and numbered from 1 in ``to_dict()`` and in everything printed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from corraoi.block import RunConfig, SlotBlock
+from corraoi.theory import analyse
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The figures ``compare``, ``diff`` and ``info`` print for one run.
+
+    ``settled_at`` is the first slot from which the run played the best arm in every slot
+    up to its last recorded slot (``None`` when its last slot was not on the best arm or
+    nothing was recorded). ``best_share`` is the share of recorded slots on the best arm.
+    """
+
+    slots: int
+    best_arm: int
+    regret: int | None
+    estimator: float | None
+    pulls: tuple[int, ...]
+    best_share: float | None
+    overrides: int
+    settled_at: int | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready figures; arms numbered from 1."""
+        return {
+            "slots": self.slots,
+            "best_arm": self.best_arm + 1,
+            "regret": self.regret,
+            "estimator": self.estimator,
+            "pulls": list(self.pulls),
+            "best_share": self.best_share,
+            "overrides": self.overrides,
+            "settled_at": self.settled_at,
+        }
+
+
+class SummaryAccumulator:
+    """Feed it the blocks of one run in slot order; ``result()`` gives the RunSummary."""
+
+    def __init__(self, config: RunConfig) -> None:
+        self.K = config.instance.K
+        self.best_arm = analyse(config.instance).best_arm
+        self.slots = 0
+        self.overrides = 0
+        self.last_off_best = 0  # last slot whose arm was not the best arm (0: none yet)
+        self._last: SlotBlock | None = None
+
+    def update(self, block: SlotBlock) -> None:
+        n = len(block)
+        if n == 0:
+            return
+        self.slots = int(block.t[-1])
+        self.overrides += int(np.count_nonzero(block.override))
+        off = np.flatnonzero(block.arm != self.best_arm)
+        if off.size:
+            self.last_off_best = int(block.t[off[-1]])
+        self._last = block
+
+    def result(self) -> RunSummary:
+        last = self._last
+        if last is None:
+            return RunSummary(
+                slots=0,
+                best_arm=self.best_arm,
+                regret=None,
+                estimator=None,
+                pulls=(0,) * self.K,
+                best_share=None,
+                overrides=0,
+                settled_at=None,
+            )
+        pulls = tuple(int(v) for v in last.pulls[-1])
+        settled = self.last_off_best + 1 if self.last_off_best < self.slots else None
+        return RunSummary(
+            slots=self.slots,
+            best_arm=self.best_arm,
+            regret=int(last.regret[-1]),
+            estimator=float(last.estimator[-1]),
+            pulls=pulls,
+            best_share=pulls[self.best_arm] / self.slots,
+            overrides=self.overrides,
+            settled_at=settled,
+        )
+
+
+def summarize_blocks(config: RunConfig, blocks: Any) -> RunSummary:
+    """The RunSummary of an iterable of SlotBlocks of the run described by ``config``."""
+    acc = SummaryAccumulator(config)
+    for b in blocks:
+        acc.update(b)
+    return acc.result()
