@@ -72,7 +72,7 @@ def unique_labels(logs: Sequence[RunLog]) -> list[str]:
                     parts.append(f"T{cfg.horizon}")
                 else:
                     params = sorted(cfg.policy.params.items())
-                    parts.append(",".join(f"{p}={v:g}" for p, v in params))
+                    parts.append(",".join(f"{p}{v:g}" for p, v in params))
             labels[i] = "-".join(parts)
     labels = [safe_label(x) for x in labels]
     counts = Counter(labels)
