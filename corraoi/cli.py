@@ -144,9 +144,15 @@ def policies_cmd() -> None:
 # --- command registrations (keep this block at the end) ---
 from .cli_figure import figure  # noqa: E402
 from .cli_sweep import reproduce, sweep  # noqa: E402
+from .cli_viewer import compare, diff, info, recover, replay  # noqa: E402
 
 main.add_command(sweep)
 main.add_command(reproduce)
+main.add_command(replay)
+main.add_command(compare)
+main.add_command(diff)
+main.add_command(info)
+main.add_command(recover)
 main.add_command(figure)
 
 

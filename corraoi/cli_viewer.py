@@ -1,0 +1,392 @@
+"""``corraoi replay | compare | diff | info | recover``: commands that read logs only.
+
+Nothing here simulates: the logs hold every slot. ``viewer``, ``recorder`` and ``rerun``
+are imported inside the command functions, so ``corraoi --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import signal
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from .cli_common import fail, handle_errors, warn
+from .errors import CorraoiError, UsageError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+_LOG = click.Path(dir_okay=True, path_type=Path)  # existence is checked by the reader
+
+
+def _viewer_options(func: F) -> F:
+    func = click.option(
+        "--web-port",
+        type=click.IntRange(0, 65535),
+        default=9090,
+        show_default=True,
+        help="Port of --serve-web (another free one is taken if it is busy).",
+    )(func)
+    func = click.option(
+        "--serve-web",
+        is_flag=True,
+        help="Serve the Rerun web viewer on 127.0.0.1 and send the recording to it; it "
+        "keeps serving until Ctrl-C.",
+    )(func)
+    func = click.option(
+        "--connect",
+        metavar="URL",
+        is_flag=False,
+        flag_value="rerun+http://127.0.0.1:9876/proxy",
+        default=None,
+        help="Send to a running Rerun viewer [URL default: rerun+http://127.0.0.1:9876/proxy; "
+        "a port number also works].",
+    )(func)
+    func = click.option(
+        "--spawn", is_flag=True, help="Start a local Rerun viewer and send to it (needs a display)."
+    )(func)
+    return func
+
+
+class _Viewer:
+    """The viewer a command sends to (--spawn, --connect or --serve-web), if any."""
+
+    def __init__(self, *, spawn: bool, connect: str | None, serve_web: bool, web_port: int):
+        options = (("--spawn", spawn), ("--connect", connect), ("--serve-web", serve_web))
+        asked = [name for name, on in options if on]
+        if len(asked) > 1:
+            raise UsageError(f"{' and '.join(asked)}: choose one way to reach a viewer")
+        self.spawn, self.connect, self.serve_web = spawn, connect, serve_web
+        self.web_port = web_port
+        self.url: str | None = None
+        self.web: Any = None
+        if connect is not None:
+            from recorder.live import normalize_url
+
+            self.connect = normalize_url(connect)  # a bad URL is a usage error: say it now
+
+    @property
+    def asked(self) -> bool:
+        return bool(self.spawn or self.connect or self.serve_web)
+
+    def start(self) -> str | None:
+        """Reach the viewer; returns the gRPC URL to send to (ViewerError if it cannot)."""
+        from recorder import live
+        from recorder.errors import ViewerError
+
+        os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
+        if self.connect is not None:
+            problem = live.probe(self.connect)
+            if problem:
+                raise ViewerError(f"--connect {self.connect}: no Rerun viewer there ({problem})")
+            self.url = self.connect
+        elif self.spawn:
+            self.url = live.spawn_viewer()
+        elif self.serve_web:
+            self.web = live.WebViewer(web_port=self.web_port).start()
+            self.url = self.web.grpc_url
+            click.echo(f"web viewer: {self.web.web_url}", err=True)
+        return self.url
+
+    def serve_until_interrupted(self) -> None:
+        if self.web is None:
+            return
+        click.echo(f"serving the web viewer at {self.web.web_url} (Ctrl-C to stop)", err=True)
+        try:
+            self.web.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        web, self.web = self.web, None
+        if web is None:
+            return
+        # The ``rerun`` script runs the server binary as its child, in the new session the
+        # server was started in: signal the whole group so that no server is left behind.
+        proc = getattr(web, "process", None)
+        if proc is not None and proc.poll() is None and hasattr(os, "killpg"):
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+            except (ProcessLookupError, PermissionError):
+                pass
+        web.stop()
+
+
+def _default_rrd(log: Path) -> Path:
+    """``run.mcap`` -> ``run.rrd`` (``run.mcap.partial`` -> ``run.rrd`` as well)."""
+    name = log.name.removesuffix(".partial")
+    base = log.with_name(name)
+    return base.with_suffix(".rrd") if base.suffix == ".mcap" else log.with_name(name + ".rrd")
+
+
+def _progress(total: int, label: str) -> Any:
+    from .progress import Progress
+
+    return Progress(total, label)
+
+
+# ---------------------------------------------------------------------------- replay
+
+
+@click.command("replay")
+@click.argument("log", type=_LOG, metavar="RUN.mcap")
+@click.option("--rrd", "rrd", metavar="OUT.rrd", type=click.Path(path_type=Path), default=None,
+              help="Rerun recording to write [default: RUN.rrd beside the log, unless a viewer "
+              "option is given].")  # fmt: skip
+@_viewer_options
+@click.option("--force", "-f", is_flag=True, help="Overwrite an existing .rrd.")
+@handle_errors
+def replay(
+    log: Path,
+    rrd: Path | None,
+    spawn: bool,
+    connect: str | None,
+    serve_web: bool,
+    web_port: int,
+    force: bool,
+) -> None:
+    """Re-render one recorded run into Rerun, without recomputing anything.
+
+    The log's slots go through the very Rerun sink that `corraoi record` uses, so the
+    replayed .rrd of a finished log equals the live one (`rerun rrd compare` exits 0). A
+    log that was cut short (a writer killed, or RUN.mcap.partial) replays up to its last
+    complete slot, and says which.
+
+    \b
+    Examples:
+      corraoi replay runs/cucb-I1-s0.mcap --rrd replay.rrd
+      corraoi replay runs/cucb-I1-s0.mcap --serve-web      # then open the printed URL
+    """
+    from recorder.reader import open_log
+    from viewer.replay import replay as do_replay
+
+    viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    run = open_log(log)  # bad input: one line, exit 2, nothing written
+    if rrd is None and not viewer.asked:
+        rrd = _default_rrd(log)
+    if rrd is not None:
+        from recorder.paths import check_output
+
+        check_output(rrd, overwrite=force, what="Rerun recording")
+    if run.cut_short:
+        warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
+    url = viewer.start() if viewer.asked else None
+    try:
+        with _progress(run.n_slots, "replay") as bar:
+            done = do_replay(run, rrd_path=rrd, viewer_url=url, overwrite=force,
+                             on_block=bar.update)  # fmt: skip
+    except BaseException:
+        viewer.stop()
+        raise
+    where = [str(done.path)] if done.path is not None else []
+    if url is not None:
+        where.append(f"the viewer at {url}")
+    click.echo(f"replayed {done.label}: slots 1..{done.slots} of {done.horizon} "
+               f"({done.status}) to {' and '.join(where)}")  # fmt: skip
+    if done.path is not None and not viewer.asked:
+        from recorder.live import view_command
+
+        click.echo(f"open in the Rerun viewer:  {view_command([str(done.path)])}")
+    viewer.serve_until_interrupted()
+
+
+# ---------------------------------------------------------------------------- compare
+
+
+@click.command("compare")
+@click.argument("logs", nargs=-1, required=True, type=_LOG, metavar="A.mcap B.mcap ...")
+@click.option("-o", "--out", metavar="OUT.rrd", type=click.Path(path_type=Path), default=None,
+              help="Rerun recording to write [default: compare.rrd, unless a viewer option "
+              "is given].")  # fmt: skip
+@click.option("--no-rrd", is_flag=True, help="Only print the summary table; write nothing.")
+@_viewer_options
+@click.option("--force", "-f", is_flag=True, help="Overwrite an existing recording.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
+@handle_errors
+def compare(
+    logs: tuple[Path, ...],
+    out: Path | None,
+    no_rrd: bool,
+    spawn: bool,
+    connect: str | None,
+    serve_web: bool,
+    web_port: int,
+    force: bool,
+    as_json: bool,
+) -> None:
+    """Put recorded runs side by side in one Rerun recording, and print their summary.
+
+    Every run goes under runs/<label>/ (labels from the policy names, made unique with
+    the instance, seed or horizon where needed). The embedded layout has one column per
+    run -- AoI against the oracle's, the channel played, the empirical means, the
+    candidate (competitive) set -- above one panel overlaying every run's regret curve.
+    The table gives per run the final pathwise regret, the paper's estimator, pulls per
+    arm, the share of slots on the best arm, the slots where the AoI-aware override
+    fired and the first slot from which the run stayed on the best arm. Runs on
+    different instances or horizons are allowed, with a warning.
+
+    \b
+    Examples:
+      corraoi compare runs/ucb-I1-s0.mcap runs/cucb-I1-s0.mcap -o ucb-vs-cucb.rrd
+      corraoi compare runs/*.mcap --serve-web
+    """
+    from viewer.compare import compare as do_compare
+    from viewer.compare import prepare
+
+    viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    if no_rrd and (out is not None or viewer.asked):
+        raise UsageError("--no-rrd: nothing to send; leave out -o and the viewer options")
+    runs, warnings = prepare(logs)  # bad input: one line, exit 2, nothing written
+    if out is None and not viewer.asked and not no_rrd:
+        out = Path("compare.rrd")
+    if out is not None:
+        from recorder.paths import check_output
+
+        check_output(out, overwrite=force, what="Rerun recording")
+    for w in warnings:
+        warn(w)
+    url = viewer.start() if viewer.asked else None
+    total = sum(r.log.n_slots for r in runs)
+    try:
+        with _progress(total, "compare") as bar:
+            result = do_compare([r.log for r in runs], rrd_path=out, viewer_url=url,
+                                overwrite=force, on_block=bar.update)  # fmt: skip
+    except BaseException:
+        viewer.stop()
+        raise
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=2))
+    else:
+        click.echo(result.table())
+        if result.path is not None:
+            click.echo(f"Rerun recording: {result.path}")
+            if not viewer.asked:
+                from recorder.live import view_command
+
+                click.echo(f"open in the Rerun viewer:  {view_command([str(result.path)])}")
+    viewer.serve_until_interrupted()
+
+
+# ---------------------------------------------------------------------------- diff
+
+
+def _diff_errors(func: F) -> F:
+    """Like handle_errors, but every failure exits 2 ("trouble", as diff(1))."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except CorraoiError as exc:
+            fail(str(exc), 2)
+        except OSError as exc:
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            fail(f"{where}{exc.strerror or exc}", 2)
+        except KeyboardInterrupt:
+            click.echo("corraoi: interrupted", err=True)
+            sys.exit(130)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@click.command("diff")
+@click.argument("a", type=_LOG, metavar="A.mcap")
+@click.argument("b", type=_LOG, metavar="B.mcap")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@click.option("--fields", multiple=True, metavar="NAME[,NAME...]",
+              help="Compare only these fields (x, arm, success, aoi, oracle_aoi, regret, "
+              "estimator, override, mu_hat, pulls, candidates) [default: all].")  # fmt: skip
+@click.option("--atol", type=float, default=0.0, show_default=True,
+              help="Absolute tolerance of the float fields (estimator, mu_hat); the others "
+              "compare exactly.")  # fmt: skip
+@click.option("--quiet", "-q", is_flag=True, help="Print nothing; only the exit status.")
+@_diff_errors
+def diff(
+    a: Path, b: Path, as_json: bool, fields: tuple[str, ...], atol: float, quiet: bool
+) -> None:
+    """Compare two recorded runs slot by slot.
+
+    Configuration differences come first, then per field the first slot where the runs
+    diverge and how many slots differ, then the final figures of both. Exit status as
+    diff(1): 0 identical, 1 different, 2 trouble (a file that is not a readable log, a
+    bad option).
+
+    \b
+    Examples:
+      corraoi diff a.mcap b.mcap                  # the same seed twice: exit 0
+      corraoi diff ucb.mcap cucb.mcap --fields x,arm
+    """
+    from viewer.diffs import diff as do_diff
+
+    report = do_diff(a, b, fields=fields or None, atol=atol)
+    if not quiet:
+        if as_json:
+            click.echo(json.dumps(report.to_dict(), indent=2))
+        else:
+            click.echo(report.message())
+    sys.exit(0 if report.identical else 1)
+
+
+# ---------------------------------------------------------------------------- info
+
+
+@click.command("info")
+@click.argument("log", type=_LOG, metavar="RUN.mcap")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@handle_errors
+def info(log: Path, as_json: bool) -> None:
+    """Show what a log holds: configuration, slots, how it ended, summary figures.
+
+    A log whose writer was killed (RUN.mcap.partial, or a file without footer) is
+    reported as cut short, with the last slot it holds; `corraoi recover` finishes it.
+    """
+    from viewer.info import info_text, log_info
+
+    data = log_info(log)
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+    else:
+        click.echo(info_text(data))
+
+
+# ---------------------------------------------------------------------------- recover
+
+
+@click.command("recover")
+@click.argument("log", type=_LOG, metavar="BROKEN.mcap")
+@click.option("-o", "--out", metavar="FIXED.mcap", type=click.Path(path_type=Path),
+              required=True, help="Where to write the finished log.")  # fmt: skip
+@click.option("--force", "-f", is_flag=True, help="Overwrite FIXED.mcap if it exists.")
+@handle_errors
+def recover(log: Path, out: Path, force: bool) -> None:
+    """Rewrite a log whose writer died into a finished, indexed one.
+
+    Every complete chunk of BROKEN.mcap is copied (message bytes unchanged) into
+    FIXED.mcap, which gets the end record, indexes, summary and footer, so that every
+    MCAP reader opens it. BROKEN.mcap is not modified.
+
+    \b
+    Example:
+      corraoi recover runs/cucb-I1-s0.mcap.partial -o runs/cucb-I1-s0.mcap
+    """
+    from viewer.recover import recover as do_recover
+
+    done = do_recover(log, out, overwrite=force)
+    if done.source_status == "complete":
+        warn(f"{done.source}: was already finished; wrote an identical re-indexed copy")
+    dropped = f"; dropped {done.dropped_bytes} bytes of a torn record" if done.dropped_bytes else ""
+    click.echo(
+        f"recovered {done.slots} of {done.horizon} slots (slots 1..{done.slots}) from "
+        f"{done.source} ({done.source_status}{dropped}) into {done.path} ({done.status})"
+    )
+
+
+__all__ = ["compare", "diff", "info", "recover", "replay"]
