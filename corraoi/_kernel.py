@@ -148,6 +148,10 @@ def advance(
     o_cand,  # (R, B, K) bool
     o_pulls,  # (R, B, K) int64
     o_muhat,  # (R, B, K) float64
+    snap_t,  # (S,) int64 ascending slots in (t0, t0 + nslots] at which to snapshot
+    s_regret,  # (R, S) int64 regret at each snapshot slot
+    s_aoisum,  # (R, S) int64 sum of ages at each snapshot slot
+    s_pulls,  # (R, S, K) int64 pulls at each snapshot slot
 ):
     R = pulls.shape[0]
     K = pulls.shape[1]
@@ -166,6 +170,8 @@ def advance(
         oage = oaoi[r]
         reg = regret[r]
         asum = aoisum[r]
+        si = 0
+        nsnap = snap_t.shape[0]
         for j in range(nslots):
             t = t0 + j + 1
             # ---- the latent state, from the latent stream only (common random numbers)
@@ -249,6 +255,12 @@ def advance(
                     o_cand[r, j, k] = cand[k]
                     o_pulls[r, j, k] = npull[k]
                     o_muhat[r, j, k] = nsucc[k] / npull[k] if npull[k] > 0 else 0.0
+            if si < nsnap and snap_t[si] == t:
+                s_regret[r, si] = reg
+                s_aoisum[r, si] = asum
+                for k in range(K):
+                    s_pulls[r, si, k] = npull[k]
+                si += 1
         aoi[r] = age
         oaoi[r] = oage
         regret[r] = reg

@@ -185,8 +185,8 @@ def _sweep_to_dir(
         open_sweep_recording(out / "sweep.rrd", config) as rerun_sink,
     ):
 
-        def hook(policy: Any, sim: Any) -> None:
-            point = checkpoint_point(policy, sim)
+        def hook(policy: Any, snap: Any) -> None:
+            point = checkpoint_point(policy, snap)
             mcap_sink.write(point)
             rerun_sink.write(point)
 

@@ -66,6 +66,16 @@ class RunsBlock:
         )
 
 
+@dataclass
+class Snapshot:
+    """The state of every run at slot ``t``: regret (R,), estimator (R,), pulls (R, K)."""
+
+    t: int
+    regret: np.ndarray
+    estimator: np.ndarray
+    pulls: np.ndarray
+
+
 class Simulation:
     """The state of R runs of one policy on one instance, advanced by :meth:`advance`."""
 
@@ -116,11 +126,33 @@ class Simulation:
         return self.aoisum - self.t / self.mu_star
 
     def advance(self, nslots: int, *, record: bool = True) -> RunsBlock | None:
-        """Simulate the next ``nslots`` slots (capped at the horizon) of every run."""
+        """Simulate the next ``nslots`` slots (capped at the horizon) of every run.
+
+        With ``record``, returns every slot's columns; otherwise only the state advances.
+        """
+        block, _ = self._advance(nslots, record=record, stops=())
+        return block
+
+    def advance_to(self, stop: int, *, snapshots: Sequence[int] = ()) -> list[Snapshot]:
+        """Simulate up to slot ``stop`` in one compiled call, snapshotting every run at the
+        slots of ``snapshots`` that fall in (t, stop] (cheap: nothing per slot is kept)."""
+        _, snaps = self._advance(stop - self.t, record=False, stops=snapshots)
+        return snaps
+
+    def _advance(
+        self, nslots: int, *, record: bool, stops: Sequence[int]
+    ) -> tuple[RunsBlock | None, list[Snapshot]]:
         nslots = min(int(nslots), self.horizon - self.t)
         if nslots <= 0:
-            return None
+            return None, []
         R, K = self.pulls.shape
+        snap_t = np.array(
+            sorted({int(s) for s in stops if self.t < s <= self.t + nslots}), dtype=np.int64
+        )
+        S = snap_t.size
+        s_regret = np.empty((R, S), dtype=np.int64)
+        s_aoisum = np.empty((R, S), dtype=np.int64)
+        s_pulls = np.empty((R, S, K), dtype=np.int64)
         B = nslots if record else 0
         o_x = np.empty((R, B), dtype=np.int16)
         o_arm = np.empty((R, B), dtype=np.int16)
@@ -142,14 +174,24 @@ class Simulation:
             self.aoi, self.oracle_aoi, self.regret, self.aoisum,
             record, o_x, o_arm, o_succ, o_aoi, o_oaoi, o_regret, o_override,
             o_cand, o_pulls, o_muhat,
+            snap_t, s_regret, s_aoisum, s_pulls,
         )  # fmt: skip
+        snaps = [
+            Snapshot(
+                t=int(ts),
+                regret=s_regret[:, i],
+                estimator=s_aoisum[:, i] - ts / self.mu_star,
+                pulls=s_pulls[:, i],
+            )
+            for i, ts in enumerate(snap_t)
+        ]
         t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)
         self.t += nslots
         if not record:
-            return None
+            return None, snaps
         assert aoisum_before is not None
         estimator = aoisum_before[:, None] + np.cumsum(o_aoi, axis=1) - t[None, :] / self.mu_star
-        return RunsBlock(
+        block = RunsBlock(
             t=t,
             x=o_x.astype(np.int64),
             arm=o_arm.astype(np.int64),
@@ -163,6 +205,7 @@ class Simulation:
             pulls=o_pulls,
             candidates=o_cand,
         )
+        return block, snaps
 
 
 def simulate(

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .engine import Simulation
+from .engine import Simulation, Snapshot
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
@@ -75,8 +75,12 @@ def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
 
 
-#: Called after each checkpoint with (policy, simulation); the horizon is always one.
-CheckpointHook = Callable[[PolicySpec, Simulation], None]
+#: Called at each checkpoint with (policy, the runs' state there); T is always one.
+CheckpointHook = Callable[[PolicySpec, Snapshot], None]
+
+#: A policy's horizon is simulated in about this many compiled calls, so that checkpoints
+#: stream out (and the progress bar moves) while a long sweep runs.
+SEGMENTS = 10
 
 
 @dataclass(frozen=True)
@@ -103,18 +107,18 @@ class SweepPoint:
         }
 
 
-def checkpoint_point(policy: PolicySpec, sim: Simulation) -> SweepPoint:
-    """The :class:`SweepPoint` of a simulation at its current slot."""
-    m, h = mean_ci95(sim.regret)
-    em, eh = mean_ci95(sim.estimator)
+def checkpoint_point(policy: PolicySpec, snap: Snapshot) -> SweepPoint:
+    """The :class:`SweepPoint` of the runs' state at a checkpoint."""
+    m, h = mean_ci95(snap.regret)
+    em, eh = mean_ci95(snap.estimator)
     return SweepPoint(
         policy=policy.name,
-        t=sim.t,
+        t=snap.t,
         regret_mean=float(m),
         regret_ci95=_finite(float(h)),
         estimator_mean=float(em),
         estimator_ci95=_finite(float(eh)),
-        pull_share=(sim.pulls / sim.t).mean(axis=0),
+        pull_share=(snap.pulls / snap.t).mean(axis=0),
     )
 
 
@@ -139,13 +143,15 @@ def run_policy(
     start = time.perf_counter()
     sim = Simulation(instance, policy, seeds, horizon)
     stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {horizon})
-    for stop in stops:
-        step = stop - sim.t
-        sim.advance(step, record=False)
+    ends = np.unique(np.linspace(0, horizon, SEGMENTS + 1).round().astype(np.int64)[1:])
+    for end in ends:
+        before = sim.t
+        snaps = sim.advance_to(int(end), snapshots=stops)
         if on_slots is not None:
-            on_slots(step)
+            on_slots(int(end) - before)
         if on_checkpoint is not None:
-            on_checkpoint(policy, sim)
+            for snap in snaps:
+                on_checkpoint(policy, snap)
     return PolicyResult(
         policy=policy,
         regret=sim.regret.astype(np.float64),

@@ -164,3 +164,21 @@ def test_bad_settings():
     dead = Instance("dead", np.array([1.0]), np.array([[0], [0]]))
     with pytest.raises(ConfigError, match="every arm has mean 0"):
         Simulation(dead, make_policy("ucb"), [0], 10)
+
+
+def test_snapshots_equal_the_recorded_columns():
+    seeds = [3, 4, 5]
+    stops = [1, 2, 17, 500, 999, 1000]
+    sim = Simulation(I1, make_policy("aoi-aware-cts"), seeds, 1000)
+    snaps = sim.advance_to(600, snapshots=stops) + sim.advance_to(1000, snapshots=stops)
+    assert [s.t for s in snaps] == stops
+    blk = next(simulate(I1, make_policy("aoi-aware-cts"), seeds, 1000, block=1000))
+    for s in snaps:
+        i = s.t - 1
+        assert np.array_equal(s.regret, blk.regret[:, i])
+        assert np.array_equal(s.pulls, blk.pulls[:, i])
+        np.testing.assert_allclose(s.estimator, blk.estimator[:, i], rtol=0, atol=1e-9)
+    # and the final state is the same as without snapshots
+    plain = Simulation(I1, make_policy("aoi-aware-cts"), seeds, 1000)
+    plain.advance(1000, record=False)
+    assert np.array_equal(plain.regret, sim.regret) and np.array_equal(plain.pulls, sim.pulls)

@@ -22,9 +22,9 @@ class Sweep:
         self.instance = load_instance(name)
         self.half: dict[str, np.ndarray] = {}
 
-        def hook(policy, sim):  # type: ignore[no-untyped-def]
-            if sim.t == T // 2:
-                self.half[policy.name] = sim.regret.astype(float)
+        def hook(policy, snap):  # type: ignore[no-untyped-def]
+            if snap.t == T // 2:
+                self.half[policy.name] = snap.regret.astype(float)
 
         results = run_sweep(
             self.instance, make_policies(["all"]), runs=RUNS, horizon=T, seed=0,

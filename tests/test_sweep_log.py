@@ -60,7 +60,7 @@ def small_sweep(
         horizon=horizon,
         seed=3,
         checkpoints=CHECKPOINTS,
-        on_checkpoint=lambda p, sim: points.append(checkpoint_point(p, sim)),
+        on_checkpoint=lambda p, snap: points.append(checkpoint_point(p, snap)),
     )
     return config, points
 
