@@ -169,7 +169,9 @@ def replay(
     from viewer.replay import replay as do_replay
 
     viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
-    run = open_log(log)  # bad input: one line, exit 2, nothing written
+    # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
+    # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
+    run = open_log(log, verify=viewer.asked)
     if rrd is None and not viewer.asked:
         rrd = _default_rrd(log)
     if rrd is not None:

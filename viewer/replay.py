@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .runs import LogLike, as_log
+from .runs import LogLike, as_log, prefetch
 
 #: Slots per block handed to the sink: the engine's block, as ``corraoi record`` uses.
 BLOCK = 1000
@@ -41,26 +41,39 @@ def replay(
     overwrite: bool = False,
     block: int = BLOCK,
     on_block: Callable[[int], None] | None = None,
+    verify: bool | None = None,
 ) -> Replayed:
     """Send every recorded slot of ``log`` to an ``.rrd`` file and/or a viewer (gRPC URL).
 
     ``on_block(n)`` is called after each block of ``n`` slots (for a progress bar). Raises
-    :class:`~recorder.errors.LogError` for an unreadable log (before anything is written),
+    :class:`~recorder.errors.LogError` for an unreadable log -- then no file is left --,
     :class:`~recorder.errors.OutputError` for an output that must not be written, and
     :class:`~recorder.errors.ViewerError` when the viewer cannot be reached.
+
+    ``verify`` (a path given as ``log``): check every chunk before sending anything. By
+    default only when sending to a viewer, which cannot take data back; a file is
+    discarded instead if a damaged chunk turns up on the way.
     """
+    from recorder.errors import LogError
     from recorder.rerun_sink import RerunSink, RrdOutput
 
-    run = as_log(log)
+    run = as_log(log, verify=viewer_url is not None if verify is None else verify)
     config = run.config
-    with (
-        RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite) as out,
-        RerunSink(out.recording, out.label, config) as sink,
-    ):
-        for b in run.blocks(block):
+    out = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite)
+    try:
+        sink = RerunSink(out.recording, out.label, config)
+        for b in prefetch(run.blocks(block)):
             sink.write(b)
             if on_block is not None:
                 on_block(len(b))
+        sink.close()
+    except LogError:
+        out.abort(discard=True)
+        raise
+    except BaseException as exc:
+        out.__exit__(type(exc), exc, exc.__traceback__)
+        raise
+    path = out.close()
     return Replayed(
         label=out.label,
         slots=run.n_slots,
@@ -68,5 +81,5 @@ def replay(
         status=run.status,
         cut_short=run.cut_short,
         description=run.summary,
-        path=out.path,
+        path=path,
     )

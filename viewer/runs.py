@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import os
+import queue
 import re
+import threading
 from collections import Counter
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, Union
+from collections.abc import Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, TypeVar, Union
 
 if TYPE_CHECKING:
     from recorder.reader import RunLog
@@ -14,16 +16,22 @@ if TYPE_CHECKING:
 #: What the viewer functions accept for a log: a path or an opened RunLog.
 LogLike = Union[str, "os.PathLike[str]", "RunLog"]
 
+T = TypeVar("T")
+
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
 
 
-def as_log(log: LogLike) -> RunLog:
-    """An opened RunLog (opening ``log`` when it is a path; LogError for bad input)."""
+def as_log(log: LogLike, *, verify: bool = True) -> RunLog:
+    """An opened RunLog (opening ``log`` when it is a path; LogError for bad input).
+
+    ``verify`` checks every chunk (CRC, decompression) now; without it a damaged chunk is
+    found when it is read.
+    """
     from recorder.reader import RunLog, open_log
 
     if isinstance(log, RunLog):
         return log
-    return open_log(log)
+    return open_log(log, verify=verify)
 
 
 def safe_label(text: str) -> str:
@@ -92,3 +100,54 @@ def unique_labels(logs: Sequence[RunLog]) -> list[str]:
             y, n = f"{x}-{n}", n + 1
         final.append(y)
     return final
+
+
+class _Raised:
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+
+
+_DONE = object()
+
+
+def prefetch(items: Iterable[T], *, depth: int = 4) -> Iterator[T]:
+    """Iterate ``items`` in a background thread, ``depth`` items ahead of the consumer.
+
+    Reading and decoding a log overlaps with sending to Rerun (whose Rust side and the zstd
+    decompression run without the GIL). An exception in the reader is raised in the
+    consumer; leaving the loop early stops the reader.
+    """
+    q: queue.Queue[object] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(item: object) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for item in items:
+                if not put(item):
+                    return
+            put(_DONE)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer
+            put(_Raised(exc))
+
+    thread = threading.Thread(target=work, name="corraoi-log-reader", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = q.get()
+            if item is _DONE:
+                return
+            if isinstance(item, _Raised):
+                raise item.exc
+            yield item  # type: ignore[misc]
+    finally:
+        stop.set()
+        thread.join(timeout=5)
