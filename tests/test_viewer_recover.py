@@ -138,3 +138,37 @@ def test_a_finished_log_is_copied_with_the_same_slots(tmp_path, record_mcap):
     assert (done.source_status, done.status, done.slots) == ("complete", "complete", 2500)
     assert diff(path, tmp_path / "copy.mcap").identical
     assert _payloads(path) == _payloads(tmp_path / "copy.mcap")
+
+
+def test_a_writer_killed_with_sigkill(tmp_path):
+    """The real case: `corraoi record` killed with SIGKILL mid-run, then recover."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run.mcap"
+    part = tmp_path / "run.mcap.partial"
+    cmd = [sys.executable, "-m", "corraoi.cli", "record", "-p", "cts", "-T", "50000000",
+           "-o", str(out), "--no-rrd"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # wait for a few flushed chunks
+            if part.exists() and part.stat().st_size > 200_000:
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail("corraoi record wrote nothing within 60 s")
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert not out.exists()
+    log = open_log(part)
+    assert log.status == "truncated" and log.n_slots > 0 and log.n_slots % 1000 == 0
+    done = recover(part, out)
+    assert done.slots == log.n_slots and done.status == "interrupted"
+    with out.open("rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == log.n_slots
+    assert diff(part, out).identical

@@ -215,3 +215,52 @@ def test_the_side_by_side_table_aligns_columns(record_mcap):
     assert len({len(line) for line in lines}) == 1  # every row as wide as the header
     seeds = next(line for line in lines if line.startswith("seed"))
     assert seeds.split() == ["seed", "1", "2"]
+
+
+def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
+    import struct
+
+    from recorder.errors import LogError
+
+    path, _, _ = record_mcap("ucb", horizon=5000)
+    data = bytearray(path.read_bytes())
+    pos, chunks = 8, 0
+    while True:  # break the CRC of the fourth chunk: three blocks are sent before it
+        opcode, length = struct.unpack_from("<BQ", data, pos)
+        if opcode == 0x06:
+            chunks += 1
+            if chunks == 4:
+                struct.pack_into("<I", data, pos + 9 + 24, 12345)
+                break
+        pos += 9 + length
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    sent: list[int] = []
+    with pytest.raises(LogError, match="CRC mismatch"):
+        replay(bad, rrd_path=tmp_path / "out.rrd", on_block=sent.append)
+    assert sent == [1000, 1000, 1000]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap", path.name]
+    with pytest.raises(LogError, match="CRC mismatch"):  # checked up front for a viewer
+        replay(bad, viewer_url="rerun+http://127.0.0.1:9/proxy")
+
+
+def test_prefetch_hands_on_errors_and_stops_early():
+    import threading
+
+    from viewer.runs import prefetch
+
+    def items():
+        yield 1
+        yield 2
+        raise ValueError("boom")
+
+    got = []
+    with pytest.raises(ValueError, match="boom"):
+        for x in prefetch(items()):
+            got.append(x)
+    assert got == [1, 2]
+    before = threading.active_count()
+    for x in prefetch(iter(range(10**6)), depth=2):
+        if x == 3:
+            break
+    assert threading.active_count() <= before

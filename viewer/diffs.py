@@ -194,7 +194,11 @@ class DiffReport:
         lines.append("final figures:")
         lines.append(f"  {'':<22} {'a':>12} {'b':>12} {'b - a':>12}")
         for name, va, vb, d in self.finals():
-            lines.append(f"  {name:<22} {_num(va):>12} {_num(vb):>12} {_num(d, sign=True):>12}")
+            pct = name == "best-arm share"
+            lines.append(
+                f"  {name:<22} {_num(va, pct=pct):>12} {_num(vb, pct=pct):>12} "
+                f"{_num(d, sign=True, pct=pct):>12}"
+            )
         lines.append(self.verdict())
         return "\n".join(lines)
 
@@ -417,9 +421,11 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _num(v: Any, *, sign: bool = False) -> str:
+def _num(v: Any, *, sign: bool = False, pct: bool = False) -> str:
     if v is None:
         return "-"
+    if pct:
+        return f"{v:+.2%}" if sign else f"{v:.2%}"
     if isinstance(v, float):
         text = f"{v:+.6g}" if sign else f"{v:.6g}"
         return text
