@@ -1,0 +1,153 @@
+"""Benchmark of the viewer: replay, compare, diff and info against the floor of decoding.
+
+    python benchmarks/bench_replay.py [--slots 100000] [--runs 12] [--run-slots 10000]
+
+Records (untimed) one ``--slots`` log of cucb on I1 and ``--runs`` logs of ``--run-slots``
+slots (the twelve policies, one seed), then times, best of ``--repeat``:
+
+* the floor: every message of the long log read with ``mcap.stream_reader.StreamReader``
+  and decoded with ``orjson.loads`` (nothing else);
+* ``viewer.replay`` of the long log to an .rrd (read, check, decode, RerunSink, file),
+  with its ratio to the floor (target: at most 1.5);
+* ``viewer.compare`` of the short logs into one .rrd (target: under 2 s), and the same
+  two commands end to end as ``corraoi`` processes (interpreter and imports included);
+* ``viewer.diff`` and ``viewer.log_info`` of the long log, for reference.
+
+A benchmark, not a test: it prints a table and never fails on a number.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import orjson
+from mcap.records import Message
+from mcap.stream_reader import StreamReader
+
+POLICIES = (
+    "ucb", "ts", "ts-gauss", "cucb", "cts", "cts-gauss",
+    "aoi-aware-ucb", "aoi-aware-ts", "aoi-aware-ts-gauss",
+    "aoi-aware-cucb", "aoi-aware-cts", "aoi-aware-cts-gauss",
+)  # fmt: skip
+
+
+def record(path: Path, policy: str, horizon: int, seed: int = 0) -> Path:
+    from corraoi.block import RunConfig
+    from corraoi.engine import simulate_run
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policy
+    from recorder.mcap_sink import McapSink
+
+    config = RunConfig(load_instance("I1"), make_policy(policy), seed, horizon)
+    with McapSink(path, config, overwrite=True, fsync=False) as sink:
+        for block in simulate_run(config.instance, config.policy, seed, horizon):
+            sink.write(block)
+    return path
+
+
+def floor(path: Path) -> int:
+    """Read and decode every message: the least any replay has to do."""
+    n = 0
+    loads = orjson.loads
+    with path.open("rb") as f:
+        for rec in StreamReader(f).records:
+            if isinstance(rec, Message):
+                loads(rec.data)
+                n += 1
+    return n
+
+
+def best(fn: Callable[[], object], repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def cli(args: list[str], cwd: Path) -> float:
+    exe = [sys.executable, "-m", "corraoi.cli"]
+    start = time.perf_counter()
+    res = subprocess.run([*exe, *args], cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if res.returncode != 0:
+        raise SystemExit(f"corraoi {' '.join(args)} failed: {res.stderr}")
+    return wall
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--slots", type=int, default=100_000)
+    ap.add_argument("--runs", type=int, default=12)
+    ap.add_argument("--run-slots", type=int, default=10_000)
+    ap.add_argument("--repeat", type=int, default=3)
+    opts = ap.parse_args()
+    os.environ.setdefault("RUST_LOG", "off")
+
+    # submodules, not ``import viewer``: an editable install made before the packages had
+    # an __init__.py maps them as namespace packages outside the checkout
+    from viewer.compare import compare
+    from viewer.diffs import diff
+    from viewer.info import log_info
+    from viewer.replay import replay
+
+    with tempfile.TemporaryDirectory(prefix="bench-replay-") as tmp:
+        d = Path(tmp)
+        long_log = record(d / "long.mcap", "cucb", opts.slots)
+        short = [
+            record(d / f"{i:02d}-{POLICIES[i % 12]}.mcap", POLICIES[i % 12], opts.run_slots)
+            for i in range(opts.runs)
+        ]
+        n = floor(long_log)
+        rows: list[tuple[str, float, str]] = []
+        t_floor = best(lambda: floor(long_log), opts.repeat)
+        rows.append((f"floor: StreamReader + orjson, {n:,} msgs", t_floor,
+                     f"{t_floor / n * 1e6:.2f} us/msg"))  # fmt: skip
+        t_replay = best(
+            lambda: replay(long_log, rrd_path=d / "replay.rrd", overwrite=True),
+            opts.repeat,
+        )
+        rows.append((f"replay {opts.slots:,} slots -> .rrd", t_replay,
+                     f"{t_replay / t_floor:.2f} x floor (target <= 1.5)"))  # fmt: skip
+        t_compare = best(
+            lambda: compare(short, rrd_path=d / "compare.rrd", overwrite=True),
+            opts.repeat,
+        )
+        rows.append((f"compare {opts.runs} x {opts.run_slots:,} slots -> .rrd", t_compare,
+                     "target < 2 s"))  # fmt: skip
+        t_diff = best(lambda: diff(long_log, long_log), opts.repeat)
+        rows.append((f"diff {opts.slots:,} slots (log with itself)", t_diff,
+                     f"{t_diff / t_floor:.2f} x floor"))  # fmt: skip
+        t_info = best(lambda: log_info(long_log), opts.repeat)
+        rows.append((f"info {opts.slots:,} slots", t_info, f"{t_info / t_floor:.2f} x floor"))
+        c_replay = min(
+            cli(["replay", str(long_log), "--rrd", str(d / "cli.rrd"), "--force"], d)
+            for _ in range(opts.repeat)
+        )
+        rows.append(("corraoi replay (process, end to end)", c_replay, "incl. imports"))
+        c_compare = min(
+            cli(["compare", *map(str, short), "-o", str(d / "cli-compare.rrd"), "--force"], d)
+            for _ in range(opts.repeat)
+        )
+        rows.append(("corraoi compare (process, end to end)", c_compare, "incl. imports"))
+
+    print(f"{'what':<44} {'wall s':>8}  note")
+    for what, wall, note in rows:
+        print(f"{what:<44} {wall:8.3f}  {note}")
+    print(
+        f"({os.cpu_count()} cores, Python {platform.python_version()}, best of {opts.repeat}; "
+        f"load average {os.getloadavg()[0]:.2f})"
+    )
+
+
+if __name__ == "__main__":
+    main()
