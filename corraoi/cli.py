@@ -143,6 +143,7 @@ def policies_cmd() -> None:
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
 from .cli_figure import figure  # noqa: E402
+from .cli_record import record  # noqa: E402
 from .cli_sweep import reproduce, sweep  # noqa: E402
 from .cli_viewer import compare, diff, info, recover, replay  # noqa: E402
 
@@ -154,6 +155,7 @@ main.add_command(diff)
 main.add_command(info)
 main.add_command(recover)
 main.add_command(figure)
+main.add_command(record)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -77,6 +78,19 @@ def rerun_executable() -> str:
     return shutil.which("rerun") or "rerun"
 
 
+def rerun_binary() -> str:
+    """The Rerun binary itself (not the Python wrapper script, which does not pass signals on)."""
+    try:
+        import rerun_cli
+
+        exe = Path(rerun_cli.__file__).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+        if exe.exists():
+            return str(exe)
+    except ImportError:
+        pass
+    return rerun_executable()
+
+
 def view_command(paths: list[str]) -> str:
     """The shell command that opens ``paths`` in the Rerun viewer."""
     import shlex
@@ -141,7 +155,7 @@ class WebViewer:
 
     def start(self, *, timeout: float = 15.0) -> WebViewer:
         cmd = [
-            rerun_executable(),
+            rerun_binary(),
             "--serve-web",
             "--bind",
             "127.0.0.1",
@@ -185,11 +199,11 @@ class WebViewer:
         proc, self.process = self.process, None
         if proc is None or proc.poll() is not None:
             return
-        proc.terminate()
+        _signal_group(proc, signal.SIGTERM)
         try:
             proc.wait(timeout=5)
         except subprocess.TimeoutExpired:
-            proc.kill()
+            _signal_group(proc, signal.SIGKILL)
             proc.wait()
 
     def __enter__(self) -> WebViewer:
@@ -202,3 +216,14 @@ class WebViewer:
         tb: TracebackType | None,
     ) -> None:
         self.stop()
+
+
+def _signal_group(proc: subprocess.Popen[bytes], sig: int) -> None:
+    """Signal the server's process group (it runs in its own session), else the process."""
+    try:
+        os.killpg(proc.pid, sig)
+    except (AttributeError, ProcessLookupError, PermissionError):
+        try:
+            proc.send_signal(sig)
+        except ProcessLookupError:
+            pass

@@ -1,0 +1,432 @@
+"""``corraoi record``: simulate runs and stream every slot to an MCAP log and a Rerun recording.
+
+The recorder (and rerun) are imported inside the command, so ``corraoi --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import click
+
+from .cli_common import (
+    handle_errors,
+    horizon_option,
+    instance_option,
+    param_options,
+    policy_option,
+    seed_option,
+)
+from .errors import UsageError
+
+DEFAULT_OUT = "runs/{label}.mcap"
+_PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}")
+
+
+@dataclass
+class _Plan:
+    config: Any  # RunConfig
+    mcap: Path
+    rrd: Path | None
+
+
+@dataclass
+class _Result:
+    plan: _Plan
+    slots: int = 0
+    wall: float = 0.0
+    regret: int | None = None
+    estimator: float | None = None
+    pulls: list[int] = field(default_factory=list)
+    mcap: Path | None = None
+    rrd: Path | None = None
+
+
+class _Stop:
+    """SIGINT/SIGTERM while recording: the first asks the loop to stop at the next block
+    (the files are then finished with every slot simulated so far); a second one raises
+    KeyboardInterrupt at once."""
+
+    def __init__(self) -> None:
+        self.signal: str | None = None
+        self._old: dict[int, Any] = {}
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self.signal is not None:
+            raise KeyboardInterrupt
+        self.signal = signal.Signals(signum).name
+
+    def __enter__(self) -> _Stop:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[sig] = signal.signal(sig, self._handle)
+            except ValueError:  # not the main thread: keep the defaults
+                pass
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+
+def _expand(template: str, config: Any) -> Path:
+    return Path(
+        template.replace("{label}", config.label)
+        .replace("{policy}", config.policy.name)
+        .replace("{instance}", config.instance.name)
+        .replace("{seed}", str(config.seed))
+    )
+
+
+def _rrd_beside(mcap: Path) -> Path:
+    return mcap.with_suffix(".rrd") if mcap.suffix == ".mcap" else Path(f"{mcap}.rrd")
+
+
+def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -> list[_Plan]:
+    several = len(configs) > 1
+    for option, value in (("-o/--out", out), ("--rrd", rrd)):
+        if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
+            raise UsageError(
+                f"{option} {value}: names one file but {len(configs)} policies are recorded; "
+                "put {label} or {policy} in it (e.g. -o 'runs/{label}.mcap')"
+            )
+        if value is not None and value.strip() == "":
+            raise UsageError(f"{option}: empty path")
+    plans = []
+    for config in configs:
+        mcap = _expand(out or DEFAULT_OUT, config)
+        path = None if no_rrd else (_expand(rrd, config) if rrd else _rrd_beside(mcap))
+        plans.append(_Plan(config, mcap, path))
+    seen: dict[str, str] = {}
+    for plan in plans:
+        for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
+            if p is None:
+                continue
+            key = os.path.abspath(p)
+            if key in seen:
+                raise UsageError(f"{p}: used twice (as {seen[key]} and as {kind})")
+            seen[key] = kind
+    return plans
+
+
+@click.command("record")
+@instance_option
+@policy_option(default=("cucb",))
+@horizon_option(10_000)
+@seed_option
+@param_options
+@click.option(
+    "-o",
+    "--out",
+    metavar="PATH",
+    default=None,
+    help="MCAP log to write [default: runs/{label}.mcap]. {label}, {policy}, "
+    "{instance} and {seed} are filled in (needed with several policies).",
+)
+@click.option(
+    "--rrd",
+    metavar="PATH",
+    default=None,
+    help="Rerun recording to write [default: the MCAP path with .rrd].",
+)
+@click.option("--no-rrd", is_flag=True, help="Write no Rerun recording (the MCAP log only).")
+@click.option("--force", "-f", is_flag=True, help="Overwrite existing files.")
+@click.option(
+    "--spawn",
+    is_flag=True,
+    help="Start a local Rerun viewer and stream to it as the run goes (needs a display).",
+)
+@click.option(
+    "--connect",
+    metavar="URL",
+    is_flag=False,
+    flag_value="rerun+http://127.0.0.1:9876/proxy",
+    default=None,
+    help="Stream to a running Rerun viewer [URL default: "
+    "rerun+http://127.0.0.1:9876/proxy; a port number also works].",
+)
+@click.option(
+    "--serve-web",
+    is_flag=True,
+    help="Serve the Rerun web viewer on 127.0.0.1 and stream to it; it keeps serving "
+    "after the run until Ctrl-C.",
+)
+@click.option(
+    "--web-port",
+    type=click.IntRange(0, 65535),
+    default=9090,
+    show_default=True,
+    help="Port of --serve-web (another free one is taken if it is busy).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
+@handle_errors
+def record(
+    instance: str,
+    policy: tuple[str, ...],
+    horizon: int,
+    seed: int,
+    c: float | None,
+    beta: float | None,
+    out: str | None,
+    rrd: str | None,
+    no_rrd: bool,
+    force: bool,
+    spawn: bool,
+    connect: str | None,
+    serve_web: bool,
+    web_port: int,
+    as_json: bool,
+) -> None:
+    """Simulate runs and stream every slot to an MCAP log and a Rerun recording.
+
+    Each slot is logged with the hidden state, the channel played, success, AoI, the
+    oracle's AoI, the pathwise regret, the paper's estimator, mu_hat and pulls per arm, the
+    candidate set and the AoI-aware override flag. Several policies run on the same seed,
+    so their hidden paths are the same (paired runs); each gets its own pair of files.
+    Ctrl-C (or SIGTERM) stops at the next block and leaves both files finished with the
+    slots simulated so far (exit status 130).
+
+    \b
+    Examples:
+      corraoi record --policy cucb
+      corraoi record -p ucb,cucb -T 100000 --seed 3
+      corraoi record -p cts --connect          # into a viewer started with `rerun`
+    """  # noqa: D301
+    from .block import RunConfig
+    from .instance import load_instance
+    from .policies import make_policies
+
+    asked = (("--spawn", spawn), ("--connect", connect), ("--serve-web", serve_web))
+    viewers = [name for name, on in asked if on]
+    if len(viewers) > 1:
+        raise UsageError(f"{' and '.join(viewers)}: choose one way to reach a viewer")
+    if no_rrd and rrd is not None:
+        raise UsageError("--rrd and --no-rrd: choose one")
+    inst = load_instance(instance)
+    specs = make_policies(policy, c=c, beta=beta)
+    configs = [RunConfig(inst, spec, seed, horizon) for spec in specs]
+    plans = _plans(configs, out, rrd, no_rrd)
+
+    from recorder import live
+    from recorder.paths import check_output
+
+    for plan in plans:  # refuse before simulating anything
+        check_output(plan.mcap, overwrite=force, what="MCAP log")
+        if plan.rrd is not None:
+            check_output(plan.rrd, overwrite=force, what="Rerun recording")
+
+    viewer_url: str | None = None
+    viewer_failed = False
+    web: live.WebViewer | None = None
+    if connect is not None:
+        url = live.normalize_url(connect)
+        problem = live.probe(url)
+        if problem:
+            click.echo(
+                f"corraoi: error: --connect {url}: no Rerun viewer there ({problem}); "
+                "recording to the files only",
+                err=True,
+            )
+            viewer_failed = True
+        else:
+            viewer_url = url
+    need_rerun = viewer_url is not None or spawn or serve_web or any(p.rrd for p in plans)
+    if need_rerun:
+        os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
+    if spawn:
+        problem = live.display_problem()
+        if problem:
+            click.echo(
+                f"corraoi: error: --spawn: {problem}, so no viewer was started; "
+                "recording to the files only",
+                err=True,
+            )
+            viewer_failed = True
+        else:
+            viewer_url = live.spawn_viewer()
+    if serve_web:
+        web = live.WebViewer(web_port=web_port).start()
+        viewer_url = web.grpc_url
+        click.echo(f"web viewer: {web.web_url}", err=True)
+    try:
+        results, stopped, viewer_problem = _record_all(plans, viewer_url, force)
+    except BaseException:
+        if web is not None:
+            web.stop()
+        raise
+    if viewer_problem:
+        click.echo(f"corraoi: error: {viewer_problem}", err=True)
+        viewer_failed = True
+    _report(results, as_json=as_json)
+    if stopped:
+        last = results[-1]
+        click.echo(
+            f"corraoi: interrupted ({stopped}) after slot {last.slots} of "
+            f"{last.plan.config.horizon}; the files hold every slot simulated so far",
+            err=True,
+        )
+        if web is not None:
+            web.stop()
+        sys.exit(130)
+    if web is not None:
+        click.echo(f"serving the web viewer at {web.web_url} (Ctrl-C to stop)", err=True)
+        try:
+            web.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            web.stop()
+    if viewer_failed:
+        sys.exit(1)
+
+
+def _record_all(
+    plans: list[_Plan], viewer_url: str | None, force: bool
+) -> tuple[list[_Result], str | None, str | None]:
+    """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
+    from .engine import simulate_run
+    from .progress import Progress
+
+    results: list[_Result] = []
+    viewer_problem: str | None = None
+    total = sum(p.config.horizon for p in plans)
+    with _Stop() as stop, Progress(total, "record") as bar:
+        for plan in plans:
+            result = _Result(plan)
+            results.append(result)
+            problem = _record_one(plan, result, viewer_url, force, stop, bar, simulate_run)
+            viewer_problem = viewer_problem or problem
+            if stop.signal:
+                return results, stop.signal, viewer_problem
+    return results, None, viewer_problem
+
+
+def _record_one(
+    plan: _Plan,
+    result: _Result,
+    viewer_url: str | None,
+    force: bool,
+    stop: _Stop,
+    bar: Any,
+    simulate_run: Any,
+) -> str | None:
+    """Record one run into its files; returns a problem with the viewer, if any."""
+    from recorder.errors import ViewerError, WriteError
+    from recorder.mcap_sink import McapSink
+
+    config = plan.config
+    start = time.perf_counter()
+    problem: str | None = None
+    rrd_error: WriteError | None = None
+    with McapSink(plan.mcap, config, overwrite=force) as mcap:
+        output = sink = None
+        if plan.rrd is not None or viewer_url is not None:
+            from recorder.rerun_sink import RerunSink, RrdOutput
+
+            output = RrdOutput(config, rrd_path=plan.rrd, viewer_url=viewer_url, overwrite=force)
+            sink = RerunSink(output.recording, config.label, config)
+        try:
+            for block in simulate_run(config.instance, config.policy, config.seed, config.horizon):
+                mcap.write(block)
+                if sink is not None:
+                    sink.write(block)
+                result.slots = int(block.t[-1])
+                result.regret = int(block.regret[-1])
+                result.estimator = float(block.estimator[-1])
+                result.pulls = [int(v) for v in block.pulls[-1]]
+                bar.update(len(block), note=f"{config.label} slot {result.slots}")
+                if stop.signal:
+                    break
+        except BaseException as exc:
+            if output is not None:
+                if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                    try:
+                        output.close()
+                    except (ViewerError, WriteError):
+                        pass
+                else:
+                    output.abort(discard=result.slots == 0)
+            raise
+        if output is not None:
+            assert sink is not None
+            sink.close()
+            try:
+                result.rrd = output.close()
+            except ViewerError as exc:
+                result.rrd = output.path
+                problem = str(exc)
+            except WriteError as exc:  # the MCAP log is still finished properly
+                rrd_error = exc
+    result.mcap = mcap.path if mcap.finished else mcap.partial_path
+    result.wall = time.perf_counter() - start
+    if rrd_error is not None:
+        if mcap.finished:
+            raise WriteError(f"{rrd_error} (the MCAP log {mcap.path} is complete)")
+        raise rrd_error
+    return problem
+
+
+def _report(results: list[_Result], *, as_json: bool) -> None:
+    from recorder.live import view_command
+
+    rrds = [str(r.rrd) for r in results if r.rrd is not None]
+    command = view_command(rrds) if rrds else None
+    if as_json:
+        out = {
+            "runs": [
+                {
+                    "label": r.plan.config.label,
+                    "policy": r.plan.config.policy.name,
+                    "params": r.plan.config.policy.params,
+                    "instance": r.plan.config.instance.name,
+                    "seed": r.plan.config.seed,
+                    "horizon": r.plan.config.horizon,
+                    "slots": r.slots,
+                    "complete": r.slots == r.plan.config.horizon,
+                    "regret": r.regret,
+                    "estimator": r.estimator,
+                    "pulls": r.pulls,
+                    "mcap": str(r.mcap) if r.mcap else None,
+                    "rrd": str(r.rrd) if r.rrd else None,
+                    "wall_s": round(r.wall, 4),
+                }
+                for r in results
+            ],
+            "view": command,
+        }
+        click.echo(json.dumps(out, indent=2))
+        return
+    for r in results:
+        c = r.plan.config
+        params = ", ".join(f"{k}={v:g}" for k, v in c.policy.params.items())
+        rate = r.slots / r.wall if r.wall > 0 else 0.0
+        done = "" if r.slots == c.horizon else " (interrupted)"
+        click.echo(
+            f"{c.policy.name}{f' ({params})' if params else ''} on {c.instance.name}, seed "
+            f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
+            f"({rate:,.0f} slots/s)"
+        )
+        if r.regret is not None and r.estimator is not None:
+            click.echo(
+                f"  AoI regret at slot {r.slots}: {r.regret} (pathwise), "
+                f"{r.estimator:.1f} (paper's estimator sum aoi - t/mu*)"
+            )
+            pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
+            click.echo(f"  pulls per arm: {pulls}")
+        click.echo(f"  MCAP log:        {r.mcap}")
+        if r.rrd is not None:
+            click.echo(f"  Rerun recording: {r.rrd}")
+    if command:
+        click.echo(f"open in the Rerun viewer:  {command}")
+
+
+__all__ = ["record"]
