@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import socket
 import struct
 import subprocess
 import sys
@@ -298,3 +299,20 @@ def test_the_viewer_does_not_import_the_engine():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == ""
+
+
+def test_an_unreachable_viewer_is_one_line_and_writes_nothing(tmp_path, record_mcap, monkeypatch):
+    a, _, _ = record_mcap("ucb", horizon=1000)
+    monkeypatch.chdir(tmp_path)
+    with socket.socket() as s:  # a port where nothing listens
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    line = one_error_line(run("replay", a, "--connect", str(port)), code=1)
+    assert f"127.0.0.1:{port}" in line and "no Rerun viewer there" in line
+    line = one_error_line(run("compare", a, "--connect", str(port)), code=1)
+    assert "no Rerun viewer there" in line
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    line = one_error_line(run("replay", a, "--spawn"), code=1)
+    assert "--spawn" in line and "no display" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == [a.name]
