@@ -127,6 +127,17 @@ def _default_rrd(log: Path) -> Path:
     return base.with_suffix(".rrd") if base.suffix == ".mcap" else log.with_name(name + ".rrd")
 
 
+def _not_an_input(out: Path, inputs: tuple[Path, ...] | list[Path]) -> None:
+    """Refuse an output path that is one of the logs being read (even with --force)."""
+    for log in inputs:
+        try:
+            same = out.exists() and log.exists() and os.path.samefile(out, log)
+        except OSError:
+            same = False
+        if same:
+            raise UsageError(f"{out}: is one of the logs being read; give another output path")
+
+
 def _progress(total: int, label: str) -> Any:
     from .progress import Progress
 
@@ -177,6 +188,7 @@ def replay(
     if rrd is not None:
         from recorder.paths import check_output
 
+        _not_an_input(rrd, [log])
         check_output(rrd, overwrite=force, what="Rerun recording")
     if run.cut_short:
         warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
@@ -252,6 +264,7 @@ def compare(
     if out is not None:
         from recorder.paths import check_output
 
+        _not_an_input(out, logs)
         check_output(out, overwrite=force, what="Rerun recording")
     for w in warnings:
         warn(w)

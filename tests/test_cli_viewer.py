@@ -128,6 +128,10 @@ def test_usage_errors_are_one_line_exit_2(tmp_path, record_mcap):
     assert "choose one" in one_error_line(run("replay", a, "--spawn", "--serve-web"))
     assert "--connect" in one_error_line(run("compare", a, "--connect", "http://x:1/nope"))
     assert "--no-rrd" in one_error_line(run("compare", a, "--no-rrd", "-o", tmp_path / "x.rrd"))
+    before = a.read_bytes()
+    assert "is one of the logs being read" in one_error_line(run("replay", a, "--rrd", a, "-f"))
+    assert "is one of the logs being read" in one_error_line(run("compare", a, "-o", a, "-f"))
+    assert a.read_bytes() == before
     (tmp_path / "exists.rrd").write_bytes(b"keep me")
     line = one_error_line(run("replay", a, "--rrd", tmp_path / "exists.rrd"))
     assert "already exists (use --force" in line
