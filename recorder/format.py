@@ -8,6 +8,7 @@ subtracts it). ``docs/log-format.md`` is the human description; this module is t
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -248,7 +249,9 @@ def empty_block(K: int) -> SlotBlock:
     )
 
 
-def decode_messages(payloads: list[bytes], K: int, n_states: int, *, where: str) -> SlotBlock:
+def decode_messages(
+    payloads: Sequence[bytes | memoryview], K: int, n_states: int, *, where: str
+) -> SlotBlock:
     """The SlotBlock of consecutive slot messages (JSON bytes), checked against the format."""
     if not payloads:
         return empty_block(K)

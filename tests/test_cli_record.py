@@ -144,6 +144,22 @@ def test_help_does_not_import_rerun_or_the_recorder():
     assert out.stdout.strip() == "[]"
 
 
+def test_the_same_command_twice_gives_the_same_files(tmp_path):
+    for name in ("a", "b"):
+        res = run(
+            "-p", "aoi-aware-cts", "-T", "2500", "-s", "3", "-o", str(tmp_path / name / "r.mcap")
+        )
+        assert res.exit_code == 0, res.output
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert (a / "r.mcap").read_bytes() == (b / "r.mcap").read_bytes()
+    cmp = subprocess.run([_rerun_binary(), "rrd", "compare", str(a / "r.rrd"), str(b / "r.rrd")],
+                         capture_output=True, text=True)  # fmt: skip
+    assert cmp.returncode == 0, cmp.stdout + cmp.stderr
+    res = run("-p", "aoi-aware-cts", "-T", "2500", "-s", "4", "-o", str(tmp_path / "c" / "r.mcap"))
+    assert res.exit_code == 0
+    assert (tmp_path / "c" / "r.mcap").read_bytes() != (a / "r.mcap").read_bytes()
+
+
 # ---------------------------------------------------------------------------- refusals
 
 
