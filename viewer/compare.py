@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .info import summary_rows
-from .runs import LogLike, as_log, unique_labels
+from .runs import LogLike, as_log, prefetch, unique_labels
 from .summary import RunSummary, SummaryAccumulator
 
 if TYPE_CHECKING:
@@ -266,16 +266,20 @@ def compare(
         blueprint=compare_blueprint(runs),
         recording_id=compare_recording_id(runs),
     ) as out:
+        sinks = []
         for r in runs:
-            acc = SummaryAccumulator(r.config)
-            with RerunSink(out.recording, r.label, r.config) as sink:
-                if r.color != policy_color(r.config.policy.name):
-                    _restyle(out.recording, r)
-                for b in r.log.blocks(block):
-                    sink.write(b)
-                    acc.update(b)
-                    if on_block is not None:
-                        on_block(len(b))
+            sinks.append(RerunSink(out.recording, r.label, r.config))
+            if r.color != policy_color(r.config.policy.name):
+                _restyle(out.recording, r)
+        accs = [SummaryAccumulator(r.config) for r in runs]
+        every = ((i, b) for i, r in enumerate(runs) for b in r.log.blocks(block))
+        for i, b in prefetch(every):  # the next blocks are read while these are sent
+            sinks[i].write(b)
+            accs[i].update(b)
+            if on_block is not None:
+                on_block(len(b))
+        for r, sink, acc in zip(runs, sinks, accs, strict=True):
+            sink.close()
             r.summary = acc.result()
         out.recording.log(
             SUMMARY_ENTITY,
