@@ -78,6 +78,10 @@ class _Stop:
         self._old.clear()
 
 
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
 def _expand(template: str, config: Any) -> Path:
     return Path(
         template.replace("{label}", config.label)
@@ -280,11 +284,17 @@ def record(
     if web is not None:
         click.echo(f"serving the web viewer at {web.web_url} (Ctrl-C to stop)", err=True)
         try:
+            old = signal.signal(signal.SIGTERM, _interrupt)
+        except ValueError:  # not the main thread
+            old = None
+        try:
             web.wait()
         except KeyboardInterrupt:
             pass
         finally:
             web.stop()
+            if old is not None:
+                signal.signal(signal.SIGTERM, old)
     if viewer_failed:
         sys.exit(1)
 

@@ -264,7 +264,8 @@ def test_connect_streams_the_same_recording_to_a_viewer(tmp_path):
     assert cmp.returncode == 0, cmp.stdout + cmp.stderr
 
 
-def test_serve_web_binds_loopback_and_stops_on_ctrl_c(tmp_path):
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_serve_web_binds_loopback_and_stops_on_a_signal(tmp_path, stop):
     web = free_port()
     proc = cli("-T", "2000", "-o", "w.mcap", "--serve-web", "--web-port", str(web), cwd=tmp_path,
                start_new_session=True)  # fmt: skip
@@ -277,7 +278,7 @@ def test_serve_web_binds_loopback_and_stops_on_ctrl_c(tmp_path):
         listening = subprocess.run(["ss", "-ltn"], capture_output=True, text=True).stdout
         bound = [ln for ln in listening.splitlines() if f":{web} " in ln]
         assert bound and all("127.0.0.1:" in ln for ln in bound), bound
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(stop)
         assert proc.wait(timeout=20) == 0
     finally:
         if proc.poll() is None:
