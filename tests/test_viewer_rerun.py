@@ -244,23 +244,50 @@ def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
         replay(bad, viewer_url="rerun+http://127.0.0.1:9/proxy")
 
 
-def test_prefetch_hands_on_errors_and_stops_early():
+def _items_then_boom():
+    from recorder.errors import LogError
+
+    yield 1
+    yield 2
+    raise LogError("boom: chunk at byte 7 is damaged")
+
+
+@pytest.mark.parametrize("mode", ["fork", "thread"])
+def test_read_ahead_hands_on_errors_and_stops_early(mode, monkeypatch):
     import threading
 
-    from viewer.runs import prefetch
+    from recorder.errors import LogError
+    from viewer import readahead
 
-    def items():
-        yield 1
-        yield 2
-        raise ValueError("boom")
-
+    monkeypatch.setenv(readahead.ENV, mode)
     got = []
-    with pytest.raises(ValueError, match="boom"):
-        for x in prefetch(items()):
+    with pytest.raises(LogError, match="boom: chunk at byte 7"):
+        for x in readahead.read_ahead(_items_then_boom):
             got.append(x)
     assert got == [1, 2]
     before = threading.active_count()
-    for x in prefetch(iter(range(10**6)), depth=2):
+    for x in readahead.read_ahead(lambda: iter(range(10**7)), depth=2):
         if x == 3:
             break
     assert threading.active_count() <= before
+    if mode == "fork" and readahead._can_fork():
+        import multiprocessing
+
+        assert multiprocessing.active_children() == []  # the reader process was stopped
+    assert list(readahead.read_ahead(lambda: [{"a": 1}, (2, b"x")])) == [{"a": 1}, (2, b"x")]
+
+
+def test_a_reader_process_that_dies_is_an_error(monkeypatch):
+    import os
+
+    from viewer import readahead
+
+    if not readahead._can_fork():
+        pytest.skip("no fork here: the reader runs in a thread")
+
+    def die():
+        yield 1
+        os._exit(3)
+
+    with pytest.raises(RuntimeError, match="stopped unexpectedly"):
+        list(readahead.read_ahead(die))

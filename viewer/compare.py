@@ -14,18 +14,20 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .info import summary_rows
-from .runs import LogLike, as_log, prefetch, unique_labels
+from .readahead import read_ahead
+from .runs import LogLike, as_log, unique_labels
 from .summary import RunSummary, SummaryAccumulator
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
+    from corraoi.block import SlotBlock
     from recorder.reader import RunLog
 
 #: Slots per block handed to the sinks.
@@ -272,8 +274,12 @@ def compare(
             if r.color != policy_color(r.config.policy.name):
                 _restyle(out.recording, r)
         accs = [SummaryAccumulator(r.config) for r in runs]
-        every = ((i, b) for i, r in enumerate(runs) for b in r.log.blocks(block))
-        for i, b in prefetch(every):  # the next blocks are read while these are sent
+        opened = [r.log for r in runs]
+
+        def every() -> Iterator[tuple[int, SlotBlock]]:
+            return ((i, b) for i, log in enumerate(opened) for b in log.blocks(block))
+
+        for i, b in read_ahead(every):  # the next blocks are read while these are sent
             sinks[i].write(b)
             accs[i].update(b)
             if on_block is not None:

@@ -14,7 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .runs import LogLike, as_log, prefetch
+from .readahead import read_ahead
+from .runs import LogLike, as_log
 
 #: Slots per block handed to the sink: the engine's block, as ``corraoi record`` uses.
 BLOCK = 1000
@@ -62,7 +63,7 @@ def replay(
     out = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite)
     try:
         sink = RerunSink(out.recording, out.label, config)
-        for b in prefetch(run.blocks(block)):
+        for b in read_ahead(lambda: run.blocks(block)):
             sink.write(b)
             if on_block is not None:
                 on_block(len(b))

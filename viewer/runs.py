@@ -3,20 +3,16 @@
 from __future__ import annotations
 
 import os
-import queue
 import re
-import threading
 from collections import Counter
-from collections.abc import Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any, TypeVar, Union
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, Union
 
 if TYPE_CHECKING:
     from recorder.reader import RunLog
 
 #: What the viewer functions accept for a log: a path or an opened RunLog.
 LogLike = Union[str, "os.PathLike[str]", "RunLog"]
-
-T = TypeVar("T")
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
 
@@ -101,53 +97,3 @@ def unique_labels(logs: Sequence[RunLog]) -> list[str]:
         final.append(y)
     return final
 
-
-class _Raised:
-    def __init__(self, exc: BaseException) -> None:
-        self.exc = exc
-
-
-_DONE = object()
-
-
-def prefetch(items: Iterable[T], *, depth: int = 4) -> Iterator[T]:
-    """Iterate ``items`` in a background thread, ``depth`` items ahead of the consumer.
-
-    Reading and decoding a log overlaps with sending to Rerun (whose Rust side and the zstd
-    decompression run without the GIL). An exception in the reader is raised in the
-    consumer; leaving the loop early stops the reader.
-    """
-    q: queue.Queue[object] = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-
-    def put(item: object) -> bool:
-        while not stop.is_set():
-            try:
-                q.put(item, timeout=0.05)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def work() -> None:
-        try:
-            for item in items:
-                if not put(item):
-                    return
-            put(_DONE)
-        except BaseException as exc:  # noqa: BLE001 - handed to the consumer
-            put(_Raised(exc))
-
-    thread = threading.Thread(target=work, name="corraoi-log-reader", daemon=True)
-    thread.start()
-    try:
-        while True:
-            item = q.get()
-            if item is _DONE:
-                return
-            if isinstance(item, _Raised):
-                raise item.exc
-            yield item  # type: ignore[misc]
-    finally:
-        stop.set()
-        thread.join(timeout=5)
