@@ -303,9 +303,12 @@ def _record_all(
     plans: list[_Plan], viewer_url: str | None, force: bool
 ) -> tuple[list[_Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from .engine import simulate_run
+    from .engine import set_workers, simulate_run
     from .progress import Progress
 
+    # One run has nothing to spread over threads, and idle numba workers compete with
+    # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
+    set_workers(1)
     results: list[_Result] = []
     viewer_problem: str | None = None
     total = sum(p.config.horizon for p in plans)
