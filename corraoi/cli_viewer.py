@@ -9,7 +9,6 @@ from __future__ import annotations
 import functools
 import json
 import os
-import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -107,17 +106,8 @@ class _Viewer:
 
     def stop(self) -> None:
         web, self.web = self.web, None
-        if web is None:
-            return
-        # The ``rerun`` script runs the server binary as its child, in the new session the
-        # server was started in: signal the whole group so that no server is left behind.
-        proc = getattr(web, "process", None)
-        if proc is not None and proc.poll() is None and hasattr(os, "killpg"):
-            try:
-                os.killpg(proc.pid, signal.SIGTERM)
-            except (ProcessLookupError, PermissionError):
-                pass
-        web.stop()
+        if web is not None:
+            web.stop()  # the server's whole process group
 
 
 def _default_rrd(log: Path) -> Path:
