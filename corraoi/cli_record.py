@@ -82,6 +82,25 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
+def _serve_until_stopped(web: Any) -> None:
+    """Keep the web viewer up after the run until Ctrl-C or SIGTERM, then stop it."""
+    old: dict[int, Any] = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                old[sig] = signal.signal(sig, _interrupt)
+            except ValueError:  # not the main thread
+                pass
+        click.echo(f"serving the web viewer at {web.web_url} (Ctrl-C to stop)", err=True)
+        web.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        web.stop()
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
+
+
 def _expand(template: str, config: Any) -> Path:
     return Path(
         template.replace("{label}", config.label)
@@ -282,19 +301,7 @@ def record(
             web.stop()
         sys.exit(130)
     if web is not None:
-        click.echo(f"serving the web viewer at {web.web_url} (Ctrl-C to stop)", err=True)
-        try:
-            old = signal.signal(signal.SIGTERM, _interrupt)
-        except ValueError:  # not the main thread
-            old = None
-        try:
-            web.wait()
-        except KeyboardInterrupt:
-            pass
-        finally:
-            web.stop()
-            if old is not None:
-                signal.signal(signal.SIGTERM, old)
+        _serve_until_stopped(web)
     if viewer_failed:
         sys.exit(1)
 
