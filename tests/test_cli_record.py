@@ -237,7 +237,10 @@ def _rerun_binary() -> str:
     return rerun_binary()
 
 
-def test_connect_streams_the_same_recording_to_a_viewer(tmp_path):
+@pytest.mark.parametrize("how", ["--connect", "--spawn"])
+def test_the_viewer_gets_the_same_recording_as_the_file(tmp_path, monkeypatch, how):
+    """A headless Rerun server that saves what it receives stands in for the viewer
+    (for --spawn, in place of the window that rr.spawn would open)."""
     port = free_port()
     saved = tmp_path / "viewer.rrd"
     server = subprocess.Popen(
@@ -253,8 +256,15 @@ def test_connect_streams_the_same_recording_to_a_viewer(tmp_path):
                 if s.connect_ex(("127.0.0.1", port)) == 0:
                     break
             time.sleep(0.1)
-        res = run("-p", "cts", "-T", "2000", "-o", str(tmp_path / "v.mcap"),
-                  "--connect", f"rerun+http://127.0.0.1:{port}/proxy")  # fmt: skip
+        url = f"rerun+http://127.0.0.1:{port}/proxy"
+        if how == "--spawn":
+            from recorder import live
+
+            monkeypatch.setenv("DISPLAY", ":99")
+            monkeypatch.setattr(live, "spawn_viewer", lambda: url)
+            res = run("-p", "cts", "-T", "2000", "-o", str(tmp_path / "v.mcap"), "--spawn")
+        else:
+            res = run("-p", "cts", "-T", "2000", "-o", str(tmp_path / "v.mcap"), "--connect", url)
         assert res.exit_code == 0, res.output
     finally:
         server.terminate()
