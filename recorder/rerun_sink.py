@@ -185,6 +185,7 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
         )
 
     aoi = windowed(f"AoI vs oracle (last {window} slots)", ["$origin/aoi", "$origin/oracle_aoi"])
+
     def whole(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
         return rrb.TimeSeriesView(
             origin=base,
