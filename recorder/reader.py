@@ -82,8 +82,15 @@ class RunLog:
     end: dict[str, str] = field(default_factory=dict)
     library: str = ""
     n_chunks: int = 0
-    _channel_id: int = 0
-    _data_end: int = 0  # byte offset after the last complete chunk read at open
+    _channel_id: int = field(default=0, repr=False)
+    #: byte offset after the last complete chunk seen at open: blocks() stops there
+    _data_end: int = field(default=0, repr=False)
+
+    def __repr__(self) -> str:
+        return (
+            f"RunLog({str(self.path)!r}, {self.config.label}, "
+            f"{self.n_slots}/{self.config.horizon} slots, {self.status})"
+        )
 
     @property
     def label(self) -> str:
