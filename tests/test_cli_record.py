@@ -299,6 +299,27 @@ def test_serve_web_binds_loopback_and_stops_on_a_signal(tmp_path, stop):
     assert open_log(tmp_path / "w.mcap").n_slots == 2000
 
 
+def test_the_web_server_does_not_outlive_a_killed_record(tmp_path):
+    web = free_port()
+    proc = cli("-T", "50000000", "-o", "k.mcap", "--no-rrd", "--serve-web", "--web-port", str(web),
+               cwd=tmp_path, start_new_session=True)  # fmt: skip
+    try:
+        _read_lines(proc.stderr, until="web viewer: ", timeout=60)
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
+            assert page.status == 200
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", web)) != 0:
+                break
+        time.sleep(0.1)
+    else:
+        raise AssertionError(f"the web server on port {web} outlived the killed record")
+
+
 def _read_lines(stream, *, until: str, timeout: float) -> list[str]:
     lines: list[str] = []
     buf = b""
