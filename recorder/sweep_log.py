@@ -5,7 +5,7 @@ One JSON message per (policy, checkpoint slot) on :data:`TOPIC` (schema
 policy, then the next policy, ... The configuration of the sweep (instance, policies,
 runs, horizon, seed, checkpoints, version) is stored in the metadata record
 :data:`SWEEP_METADATA`, so a figure can be redrawn from the file alone.
-``docs/sweep-log-format.md`` is the human description; this module is the code.
+``docs/log-format.md`` (section 3) is the human description; this module is the code.
 
 The writer is byte-reproducible: no wall clock anywhere (log_time = publish_time =
 ``t * NS_PER_SLOT``, sequence = 1-based index of the message in the file). It writes
