@@ -27,23 +27,34 @@ def warn(message: str) -> None:
     click.echo(f"corraoi: warning: {message}", err=True)
 
 
-def handle_errors(func: F) -> F:
-    """Turn corraoi errors, I/O errors and Ctrl-C into one line and an exit status."""
+def errors_exit(code: int | None = None) -> Callable[[F], F]:
+    """Turn corraoi errors, I/O errors and Ctrl-C into one line and an exit status.
 
-    @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except CorraoiError as exc:
-            fail(str(exc), exc.exit_code)
-        except OSError as exc:
-            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-            fail(f"{where}{exc.strerror or exc}", 1)
-        except KeyboardInterrupt:
-            click.echo("corraoi: interrupted", err=True)
-            sys.exit(130)
+    Errors exit with their own ``exit_code`` (I/O errors with 1), or all with ``code``
+    when it is given (``diff`` exits 2 on any trouble, as diff(1)); Ctrl-C exits 130.
+    """
 
-    return wrapper  # type: ignore[return-value]
+    def deco(func: F) -> F:
+        @functools.wraps(func)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return func(*args, **kwargs)
+            except CorraoiError as exc:
+                fail(str(exc), code if code is not None else exc.exit_code)
+            except OSError as exc:
+                where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+                fail(f"{where}{exc.strerror or exc}", code if code is not None else 1)
+            except KeyboardInterrupt:
+                click.echo("corraoi: interrupted", err=True)
+                sys.exit(130)
+
+        return wrapper  # type: ignore[return-value]
+
+    return deco
+
+
+#: The usual error handling of a command: each error's own exit status.
+handle_errors = errors_exit()
 
 
 def instance_option(func: F) -> F:

@@ -6,7 +6,6 @@ are imported inside the command functions, so ``corraoi --help`` stays fast.
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import sys
@@ -16,8 +15,8 @@ from typing import Any, TypeVar
 
 import click
 
-from .cli_common import fail, handle_errors, warn
-from .errors import CorraoiError, UsageError
+from .cli_common import errors_exit, handle_errors, warn
+from .errors import UsageError
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -283,23 +282,6 @@ def compare(
 # ---------------------------------------------------------------------------- diff
 
 
-def _diff_errors(func: F) -> F:
-    """Like handle_errors, but every failure exits 2 ("trouble", as diff(1))."""
-
-    @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except CorraoiError as exc:
-            fail(str(exc), 2)
-        except OSError as exc:
-            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-            fail(f"{where}{exc.strerror or exc}", 2)
-        except KeyboardInterrupt:
-            click.echo("corraoi: interrupted", err=True)
-            sys.exit(130)
-
-    return wrapper  # type: ignore[return-value]
 
 
 @click.command("diff")
@@ -313,7 +295,7 @@ def _diff_errors(func: F) -> F:
               help="Absolute tolerance of the float fields (estimator, mu_hat); the others "
               "compare exactly.")  # fmt: skip
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing; only the exit status.")
-@_diff_errors
+@errors_exit(2)  # any trouble exits 2, as diff(1)
 def diff(
     a: Path, b: Path, as_json: bool, fields: tuple[str, ...], atol: float, quiet: bool
 ) -> None:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernel
-from .block import SlotBlock, check_horizon, check_seed
+from .block import FIELDS, SlotBlock, check_horizon, check_seed
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
@@ -50,20 +50,9 @@ class RunsBlock:
     candidates: np.ndarray
 
     def run(self, i: int) -> SlotBlock:
-        return SlotBlock(
-            t=self.t,
-            x=self.x[i],
-            arm=self.arm[i],
-            success=self.success[i],
-            aoi=self.aoi[i],
-            oracle_aoi=self.oracle_aoi[i],
-            regret=self.regret[i],
-            estimator=self.estimator[i],
-            override=self.override[i],
-            mu_hat=self.mu_hat[i],
-            pulls=self.pulls[i],
-            candidates=self.candidates[i],
-        )
+        """Run ``i``'s columns (views, no copy)."""
+        per_run = {f: getattr(self, f)[i] for f in FIELDS if f != "t"}
+        return SlotBlock(t=self.t, **per_run)
 
 
 @dataclass

@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -149,6 +150,33 @@ def about_markdown(config: RunConfig) -> str:
     return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class TimeWindows:
+    """Time axes and query ranges of the blueprints: the last ``window`` slots before the
+    cursor, and the whole run."""
+
+    window_axis: Any
+    window_query: Any
+    whole_axis: Any
+    whole_query: Any
+
+
+def time_windows(window: int) -> TimeWindows:
+    recent = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
+    everything = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+    return TimeWindows(
+        window_axis=rrb.TimeAxis(view_range=recent),
+        window_query=rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end),
+        whole_axis=rrb.TimeAxis(view_range=everything),
+        whole_query=rrb.VisibleTimeRange(TIMELINE, start=everything.start, end=everything.end),
+    )
+
+
 def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
     """The default layout of one run.
 
@@ -160,17 +188,9 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
     base = run_path(label)
     K = config.instance.K
     n = config.instance.n_states
-    recent = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
-        end=rrb.TimeRangeBoundary.cursor_relative(),
-    )
-    window_axis = rrb.TimeAxis(view_range=recent)
-    window_query = rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end)
-    everything = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
-    )
-    whole_axis = rrb.TimeAxis(view_range=everything)
-    whole_query = rrb.VisibleTimeRange(TIMELINE, start=everything.start, end=everything.end)
+    tw = time_windows(window)
+    window_axis, window_query = tw.window_axis, tw.window_query
+    whole_axis, whole_query = tw.whole_axis, tw.whole_query
     legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
 
     def windowed(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:

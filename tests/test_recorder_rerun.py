@@ -24,6 +24,8 @@ from recorder.rerun_sink import (  # noqa: E402
     run_path,
 )
 
+from .rrd_util import read_rrd  # noqa: E402
+
 RERUN = str(Path(sys.executable).parent / "rerun")
 
 
@@ -42,25 +44,6 @@ def write_rrd(path: Path, config, blocks, **kw) -> Path:
             for b in blocks:
                 sink.write(b)
     return path
-
-
-def read_rrd(path: Path) -> dict[str, tuple[np.ndarray, list]]:
-    """entity path -> (slots, values per slot) of every Scalars column in the recording."""
-    found: dict[str, tuple[list[int], list]] = {}
-    for chunk in RrdReader(path).stream():
-        if chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        if "slot" not in batch.schema.names or "Scalars:scalars" not in batch.schema.names:
-            continue
-        slots, values = found.setdefault(chunk.entity_path, ([], []))
-        slots.extend(batch.column("slot").to_pylist())
-        values.extend(batch.column("Scalars:scalars").to_pylist())
-    out = {}
-    for entity, (slots, values) in found.items():
-        order = np.argsort(slots, kind="stable")
-        out[entity] = (np.asarray(slots)[order], [values[i] for i in order])
-    return out
 
 
 def test_the_rrd_holds_every_slot_value_for_value(tmp_path, make_config, engine):

@@ -28,6 +28,8 @@ from viewer.compare import (  # noqa: E402
 from viewer.runs import safe_label, unique_labels  # noqa: E402
 from viewer.summary import summarize_blocks  # noqa: E402
 
+from .rrd_util import read_rrd  # noqa: E402
+
 RERUN = str(Path(sys.executable).parent / "rerun")
 
 
@@ -41,25 +43,6 @@ def strict_rerun():
 
 def rrd_compare(a: Path, b: Path) -> subprocess.CompletedProcess:
     return subprocess.run([RERUN, "rrd", "compare", str(a), str(b)], capture_output=True, text=True)
-
-
-def scalars(path: Path) -> dict[str, tuple[np.ndarray, list]]:
-    """entity -> (slots, values) of every Scalars column of a recording."""
-    found: dict[str, tuple[list[int], list]] = {}
-    for chunk in RrdReader(path).stream():
-        if chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        if "slot" not in batch.schema.names or "Scalars:scalars" not in batch.schema.names:
-            continue
-        slots, values = found.setdefault(chunk.entity_path, ([], []))
-        slots.extend(batch.column("slot").to_pylist())
-        values.extend(batch.column("Scalars:scalars").to_pylist())
-    out = {}
-    for entity, (slots, values) in found.items():
-        order = np.argsort(slots, kind="stable")
-        out[entity] = (np.asarray(slots)[order], [values[i] for i in order])
-    return out
 
 
 def static_texts(path: Path) -> dict[str, str]:
@@ -119,7 +102,7 @@ def test_replay_of_a_cut_short_log_renders_the_slots_it_holds(tmp_path, make_con
         True,
     )
     assert "2000 of 4000" in done.description
-    data = scalars(tmp_path / "cut.rrd")
+    data = read_rrd(tmp_path / "cut.rrd")
     slots, values = data[f"/{run_path(config.label)}/regret"]
     assert np.array_equal(slots, np.arange(1, 2001))
     assert np.array_equal([v[0] for v in values], ref.regret[:2000])
@@ -135,7 +118,7 @@ def test_compare_puts_every_run_side_by_side(tmp_path, record_mcap):
     result = compare(paths, rrd_path=out)
     assert result.path == out and result.warnings == []
     assert [r.label for r in result.runs] == ["ucb", "cucb", "aoi-aware-ts"]
-    data = scalars(out)
+    data = read_rrd(out)
     for run in result.runs:
         config, ref = refs[run.label]
         base = f"/{run_path(run.label)}"

@@ -139,19 +139,10 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from recorder.rerun_sink import TIMELINE, run_path
+    from recorder.rerun_sink import TIMELINE, run_path, time_windows
 
-    recent = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
-        end=rrb.TimeRangeBoundary.cursor_relative(),
-    )
-    window_axis = rrb.TimeAxis(view_range=recent)
-    window_query = rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end)
-    whole = rrb.TimeAxis(
-        view_range=rrb.TimeRange(
-            start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
-        )
-    )
+    tw = time_windows(window)
+    window_axis, window_query, whole = tw.window_axis, tw.window_query, tw.whole_axis
     legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
     hidden = rrb.PlotLegend(visible=False)
 
