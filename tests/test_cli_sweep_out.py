@@ -1,0 +1,86 @@
+"""`corraoi sweep -o DIR` and `corraoi reproduce`: streamed logs, summaries, figure, refusals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from click.testing import CliRunner
+
+from corraoi.cli import main
+from corraoi.engine import Simulation
+from corraoi.instance import load_instance
+from corraoi.policies import make_policy
+from recorder.sweep_log import read_sweep
+
+
+def run(*args: str):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_sweep_out_writes_logs_summary_and_figure(tmp_path: Path):
+    out = tmp_path / "s"
+    res = run("sweep", "-i", "I2", "-p", "cucb,aoi-aware-cts", "-n", "6", "-T", "400",
+              "-s", "2", "-o", str(out), "--checkpoints", "20")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    for name in ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png"):
+        assert (out / name).is_file(), name
+    assert not list(out.glob("*.partial"))
+    summary = json.loads((out / "summary.json").read_text())
+    # the summary is the library's own result for the same seeds
+    sim = Simulation(load_instance("I2"), make_policy("cucb"), list(range(2, 8)), 400)
+    sim.advance(400, record=False)
+    assert summary["policies"]["cucb"]["regret_mean"] == float(np.mean(sim.regret))
+    assert summary["theory"]["C"] == 0
+    # the log's last checkpoint of each policy is that final figure too
+    log = read_sweep(out / "sweep.mcap")
+    assert log.policies == ["cucb", "aoi-aware-cts"]
+    for name in log.policies:
+        curve = log.curves[name]
+        assert curve.t[-1] == 400 and np.all(np.diff(curve.t) > 0)
+        assert curve.regret_mean[-1] == summary["policies"][name]["regret_mean"]
+    md = (out / "summary.md").read_text()
+    assert "| 1 |" in md and "Theorem 2 (CUCB)" in md
+    assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a second run into the same DIR is refused, and --force overwrites
+    again = run("sweep", "-i", "I2", "-p", "cucb", "-n", "2", "-T", "50", "-o", str(out))
+    assert again.exit_code == 2 and "already holds a sweep" in again.output
+    assert json.loads((out / "summary.json").read_text()) == summary
+    forced = run("sweep", "-i", "I2", "-p", "cucb", "-n", "2", "-T", "50", "-o", str(out),
+                 "--force")  # fmt: skip
+    assert forced.exit_code == 0
+    assert json.loads((out / "summary.json").read_text())["horizon"] == 50
+
+
+def test_sweep_out_under_a_file_is_refused(tmp_path: Path):
+    afile = tmp_path / "plain"
+    afile.write_text("x")
+    res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "-o", str(afile / "sub"))
+    assert res.exit_code == 2
+    assert "cannot create the directory" in res.output and "Traceback" not in res.output
+
+
+def test_identical_arms_are_a_stated_result(tmp_path: Path):
+    same = tmp_path / "same.txt"
+    same.write_text("0.5 0.5\n1 0\n1 0\n")
+    res = run("sweep", "-i", str(same), "-p", "ucb,cts", "-n", "5", "-T", "200", "--json")
+    assert res.exit_code == 0
+    assert "every arm has the same mean" in res.stderr
+    d = json.loads(res.stdout)
+    # identical arms: the pathwise regret is exactly 0 in every run
+    assert all(p["regret_mean"] == 0.0 for p in d["policies"].values())
+    assert d["theory"]["bounds"]["cucb"]["value"] is None
+
+
+def test_reproduce_small(tmp_path: Path):
+    out = tmp_path / "paper"
+    res = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
+    assert res.exit_code == 0, res.output
+    for inst in ("I1", "I2"):
+        s = json.loads((out / inst / "summary.json").read_text())
+        assert s["instance"]["name"] == inst and len(s["policies"]) == 12 and s["runs"] == 3
+    text = (out / "summary.md").read_text()
+    assert "Sweep: instance I1" in text and "Sweep: instance I2" in text
+    again = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
+    assert again.exit_code == 2 and "already holds a reproduction" in again.output
