@@ -28,8 +28,12 @@ def main() -> None:
     shared hidden state. Scheduling policies learn which channel keeps the data fresh.
     \b
     Start with:
-      corraoi instance show I1          the model and its theory (competitive arms, C)
+      corraoi record --policy cucb      simulate one run, stream it to runs/*.mcap and *.rrd
+      corraoi instance show I1          the model and its theory (competitive arms, C, bounds)
+      corraoi compare A.mcap B.mcap     recorded runs side by side (no recomputation)
+      corraoi diff A.mcap B.mcap        where two recorded runs diverge (exit 0/1/2)
       corraoi sweep --policy all        every policy over 200 paired runs, regret with 95% CI
+      corraoi reproduce -o paper        the paper's simulations, figures and tables
     """
 
 
