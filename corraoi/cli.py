@@ -14,11 +14,15 @@ import click
 
 from ._version import __version__
 from .cli_common import (
+    OneLineGroup,
     handle_errors,
 )
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.group(
+    cls=OneLineGroup,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
 @click.version_option(__version__, prog_name="corraoi")
 def main() -> None:
     """Correlated Age-of-Information bandits: simulate, record, replay, compare and diff.

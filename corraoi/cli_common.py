@@ -57,6 +57,33 @@ def errors_exit(code: int | None = None) -> Callable[[F], F]:
 handle_errors = errors_exit()
 
 
+class OneLineGroup(click.Group):
+    """A click group whose usage errors are one line (``corraoi: error: ...``), exit 2.
+
+    click's default prints the usage, a hint and the error on four lines; the message below
+    keeps what and where (the option and the value) and points at ``--help``.
+    """
+
+    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        base = super().main
+        if not standalone_mode:
+            return base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+        try:
+            code = base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+        except click.exceptions.NoArgsIsHelpError as exc:  # `corraoi` alone: the help
+            click.echo(exc.format_message())
+            sys.exit(0)
+        except click.UsageError as exc:
+            where = exc.ctx.command_path if exc.ctx is not None else "corraoi"
+            fail(f"{exc.format_message()} (see '{where} --help')", exc.exit_code)
+        except click.ClickException as exc:
+            fail(exc.format_message(), exc.exit_code)
+        except click.Abort:
+            click.echo("corraoi: aborted", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 def instance_option(func: F) -> F:
     return click.option(
         "--instance",

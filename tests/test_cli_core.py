@@ -147,3 +147,21 @@ def test_sweep_out_dir_refusals(tmp_path: Path):
     res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "-o", str(held))
     assert res.exit_code == 2 and "already holds a sweep" in res.output
     assert (held / "summary.json").read_text() == "{}"
+
+
+def test_usage_errors_are_one_line():
+    for args, needle in (
+        (("sweep", "--runs", "0"), "'--runs' / '-n': 0 is not in the range x>=1"),
+        (("sweep", "-T", "abc"), "'abc' is not a valid integer"),
+        (("--bogus",), "No such option '--bogus'"),
+        (("instance", "show"), "Missing argument 'NAME|PATH'"),
+    ):
+        res = run(*args)
+        assert res.exit_code == 2, args
+        assert res.output.count("\n") == 1 and res.output.startswith("corraoi: error: ")
+        assert needle in res.output and "--help" in res.output
+
+
+def test_no_command_prints_the_help():
+    res = run()
+    assert res.exit_code == 0 and "Start with:" in res.output and "record" in res.output
