@@ -185,7 +185,7 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 )
 @click.option(
     "--web-port",
-    type=click.IntRange(0, 65535),
+    type=click.IntRange(1, 65535),
     default=9090,
     show_default=True,
     help="Port of --serve-web (another free one is taken if it is busy).",

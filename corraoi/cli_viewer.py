@@ -26,7 +26,7 @@ _LOG = click.Path(dir_okay=True, path_type=Path)  # existence is checked by the 
 def _viewer_options(func: F) -> F:
     func = click.option(
         "--web-port",
-        type=click.IntRange(0, 65535),
+        type=click.IntRange(1, 65535),
         default=9090,
         show_default=True,
         help="Port of --serve-web (another free one is taken if it is busy).",
@@ -167,11 +167,12 @@ def replay(
     """
     from recorder.reader import open_log
     from viewer.replay import replay as do_replay
+    from viewer.runs import require_slots
 
     viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
     # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
-    run = open_log(log, verify=viewer.asked)
+    run = require_slots(open_log(log, verify=viewer.asked), "replay")
     if rrd is None and not viewer.asked:
         rrd = _default_rrd(log)
     if rrd is not None:
@@ -280,8 +281,6 @@ def compare(
 
 
 # ---------------------------------------------------------------------------- diff
-
-
 
 
 @click.command("diff")

@@ -320,3 +320,22 @@ def test_an_unreachable_viewer_is_one_line_and_writes_nothing(tmp_path, record_m
     line = one_error_line(run("replay", a, "--spawn"), code=1)
     assert "--spawn" in line and "no display" in line
     assert sorted(p.name for p in tmp_path.iterdir()) == [a.name]
+
+
+def test_a_log_with_no_complete_slot_is_refused(tmp_path, record_mcap):
+    path, _, _ = record_mcap("cucb", horizon=3000)
+    empty = tmp_path / "empty.mcap.partial"
+    empty.write_bytes(path.read_bytes()[:5000])  # killed before the first chunk was written
+    from recorder.reader import open_log
+
+    assert open_log(empty).n_slots == 0
+    for cmd, out in (
+        (["replay", empty, "--rrd", tmp_path / "r.rrd"], tmp_path / "r.rrd"),
+        (["compare", empty, path, "-o", tmp_path / "c.rrd"], tmp_path / "c.rrd"),
+        (["recover", empty, "-o", tmp_path / "f.mcap"], tmp_path / "f.mcap"),
+    ):
+        line = one_error_line(run(*cmd))
+        assert "no complete slot" in line and str(empty) in line
+        assert not out.exists() and not list(tmp_path.glob("*.partial.*"))
+    # info still describes it
+    assert run("info", empty).exit_code == 0

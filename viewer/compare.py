@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from .info import summary_rows
 from .readahead import read_ahead
-from .runs import LogLike, as_log, unique_labels
+from .runs import LogLike, as_log, require_slots, unique_labels
 from .summary import RunSummary, SummaryAccumulator
 
 if TYPE_CHECKING:
@@ -211,7 +211,7 @@ def prepare(logs: Sequence[LogLike]) -> tuple[list[ComparedRun], list[str]]:
         from corraoi.errors import UsageError
 
         raise UsageError("compare needs at least one log")
-    opened = [as_log(x) for x in logs]
+    opened = [require_slots(as_log(x), "compare") for x in logs]
     labels = unique_labels(opened)
     colors = run_colors(opened)
     runs = [

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
+from .runs import require_slots
+
 if TYPE_CHECKING:
     from recorder.reader import RunLog
 
@@ -64,7 +66,7 @@ def recover(
     from recorder.reader import open_log
 
     src = Path(source)
-    log = open_log(src)
+    log = require_slots(open_log(src), "recover")
     dest = _check_dest(src, Path(out), overwrite=overwrite)
     try:
         dest.parent.mkdir(parents=True, exist_ok=True)

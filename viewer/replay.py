@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .readahead import read_ahead
-from .runs import LogLike, as_log
+from .runs import LogLike, as_log, require_slots
 
 #: Slots per block handed to the sink: the engine's block, as ``corraoi record`` uses.
 BLOCK = 1000
@@ -58,7 +58,9 @@ def replay(
     from recorder.errors import LogError
     from recorder.rerun_sink import RerunSink, RrdOutput
 
-    run = as_log(log, verify=viewer_url is not None if verify is None else verify)
+    run = require_slots(
+        as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"
+    )
     config = run.config
     out = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite)
     try:

@@ -30,6 +30,21 @@ def as_log(log: LogLike, *, verify: bool = True) -> RunLog:
     return open_log(log, verify=verify)
 
 
+def require_slots(log: RunLog, what: str) -> RunLog:
+    """``log`` if it holds at least one slot; a LogError (exit 2) naming it otherwise.
+
+    A writer killed before its first chunk reached the disk leaves a valid file with no
+    slot: there is nothing to replay, compare or recover.
+    """
+    if log.n_slots == 0:
+        from recorder.errors import LogError
+
+        raise LogError(
+            f"{log.path}: no complete slot in the log ({log.summary}); nothing to {what}"
+        )
+    return log
+
+
 def safe_label(text: str) -> str:
     """``text`` as one Rerun entity path part: letters, digits and ``_ . + -`` only."""
     return _UNSAFE.sub("_", text).strip("_") or "run"
@@ -96,4 +111,3 @@ def unique_labels(logs: Sequence[RunLog]) -> list[str]:
             y, n = f"{x}-{n}", n + 1
         final.append(y)
     return final
-
