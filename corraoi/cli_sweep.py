@@ -100,11 +100,12 @@ def sweep(
       corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
       corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
     """
-    from .engine import set_workers
+    from .engine import check_instance, set_workers
     from .instance import load_instance
     from .policies import make_policies
 
     inst = load_instance(instance)
+    check_instance(inst)
     specs = make_policies(policy, c=c, beta=beta)
     if out is not None:
         check_out_dir(out, force=force)

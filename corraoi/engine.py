@@ -19,7 +19,7 @@ from .block import FIELDS, SlotBlock, check_horizon, check_seed
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
-from .theory import analyse, policy_pseudo_rewards
+from .theory import InstanceTheory, analyse, policy_pseudo_rewards
 
 DEFAULT_BLOCK = 1000
 
@@ -65,6 +65,17 @@ class Snapshot:
     pulls: np.ndarray
 
 
+def check_instance(instance: Instance) -> InstanceTheory:
+    """The instance's theory, or a ConfigError when it cannot be simulated (mu* = 0)."""
+    theory = analyse(instance)
+    if theory.mu_star <= 0:
+        raise ConfigError(
+            f"instance {instance.name}: every arm has mean 0, the AoI grows without bound "
+            "and regret is not defined"
+        )
+    return theory
+
+
 class Simulation:
     """The state of R runs of one policy on one instance, advanced by :meth:`advance`."""
 
@@ -80,14 +91,9 @@ class Simulation:
         self.policy = policy
         self.seeds = [int(s) for s in seeds]
         self.horizon = int(horizon)
-        theory = analyse(instance)
+        theory = check_instance(instance)
         self.best = theory.best_arm
         self.mu_star = theory.mu_star
-        if self.mu_star <= 0:
-            raise ConfigError(
-                f"instance {instance.name}: every arm has mean 0, the AoI grows without bound "
-                "and regret is not defined"
-            )
         R, K = len(self.seeds), instance.K
         self._cdf = np.cumsum(instance.p)
         self._Y = np.ascontiguousarray(instance.Y, dtype=np.int8)

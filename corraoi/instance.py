@@ -165,15 +165,15 @@ BUILTINS: dict[str, dict[str, Any]] = {
 }
 
 
-def builtin_names() -> list[str]:
-    return list(BUILTINS)
-
-
 def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
     """A built-in name (``I1``, ``I2``, case-insensitive) or a path to an instance file."""
     if isinstance(spec, Instance):
         return spec
     text = os.fspath(spec)
+    if not text.strip():
+        raise InstanceError(
+            f"empty instance name (expected a built-in, {', '.join(BUILTINS)}, or a file path)"
+        )
     for name, data in BUILTINS.items():
         if text.upper() == name:
             return Instance.from_dict(data, where=name)

@@ -48,10 +48,12 @@ class PolicySpec:
     def __post_init__(self) -> None:
         if self.name not in POLICY_NAMES:
             raise PolicyError(unknown_policy_message(self.name))
-        if not (self.c > 0 and self.c < float("inf")):
-            raise PolicyError(f"policy {self.name}: parameter c must be > 0, got {self.c!r}")
-        if not (self.beta > 0 and self.beta < float("inf")):
-            raise PolicyError(f"policy {self.name}: parameter beta must be > 0, got {self.beta!r}")
+        for pname in ("c", "beta"):
+            value = getattr(self, pname)
+            if not (0 < value < float("inf")):
+                raise PolicyError(
+                    f"policy {self.name}: parameter {pname} must be finite and > 0, got {value!r}"
+                )
         object.__setattr__(self, "params", self.used_params())
 
     @property
@@ -137,12 +139,14 @@ def make_policies(
     ``--beta 2 --policy ucb`` is not silently ignored.
     """
     names = parse_policy_names(values)
-    specs = [make_policy(n, c=c, beta=beta) for n in names]
-    for pname, value in (("c", c), ("beta", beta)):
-        if value is not None and not any(pname in s.params for s in specs):
+    given = {"c": c, "beta": beta}
+    reads = {n: make_policy(n).params for n in names}
+    for pname, value in given.items():
+        if value is not None and not any(pname in reads[n] for n in names):
             users = [n for n in POLICY_NAMES if pname in make_policy(n).params]
             raise PolicyError(
                 f"parameter {pname} does not apply to {', '.join(names)} "
                 f"(it is read by {', '.join(users)})"
             )
-    return specs
+    # each policy gets only the parameters it reads
+    return [make_policy(n, **{k: v for k, v in given.items() if k in reads[n]}) for n in names]

@@ -106,7 +106,9 @@ def test_sweep_bad_input():
     for args, needle in (
         (("-p", "cucv"), "did you mean cucb"),
         (("-p", "ucb", "--beta", "2"), "does not apply"),
-        (("-p", "ucb", "--c", "-1"), "c must be > 0"),
+        (("-p", "ucb", "--c", "-1"), "c must be finite and > 0"),
+        (("-p", "ucb", "--c", "inf"), "c must be finite and > 0"),
+        (("-p", "ucb", "--beta", "1e309"), "beta does not apply to ucb"),
         (("--instance", "nope"), "no such instance file"),
     ):
         res = run("sweep", "-n", "2", "-T", "10", *args)

@@ -84,3 +84,21 @@ def test_reproduce_small(tmp_path: Path):
     assert "Sweep: instance I1" in text and "Sweep: instance I2" in text
     again = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
     assert again.exit_code == 2 and "already holds a reproduction" in again.output
+
+
+def test_an_instance_that_cannot_be_simulated_writes_nothing(tmp_path: Path):
+    dead = tmp_path / "dead.txt"
+    dead.write_text("1.0\n0\n0\n")
+    out = tmp_path / "s"
+    res = run("sweep", "-i", str(dead), "-n", "2", "-T", "10", "-o", str(out))
+    assert res.exit_code == 2
+    assert res.output.strip() == (
+        "corraoi: error: instance dead: every arm has mean 0, the AoI grows without bound "
+        "and regret is not defined"
+    )
+    assert not out.exists()
+
+
+def test_empty_instance_name():
+    res = run("instance", "show", "")
+    assert res.exit_code == 2 and "empty instance name" in res.output

@@ -32,7 +32,7 @@ def test_params_defaults_and_validation():
     assert make_policy("aoi-aware-cts-gauss").params == {"beta": 1.0}
     assert make_policy("ts").params == {}
     assert make_policy("cucb", c=1.5).c == 1.5
-    with pytest.raises(PolicyError, match="c must be > 0"):
+    with pytest.raises(PolicyError, match="c must be finite and > 0"):
         make_policy("ucb", c=-1)
     with pytest.raises(PolicyError, match="unknown policy parameter 'gamma'"):
         make_policy("ucb", gamma=1.0)
