@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from corraoi.bounds import _first_tau, cts_bound, cucb_bound
 from corraoi.instance import Instance, load_instance
@@ -59,3 +60,47 @@ def test_not_applicable_cases():
     assert "regret is 0" in cucb_bound(same, 100).note
     zero = Instance("zero", np.array([0.5, 0.5]), np.array([[1, 0], [0, 0]]))
     assert "mean 0" in cts_bound(zero, 100).note
+
+
+def _zeta3(T: int) -> float:
+    t = np.arange(1, T + 1, dtype=float)
+    return float(np.sum(t**-3.0))
+
+
+def test_i2_cucb_bound_by_hand():
+    # C = 0: R <= (1-mu*)/(mu* mu_min) + (1/mu_min - 1/mu*) sum_k gap_k U_nc, with
+    # U_nc = K t0 + K^3 sum_{t=K t0}^{T} 2 (t/K)^-2 + sum_t 3 t^-3; K t0 > T empties the
+    # middle sum. mu* = .8, mu_min = .1, gaps of arms 1-3: .7 + .6 + .7 = 2.0.
+    b = cucb_bound(load_instance("I2"), 10_000)
+    t0 = b.threshold
+    assert t0 == 2826
+    expected = 0.2 / 0.08 + (10 - 1.25) * 2.0 * (4 * t0 + 3 * _zeta3(10_000))
+    assert b.value == pytest.approx(expected, rel=1e-12)
+    assert b.value == pytest.approx(197885.6, abs=0.1)
+
+
+def test_i1_cucb_bound_log_regime_by_hand():
+    # C = 1 (arm 3, gap .1); non-competitive arms 1, 4 (gaps .4 each); K = 4
+    T = 1_000_000
+    b = cucb_bound(load_instance("I1"), T)
+    t0 = b.threshold
+    assert t0 is not None and b.regime == "log"
+    t = np.arange(1, T + 1, dtype=float)
+    mid = np.arange(4 * t0, T + 1, dtype=float)
+    u_nc = 4 * t0 + 4**3 * np.sum(2 * (mid / 4) ** -2.0) + np.sum(3 * t**-3.0)
+    tail = np.sum(2 * 4 * t * np.exp(-t * 0.1**2 / (2 * 4)))
+    u_c = 8 * math.log(T) / 0.1**2 + (1 + math.pi**2 / 3) + tail
+    pre = 1 / 0.2 - 1 / 0.6
+    expected = (1 - 0.6) / (0.6 * 0.2) + pre * (0.4 * u_nc + 0.4 * u_nc + 0.1 * u_c)
+    assert b.value == pytest.approx(expected, rel=1e-9)
+
+
+def test_i2_cts_bound_log_regime_by_hand():
+    # beta = 1.01: t_b = max(e^(11 beta), the gap condition) and K t_b > T empties the sums
+    T = 100_000
+    b = cts_bound(load_instance("I2"), T, beta=1.01)
+    tb = b.threshold
+    assert b.regime == "log" and tb is not None
+    assert tb == math.ceil(math.exp(11 * 1.01))
+    expected = 2.5 + 8.75 * 2.0 * (4 * tb + 3 * _zeta3(T))
+    assert b.value == pytest.approx(expected, rel=1e-12)

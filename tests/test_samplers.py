@@ -1,0 +1,73 @@
+"""Thompson sampling: the samplers' moments and the decisions they drive.
+
+The conformance check (tests/reference.py) can only say that a TS arm was a candidate;
+these tests pin the distributions: a wrong prior, variance or gamma step turns them red.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from corraoi import _kernel
+from corraoi.engine import Simulation, streams_for_seed
+from corraoi.instance import Instance
+from corraoi.policies import make_policy
+
+N = 40_000
+
+
+def draws(fn, *args) -> np.ndarray:  # type: ignore[no-untyped-def]
+    st = streams_for_seed(123)[1]
+    cache = np.zeros(2)
+    return np.array([fn(st, cache, *args) for _ in range(N)])
+
+
+def test_normal_moments():
+    z = draws(_kernel._normal)
+    assert abs(z.mean()) < 5 / np.sqrt(N)
+    assert z.var() == pytest.approx(1.0, abs=0.03)
+    assert np.mean(np.abs(z) < 1.0) == pytest.approx(0.6827, abs=0.01)
+
+
+@pytest.mark.parametrize("shape", [1.0, 2.0, 7.0])
+def test_gamma_moments(shape: float):
+    g = draws(_kernel._gamma, shape)
+    assert g.mean() == pytest.approx(shape, abs=5 * np.sqrt(shape / N))
+    assert g.var() == pytest.approx(shape, rel=0.05)
+
+
+@pytest.mark.parametrize(("a", "b"), [(1.0, 1.0), (3.0, 5.0), (20.0, 2.0)])
+def test_beta_moments(a: float, b: float):
+    x = draws(_kernel._beta, a, b)
+    mean = a / (a + b)
+    var = a * b / ((a + b) ** 2 * (a + b + 1))
+    assert x.mean() == pytest.approx(mean, abs=5 * np.sqrt(var / N))
+    assert x.var() == pytest.approx(var, rel=0.05)
+    assert 0.0 < x.min() and x.max() < 1.0
+
+
+TWO = Instance("two", np.array([0.5, 0.5]), np.array([[1, 0], [0, 1]]))
+
+
+def next_choice(policy: str, **params: float) -> float:
+    """Share of runs choosing arm 1 at slot 3 after arm 1 succeeded once and arm 2 failed."""
+    runs = 6000
+    sim = Simulation(TWO, make_policy(policy, **params), list(range(runs)), 3)
+    sim.pulls[:] = [1, 1]
+    sim.succ[:] = [1, 0]
+    sim.t = 2
+    blk = sim.advance(1)
+    assert blk is not None
+    return float((blk.arm[:, 0] == 0).mean())
+
+
+def test_ts_beta_decision_probability():
+    # Beta(2, 1) against Beta(1, 2): P(first is larger) = 5/6
+    assert next_choice("ts") == pytest.approx(5 / 6, abs=0.02)
+
+
+def test_ts_gauss_decision_probability():
+    # N(1, beta/2) against N(0, beta/2): P(first is larger) = Phi(1 / sqrt(beta))
+    assert next_choice("ts-gauss") == pytest.approx(0.8413, abs=0.02)
+    assert next_choice("ts-gauss", beta=4.0) == pytest.approx(0.6915, abs=0.02)
