@@ -18,10 +18,10 @@ from .theory import analyse
 
 
 def policy_bound(instance: Instance, policy: PolicySpec, horizon: int) -> Bound | None:
-    """The theorem that bounds ``policy`` (plain CUCB or CTS), or None.
+    """The theorem about ``policy`` (plain CUCB or CTS), or None for the others.
 
-    Theorem 3 is stated for Gaussian priors with beta > 1: cts-gauss is bounded with its own
-    beta; Beta-prior cts (the paper's simulations) with beta = 2, as the paper does.
+    Theorem 3 is stated for CTS with Gaussian priors and beta > 1: cts-gauss gets it with
+    its own beta (n/a at beta <= 1); Beta-prior cts gets an n/a that says so.
     """
     if not policy.correlated or policy.aoi_aware:
         return None
@@ -30,7 +30,10 @@ def policy_bound(instance: Instance, policy: PolicySpec, horizon: int) -> Bound 
     if policy.base == BASE_TS_GAUSS:
         return cts_bound(instance, horizon, policy.beta)
     if policy.base == BASE_TS_BETA:
-        return cts_bound(instance, horizon, DEFAULT_BOUND_BETA)
+        return Bound(
+            "Theorem 3 (CTS)", horizon, None, "n/a", None,
+            "stated for Gaussian priors (cts-gauss with beta > 1), not for Beta priors",
+        )  # fmt: skip
     return None
 
 

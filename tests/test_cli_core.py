@@ -167,3 +167,13 @@ def test_usage_errors_are_one_line():
 def test_no_command_prints_the_help():
     res = run()
     assert res.exit_code == 0 and "Start with:" in res.output and "record" in res.output
+
+
+def test_theorem_3_only_beside_gaussian_cts_with_beta_above_one():
+    res = run("sweep", "-p", "cts,cts-gauss", "-n", "3", "-T", "100", "--beta", "2", "--json")
+    d = json.loads(res.stdout)["policies"]
+    assert d["cts"]["bound"]["value"] is None and "Gaussian priors" in d["cts"]["bound"]["note"]
+    assert d["cts-gauss"]["bound"]["theorem"] == "Theorem 3 (CTS, beta=2)"
+    assert d["cts-gauss"]["bound"]["value"] == (1 / 0.2 - 1 / 0.6) * 100  # linear regime
+    low = json.loads(run("sweep", "-p", "cts-gauss", "-n", "2", "-T", "50", "--json").stdout)
+    assert low["policies"]["cts-gauss"]["bound"]["value"] is None  # default beta = 1
