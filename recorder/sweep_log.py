@@ -261,7 +261,10 @@ class SweepMcapSink:
                 data=json.dumps(sweep_schema(self.K), indent=1).encode(),
             )
             self._channel = self._writer.register_channel(
-                topic=TOPIC, message_encoding=MESSAGE_ENCODING, schema_id=schema_id
+                topic=TOPIC,
+                message_encoding=MESSAGE_ENCODING,
+                schema_id=schema_id,
+                metadata={"format_version": str(FORMAT_VERSION)},
             )
             self._writer.flush()
         except OSError as exc:

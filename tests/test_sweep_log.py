@@ -394,3 +394,22 @@ def test_rerun_recordings_compare_equal(tmp_path: Path, sweep: Sweep):
     assert same.returncode == 0, same.stderr.decode()
     diff = subprocess.run([str(exe), "rrd", "compare", *map(str, paths[::2])], capture_output=True)
     assert diff.returncode != 0
+
+
+def test_channel_metadata_carries_the_format_version(tmp_path):
+    from mcap.reader import make_reader
+
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policies
+    from recorder.sweep_log import FORMAT_VERSION, SweepMcapSink
+
+    specs = make_policies(["ucb"])
+    config = sweep_config(load_instance("I1"), specs, runs=2, horizon=10, seed=0, checkpoints=[10])
+    path = tmp_path / "s.mcap"
+    with SweepMcapSink(path, config):
+        pass
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    (channel,) = summary.channels.values()
+    assert channel.metadata == {"format_version": str(FORMAT_VERSION)}
