@@ -25,6 +25,7 @@ from .cli_common import (
     policy_option,
     seed_option,
 )
+from .cli_live import ViewerChoice, viewer_options
 from .errors import UsageError
 
 DEFAULT_OUT = "runs/{label}.mcap"
@@ -76,29 +77,6 @@ class _Stop:
         for sig, old in self._old.items():
             signal.signal(sig, old)
         self._old.clear()
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
-
-
-def _serve_until_stopped(web: Any) -> None:
-    """Keep the web viewer up after the run until Ctrl-C or SIGTERM, then stop it."""
-    old: dict[int, Any] = {}
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                old[sig] = signal.signal(sig, _interrupt)
-            except ValueError:  # not the main thread
-                pass
-        click.echo(f"serving the web viewer at {web.web_url} (Ctrl-C to stop)", err=True)
-        web.wait()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        web.stop()
-        for signum, handler in old.items():
-            signal.signal(signum, handler)
 
 
 def _expand(template: str, config: Any) -> Path:
@@ -163,33 +141,7 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 )
 @click.option("--no-rrd", is_flag=True, help="Write no Rerun recording (the MCAP log only).")
 @click.option("--force", "-f", is_flag=True, help="Overwrite existing files.")
-@click.option(
-    "--spawn",
-    is_flag=True,
-    help="Start a local Rerun viewer and stream to it as the run goes (needs a display).",
-)
-@click.option(
-    "--connect",
-    metavar="URL",
-    is_flag=False,
-    flag_value="rerun+http://127.0.0.1:9876/proxy",
-    default=None,
-    help="Stream to a running Rerun viewer [URL default: "
-    "rerun+http://127.0.0.1:9876/proxy; a port number also works].",
-)
-@click.option(
-    "--serve-web",
-    is_flag=True,
-    help="Serve the Rerun web viewer on 127.0.0.1 and stream to it; it keeps serving "
-    "after the run until Ctrl-C.",
-)
-@click.option(
-    "--web-port",
-    type=click.IntRange(1, 65535),
-    default=9090,
-    show_default=True,
-    help="Port of --serve-web (another free one is taken if it is busy).",
-)
+@viewer_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -228,10 +180,7 @@ def record(
     from .instance import load_instance
     from .policies import make_policies
 
-    asked = (("--spawn", spawn), ("--connect", connect), ("--serve-web", serve_web))
-    viewers = [name for name, on in asked if on]
-    if len(viewers) > 1:
-        raise UsageError(f"{' and '.join(viewers)}: choose one way to reach a viewer")
+    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
     inst = load_instance(instance)
@@ -239,7 +188,6 @@ def record(
     configs = [RunConfig(inst, spec, seed, horizon) for spec in specs]
     plans = _plans(configs, out, rrd, no_rrd)
 
-    from recorder import live
     from recorder.paths import check_output
 
     for plan in plans:  # refuse before simulating anything
@@ -247,44 +195,15 @@ def record(
         if plan.rrd is not None:
             check_output(plan.rrd, overwrite=force, what="Rerun recording")
 
-    viewer_url: str | None = None
-    viewer_failed = False
-    web: live.WebViewer | None = None
-    if connect is not None:
-        url = live.normalize_url(connect)
-        problem = live.probe(url)
-        if problem:
-            click.echo(
-                f"corraoi: error: --connect {url}: no Rerun viewer there ({problem}); "
-                "recording to the files only",
-                err=True,
-            )
-            viewer_failed = True
-        else:
-            viewer_url = url
-    need_rerun = viewer_url is not None or spawn or serve_web or any(p.rrd for p in plans)
-    if need_rerun:
+    if any(p.rrd for p in plans):
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
-    if spawn:
-        problem = live.display_problem()
-        if problem:
-            click.echo(
-                f"corraoi: error: --spawn: {problem}, so no viewer was started; "
-                "recording to the files only",
-                err=True,
-            )
-            viewer_failed = True
-        else:
-            viewer_url = live.spawn_viewer()
-    if serve_web:
-        web = live.WebViewer(web_port=web_port).start()
-        viewer_url = web.grpc_url
-        click.echo(f"web viewer: {web.web_url}", err=True)
+    # A viewer that cannot be reached is one error line; the files are still written.
+    viewer_url = viewer.start(tolerant=True)
+    viewer_failed = viewer.problem is not None
     try:
         results, stopped, viewer_problem = _record_all(plans, viewer_url, force)
     except BaseException:
-        if web is not None:
-            web.stop()
+        viewer.stop()
         raise
     if viewer_problem:
         click.echo(f"corraoi: error: {viewer_problem}", err=True)
@@ -297,11 +216,9 @@ def record(
             f"{last.plan.config.horizon}; the files hold every slot simulated so far",
             err=True,
         )
-        if web is not None:
-            web.stop()
+        viewer.stop()
         sys.exit(130)
-    if web is not None:
-        _serve_until_stopped(web)
+    viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
 

@@ -16,97 +16,12 @@ from typing import Any, TypeVar
 import click
 
 from .cli_common import errors_exit, handle_errors, warn
+from .cli_live import ViewerChoice, viewer_options
 from .errors import UsageError
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 _LOG = click.Path(dir_okay=True, path_type=Path)  # existence is checked by the reader
-
-
-def _viewer_options(func: F) -> F:
-    func = click.option(
-        "--web-port",
-        type=click.IntRange(1, 65535),
-        default=9090,
-        show_default=True,
-        help="Port of --serve-web (another free one is taken if it is busy).",
-    )(func)
-    func = click.option(
-        "--serve-web",
-        is_flag=True,
-        help="Serve the Rerun web viewer on 127.0.0.1 and send the recording to it; it "
-        "keeps serving until Ctrl-C.",
-    )(func)
-    func = click.option(
-        "--connect",
-        metavar="URL",
-        is_flag=False,
-        flag_value="rerun+http://127.0.0.1:9876/proxy",
-        default=None,
-        help="Send to a running Rerun viewer [URL default: rerun+http://127.0.0.1:9876/proxy; "
-        "a port number also works].",
-    )(func)
-    func = click.option(
-        "--spawn", is_flag=True, help="Start a local Rerun viewer and send to it (needs a display)."
-    )(func)
-    return func
-
-
-class _Viewer:
-    """The viewer a command sends to (--spawn, --connect or --serve-web), if any."""
-
-    def __init__(self, *, spawn: bool, connect: str | None, serve_web: bool, web_port: int):
-        options = (("--spawn", spawn), ("--connect", connect), ("--serve-web", serve_web))
-        asked = [name for name, on in options if on]
-        if len(asked) > 1:
-            raise UsageError(f"{' and '.join(asked)}: choose one way to reach a viewer")
-        self.spawn, self.connect, self.serve_web = spawn, connect, serve_web
-        self.web_port = web_port
-        self.url: str | None = None
-        self.web: Any = None
-        if connect is not None:
-            from recorder.live import normalize_url
-
-            self.connect = normalize_url(connect)  # a bad URL is a usage error: say it now
-
-    @property
-    def asked(self) -> bool:
-        return bool(self.spawn or self.connect or self.serve_web)
-
-    def start(self) -> str | None:
-        """Reach the viewer; returns the gRPC URL to send to (ViewerError if it cannot)."""
-        from recorder import live
-        from recorder.errors import ViewerError
-
-        os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
-        if self.connect is not None:
-            problem = live.probe(self.connect)
-            if problem:
-                raise ViewerError(f"--connect {self.connect}: no Rerun viewer there ({problem})")
-            self.url = self.connect
-        elif self.spawn:
-            self.url = live.spawn_viewer()
-        elif self.serve_web:
-            self.web = live.WebViewer(web_port=self.web_port).start()
-            self.url = self.web.grpc_url
-            click.echo(f"web viewer: {self.web.web_url}", err=True)
-        return self.url
-
-    def serve_until_interrupted(self) -> None:
-        if self.web is None:
-            return
-        click.echo(f"serving the web viewer at {self.web.web_url} (Ctrl-C to stop)", err=True)
-        try:
-            self.web.wait()
-        except KeyboardInterrupt:
-            pass
-        finally:
-            self.stop()
-
-    def stop(self) -> None:
-        web, self.web = self.web, None
-        if web is not None:
-            web.stop()  # the server's whole process group
 
 
 def _default_rrd(log: Path) -> Path:
@@ -141,7 +56,7 @@ def _progress(total: int, label: str) -> Any:
 @click.option("--rrd", "rrd", metavar="OUT.rrd", type=click.Path(path_type=Path), default=None,
               help="Rerun recording to write [default: RUN.rrd beside the log, unless a viewer "
               "option is given].")  # fmt: skip
-@_viewer_options
+@viewer_options
 @click.option("--force", "-f", is_flag=True, help="Overwrite an existing .rrd.")
 @handle_errors
 def replay(
@@ -169,7 +84,7 @@ def replay(
     from viewer.replay import replay as do_replay
     from viewer.runs import require_slots
 
-    viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
     # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
     run = require_slots(open_log(log, verify=viewer.asked), "replay")
@@ -199,7 +114,7 @@ def replay(
         from recorder.live import view_command
 
         click.echo(f"open in the Rerun viewer:  {view_command([str(done.path)])}")
-    viewer.serve_until_interrupted()
+    viewer.serve_until_stopped()
 
 
 # ---------------------------------------------------------------------------- compare
@@ -211,7 +126,7 @@ def replay(
               help="Rerun recording to write [default: compare.rrd, unless a viewer option "
               "is given].")  # fmt: skip
 @click.option("--no-rrd", is_flag=True, help="Only print the summary table; write nothing.")
-@_viewer_options
+@viewer_options
 @click.option("--force", "-f", is_flag=True, help="Overwrite an existing recording.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
@@ -245,7 +160,7 @@ def compare(
     from viewer.compare import compare as do_compare
     from viewer.compare import prepare
 
-    viewer = _Viewer(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and (out is not None or viewer.asked):
         raise UsageError("--no-rrd: nothing to send; leave out -o and the viewer options")
     runs, warnings = prepare(logs)  # bad input: one line, exit 2, nothing written
@@ -277,7 +192,7 @@ def compare(
                 from recorder.live import view_command
 
                 click.echo(f"open in the Rerun viewer:  {view_command([str(result.path)])}")
-    viewer.serve_until_interrupted()
+    viewer.serve_until_stopped()
 
 
 # ---------------------------------------------------------------------------- diff

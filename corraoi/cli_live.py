@@ -1,0 +1,142 @@
+"""The live-viewer options that record, replay and compare share: --spawn, --connect,
+--serve-web (with --web-port), and the viewer they choose.
+
+recorder.live (and so rerun) is imported only when a viewer is asked for.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Callable
+from types import FrameType
+from typing import Any, TypeVar
+
+import click
+
+from .errors import UsageError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: Where --connect sends without a URL: a viewer started with plain `rerun`.
+CONNECT_DEFAULT = "rerun+http://127.0.0.1:9876/proxy"
+
+
+def viewer_options(func: F) -> F:
+    """Add --spawn, --connect [URL], --serve-web and --web-port to a command."""
+    func = click.option(
+        "--web-port",
+        type=click.IntRange(1, 65535),
+        default=9090,
+        show_default=True,
+        help="Port of --serve-web (another free one is taken if it is busy).",
+    )(func)
+    func = click.option(
+        "--serve-web",
+        is_flag=True,
+        help="Serve the Rerun web viewer on 127.0.0.1 and stream to it; it keeps serving "
+        "afterwards until Ctrl-C.",
+    )(func)
+    func = click.option(
+        "--connect",
+        metavar="URL",
+        is_flag=False,
+        flag_value=CONNECT_DEFAULT,
+        default=None,
+        help=f"Stream to a running Rerun viewer [URL default: {CONNECT_DEFAULT}; a port "
+        "number also works].",
+    )(func)
+    func = click.option(
+        "--spawn",
+        is_flag=True,
+        help="Start a local Rerun viewer and stream to it (needs a display).",
+    )(func)
+    return func
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+class ViewerChoice:
+    """The viewer a command streams to (--spawn, --connect or --serve-web), if any."""
+
+    def __init__(self, *, spawn: bool, connect: str | None, serve_web: bool, web_port: int):
+        options = (("--spawn", spawn), ("--connect", connect), ("--serve-web", serve_web))
+        asked = [name for name, on in options if on]
+        if len(asked) > 1:
+            raise UsageError(f"{' and '.join(asked)}: choose one way to reach a viewer")
+        self.spawn, self.connect, self.serve_web = spawn, connect, serve_web
+        self.web_port = web_port
+        self.url: str | None = None
+        self.web: Any = None
+        #: Why the viewer could not be reached (``start(tolerant=True)`` only).
+        self.problem: str | None = None
+        if connect is not None:
+            from recorder.live import normalize_url
+
+            self.connect = normalize_url(connect)  # a bad URL is a usage error: say it now
+
+    @property
+    def asked(self) -> bool:
+        return bool(self.spawn or self.connect or self.serve_web)
+
+    def start(self, *, tolerant: bool = False) -> str | None:
+        """Reach the viewer; returns the gRPC URL to stream to.
+
+        A viewer that cannot be reached raises ViewerError, or with ``tolerant`` prints one
+        error line, keeps the reason in :attr:`problem` and returns None (``record`` then
+        writes its files and exits 1).
+        """
+        if not self.asked:
+            return None
+        from recorder import live
+        from recorder.errors import ViewerError
+
+        os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
+        try:
+            if self.connect is not None:
+                problem = live.probe(self.connect)
+                if problem:
+                    raise ViewerError(
+                        f"--connect {self.connect}: no Rerun viewer there ({problem})"
+                    )
+                self.url = self.connect
+            elif self.spawn:
+                self.url = live.spawn_viewer()
+            elif self.serve_web:
+                self.web = live.WebViewer(web_port=self.web_port).start()
+                self.url = self.web.grpc_url
+                click.echo(f"web viewer: {self.web.web_url}", err=True)
+        except ViewerError as exc:
+            if not tolerant:
+                raise
+            self.problem = str(exc)
+            click.echo(f"corraoi: error: {exc}; writing the files only", err=True)
+            return None
+        return self.url
+
+    def serve_until_stopped(self) -> None:
+        """With --serve-web, keep serving until Ctrl-C or SIGTERM, then stop the server."""
+        if self.web is None:
+            return
+        old: dict[int, Any] = {}
+        try:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                try:
+                    old[sig] = signal.signal(sig, _interrupt)
+                except ValueError:  # not the main thread
+                    pass
+            click.echo(f"serving the web viewer at {self.web.web_url} (Ctrl-C to stop)", err=True)
+            self.web.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+            for signum, handler in old.items():
+                signal.signal(signum, handler)
+
+    def stop(self) -> None:
+        web, self.web = self.web, None
+        if web is not None:
+            web.stop()  # the server's whole process group
