@@ -2,10 +2,28 @@
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import pytest
+import rerun as rr
 from rerun.chunk import RrdReader
+
+#: The rerun CLI bundled with rerun-sdk (rrd compare, verify, ...).
+RERUN = str(Path(sys.executable).parent / "rerun")
+
+
+@pytest.fixture(autouse=True)
+def strict_rerun() -> Iterator[None]:
+    """Rerun logs (instead of raising) on bad input unless strict: make mistakes fail.
+
+    Autouse in every module that imports it."""
+    old = rr.strict_mode()
+    rr.set_strict_mode(True)
+    yield
+    rr.set_strict_mode(old)
 
 
 def read_rrd(path: Path) -> dict[str, tuple[np.ndarray, list]]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,18 +23,7 @@ from recorder.rerun_sink import (  # noqa: E402
     run_path,
 )
 
-from .rrd_util import read_rrd  # noqa: E402
-
-RERUN = str(Path(sys.executable).parent / "rerun")
-
-
-@pytest.fixture(autouse=True)
-def strict_rerun():
-    """Rerun logs (instead of raising) on bad input unless strict: make mistakes fail."""
-    old = rr.strict_mode()
-    rr.set_strict_mode(True)
-    yield
-    rr.set_strict_mode(old)
+from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 
 
 def write_rrd(path: Path, config, blocks, **kw) -> Path:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -28,17 +27,7 @@ from viewer.compare import (  # noqa: E402
 from viewer.runs import safe_label, unique_labels  # noqa: E402
 from viewer.summary import summarize_blocks  # noqa: E402
 
-from .rrd_util import read_rrd  # noqa: E402
-
-RERUN = str(Path(sys.executable).parent / "rerun")
-
-
-@pytest.fixture(autouse=True)
-def strict_rerun():
-    old = rr.strict_mode()
-    rr.set_strict_mode(True)
-    yield
-    rr.set_strict_mode(old)
+from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 
 
 def rrd_compare(a: Path, b: Path) -> subprocess.CompletedProcess:
