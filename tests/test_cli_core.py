@@ -97,9 +97,16 @@ def test_sweep_values_match_library():
 
 
 def test_sweep_text_table():
-    res = run("sweep", "-p", "ucb", "-n", "4", "-T", "200")
+    res = run("sweep", "-p", "ucb,cucb", "-n", "4", "-T", "200")
     assert res.exit_code == 0
-    assert "ucb" in res.output and "regret" in res.output
+    d = json.loads(run("sweep", "-p", "ucb,cucb", "-n", "4", "-T", "200", "--json").stdout)
+    rows = {line.split()[0]: line.split() for line in res.stdout.splitlines()[2:]}
+    for name in ("ucb", "cucb"):
+        s = d["policies"][name]
+        regret, ci, estimator, share = (float(v) for v in rows[name][1:5])
+        assert regret == round(s["regret_mean"], 1) and ci == round(s["regret_ci95"], 1)
+        assert estimator == round(s["estimator_mean"], 1)
+        assert share == round(s["best_arm_share"], 3)
 
 
 def test_sweep_bad_input():
