@@ -96,13 +96,16 @@ def view_command(paths: list[str]) -> str:
     """The shell command that opens ``paths`` in the Rerun viewer."""
     import shlex
 
-    exe = "rerun" if shutil.which("rerun") == rerun_executable() else rerun_executable()
-    try:
-        rel = os.path.relpath(exe)
-        if not rel.startswith(".."):
-            exe = rel if os.sep in rel else f".{os.sep}{rel}"
-    except ValueError:
-        pass
+    exe = rerun_executable()
+    if shutil.which("rerun") == exe:
+        exe = "rerun"  # on PATH: the plain name
+    elif os.path.isabs(exe):
+        try:
+            rel = os.path.relpath(exe)
+            if not rel.startswith(".."):
+                exe = rel if os.sep in rel else f".{os.sep}{rel}"
+        except ValueError:  # another drive (Windows)
+            pass
     return " ".join(shlex.quote(p) for p in [exe, *paths])
 
 
