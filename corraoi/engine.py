@@ -32,22 +32,21 @@ def streams_for_seed(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lat, dtype=np.uint64), np.array(pol, dtype=np.uint64)
 
 
-@dataclass
-class RunsBlock:
-    """Consecutive slots of R runs: arrays (R, B) and (R, B, K)."""
+class RunsBlock(SlotBlock):
+    """Consecutive slots of R runs: the fields of :class:`SlotBlock` with a leading run axis
+    (``t`` stays (B,); the others are (R, B) and (R, B, K))."""
 
-    t: np.ndarray
-    x: np.ndarray
-    arm: np.ndarray
-    success: np.ndarray
-    aoi: np.ndarray
-    oracle_aoi: np.ndarray
-    regret: np.ndarray
-    estimator: np.ndarray
-    override: np.ndarray
-    mu_hat: np.ndarray
-    pulls: np.ndarray
-    candidates: np.ndarray
+    @classmethod
+    def concat(cls, blocks: list[SlotBlock]) -> RunsBlock:
+        """Join consecutive blocks along the slot axis."""
+        if not blocks:
+            raise ValueError("no blocks to concatenate")
+        return cls(
+            **{
+                f: np.concatenate([b.column(f) for b in blocks], axis=0 if f == "t" else 1)
+                for f in FIELDS
+            }  # fmt: skip
+        )
 
     def run(self, i: int) -> SlotBlock:
         """Run ``i``'s columns (views, no copy)."""

@@ -37,7 +37,7 @@ from .format import (
     run_metadata,
     schema_bytes,
 )
-from .paths import check_output, open_partial, partial_path, publish, reason
+from .paths import Sink, check_output, open_partial, partial_path, publish, reason
 
 #: Chunks are closed by slot count (FLUSH_EVERY), not by size; this only caps a huge chunk.
 _CHUNK_BYTES = 64 * 1024 * 1024
@@ -45,7 +45,7 @@ _CHUNK_BYTES = 64 * 1024 * 1024
 _I64_SAFE = (2**63 - 1) // NS_PER_SLOT
 
 
-class McapSink:
+class McapSink(Sink):
     """Write one run's slots to ``path`` (an MCAP file), block by block.
 
     ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
@@ -207,9 +207,6 @@ class McapSink:
             f"{self.partial_path}: cannot write the MCAP log: {reason(exc)} "
             f"(the unfinished log is left as {self.partial_path})"
         )
-
-    def __enter__(self) -> McapSink:
-        return self
 
     def __exit__(
         self,

@@ -10,11 +10,45 @@ from __future__ import annotations
 import errno
 import os
 from pathlib import Path
-from typing import BinaryIO
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, BinaryIO
+
+if TYPE_CHECKING:
+    from typing_extensions import Self
 
 from .errors import OutputError, WriteError
 
 PARTIAL_SUFFIX = ".partial"
+
+
+class Sink:
+    """The context-manager protocol of every writer in ``recorder``.
+
+    Leaving the ``with`` block normally calls :meth:`close` (the file is finished and moved
+    into place); leaving it through an exception calls :meth:`abort` (the file is finished
+    as far as it got and left at its ``.partial`` name). Both are safe to call twice.
+    Writers that treat Ctrl-C differently override ``__exit__``.
+    """
+
+    def close(self) -> Any:
+        raise NotImplementedError
+
+    def abort(self) -> Any:
+        return self.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 def partial_path(path: str | os.PathLike[str]) -> Path:

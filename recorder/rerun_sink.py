@@ -43,7 +43,7 @@ from corraoi.block import RunConfig, SlotBlock
 from corraoi.theory import analyse
 
 from .errors import ViewerError, WriteError
-from .paths import check_output, open_partial, partial_path, publish, reason
+from .paths import Sink, check_output, open_partial, partial_path, publish, reason
 from .sweep_log import arm_color, lighter, policy_color
 
 APPLICATION_ID = "corraoi"
@@ -247,7 +247,7 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
     )
 
 
-class RerunSink:
+class RerunSink(Sink):
     """Send one run's SlotBlocks to ``recording`` under ``runs/<label>``.
 
     ``with RerunSink(recording, label, config) as sink: sink.write(block)``. The static
@@ -378,24 +378,13 @@ class RerunSink:
             self.problem = _first_line(exc)
         return self.problem
 
-    def __enter__(self) -> RerunSink:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
 
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip() or type(exc).__name__
     return text.splitlines()[0]
 
 
-class RrdOutput:
+class RrdOutput(Sink):
     """Where one run's Rerun recording goes: an ``.rrd`` file and/or a viewer (gRPC URL).
 
     The file is written as ``<path>.partial`` (with the default blueprint embedded) and
@@ -516,9 +505,6 @@ class RrdOutput:
                 f"{part}: Rerun could not write the whole recording ({why}; disk full?); "
                 f"the incomplete file is left as {part}"
             )
-
-    def __enter__(self) -> RrdOutput:
-        return self
 
     def __exit__(
         self,

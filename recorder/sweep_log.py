@@ -19,7 +19,6 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
@@ -32,7 +31,7 @@ from corraoi._version import __version__
 from corraoi.policies import AOI_PREFIX
 
 from .errors import LogError, WriteError
-from .paths import PARTIAL_SUFFIX, open_partial, partial_path, publish, reason
+from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
@@ -215,7 +214,7 @@ def sweep_metadata(config: dict[str, Any], *, flush_every: int = FLUSH_EVERY) ->
 # ---------------------------------------------------------------------------- writer
 
 
-class SweepMcapSink:
+class SweepMcapSink(Sink):
     """Streams :class:`~corraoi.sweep.SweepPoint` rows of a sweep into an MCAP file.
 
     ``with SweepMcapSink(path, config) as sink: sink.write(point)``. The file is written as
@@ -378,20 +377,6 @@ class SweepMcapSink:
         if self._closed:
             return
         self._finish("interrupted")
-
-    def __enter__(self) -> SweepMcapSink:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 def _opt(v: float | None) -> float | None:

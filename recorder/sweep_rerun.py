@@ -26,7 +26,6 @@ import hashlib
 import json
 import os
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -36,7 +35,7 @@ import rerun.blueprint as rrb
 from corraoi.sweep import SweepPoint
 
 from .errors import WriteError
-from .paths import partial_path, publish, reason
+from .paths import Sink, partial_path, publish, reason
 from .sweep_log import FLUSH_EVERY, arm_color, is_aoi_aware, lighter, policy_color
 
 TIMELINE = "slot"
@@ -147,7 +146,7 @@ def open_sweep_recording(
     )
 
 
-class SweepRerunSink:
+class SweepRerunSink(Sink):
     """Streams :class:`~corraoi.sweep.SweepPoint` rows into a Rerun recording.
 
     ``with SweepRerunSink(recording, config) as sink: sink.write(point)``. Points are
@@ -313,20 +312,6 @@ class SweepRerunSink:
         self.recording.flush()
         if self._owned_path is not None:
             self.recording.disconnect()
-
-    def __enter__(self) -> SweepRerunSink:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 __all__ = [

@@ -8,7 +8,7 @@ import pytest
 
 from corraoi import _kernel
 from corraoi.block import SlotBlock
-from corraoi.engine import Simulation, simulate, simulate_run, streams_for_seed
+from corraoi.engine import RunsBlock, Simulation, simulate, simulate_run, streams_for_seed
 from corraoi.errors import ConfigError
 from corraoi.instance import Instance, load_instance
 from corraoi.policies import POLICY_NAMES, make_policy
@@ -182,3 +182,10 @@ def test_snapshots_equal_the_recorded_columns():
     plain = Simulation(I1, make_policy("aoi-aware-cts"), seeds, 1000)
     plain.advance(1000, record=False)
     assert np.array_equal(plain.regret, sim.regret) and np.array_equal(plain.pulls, sim.pulls)
+
+
+def test_runs_blocks_join_along_slots():
+    blocks = list(simulate(I1, make_policy("ucb"), [1, 2], 250, block=100))
+    joined = RunsBlock.concat(blocks)
+    assert len(joined) == 250 and joined.arm.shape == (2, 250) and joined.pulls.shape == (2, 250, 4)
+    assert joined.run(1).equals(one_run(I1, "ucb", 2, 250))
