@@ -32,7 +32,6 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -388,7 +387,9 @@ class RrdOutput(Sink):
     """Where one run's Rerun recording goes: an ``.rrd`` file and/or a viewer (gRPC URL).
 
     The file is written as ``<path>.partial`` (with the default blueprint embedded) and
-    renamed to ``path`` by :meth:`close`; :meth:`abort` leaves the ``.partial`` file.
+    renamed to ``path`` by :meth:`close`; :meth:`abort` leaves the ``.partial`` file, or
+    deletes it with ``discard_on_abort`` (replay and compare: their output can be made
+    again). Leaving a ``with`` block through any exception, Ctrl-C included, aborts.
     ``recording`` is made here (:func:`new_recording`); hand it to :class:`RerunSink`.
     """
 
@@ -403,6 +404,7 @@ class RrdOutput(Sink):
         blueprint: rrb.Blueprint | None = None,
         recording_id: str | None = None,
         flush_timeout: float = 30.0,
+        discard_on_abort: bool = False,
     ) -> None:
         if rrd_path is None and viewer_url is None:
             raise ValueError("RrdOutput needs an .rrd path, a viewer URL or both")
@@ -412,6 +414,7 @@ class RrdOutput(Sink):
         self.viewer_url = viewer_url
         self.overwrite = overwrite
         self.flush_timeout = flush_timeout
+        self.discard_on_abort = discard_on_abort
         self.closed = False
         self.finished = False
         sinks: list[Any] = []
@@ -466,13 +469,18 @@ class RrdOutput(Sink):
             raise ViewerError(f"viewer {self.viewer_url}: {problem}")
         return self.path
 
-    def abort(self, *, discard: bool = False) -> Path | None:
-        """Stop; the file (if any) stays at ``<path>.partial`` (deleted with ``discard``)."""
+    def abort(self, *, discard: bool | None = None) -> Path | None:
+        """Stop; the file (if any) stays at ``<path>.partial`` (deleted with ``discard``,
+        which defaults to ``discard_on_abort``). After :meth:`close` it changes nothing."""
+        if self.finished:
+            return self.path
         if not self.closed:
             self.closed = True
             self._finish()
         if self.path is None:
             return None
+        if discard is None:
+            discard = self.discard_on_abort
         part = partial_path(self.path)
         if discard:
             part.unlink(missing_ok=True)
@@ -505,21 +513,6 @@ class RrdOutput(Sink):
                 f"{part}: Rerun could not write the whole recording ({why}; disk full?); "
                 f"the incomplete file is left as {part}"
             )
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        if exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
-            try:
-                self.close()
-            except ViewerError:
-                if exc_type is None:
-                    raise
-        else:
-            self.abort()
 
 
 __all__ = [

@@ -339,3 +339,23 @@ def test_a_log_with_no_complete_slot_is_refused(tmp_path, record_mcap):
         assert not out.exists() and not list(tmp_path.glob("*.partial.*"))
     # info still describes it
     assert run("info", empty).exit_code == 0
+
+
+def test_ctrl_c_in_replay_or_compare_leaves_no_half_written_rrd(tmp_path, record_mcap):
+    import pytest
+
+    from viewer import compare, replay
+
+    path, _, _ = record_mcap("cucb", horizon=3000)
+    good = tmp_path / "out.rrd"
+    good.write_bytes(b"an earlier, complete recording")
+
+    def interrupt(n: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        replay(path, rrd_path=good, overwrite=True, on_block=interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        compare([path, path], rrd_path=good, overwrite=True, on_block=interrupt)
+    assert good.read_bytes() == b"an earlier, complete recording"
+    assert not list(tmp_path.glob("*.partial"))

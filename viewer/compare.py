@@ -258,6 +258,7 @@ def compare(
         label="compare",
         blueprint=compare_blueprint(runs),
         recording_id=compare_recording_id(runs),
+        discard_on_abort=True,  # Ctrl-C or a damaged chunk: no half-written .rrd is left
     ) as out:
         sinks = []
         for r in runs:

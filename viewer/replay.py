@@ -55,14 +55,16 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
-    from recorder.errors import LogError
     from recorder.rerun_sink import RerunSink, RrdOutput
 
     run = require_slots(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"
     )
     config = run.config
-    out = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite)
+    out = RrdOutput(
+        config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite,
+        discard_on_abort=True,
+    )  # fmt: skip
     try:
         sink = RerunSink(out.recording, out.label, config)
         for b in read_ahead(lambda: run.blocks(block)):
@@ -70,11 +72,8 @@ def replay(
             if on_block is not None:
                 on_block(len(b))
         sink.close()
-    except LogError:
-        out.abort(discard=True)
-        raise
-    except BaseException as exc:
-        out.__exit__(type(exc), exc, exc.__traceback__)
+    except BaseException:  # a damaged chunk, Ctrl-C, ...: no half-written .rrd is left
+        out.abort()
         raise
     path = out.close()
     return Replayed(
