@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,14 @@ from .errors import ConfigError
 
 #: What ``sweep -o DIR`` writes; a DIR holding any of them is refused without --force.
 SWEEP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
+#: Suffix of a file that is being written (recorder.paths.PARTIAL_SUFFIX).
+PARTIAL = ".partial"
+
+
+def _sweep_files(out: Path) -> list[str]:
+    """The files of a sweep (finished or not) that ``out`` holds."""
+    names = [*SWEEP_FILES, *(f + PARTIAL for f in SWEEP_FILES)]
+    return [f for f in names if (out / f).exists()]
 
 
 def check_out_dir(out: Path, *, force: bool) -> None:
@@ -33,7 +42,7 @@ def check_out_dir(out: Path, *, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
     if out.is_dir():
-        present = [f for f in SWEEP_FILES if (out / f).exists()]
+        present = _sweep_files(out)
         if present and not force:
             raise ConfigError(
                 f"{out}: already holds a sweep ({', '.join(present)}); use --force to overwrite"
@@ -49,8 +58,15 @@ def check_out_dir(out: Path, *, force: bool) -> None:
         raise ConfigError(f"{out}: cannot create the directory ({probe} is not writable)")
 
 
+def _clear_out_dir(out: Path) -> None:
+    """Remove an earlier sweep's files (reached only with --force), so that an interrupted
+    sweep never leaves the old complete files beside its own unfinished ones."""
+    for name in _sweep_files(out):
+        (out / name).unlink()
+
+
 def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".part")
+    tmp = path.with_name(path.name + PARTIAL)
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
 
@@ -110,10 +126,16 @@ def sweep(
     if out is not None:
         check_out_dir(out, force=force)
     used = set_workers(workers)
-    summary = sweep_instance(
-        inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
-        checkpoints=checkpoints,
-    )  # fmt: skip
+    try:
+        summary = sweep_instance(
+            inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
+            checkpoints=checkpoints,
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        left = ", ".join(str(out / f) for f in _sweep_files(out)) if out is not None else ""
+        where = f"; the unfinished logs: {left}" if left else ""
+        click.echo(f"corraoi: interrupted{where}", err=True)
+        sys.exit(130)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
@@ -180,6 +202,7 @@ def _sweep_to_dir(
     from .sweep import checkpoint_point, run_sweep, sweep_config
 
     out.mkdir(parents=True, exist_ok=True)
+    _clear_out_dir(out)
     config = sweep_config(inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops)
     with (
         SweepMcapSink(out / "sweep.mcap", config) as mcap_sink,

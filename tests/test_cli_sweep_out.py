@@ -102,3 +102,30 @@ def test_an_instance_that_cannot_be_simulated_writes_nothing(tmp_path: Path):
 def test_empty_instance_name():
     res = run("instance", "show", "")
     assert res.exit_code == 2 and "empty instance name" in res.output
+
+
+def test_an_interrupted_forced_sweep_leaves_no_old_complete_files(tmp_path: Path, monkeypatch):
+    import corraoi.sweep
+
+    out = tmp_path / "s"
+    args = ["sweep", "-p", "ucb,cts", "-n", "2", "-T", "300", "-o", str(out), "--checkpoints", "10"]
+    assert run(*args).exit_code == 0
+    assert (out / "summary.json").exists()
+    real = corraoi.sweep.checkpoint_point
+    calls = []
+
+    def stop_midway(policy, snap):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        return real(policy, snap)
+
+    monkeypatch.setattr(corraoi.sweep, "checkpoint_point", stop_midway)
+    res = run(*args, "--force")
+    assert res.exit_code == 130
+    assert "interrupted; the unfinished logs:" in res.stderr and "sweep.mcap.partial" in res.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.mcap.partial", "sweep.rrd.partial"]
+    # an unfinished sweep is a sweep: refused without --force
+    monkeypatch.setattr(corraoi.sweep, "checkpoint_point", real)
+    again = run(*args)
+    assert again.exit_code == 2 and "sweep.mcap.partial" in again.output
