@@ -71,14 +71,15 @@ def check_seed(seed: int) -> None:
 
 
 @dataclass
-class SlotBlock:
-    """Consecutive slots of one run. Shapes: (B,) per slot, (B, K) per slot and arm.
+class Columns:
+    """The per-slot columns (:data:`FIELDS`) of consecutive slots ``t`` (1-based, (B,)).
 
     ``mu_hat`` and ``pulls`` are after the slot's update; ``candidates`` is the set the arm
     was chosen from (A_t + {k_emp} for the correlated policies, every arm otherwise);
     ``override`` says that the AoI-aware rule chose the arm; ``regret`` is the pathwise
     regret sum(aoi - oracle_aoi) up to the slot; ``estimator`` the paper's
-    sum(aoi) - t / mu*.
+    sum(aoi) - t / mu*. :class:`SlotBlock` holds one run, ``engine.RunsBlock`` many: the
+    two are distinct types so that a many-run block cannot be handed to a sink.
     """
 
     t: np.ndarray
@@ -100,6 +101,11 @@ class SlotBlock:
     def column(self, name: str) -> np.ndarray:
         value: np.ndarray = getattr(self, name)
         return value
+
+
+@dataclass
+class SlotBlock(Columns):
+    """Consecutive slots of one run. Shapes: (B,) per slot, (B, K) per slot and arm."""
 
     @classmethod
     def concat(cls, blocks: list[SlotBlock]) -> SlotBlock:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernel
-from .block import FIELDS, SlotBlock, check_horizon, check_seed
+from .block import FIELDS, Columns, SlotBlock, check_horizon, check_seed
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
@@ -32,12 +32,13 @@ def streams_for_seed(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lat, dtype=np.uint64), np.array(pol, dtype=np.uint64)
 
 
-class RunsBlock(SlotBlock):
-    """Consecutive slots of R runs: the fields of :class:`SlotBlock` with a leading run axis
+@dataclass
+class RunsBlock(Columns):
+    """Consecutive slots of R runs: the columns of :class:`SlotBlock` with a leading run axis
     (``t`` stays (B,); the others are (R, B) and (R, B, K))."""
 
     @classmethod
-    def concat(cls, blocks: list[SlotBlock]) -> RunsBlock:
+    def concat(cls, blocks: list[RunsBlock]) -> RunsBlock:
         """Join consecutive blocks along the slot axis."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
