@@ -20,6 +20,7 @@ from .cli_common import (
 
 
 @click.group(
+    "corraoi",
     cls=OneLineGroup,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )

@@ -74,14 +74,30 @@ class OneLineGroup(click.Group):
             click.echo(exc.format_message())
             sys.exit(0)
         except click.UsageError as exc:
-            where = exc.ctx.command_path if exc.ctx is not None else "corraoi"
+            if exc.ctx is not None:
+                where = exc.ctx.command_path
+            else:  # raised while parsing, before the command's context exists
+                where = self.command_path_of(kwargs.get("args", args[0] if args else None))
             fail(f"{exc.format_message()} (see '{where} --help')", exc.exit_code)
         except click.ClickException as exc:
             fail(exc.format_message(), exc.exit_code)
-        except click.Abort:
-            click.echo("corraoi: aborted", err=True)
-            sys.exit(1)
+        except click.Abort:  # Ctrl-C where no command handled it
+            click.echo("corraoi: interrupted", err=True)
+            sys.exit(130)
         sys.exit(code if isinstance(code, int) else 0)
+
+    def command_path_of(self, args: Any) -> str:
+        """``corraoi record`` for ``["record", "-p", ...]``: the (sub)commands named."""
+        words = list(sys.argv[1:] if args is None else args)
+        path = [self.name or "corraoi"]
+        cmd: click.Command = self
+        for word in words:
+            if isinstance(cmd, click.Group) and word in cmd.commands:
+                cmd = cmd.commands[word]
+                path.append(word)
+            elif not word.startswith("-"):
+                break
+        return " ".join(path)
 
 
 def instance_option(func: F) -> F:

@@ -164,6 +164,8 @@ def test_usage_errors_are_one_line():
         (("sweep", "-T", "abc"), "'abc' is not a valid integer"),
         (("--bogus",), "No such option '--bogus'"),
         (("instance", "show"), "Missing argument 'NAME|PATH'"),
+        (("record", "-p", "ucb", "--rrd"), "requires an argument. (see 'corraoi record --help')"),
+        (("instance", "show", "I1", "-T"), "(see 'corraoi instance show --help')"),
     ):
         res = run(*args)
         assert res.exit_code == 2, args
