@@ -31,6 +31,8 @@ SCHEMA_ENCODING = "jsonschema"
 RUN_METADATA = "corraoi.run"
 #: Metadata record written when the file is finished: how the run ended.
 END_METADATA = "corraoi.end"
+#: Metadata record that marks a sweep log (recorder.sweep_log), not a run log.
+SWEEP_METADATA = "corraoi.sweep"
 #: log_time = publish_time = t * NS_PER_SLOT: one slot shows as one second in MCAP tools.
 NS_PER_SLOT = 1_000_000_000
 #: The largest slot number whose log_time fits MCAP's unsigned 64-bit nanoseconds.

@@ -40,6 +40,7 @@ from .format import (
     NS_PER_SLOT,
     RUN_METADATA,
     SCHEMA_NAME,
+    SWEEP_METADATA,
     TOPIC,
     decode_messages,
     empty_block,
@@ -197,6 +198,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         n_slots = 0
         data_end = 0
         finished = False
+        sweep = False  # a sweep log's metadata was seen
         for kind, item in walker.records(read_chunks=True, lazy_after_first=not verify):
             if kind == "header":
                 assert isinstance(item, Header)
@@ -208,10 +210,12 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
                     _check_run_metadata(p, run_md, library)
                 elif item.name == END_METADATA:
                     end_md = dict(item.metadata)
+                elif item.name == SWEEP_METADATA:
+                    sweep = True
             elif kind == "chunk":
                 assert isinstance(item, _Chunk)
                 if run_md is None:
-                    raise _not_ours(p, library)
+                    raise _not_ours(p, library, sweep)
                 if item.records is not None:
                     if not channel_id:
                         channel_id = _find_channel(item.records, p, item.offset)
@@ -225,7 +229,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
             elif kind == "footer":
                 finished = True
             elif kind == "data_end" and run_md is None:
-                raise _not_ours(p, library)
+                raise _not_ours(p, library, sweep)
         if run_md is None:
             if walker.records_seen == 0:
                 raise LogError(
@@ -236,7 +240,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
                     f"{p}: the writer stopped before it wrote the run configuration; "
                     "nothing to read"
                 )
-            raise _not_ours(p, library)
+            raise _not_ours(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {TOPIC} channel with schema {SCHEMA_NAME}")
     try:
@@ -284,7 +288,12 @@ def _open(p: Path) -> BinaryIO:
         raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
 
 
-def _not_ours(p: Path, library: str) -> LogError:
+def _not_ours(p: Path, library: str, sweep: bool = False) -> LogError:
+    if sweep:
+        return LogError(
+            f"{p}: a corraoi sweep log (aggregated curves), not the log of one run; "
+            "draw it with `corraoi figure`"
+        )
     who = f" (written by {library!r})" if library else ""
     return LogError(f"{p}: an MCAP file but not a corraoi log{who}: no {RUN_METADATA} metadata")
 

@@ -31,6 +31,7 @@ from corraoi._version import __version__
 from corraoi.policies import AOI_PREFIX
 
 from .errors import LogError, WriteError
+from .format import SWEEP_METADATA
 from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
@@ -45,7 +46,6 @@ SCHEMA_NAME = "corraoi.SweepPoint"
 MESSAGE_ENCODING = "json"
 SCHEMA_ENCODING = "jsonschema"
 #: Metadata record written when the file is opened: the sweep configuration.
-SWEEP_METADATA = "corraoi.sweep"
 #: Metadata record written when the file is finished: how the sweep ended.
 END_METADATA = "corraoi.sweep.end"
 #: log_time = publish_time = t * NS_PER_SLOT: slot t shows as t seconds in MCAP tools.

@@ -359,3 +359,11 @@ def test_ctrl_c_in_replay_or_compare_leaves_no_half_written_rrd(tmp_path, record
         compare([path, path], rrd_path=good, overwrite=True, on_block=interrupt)
     assert good.read_bytes() == b"an earlier, complete recording"
     assert not list(tmp_path.glob("*.partial"))
+
+
+def test_a_sweep_log_is_named_as_such(tmp_path):
+    out = tmp_path / "s"
+    assert run("sweep", "-p", "ucb", "-n", "2", "-T", "50", "-o", out).exit_code == 0
+    for cmd in (["info", out / "sweep.mcap"], ["replay", out / "sweep.mcap"]):
+        line = one_error_line(run(*cmd))
+        assert "a corraoi sweep log" in line and "corraoi figure" in line
