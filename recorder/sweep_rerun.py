@@ -294,17 +294,13 @@ class SweepRerunSink(Sink):
     def close(self) -> None:
         """Send what is buffered and flush the recording (an owned one is also
         disconnected and its file renamed into place). Safe to call twice."""
-        if self._closed:
-            return
-        self._closed = True
-        self.flush()
-        self.recording.flush()
-        if self._owned_path is not None:
-            self.recording.disconnect()
-            publish(self._owned_path, overwrite=self._overwrite)
+        self._stop(publish_file=True)
 
     def abort(self) -> None:
         """Like :meth:`close`, but an owned file stays at ``<path>.partial``."""
+        self._stop(publish_file=False)
+
+    def _stop(self, *, publish_file: bool) -> None:
         if self._closed:
             return
         self._closed = True
@@ -312,6 +308,8 @@ class SweepRerunSink(Sink):
         self.recording.flush()
         if self._owned_path is not None:
             self.recording.disconnect()
+            if publish_file:
+                publish(self._owned_path, overwrite=self._overwrite)
 
 
 __all__ = [
