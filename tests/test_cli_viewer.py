@@ -295,7 +295,7 @@ def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
 def test_the_viewer_does_not_import_the_engine():
     code = (
         "import sys, viewer, viewer.compare, viewer.replay, viewer.diffs, viewer.info, "
-        "viewer.recover, corraoi.cli_viewer, recorder.reader, recorder.rerun_sink\n"
+        "viewer.recover, corraoi.cli.viewer, recorder.reader, recorder.rerun_sink\n"
         "bad = sorted(m for m in ('corraoi.engine', 'corraoi._kernel', 'numba') "
         "if m in sys.modules)\n"
         "print(','.join(bad))"

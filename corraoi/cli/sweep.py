@@ -14,7 +14,8 @@ from typing import Any
 
 import click
 
-from .cli_common import (
+from ..errors import ConfigError
+from .common import (
     handle_errors,
     horizon_option,
     instance_option,
@@ -23,7 +24,6 @@ from .cli_common import (
     seed_option,
     warn,
 )
-from .errors import ConfigError
 
 #: What ``sweep -o DIR`` writes; a DIR holding any of them is refused without --force.
 SWEEP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
@@ -116,9 +116,9 @@ def sweep(
       corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
       corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
     """
-    from .engine import check_instance, set_workers
-    from .instance import load_instance
-    from .policies import make_policies
+    from ..engine import check_instance, set_workers
+    from ..instance import load_instance
+    from ..policies import make_policies
 
     inst = load_instance(instance)
     check_instance(inst)
@@ -158,9 +158,9 @@ def sweep_instance(
     label: str = "sweep",
 ) -> dict[str, Any]:
     """One instance's sweep with a progress bar; with ``out``, its logs, summary and figure."""
-    from .progress import Progress
-    from .summary import instance_notes, summary_markdown, sweep_summary
-    from .sweep import default_checkpoints, run_sweep
+    from ..progress import Progress
+    from ..summary import instance_notes, summary_markdown, sweep_summary
+    from ..sweep import default_checkpoints, run_sweep
 
     for note in instance_notes(inst):
         warn(note)
@@ -199,7 +199,7 @@ def _sweep_to_dir(
     from recorder.sweep_log import SweepMcapSink
     from recorder.sweep_rerun import open_sweep_recording
 
-    from .sweep import checkpoint_point, run_sweep, sweep_config
+    from ..sweep import checkpoint_point, run_sweep, sweep_config
 
     out.mkdir(parents=True, exist_ok=True)
     _clear_out_dir(out)
@@ -283,10 +283,10 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from .engine import set_workers
-    from .instance import load_instance
-    from .policies import make_policies
-    from .summary import summary_markdown
+    from ..engine import set_workers
+    from ..instance import load_instance
+    from ..policies import make_policies
+    from ..summary import summary_markdown
 
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from .cli_common import handle_errors, warn
-from .errors import UsageError
+from ..errors import UsageError
+from .common import handle_errors, warn
 
 
 def _split(values: tuple[str, ...]) -> list[str] | None:

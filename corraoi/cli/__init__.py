@@ -7,13 +7,12 @@ Heavy modules (the numba engine, rerun, mcap) are imported inside the commands s
 from __future__ import annotations
 
 import json
-import sys
 from typing import Any
 
 import click
 
-from ._version import __version__
-from .cli_common import (
+from .._version import __version__
+from .common import (
     OneLineGroup,
     handle_errors,
 )
@@ -54,8 +53,8 @@ def instance() -> None:
 @handle_errors
 def instance_list() -> None:
     """List the built-in instances."""
-    from .instance import BUILTINS, load_instance
-    from .theory import analyse
+    from ..instance import BUILTINS, load_instance
+    from ..theory import analyse
 
     for name in BUILTINS:
         inst = load_instance(name)
@@ -82,9 +81,9 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     Arms and states are numbered from 1. phi is the expected pseudo-reward of each arm with
     respect to the best arm k*; an arm l != k* is competitive when mu* - phi_{l,k*} <= 0.
     """
-    from .bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
-    from .instance import load_instance
-    from .theory import analyse
+    from ..bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
+    from ..instance import load_instance
+    from ..theory import analyse
 
     inst = load_instance(spec)
     th = analyse(inst)
@@ -138,7 +137,7 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
 @main.command("policies")
 def policies_cmd() -> None:
     """List the registered policies and the parameters each reads."""
-    from .policies import PARAMETERS, POLICY_NAMES, make_policy
+    from ..policies import PARAMETERS, POLICY_NAMES, make_policy
 
     for name in POLICY_NAMES:
         params = make_policy(name).params
@@ -151,10 +150,10 @@ def policies_cmd() -> None:
 
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
-from .cli_figure import figure  # noqa: E402
-from .cli_record import record  # noqa: E402
-from .cli_sweep import reproduce, sweep  # noqa: E402
-from .cli_viewer import compare, diff, info, recover, replay  # noqa: E402
+from .figure import figure  # noqa: E402
+from .record import record  # noqa: E402
+from .sweep import reproduce, sweep  # noqa: E402
+from .viewer import compare, diff, info, recover, replay  # noqa: E402
 
 main.add_command(sweep)
 main.add_command(reproduce)
@@ -165,7 +164,3 @@ main.add_command(info)
 main.add_command(recover)
 main.add_command(figure)
 main.add_command(record)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main(sys.argv[1:])

@@ -17,7 +17,8 @@ from typing import Any
 
 import click
 
-from .cli_common import (
+from ..errors import UsageError
+from .common import (
     handle_errors,
     horizon_option,
     instance_option,
@@ -25,8 +26,7 @@ from .cli_common import (
     policy_option,
     seed_option,
 )
-from .cli_live import ViewerChoice, viewer_options
-from .errors import UsageError
+from .live import ViewerChoice, viewer_options
 
 DEFAULT_OUT = "runs/{label}.mcap"
 _PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}")
@@ -176,9 +176,9 @@ def record(
       corraoi record -p ucb,cucb -T 100000 --seed 3
       corraoi record -p cts --connect          # into a viewer started with `rerun`
     """  # noqa: D301
-    from .block import RunConfig
-    from .instance import load_instance
-    from .policies import make_policies
+    from ..block import RunConfig
+    from ..instance import load_instance
+    from ..policies import make_policies
 
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and rrd is not None:
@@ -227,8 +227,8 @@ def _record_all(
     plans: list[_Plan], viewer_url: str | None, force: bool
 ) -> tuple[list[_Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from .engine import set_workers, simulate_run
-    from .progress import Progress
+    from ..engine import set_workers, simulate_run
+    from ..progress import Progress
 
     # One run has nothing to spread over threads, and idle numba workers compete with
     # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.

@@ -15,9 +15,9 @@ from typing import Any, TypeVar
 
 import click
 
-from .cli_common import errors_exit, handle_errors, warn
-from .cli_live import ViewerChoice, viewer_options
-from .errors import UsageError
+from ..errors import UsageError
+from .common import errors_exit, handle_errors, warn
+from .live import ViewerChoice, viewer_options
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -43,7 +43,7 @@ def _not_an_input(out: Path, inputs: tuple[Path, ...] | list[Path]) -> None:
 
 
 def _progress(total: int, label: str) -> Any:
-    from .progress import Progress
+    from ..progress import Progress
 
     return Progress(total, label)
 

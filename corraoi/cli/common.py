@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import click
 
-from .errors import CorraoiError
+from ..errors import CorraoiError
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -1,0 +1,5 @@
+"""``python -m corraoi.cli``: the command line."""
+
+from . import main
+
+main(prog_name="corraoi")
