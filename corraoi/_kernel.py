@@ -1,136 +1,94 @@
-"""The compiled simulation kernel: every policy, every run, block by block.
+"""The compiled simulation kernel: one policy family, every run, block by block.
 
-One numba function advances R independent runs by B slots. Runs are spread over the cores
-with ``prange``; each run owns two SFC64 random streams (latent path, policy), so results
-do not depend on the number of threads.
+This file is a template as well as a module. :mod:`corraoi.kernels` writes a copy of it per
+policy family into the kernel cache, with the ``HOOKS`` import line below pointing at that
+family's compiled hooks (``forced``, ``score``, ``update``), and imports the copy: numba then
+inlines the hooks and caches the compiled kernel on disk beside the copy, so a new process
+loads it instead of compiling (closures would miss numba's cache).
 
-The SFC64 step is NumPy's (``numpy.random.SFC64``) bit for bit: a stream seeded here
-yields exactly ``numpy.random.Generator(SFC64(seed_sequence)).random()``, which the tests
-check. Normals (polar method) and gammas (Marsaglia-Tsang) are our own, drawn from that
-stream.
+One call advances R independent runs by ``nslots`` slots. Runs are spread over the cores
+with ``prange``; each run owns two SFC64 streams (latent path, policy), so results do not
+depend on the number of threads or on which other runs share the batch.
+
+Per slot: draw the hidden state (channel), compute the empirical means, let the policy force
+an arm (``forced``), compute the correlated candidate set (bitsets, when ``correlated``), apply
+the AoI-aware override (when ``aware``), otherwise play the argmax of the policy's ``score``
+over the candidates (ties uniformly at random), then update counts, ages and the policy's own
+state (``update``).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit, prange
 
-U64 = np.uint64
-_S11 = np.uint64(11)
-_S3 = np.uint64(3)
-_S24 = np.uint64(24)
-_S40 = np.uint64(40)
-_ONE = np.uint64(1)
-_INV53 = 1.0 / 9007199254740992.0
+from corraoi.policies.hooks import forced_none as _forced  # HOOKS
+from corraoi.policies.hooks import score_none as _score  # HOOKS
+from corraoi.policies.hooks import update_none as _update  # HOOKS
+from corraoi.rng import argmax_random, uniform
 
-BASE_UCB, BASE_TS_BETA, BASE_TS_GAUSS = 0, 1, 2
+CHANNEL_CDF, CHANNEL_TRACE = 0, 1
 
 
 @njit(inline="always", cache=True)
-def _next_u64(st):
-    a = st[0]
-    b = st[1]
-    c = st[2]
-    w = st[3]
-    tmp = a + b + w
-    st[3] = w + _ONE
-    st[0] = b ^ (b >> _S11)
-    st[1] = c + (c << _S3)
-    st[2] = ((c << _S24) | (c >> _S40)) + tmp
-    return tmp
+def draw_state(cdf_rows, kind, trace, lst, xprev, t):
+    """The hidden state of slot ``t`` (1-based) of one run.
 
-
-@njit(inline="always", cache=True)
-def _uniform(st):
-    return float(_next_u64(st) >> _S11) * _INV53
-
-
-@njit(cache=True)
-def _normal(st, cache):
-    """Standard normal by the polar method; the spare value waits in ``cache[1]``."""
-    if cache[0] != 0.0:
-        cache[0] = 0.0
-        return cache[1]
-    while True:
-        u = 2.0 * _uniform(st) - 1.0
-        v = 2.0 * _uniform(st) - 1.0
-        s = u * u + v * v
-        if 0.0 < s < 1.0:
-            break
-    f = math.sqrt(-2.0 * math.log(s) / s)
-    cache[0] = 1.0
-    cache[1] = v * f
-    return u * f
-
-
-@njit(cache=True)
-def _gamma(st, cache, shape):
-    """Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang 2000)."""
-    d = shape - 1.0 / 3.0
-    c = 1.0 / math.sqrt(9.0 * d)
-    while True:
-        x = _normal(st, cache)
-        v = 1.0 + c * x
-        if v <= 0.0:
-            continue
-        v = v * v * v
-        u = _uniform(st)
-        x2 = x * x
-        if u < 1.0 - 0.0331 * x2 * x2:
-            return d * v
-        if math.log(u) < 0.5 * x2 + d * (1.0 - v + math.log(v)):
-            return d * v
-
-
-@njit(cache=True)
-def _beta(st, cache, a, b):
-    ga = _gamma(st, cache, a)
-    gb = _gamma(st, cache, b)
-    return ga / (ga + gb)
-
-
-@njit(cache=True)
-def _argmax_random(vals, mask, st, K):
-    """Index of the largest ``vals[k]`` with ``mask[k]``; ties uniformly at random.
-
-    Reservoir sampling: one uniform draw per extra tied arm, none without ties.
+    ``kind`` CHANNEL_CDF: row 0 of ``cdf_rows`` is the law of X_1 (and of every X_t for an
+    i.i.d. channel, which has that row only); rows 1..n are the transition rows, so X_t is
+    drawn from row X_{t-1} + 1. One uniform per slot, inverted by bisection (the same state
+    as a linear scan of the CDF, in log n steps). CHANNEL_TRACE: X_t = trace[t - 1].
     """
-    best = -1
-    bestv = -np.inf
-    ties = 0
-    for k in range(K):
-        if not mask[k]:
-            continue
-        v = vals[k]
-        if best < 0 or v > bestv:
-            best = k
-            bestv = v
-            ties = 1
-        elif v == bestv:
-            ties += 1
-            if _uniform(st) * ties < 1.0:
-                best = k
-    return best
+    if kind == CHANNEL_TRACE:
+        return trace[t - 1]
+    row = 0
+    if cdf_rows.shape[0] > 1 and xprev >= 0:
+        row = xprev + 1
+    u = uniform(lst)
+    lo = 0
+    hi = cdf_rows.shape[1] - 1
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if u < cdf_rows[row, mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@njit(cache=True)
+def draw_states(cdf_rows, kind, trace, lat, xprev, t0, nslots, out):
+    """``out[r, j]``: the hidden state of slot t0 + j + 1 of run r (the plain-Python tier's
+    path; the same draws as the compiled kernel's, so plug-ins see built-ins' paths)."""
+    for r in range(lat.shape[0]):
+        st = lat[r]
+        xp = xprev[r]
+        for j in range(nslots):
+            xp = draw_state(cdf_rows, kind, trace, st, xp, t0 + j + 1)
+            out[r, j] = xp
+        xprev[r] = xp
 
 
 @njit(parallel=True, cache=True)
 def advance(
-    cdf,  # (n,) float64 cumulative distribution of X
+    cdf_rows,  # (1 or n + 1, n) float64 CDFs: law of X_1, then transition rows
+    kind,  # int: CHANNEL_CDF / CHANNEL_TRACE
+    trace,  # (T,) int64 hidden path for CHANNEL_TRACE (else unused)
     Y,  # (K, n) int8 rewards
-    spol,  # (K, K, 2) float64 policy pseudo-rewards s[k, l, r]
+    fail0,  # (K, W) uint64: arms k with phi_{k,l} = 0, as bitsets per pulled arm l
+    fail1,  # (K, W) uint64: arms k with phi_{k,l} = failure rate of l
+    fail2,  # (K, W) uint64: arms k with phi_{k,l} = success rate of l
     best,  # int: index of the best arm (for the oracle)
-    base,  # int: BASE_UCB / BASE_TS_BETA / BASE_TS_GAUSS
-    correlated,  # bool
+    correlated,  # bool: restrict to the correlated candidate set
     aware,  # bool: AoI-aware override
-    c_ucb,  # float
-    beta,  # float
+    params,  # (P,) float64 the policy's parameters
     t0,  # int: slots already simulated
     nslots,  # int: slots to simulate now
     lat,  # (R, 4) uint64 latent streams
     pol,  # (R, 4) uint64 policy streams
     ncache,  # (R, 2) float64 spare normal per run
+    pstate,  # (R, S) float64 the policy's own state per run
+    xprev,  # (R,) int64 previous hidden state (-1 before slot 1)
     pulls,  # (R, K) int64
     succ,  # (R, K) int64
     aoi,  # (R,) int64 current age
@@ -138,8 +96,8 @@ def advance(
     regret,  # (R,) int64 pathwise regret so far
     aoisum,  # (R,) int64 sum of ages so far
     record,  # bool: write the per-slot columns below
-    o_x,  # (R, B) int16
-    o_arm,  # (R, B) int16
+    o_x,  # (R, B) int32
+    o_arm,  # (R, B) int32
     o_succ,  # (R, B) bool
     o_aoi,  # (R, B) int64
     o_oaoi,  # (R, B) int64
@@ -155,32 +113,31 @@ def advance(
 ):
     R = pulls.shape[0]
     K = pulls.shape[1]
-    n = cdf.shape[0]
+    W = fail0.shape[1]
     for r in prange(R):
         lst = lat[r]
         pst = pol[r]
         cache = ncache[r]
+        ps = pstate[r]
         npull = pulls[r]
         nsucc = succ[r]
         muhat = np.empty(K)
         vals = np.empty(K)
         cand = np.empty(K, dtype=np.bool_)
         in_s = np.empty(K, dtype=np.bool_)
+        fail = np.empty(W, dtype=np.uint64)
         age = aoi[r]
         oage = oaoi[r]
         reg = regret[r]
         asum = aoisum[r]
+        xp = xprev[r]
         si = 0
         nsnap = snap_t.shape[0]
         for j in range(nslots):
             t = t0 + j + 1
-            # ---- the latent state, from the latent stream only (common random numbers)
-            u = _uniform(lst)
-            x = n - 1
-            for i in range(n - 1):
-                if u < cdf[i]:
-                    x = i
-                    break
+            # ---- the hidden state, from the latent stream only (common random numbers)
+            x = draw_state(cdf_rows, kind, trace, lst, xp, t)
+            xp = x
             # ---- the policy's decision, from the history and the policy stream only
             maxmu = 0.0
             for k in range(K):
@@ -189,56 +146,52 @@ def advance(
                 if m > maxmu:
                     maxmu = m
                 cand[k] = True
-            unpulled = -1
-            for k in range(K):
-                if npull[k] == 0:
-                    unpulled = k
-                    break
-            forced = base == BASE_UCB and unpulled >= 0  # UCB's round-robin start
-            if correlated and not forced:
-                # S_t: arms pulled at least (t-1)/K times
+            forced = _forced(t, K, npull, nsucc, params, ps, pst)
+            if correlated and forced < 0:
+                # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
                 for k in range(K):
                     in_s[k] = npull[k] * K >= t - 1
-                kemp = _argmax_random(muhat, in_s, pst, K)
+                kemp = argmax_random(muhat, in_s, pst, K)
                 target = muhat[kemp]
+                # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
+                # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
+                # pseudo-rewards; the arms failing for l are a union of precomputed bitsets.
+                for w in range(W):
+                    fail[w] = np.uint64(0)
+                for l in range(K):
+                    if not in_s[l] or npull[l] == 0:
+                        continue
+                    drop0 = target > 0.0
+                    drop1 = (npull[l] - nsucc[l]) / npull[l] < target
+                    drop2 = nsucc[l] / npull[l] < target
+                    if drop0 or drop1 or drop2:
+                        for w in range(W):
+                            m64 = np.uint64(0)
+                            if drop0:
+                                m64 |= fail0[l, w]
+                            if drop1:
+                                m64 |= fail1[l, w]
+                            if drop2:
+                                m64 |= fail2[l, w]
+                            fail[w] |= m64
                 for k in range(K):
-                    lo = np.inf
-                    for l in range(K):
-                        if in_s[l] and npull[l] > 0:
-                            ph = (
-                                nsucc[l] * spol[k, l, 1] + (npull[l] - nsucc[l]) * spol[k, l, 0]
-                            ) / npull[l]
-                            if ph < lo:
-                                lo = ph
-                    cand[k] = lo >= target
+                    cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
                 cand[kemp] = True
             override = aware and maxmu > 0.0 and age * maxmu > 1.0
             if override:
                 for k in range(K):
                     in_s[k] = True
-                arm = _argmax_random(muhat, in_s, pst, K)
-            elif forced:
-                arm = unpulled
+                arm = argmax_random(muhat, in_s, pst, K)
+            elif forced >= 0:
+                arm = forced
             else:
-                if base == BASE_UCB:
-                    lt = math.log(t)
-                    for k in range(K):
-                        vals[k] = muhat[k] + math.sqrt(c_ucb * lt / npull[k])
-                elif base == BASE_TS_BETA:
-                    for k in range(K):
-                        if cand[k]:
-                            vals[k] = _beta(pst, cache, nsucc[k] + 1.0, npull[k] - nsucc[k] + 1.0)
-                else:
-                    for k in range(K):
-                        if cand[k]:
-                            vals[k] = muhat[k] + math.sqrt(beta / (npull[k] + 1.0)) * _normal(
-                                pst, cache
-                            )
-                arm = _argmax_random(vals, cand, pst, K)
+                _score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
+                arm = argmax_random(vals, cand, pst, K)
             # ---- outcome and ages
             rew = Y[arm, x]
             npull[arm] += 1
             nsucc[arm] += rew
+            _update(t, arm, rew, K, npull, nsucc, params, ps)
             age = 1 if rew == 1 else age + 1
             oage = 1 if Y[best, x] == 1 else oage + 1
             reg += age - oage
@@ -265,12 +218,4 @@ def advance(
         oaoi[r] = oage
         regret[r] = reg
         aoisum[r] = asum
-
-
-@njit(cache=True)
-def sfc64_doubles(st, count):
-    """``count`` uniforms from one SFC64 state (used by tests against NumPy)."""
-    out = np.empty(count)
-    for i in range(count):
-        out[i] = _uniform(st)
-    return out
+        xprev[r] = xp

@@ -1,0 +1,52 @@
+"""Scheduling policies: the policy API, the built-ins and the registry.
+
+Write your own (``docs/extending.md``)::
+
+    from corraoi.policies import Param, Policy
+
+    class EpsilonGreedy(Policy):
+        name = "eps-greedy"
+        params = {"epsilon": Param(0.1, "exploration probability", low=0, high=1)}
+
+        def select(self, t, state):
+            ...
+
+and run it with ``corraoi record --policy eps_greedy.py:EpsilonGreedy``.
+
+Importing this package is light; the built-ins (numba) load on first use of the registry.
+"""
+
+from __future__ import annotations
+
+from .api import RGB, CompiledPolicy, Param, Policy, PolicyBase, PolicySpec
+from .registry import (
+    ENTRY_POINT_GROUP,
+    available,
+    builtins,
+    make_policies,
+    make_policy,
+    paper_names,
+    parse_param_assignments,
+    parse_policy_names,
+    resolve,
+    unknown_policy_message,
+)
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "RGB",
+    "CompiledPolicy",
+    "Param",
+    "Policy",
+    "PolicyBase",
+    "PolicySpec",
+    "available",
+    "builtins",
+    "make_policies",
+    "make_policy",
+    "paper_names",
+    "parse_param_assignments",
+    "parse_policy_names",
+    "resolve",
+    "unknown_policy_message",
+]
