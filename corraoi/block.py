@@ -12,9 +12,10 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
+from .channels import Channel, default_channel
 from .errors import ConfigError
 from .instance import Instance
-from .policies import PolicySpec
+from .policies.api import PolicySpec
 
 #: Per-slot columns of a block, in log order.
 SCALAR_FIELDS = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "override")
@@ -31,23 +32,38 @@ class RunConfig:
     seed: int
     horizon: int
     version: str = __version__
+    channel: Channel | None = None
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
+        if self.channel is None:
+            object.__setattr__(self, "channel", default_channel(self.instance))
+
+    @property
+    def format_version(self) -> int:
+        """The slot-log format version this run is written in: 1 for a built-in policy on an
+        i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
+        non-i.i.d. channel (older readers refuse it instead of misreading it)."""
+        assert self.channel is not None
+        return 1 if self.policy.builtin and self.channel.iid else 2
 
     @property
     def label(self) -> str:
         return f"{self.policy.name}-{self.instance.name}-s{self.seed}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "instance": self.instance.to_dict(),
             "policy": self.policy.to_dict(),
             "seed": int(self.seed),
             "horizon": int(self.horizon),
             "version": self.version,
         }
+        assert self.channel is not None
+        if not self.channel.iid:
+            out["channel"] = self.channel.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
@@ -57,6 +73,7 @@ class RunConfig:
             seed=int(data["seed"]),
             horizon=int(data["horizon"]),
             version=str(data.get("version", "unknown")),
+            channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
         )
 
 

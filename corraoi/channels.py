@@ -109,14 +109,15 @@ class Channel:
             return first, _TRACE, np.ascontiguousarray(self.trace, dtype=np.int64)
         empty = np.zeros(1, dtype=np.int64)
         if self.kind == "markov":
-            transition = np.asarray(getattr(instance, "transition"), dtype=np.float64)
+            transition = np.asarray(instance.transition, dtype=np.float64)
             rows = np.vstack([first, np.cumsum(transition, axis=1)])
             return np.ascontiguousarray(rows), _CDF, empty
         return np.ascontiguousarray(first), _CDF, empty
 
 
 def _digest(trace: np.ndarray) -> str:
-    return "sha256:" + hashlib.sha256(np.ascontiguousarray(trace, np.int64).tobytes()).hexdigest()[:16]
+    data = np.ascontiguousarray(trace, np.int64).tobytes()
+    return "sha256:" + hashlib.sha256(data).hexdigest()[:16]
 
 
 def default_channel(instance: Instance) -> Channel:

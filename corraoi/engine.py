@@ -123,7 +123,7 @@ class Simulation:
         theory = check_instance(instance)
         self.best = theory.best_arm
         self.mu_star = theory.mu_star
-        self.cls = policy.resolve()
+        self.cls: Any = policy.resolve()
         R, K = seed_arr.size, instance.K
         self._cdf_rows, self._kind, self._trace = self.channel.kernel_arrays(instance)
         self._Y = np.ascontiguousarray(instance.Y, dtype=np.int8)
@@ -148,7 +148,8 @@ class Simulation:
             self._py: Any = None
         else:
             self._py = self.cls(**policy.params)
-            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=Streams(self.pol, self.ncache))
+            rng = Streams(self.pol, self.ncache)
+            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 
     @property
     def runs(self) -> int:

@@ -18,6 +18,7 @@ The cache folder is ``$CORRAOI_CACHE_DIR``, else ``$XDG_CACHE_HOME/corraoi``, el
 from __future__ import annotations
 
 import hashlib
+import importlib
 import importlib.util
 import os
 import sys
@@ -30,7 +31,6 @@ from typing import Any
 from ._version import __version__
 from .errors import CorraoiError
 from .policies.api import CompiledPolicy
-from .policies.hooks import forced_none, score_none, update_none
 
 #: Called with a one-line notice before a kernel is compiled (not when it loads from cache).
 #: The CLI prints it; the library stays quiet.
@@ -77,8 +77,23 @@ def _writable(folder: Path) -> Path:
         return fallback
 
 
-def _hook_ref(hook: Any, role: str, policy: type[CompiledPolicy]) -> tuple[str, str, Path | None]:
+def load_hook(ref: Any, role: str, policy: type[CompiledPolicy]) -> Any:
+    """The numba function a hook names: itself, or ``"module:function"`` imported."""
+    if not isinstance(ref, str):
+        return ref
+    modname, _, attr = ref.partition(":")
+    try:
+        module = importlib.import_module(modname)
+        return getattr(module, attr)
+    except (ImportError, AttributeError) as exc:
+        raise KernelError(
+            f"policy {policy.name}: its {role} hook {ref!r} cannot be imported: {exc}"
+        ) from None
+
+
+def _hook_ref(ref: Any, role: str, policy: type[CompiledPolicy]) -> tuple[str, str, Path | None]:
     """(module, attribute, source file) of a compiled hook, which must be importable."""
+    hook = load_hook(ref, role, policy)
     func = getattr(hook, "py_func", None)
     if func is None or not hasattr(hook, "compile"):
         raise KernelError(
@@ -97,9 +112,9 @@ def _hook_ref(hook: Any, role: str, policy: type[CompiledPolicy]) -> tuple[str, 
 
 def hooks_of(policy: type[CompiledPolicy]) -> tuple[Any, Any, Any]:
     return (
-        policy.forced if policy.forced is not None else forced_none,
-        policy.score if policy.score is not None else score_none,
-        policy.update if policy.update is not None else update_none,
+        policy.forced if policy.forced is not None else "corraoi.policies.hooks:forced_none",
+        policy.score if policy.score is not None else "corraoi.policies.hooks:score_none",
+        policy.update if policy.update is not None else "corraoi.policies.hooks:update_none",
     )
 
 
@@ -132,7 +147,9 @@ def kernel_source(policy: type[CompiledPolicy]) -> tuple[str, str]:
 
 def _is_cached(folder: Path, modname: str) -> bool:
     pycache = folder / "__pycache__"
-    return pycache.is_dir() and any(p.name.startswith(f"{modname}.advance") for p in pycache.iterdir())
+    if not pycache.is_dir():
+        return False
+    return any(p.name.startswith(f"{modname}.advance") for p in pycache.iterdir())
 
 
 def kernel_for(policy: type[CompiledPolicy]) -> Any:

@@ -12,7 +12,7 @@ from typing import Any
 
 from .bounds import DEFAULT_BOUND_BETA, Bound, cts_bound, cucb_bound
 from .instance import Instance
-from .policies import BASE_TS_BETA, BASE_TS_GAUSS, BASE_UCB, PolicySpec
+from .policies.api import PolicySpec
 from .sweep import PolicyResult
 from .theory import analyse
 
@@ -23,13 +23,12 @@ def policy_bound(instance: Instance, policy: PolicySpec, horizon: int) -> Bound 
     Theorem 3 is stated for CTS with Gaussian priors and beta > 1: cts-gauss gets it with
     its own beta (n/a at beta <= 1); Beta-prior cts gets an n/a that says so.
     """
-    if not policy.correlated or policy.aoi_aware:
-        return None
-    if policy.base == BASE_UCB:
+    theorem = policy.resolve().theorem if policy.builtin else None
+    if theorem == "cucb":
         return cucb_bound(instance, horizon)
-    if policy.base == BASE_TS_GAUSS:
-        return cts_bound(instance, horizon, policy.beta)
-    if policy.base == BASE_TS_BETA:
+    if theorem == "cts" and "beta" in policy.params:
+        return cts_bound(instance, horizon, policy.params["beta"])
+    if theorem == "cts":
         return Bound(
             "Theorem 3 (CTS)", horizon, None, "n/a", None,
             "stated for Gaussian priors (cts-gauss with beta > 1), not for Beta priors",

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .channels import Channel
 from .engine import Simulation, Snapshot
 from .errors import ConfigError
 from .instance import Instance
@@ -138,10 +139,11 @@ def run_policy(
     checkpoints: Sequence[int] = (),
     on_checkpoint: CheckpointHook | None = None,
     on_slots: Callable[[int], None] | None = None,
+    channel: Channel | None = None,
 ) -> PolicyResult:
     """Simulate ``policy`` for every seed to ``horizon`` without keeping per-slot columns."""
     start = time.perf_counter()
-    sim = Simulation(instance, policy, seeds, horizon)
+    sim = Simulation(instance, policy, seeds, horizon, channel=channel)
     stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {horizon})
     ends = np.unique(np.linspace(0, horizon, SEGMENTS + 1).round().astype(np.int64)[1:])
     for end in ends:
@@ -172,11 +174,12 @@ def run_sweep(
     checkpoints: Sequence[int] = (),
     on_checkpoint: CheckpointHook | None = None,
     on_slots: Callable[[int], None] | None = None,
+    channel: Channel | None = None,
 ) -> list[PolicyResult]:
     """Every policy over the same seeds ``seed .. seed + runs - 1`` (paired runs)."""
     if runs < 1:
         raise ConfigError(f"runs must be >= 1, got {runs}")
-    seeds = list(range(seed, seed + runs))
+    seeds = range(seed, seed + runs)
     return [
         run_policy(
             instance,
@@ -186,6 +189,7 @@ def run_sweep(
             checkpoints=checkpoints,
             on_checkpoint=on_checkpoint,
             on_slots=on_slots,
+            channel=channel,
         )  # fmt: skip
         for p in policies
     ]
@@ -199,11 +203,14 @@ def sweep_config(
     horizon: int,
     seed: int,
     checkpoints: Sequence[int],
+    channel: Channel | None = None,
 ) -> dict[str, Any]:
     """Everything that determines a sweep (stored inside its log)."""
     from ._version import __version__
 
+    extra = {} if channel is None or channel.iid else {"channel": channel.to_dict()}
     return {
+        **extra,
         "instance": instance.to_dict(),
         "policies": [p.to_dict() for p in policies],
         "runs": int(runs),

@@ -21,8 +21,10 @@ from .errors import LogError
 
 #: Name of the format, stored under ``format`` in the run metadata.
 FORMAT_NAME = "corraoi.slot-log"
-#: Version of the format this code writes and the newest it reads (see docs/log-format.md).
-FORMAT_VERSION = 1
+#: The newest version of the format this code reads and writes (see docs/log-format.md):
+#: a run is written as version 1 (built-in policy, i.i.d. channel) or 2 (a plug-in policy or a
+#: Markov/trace channel), ``RunConfig.format_version``.
+FORMAT_VERSION = 2
 TOPIC = "/corraoi/slot"
 SCHEMA_NAME = "corraoi.SlotEvent"
 MESSAGE_ENCODING = "json"
@@ -132,7 +134,7 @@ def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[s
     theory = analyse(inst)
     return {
         "format": FORMAT_NAME,
-        "format_version": str(FORMAT_VERSION),
+        "format_version": str(config.format_version),
         "corraoi_version": config.version,
         "label": config.label,
         "instance": inst.name,
@@ -155,12 +157,15 @@ def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[s
     }
 
 
-def end_metadata(*, slots: int, horizon: int, last: SlotBlock | None) -> dict[str, str]:
-    """The ``corraoi.end`` metadata record written by a writer that finished its file."""
-    out = {
-        "status": "complete" if slots >= horizon else "interrupted",
-        "slots": str(slots),
-    }
+def end_metadata(
+    *, slots: int, horizon: int, last: SlotBlock | None, error: str | None = None
+) -> dict[str, str]:
+    """The ``corraoi.end`` metadata record written by a writer that finished its file
+    (``error``: the run stopped on that error, status ``failed``)."""
+    status = "complete" if slots >= horizon else "interrupted"
+    out = {"status": "failed" if error is not None else status, "slots": str(slots)}
+    if error is not None:
+        out["error"] = error
     if last is not None and len(last):
         out["regret"] = str(int(last.regret[-1]))
         out["estimator"] = repr(float(last.estimator[-1]))

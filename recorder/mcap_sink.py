@@ -18,7 +18,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from corraoi.block import RunConfig, SlotBlock
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, CorraoiError
 
 from .errors import WriteError
 from .format import (
@@ -179,6 +179,29 @@ class McapSink(Sink):
         self.finished = True
         return self.path
 
+    def fail(self, error: str) -> Path:
+        """The run stopped on ``error``: finish the file with status ``failed`` and that error,
+        and leave it at its ``.partial`` name (the final name is never written)."""
+        if self.closed:
+            return self.partial_path
+        if self._torn:
+            return self.abort() or self.partial_path
+        self.closed = True
+        try:
+            self._writer.flush()
+            self._writer.add_metadata(
+                END_METADATA,
+                end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last,
+                             error=error),
+            )  # fmt: skip
+            self._writer.finish()
+            self._file.flush()
+            self._file.close()
+        except OSError as exc:
+            self._close_file()
+            raise self._write_error(exc) from None
+        return self.partial_path
+
     def abort(self) -> Path | None:
         """Stop without finishing: the ``.partial`` file stays (readable up to its last
         chunk), unless no slot was written, in which case it is deleted (None)."""
@@ -217,6 +240,8 @@ class McapSink(Sink):
         interrupted = exc_type is not None and issubclass(exc_type, (KeyboardInterrupt, SystemExit))
         if exc_type is None or (interrupted and not self._torn):
             self.close()
+        elif isinstance(exc, CorraoiError) and not isinstance(exc, WriteError):
+            self.fail(str(exc))  # the simulation failed (e.g. a plug-in's bad arm): say so
         else:
             self.abort()
 

@@ -107,6 +107,11 @@ class RunLog:
         T = self.config.horizon
         if self.status == "complete":
             return f"complete: {self.n_slots} of {T} slots"
+        if self.status == "failed":
+            return (
+                f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
+                f"{self.end.get('error', '(no message)')}"
+            )
         if self.status == "interrupted":
             return (
                 f"cut short: the run was stopped after slot {self.n_slots} of {T} "
@@ -251,6 +256,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
     if not finished:
         status = "truncated"
+    elif end_md.get("status") == "failed":
+        status = "failed"
     elif n_slots < config.horizon:
         status = "interrupted"
     else:

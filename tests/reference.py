@@ -13,7 +13,7 @@ import numpy as np
 
 from corraoi.block import SlotBlock
 from corraoi.instance import Instance
-from corraoi.policies import BASE_UCB, PolicySpec
+from corraoi.policies import PolicySpec
 from corraoi.theory import analyse, policy_pseudo_rewards
 
 
@@ -39,6 +39,8 @@ def expected_candidates(
 
 def check_run(inst: Instance, policy: PolicySpec, run: SlotBlock) -> None:
     K = inst.K
+    cls = policy.resolve()
+    is_ucb = str(cls.score).endswith(":ucb_score")
     th = analyse(inst)
     spol = policy_pseudo_rewards(inst)
     pulls = np.zeros(K, dtype=np.int64)
@@ -49,9 +51,9 @@ def check_run(inst: Instance, policy: PolicySpec, run: SlotBlock) -> None:
         arm = int(run.arm[i])
         x = int(run.x[i])
         mu = np.where(pulls > 0, succ / np.maximum(pulls, 1), 0.0)
-        forced = policy.base == BASE_UCB and bool((pulls == 0).any())
+        forced = is_ucb and bool((pulls == 0).any())
         # the candidate set
-        if policy.correlated and not forced:
+        if cls.correlated and not forced:
             A, kemps = expected_candidates(pulls, succ, int(t), spol)
             options = [A | (np.arange(K) == e) for e in kemps]
             assert any(np.array_equal(run.candidates[i], o) for o in options), (
@@ -61,7 +63,7 @@ def check_run(inst: Instance, policy: PolicySpec, run: SlotBlock) -> None:
         else:
             assert run.candidates[i].all(), t
         # the AoI-aware override
-        override = policy.aoi_aware and mu.max() > 0 and age * mu.max() > 1
+        override = cls.aoi_aware and mu.max() > 0 and age * mu.max() > 1
         assert bool(run.override[i]) == override, t
         if override:
             assert mu[arm] == mu.max(), t
@@ -70,8 +72,8 @@ def check_run(inst: Instance, policy: PolicySpec, run: SlotBlock) -> None:
         else:
             cand = run.candidates[i]
             assert cand[arm], t
-            if policy.base == BASE_UCB:
-                index = mu + np.sqrt(policy.c * math.log(t) / pulls)
+            if is_ucb:
+                index = mu + np.sqrt(policy.params["c"] * math.log(t) / pulls)
                 assert index[arm] == index[cand].max(), (t, index, arm)
         # outcome, ages, state
         r = int(inst.Y[arm, x])

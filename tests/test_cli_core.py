@@ -8,7 +8,9 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from corraoi.cli import main
-from corraoi.policies import POLICY_NAMES
+from corraoi.policies import paper_names
+
+POLICY_NAMES = paper_names()
 
 
 def run(*args: str):
@@ -113,8 +115,11 @@ def test_sweep_bad_input():
     for args, needle in (
         (("-p", "cucv"), "did you mean cucb"),
         (("-p", "ucb", "--beta", "2"), "does not apply"),
-        (("-p", "ucb", "--c", "-1"), "c must be finite and > 0"),
-        (("-p", "ucb", "--c", "inf"), "c must be finite and > 0"),
+        (("-p", "ucb", "--c", "-1"), "parameter c=-1 must be in (0, inf)"),
+        (("-p", "ucb", "--c", "inf"), "parameter c=inf must be finite"),
+        (("-p", "sw-ucb", "--param", "window=0.5"), "window=0.5 must be a whole number"),
+        (("-p", "ucb", "--param", "window=10"), "parameter window does not apply to ucb"),
+        (("-p", "ucb", "--param", "c"), "--param 'c': expected NAME=VALUE"),
         (("-p", "ucb", "--beta", "1e309"), "beta does not apply to ucb"),
         (("--instance", "nope"), "no such instance file"),
     ):

@@ -111,7 +111,7 @@ def test_json_summary_and_options(tmp_path):
     )
     assert (r["slots"], r["complete"], r["params"]) == (1500, True, {"beta": 2.0})
     log = open_log(r["mcap"])
-    assert log.config.policy.beta == 2.0 and log.config.instance.name == "I2"
+    assert log.config.policy.params["beta"] == 2.0 and log.config.instance.name == "I2"
     assert log.read_all().pulls[-1].tolist() == r["pulls"]
     assert summary["view"].endswith(str(tmp_path / "r.rrd"))
 

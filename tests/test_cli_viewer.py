@@ -266,15 +266,15 @@ def test_recover_cli(tmp_path, record_mcap):
 def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
     a, _, _ = record_mcap("ucb", horizon=2000)
     b, _, _ = record_mcap("cucb", horizon=2000)
-    import corraoi._kernel
     import corraoi.engine
+    import corraoi.kernels
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the simulation engine was called")
 
     for name in ("simulate", "simulate_run", "Simulation", "streams_for_seed"):
         monkeypatch.setattr(corraoi.engine, name, forbidden)
-    monkeypatch.setattr(corraoi._kernel, "advance", forbidden)
+    monkeypatch.setattr(corraoi.kernels, "kernel_for", forbidden)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(a.read_bytes()[:60_000])
     for args in (
@@ -296,7 +296,7 @@ def test_the_viewer_does_not_import_the_engine():
     code = (
         "import sys, viewer, viewer.compare, viewer.replay, viewer.diffs, viewer.info, "
         "viewer.recover, corraoi.cli.viewer, recorder.reader, recorder.rerun_sink\n"
-        "bad = sorted(m for m in ('corraoi.engine', 'corraoi._kernel', 'numba') "
+        "bad = sorted(m for m in ('corraoi.engine', 'corraoi.kernels', 'numba') "
         "if m in sys.modules)\n"
         "print(','.join(bad))"
     )

@@ -11,8 +11,10 @@ import pytest
 
 from corraoi.bounds import cts_bound, cucb_bound
 from corraoi.instance import load_instance
-from corraoi.policies import POLICY_NAMES, make_policies, make_policy
+from corraoi.policies import make_policies, make_policy, paper_names
 from corraoi.sweep import PolicyResult, mean_ci95, run_policy, run_sweep
+
+POLICY_NAMES = paper_names()
 
 RUNS, T = 200, 10_000
 

@@ -135,17 +135,62 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
 
 
 @main.command("policies")
-def policies_cmd() -> None:
-    """List the registered policies and the parameters each reads."""
-    from ..policies import PARAMETERS, POLICY_NAMES, make_policy
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
+@handle_errors
+def policies_cmd(as_json: bool) -> None:
+    """List the policies: built-ins, then plug-ins found through entry points.
 
-    for name in POLICY_NAMES:
-        params = make_policy(name).params
-        desc = ", ".join(f"{k}={v:g}" for k, v in params.items()) or "-"
-        click.echo(f"{name:22s} {desc}")
+    \b
+    Plug-ins are also taken by path: --policy FILE.py:Class or --policy package.module:Class
+    (see docs/extending.md). A broken entry point is listed with its error; the rest work.
+    --param NAME=VALUE sets a parameter of every listed policy that declares NAME.
+    """
+    from ..policies import available, paper_names
+
+    paper = set(paper_names())
+    entries = []
+    for a in available():
+        entry: dict[str, Any] = {"name": a.name, "source": a.source}
+        if a.cls is None:
+            entry.update(status="broken", error=a.error)
+        else:
+            entry.update(
+                status="ok",
+                tier=a.cls.tier,
+                paper=a.name in paper,
+                summary=a.cls.describe(),
+                reference=a.cls.reference,
+                color=list(a.cls.color) if a.cls.color else None,
+                params={
+                    k: {"default": p.default, "range": p.range_text(), "help": p.help}
+                    for k, p in a.cls.params.items()
+                },
+            )
+        entries.append(entry)
+    if as_json:
+        click.echo(json.dumps({"policies": entries}, indent=2))
+        return
+    for e in entries:
+        if e["status"] != "ok":
+            click.echo(f"{e['name']:22s} BROKEN ({e['source']}): {e['error']}")
+            continue
+        params = ", ".join(f"{k}={v['default']:g}" for k, v in e["params"].items()) or "-"
+        where = "" if e["source"] == "built-in" else f"  [{e['source']}]"
+        click.echo(f"{e['name']:22s} {params:22s} {e['summary']}{where}")
     click.echo("")
-    for pname, (default, _, text) in PARAMETERS.items():
-        click.echo(f"--{pname} (default {default:g}): {text}")
+    seen: set[str] = set()
+    for e in entries:
+        for k, v in e.get("params", {}).items():
+            if k not in seen:
+                seen.add(k)
+                click.echo(
+                    f"--param {k}=VALUE  {v['help']} (default {v['default']:g}, {v['range']})"
+                )
+    click.echo(
+        "--policy all: the paper's twelve ("
+        + ", ".join(paper_names())
+        + ")"
+    )
 
 
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).

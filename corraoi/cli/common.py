@@ -123,14 +123,24 @@ def policy_option(default: tuple[str, ...] | None = None) -> Callable[[F], F]:
             default=default,
             required=default is None,
             metavar="NAME[,NAME...]",
-            help="Policy: ucb, ts, ts-gauss, cucb, cts, cts-gauss or aoi-aware-<any of those>; "
-            "a comma list, the flag repeated, or 'all'.",
+            help="Policy: a built-in (ucb, ts, ts-gauss, cucb, cts, cts-gauss, aoi-aware-<any>, "
+            "q-ucb, q-ts, sw-ucb, d-ts, ...: see 'corraoi policies'), a plug-in FILE.py:Class or "
+            "package.module:Class, or an entry-point name; a comma list, the flag repeated, or "
+            "'all' (the paper's twelve).",
         )(func)
 
     return deco
 
 
 def param_options(func: F) -> F:
+    func = click.option(
+        "--param",
+        "param",
+        multiple=True,
+        metavar="NAME=VALUE",
+        help="Set a policy parameter (repeatable); it applies to every listed policy that "
+        "declares NAME and is checked against its range ('corraoi policies' lists them).",
+    )(func)
     func = click.option(
         "--beta",
         type=float,
@@ -146,6 +156,18 @@ def param_options(func: F) -> F:
         help="UCB exploration constant for ucb/cucb: mu_hat + sqrt(c ln t / n) [default: 2].",
     )(func)
     return func
+
+
+def channel_option(func: F) -> F:
+    return click.option(
+        "--channel",
+        "channel",
+        default=None,
+        metavar="iid|markov|trace:PATH",
+        help="Hidden-state process: iid (X_t ~ p), markov (the instance's transition matrix), "
+        "or trace:PATH (replay the hidden path of a .mcap slot log or a text file of 1-based "
+        "states) [default: markov for instances with a transition matrix, else iid].",
+    )(func)
 
 
 def horizon_option(default: int) -> Callable[[F], F]:

@@ -19,6 +19,7 @@ import click
 
 from ..errors import UsageError
 from .common import (
+    channel_option,
     handle_errors,
     horizon_option,
     instance_option,
@@ -125,6 +126,7 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @horizon_option(10_000)
 @seed_option
 @param_options
+@channel_option
 @click.option(
     "-o",
     "--out",
@@ -151,6 +153,8 @@ def record(
     seed: int,
     c: float | None,
     beta: float | None,
+    param: tuple[str, ...],
+    channel: str | None,
     out: str | None,
     rrd: str | None,
     no_rrd: bool,
@@ -177,15 +181,18 @@ def record(
       corraoi record -p cts --connect          # into a viewer started with `rerun`
     """  # noqa: D301
     from ..block import RunConfig
+    from ..channels import parse_channel
     from ..instance import load_instance
-    from ..policies import make_policies
+    from ..policies import make_policies, parse_param_assignments
 
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
     inst = load_instance(instance)
-    specs = make_policies(policy, c=c, beta=beta)
-    configs = [RunConfig(inst, spec, seed, horizon) for spec in specs]
+    specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+    chan = parse_channel(channel, inst)
+    chan.check(inst, horizon)
+    configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
     plans = _plans(configs, out, rrd, no_rrd)
 
     from recorder.paths import check_output
@@ -257,11 +264,33 @@ def _record_one(
     simulate_run: Any,
 ) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
+    from ..pyengine import PolicyRuntimeError
+
+    start = time.perf_counter()
+    try:
+        return _record_into(plan, result, viewer_url, force, stop, bar, simulate_run, start)
+    except PolicyRuntimeError as exc:
+        from recorder.paths import partial_path
+
+        where = partial_path(plan.mcap)
+        left = f"; the log is left as {where}, marked failed" if where.exists() else ""
+        raise PolicyRuntimeError(f"{exc}{left}") from None
+
+
+def _record_into(
+    plan: _Plan,
+    result: _Result,
+    viewer_url: str | None,
+    force: bool,
+    stop: _Stop,
+    bar: Any,
+    simulate_run: Any,
+    start: float,
+) -> str | None:
     from recorder.errors import ViewerError, WriteError
     from recorder.mcap_sink import McapSink
 
     config = plan.config
-    start = time.perf_counter()
     problem: str | None = None
     rrd_error: WriteError | None = None
     with McapSink(plan.mcap, config, overwrite=force) as mcap:
@@ -272,7 +301,10 @@ def _record_one(
             output = RrdOutput(config, rrd_path=plan.rrd, viewer_url=viewer_url, overwrite=force)
             sink = RerunSink(output.recording, config.label, config)
         try:
-            for block in simulate_run(config.instance, config.policy, config.seed, config.horizon):
+            for block in simulate_run(
+                config.instance, config.policy, config.seed, config.horizon,
+                channel=config.channel,
+            ):  # fmt: skip
                 mcap.write(block)
                 if sink is not None:
                     sink.write(block)

@@ -16,6 +16,7 @@ import click
 
 from ..errors import ConfigError
 from .common import (
+    channel_option,
     handle_errors,
     horizon_option,
     instance_option,
@@ -80,6 +81,7 @@ def _write_text(path: Path, text: str) -> None:
 @horizon_option(10_000)
 @seed_option
 @param_options
+@channel_option
 @click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
 @click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=None,
@@ -98,6 +100,8 @@ def sweep(
     seed: int,
     c: float | None,
     beta: float | None,
+    param: tuple[str, ...],
+    channel: str | None,
     workers: int | None,
     out: Path | None,
     checkpoints: int,
@@ -116,20 +120,23 @@ def sweep(
       corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
       corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
     """
+    from ..channels import parse_channel
     from ..engine import check_instance, set_workers
     from ..instance import load_instance
-    from ..policies import make_policies
+    from ..policies import make_policies, parse_param_assignments
 
     inst = load_instance(instance)
     check_instance(inst)
-    specs = make_policies(policy, c=c, beta=beta)
+    specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+    chan = parse_channel(channel, inst)
+    chan.check(inst, horizon)
     if out is not None:
         check_out_dir(out, force=force)
     used = set_workers(workers)
     try:
         summary = sweep_instance(
             inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
-            checkpoints=checkpoints,
+            checkpoints=checkpoints, channel=chan,
         )  # fmt: skip
     except KeyboardInterrupt:
         left = ", ".join(str(out / f) for f in _sweep_files(out)) if out is not None else ""
@@ -156,6 +163,7 @@ def sweep_instance(
     out: Path | None,
     checkpoints: int = 200,
     label: str = "sweep",
+    channel: Any = None,
 ) -> dict[str, Any]:
     """One instance's sweep with a progress bar; with ``out``, its logs, summary and figure."""
     from ..progress import Progress
@@ -168,13 +176,14 @@ def sweep_instance(
     with Progress(len(specs) * horizon, label) as bar:
         if out is None:
             results = run_sweep(
-                inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update
+                inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update,
+                channel=channel,
             )
         else:
             stops = default_checkpoints(horizon, checkpoints)
             results = _sweep_to_dir(
                 out, inst, specs, runs=runs, horizon=horizon, seed=seed, stops=stops,
-                on_slots=bar.update,
+                on_slots=bar.update, channel=channel,
             )  # fmt: skip
     summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=workers)
     summary["wall_s"] = round(time.perf_counter() - start, 4)
@@ -195,6 +204,7 @@ def _sweep_to_dir(
     seed: int,
     stops: list[int],
     on_slots: Any,
+    channel: Any = None,
 ) -> Any:
     from recorder.sweep_log import SweepMcapSink
     from recorder.sweep_rerun import open_sweep_recording
@@ -203,7 +213,8 @@ def _sweep_to_dir(
 
     out.mkdir(parents=True, exist_ok=True)
     _clear_out_dir(out)
-    config = sweep_config(inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops)
+    config = sweep_config(inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
+                          channel=channel)  # fmt: skip
     with (
         SweepMcapSink(out / "sweep.mcap", config) as mcap_sink,
         open_sweep_recording(out / "sweep.rrd", config) as rerun_sink,
@@ -216,7 +227,7 @@ def _sweep_to_dir(
 
         return run_sweep(
             inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
-            on_checkpoint=hook, on_slots=on_slots,
+            on_checkpoint=hook, on_slots=on_slots, channel=channel,
         )  # fmt: skip
 
 

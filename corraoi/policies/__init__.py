@@ -31,8 +31,10 @@ from .registry import (
     resolve,
     unknown_policy_message,
 )
+from .variants import AOI_PREFIX
 
 __all__ = [
+    "AOI_PREFIX",
     "ENTRY_POINT_GROUP",
     "RGB",
     "CompiledPolicy",

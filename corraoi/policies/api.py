@@ -67,9 +67,7 @@ class Param:
             return "must be a whole number"
         if self.low is not None and (value < self.low or (self.open_low and value == self.low)):
             return f"must be in {self.range_text()}"
-        if self.high is not None and (
-            value > self.high or (self.open_high and value == self.high)
-        ):
+        if self.high is not None and (value > self.high or (self.open_high and value == self.high)):
             return f"must be in {self.range_text()}"
         return None
 
@@ -109,6 +107,9 @@ class CompiledPolicy(PolicyBase):
     """A policy made of numba-compiled hooks, inlined into the engine's kernel.
 
     Hooks (each ``@numba.njit(cache=True)``, defined at module level; signatures fixed):
+
+    Each hook is the function itself or its ``"module:function"`` name (imported only when the
+    engine composes the kernel, so listing and reading logs never needs numba):
 
     * ``forced(t, K, npull, nsucc, params, ps, pst) -> int``: an arm to play whatever the
       score says (UCB's first pull of every arm, forced exploration), or -1;
@@ -179,9 +180,9 @@ class PolicySpec:
     params: Mapping[str, float] = field(default_factory=dict)
     qualname: str = ""
     version: str = ""
-    tier: str = "compiled"
-    label: str = ""
-    color: RGB | None = None
+    tier: str = field(default="compiled", compare=False)
+    label: str = field(default="", compare=False)
+    color: RGB | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", dict(self.params))
@@ -221,9 +222,13 @@ class PolicySpec:
         ):
             raise PolicyError(f"policy {data['name']}: params must map names to numbers")
         plugin = data.get("plugin")
-        if plugin is None:
+        if plugin is None:  # a built-in: its display colour and label from this registry
+            from .registry import builtins
+
+            known = builtins().get(data["name"])
             return cls(name=data["name"], params={k: float(v) for k, v in params.items()},
-                       version=__version__)  # fmt: skip
+                       version=__version__, label=known.label if known else "",
+                       color=known.color if known else None)  # fmt: skip
         if not isinstance(plugin, Mapping):
             raise PolicyError(f"policy {data['name']}: 'plugin' must be an object")
         color = plugin.get("color")

@@ -15,62 +15,11 @@ uses the whole-history mu_hat, as for every policy.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
-from numba import njit
-
-from ..rng import beta as beta_sample
 from .api import CompiledPolicy, Param
 from .paper import C_PARAM
 from .variants import family
-
-
-@njit(cache=True)
-def sw_ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    window = int(params[0])
-    c = params[1]
-    lt = math.log(min(t, window)) if t > 1 else 0.0
-    for k in range(K):
-        n = ps[k]
-        if n == 0.0:
-            vals[k] = math.inf
-        else:
-            vals[k] = ps[K + k] / n + math.sqrt(c * lt / n)
-
-
-@njit(cache=True)
-def sw_ucb_update(t, arm, reward, K, npull, nsucc, params, ps):
-    # ps: [0, K) pulls in the window, [K, 2K) successes in the window, then a ring of the last
-    # `window` slots: arm + 1 (0 = empty) and reward.
-    window = int(params[0])
-    pos = (t - 1) % window
-    ring_arm = 2 * K + pos
-    ring_rew = 2 * K + window + pos
-    old = int(ps[ring_arm])
-    if old > 0:
-        ps[old - 1] -= 1.0
-        ps[K + old - 1] -= ps[ring_rew]
-    ps[ring_arm] = arm + 1.0
-    ps[ring_rew] = float(reward)
-    ps[arm] += 1.0
-    ps[K + arm] += float(reward)
-
-
-@njit(cache=True)
-def d_ts_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    for k in range(K):
-        if cand[k]:
-            vals[k] = beta_sample(pst, cache, ps[k] + 1.0, ps[K + k] + 1.0)
-
-
-@njit(cache=True)
-def d_ts_update(t, arm, reward, K, npull, nsucc, params, ps):
-    g = params[0]
-    for k in range(2 * K):
-        ps[k] *= g
-    ps[arm] += float(reward)
-    ps[K + arm] += 1.0 - float(reward)
 
 
 class SWUCB(CompiledPolicy):
@@ -83,8 +32,8 @@ class SWUCB(CompiledPolicy):
     }
     color = (227, 119, 194)  # pink
     reference = "Garivier and Moulines (2011), ALT"
-    score = sw_ucb_score
-    update = sw_ucb_update
+    score = "corraoi.policies.builtin_hooks:sw_ucb_score"
+    update = "corraoi.policies.builtin_hooks:sw_ucb_update"
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:
@@ -99,8 +48,8 @@ class DTS(CompiledPolicy):
                              open_low=True)}  # fmt: skip
     color = (127, 127, 127)  # grey
     reference = "Raj and Kalyani (2017), arXiv:1707.09727"
-    score = d_ts_score
-    update = d_ts_update
+    score = "corraoi.policies.builtin_hooks:d_ts_score"
+    update = "corraoi.policies.builtin_hooks:d_ts_update"
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:

@@ -12,71 +12,30 @@ probability is 0 and no draw is made), one more for the explored arm.
 
 from __future__ import annotations
 
-import math
-
-from numba import njit
-
-from ..rng import integer, uniform
 from .api import CompiledPolicy
-from .paper import ts_beta_score
 from .variants import family
 
 REFERENCE = "Krishnasamy, Sen, Johari, Shakkottai (2021), Operations Research 69(1)"
 
 
-@njit(cache=True)
-def _explore(t, K, pst):
-    if t < 2:
-        return -1
-    lt = math.log(t)
-    prob = 3.0 * K * lt * lt / t
-    if uniform(pst) < prob:
-        return integer(pst, K)
-    return -1
-
-
-@njit(cache=True)
-def q_ucb_forced(t, K, npull, nsucc, params, ps, pst):
-    arm = _explore(t, K, pst)
-    if arm >= 0:
-        return arm
-    for k in range(K):
-        if npull[k] == 0:
-            return k
-    return -1
-
-
-@njit(cache=True)
-def q_ts_forced(t, K, npull, nsucc, params, ps, pst):
-    return _explore(t, K, pst)
-
-
-@njit(cache=True)
-def q_ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    lt = math.log(t)
-    for k in range(K):
-        vals[k] = muhat[k] + math.sqrt(lt * lt / (2.0 * npull[k]))
-
-
 class QUCB(CompiledPolicy):
-    """Q-UCB: explore uniformly w.p. min(1, 3K ln^2 t / t), else argmax
-    mu_hat + sqrt(ln^2 t / (2 n_k))."""
+    """Q-UCB: explore w.p. min(1, 3K ln^2 t / t), else argmax mu_hat + ln t / sqrt(2 n_k)."""
 
     name = "q-ucb"
     color = (23, 190, 207)  # cyan
     reference = REFERENCE
-    forced = q_ucb_forced
-    score = q_ucb_score
+    forced = "corraoi.policies.builtin_hooks:q_ucb_forced"
+    score = "corraoi.policies.builtin_hooks:q_ucb_score"
 
 
 class QTS(CompiledPolicy):
-    """Q-TS: explore uniformly w.p. min(1, 3K ln^2 t / t), else Beta(S+1, F+1) sampling."""
+    """Q-TS: explore w.p. min(1, 3K ln^2 t / t), else Beta(S+1, F+1) sampling."""
 
     name = "q-ts"
     color = (188, 189, 34)  # olive
     reference = REFERENCE
-    forced = q_ts_forced
-    score = ts_beta_score
+    forced = "corraoi.policies.builtin_hooks:q_ts_forced"
+    score = "corraoi.policies.builtin_hooks:ts_beta_score"
 
 
 POLICIES = {

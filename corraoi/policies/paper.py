@@ -10,43 +10,13 @@ candidate set A_t + {k_emp}). AoI-aware rule: Fatale, Bhandari, Narula, Prakash,
 
 from __future__ import annotations
 
-import math
-
-from numba import njit
-
-from ..rng import beta as beta_sample
-from ..rng import normal
 from .api import CompiledPolicy, Param
-from .hooks import first_unpulled
 from .variants import family
 
 C_PARAM = Param(2.0, "UCB exploration constant: index mu_hat + sqrt(c ln t / n)", low=0.0,
                 open_low=True)  # fmt: skip
 BETA_PARAM = Param(1.0, "Gaussian TS variance scale: N(mu_hat, beta / (n + 1))", low=0.0,
                    open_low=True)  # fmt: skip
-
-
-@njit(cache=True)
-def ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    lt = math.log(t)
-    c = params[0]
-    for k in range(K):
-        vals[k] = muhat[k] + math.sqrt(c * lt / npull[k])
-
-
-@njit(cache=True)
-def ts_beta_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    for k in range(K):
-        if cand[k]:
-            vals[k] = beta_sample(pst, cache, nsucc[k] + 1.0, npull[k] - nsucc[k] + 1.0)
-
-
-@njit(cache=True)
-def ts_gauss_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
-    b = params[0]
-    for k in range(K):
-        if cand[k]:
-            vals[k] = muhat[k] + math.sqrt(b / (npull[k] + 1.0)) * normal(pst, cache)
 
 
 class UCB(CompiledPolicy):
@@ -56,8 +26,8 @@ class UCB(CompiledPolicy):
     params = {"c": C_PARAM}
     color = (31, 119, 180)  # blue
     reference = "Auer, Cesa-Bianchi, Fischer (2002)"
-    forced = first_unpulled
-    score = ucb_score
+    forced = "corraoi.policies.hooks:first_unpulled"
+    score = "corraoi.policies.builtin_hooks:ucb_score"
     paper = True
 
 
@@ -67,7 +37,7 @@ class TS(CompiledPolicy):
     name = "ts"
     color = (255, 127, 14)  # orange
     reference = "Agrawal and Goyal (2012)"
-    score = ts_beta_score
+    score = "corraoi.policies.builtin_hooks:ts_beta_score"
     paper = True
 
 
@@ -78,7 +48,7 @@ class TSGauss(CompiledPolicy):
     params = {"beta": BETA_PARAM}
     color = (140, 86, 75)  # brown
     reference = "Agrawal and Goyal (2013), Gaussian priors"
-    score = ts_gauss_score
+    score = "corraoi.policies.builtin_hooks:ts_gauss_score"
     paper = True
 
 

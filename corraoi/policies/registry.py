@@ -160,9 +160,7 @@ def resolve(token: str) -> Resolved:
     if ":" in raw:
         left, _, attr = raw.rpartition(":")
         if not left or not attr.isidentifier():
-            raise PolicyError(
-                f"policy {raw!r}: expected FILE.py:Class or package.module:Class"
-            )
+            raise PolicyError(f"policy {raw!r}: expected FILE.py:Class or package.module:Class")
         if _is_file_ref(left):
             path = Path(left).expanduser()
             if not path.is_file():
@@ -191,8 +189,8 @@ def resolve(token: str) -> Resolved:
                 raise PolicyError(
                     f"policy {raw!r}: its entry point {ep.value} is broken: {_one_line(exc)}"
                 ) from None
-            module = ep.value.split(":")[0]
-            return Resolved(cls, f"{module}:{cls.__name__}", _module_version(module))
+            modname = ep.value.split(":")[0]
+            return Resolved(cls, f"{modname}:{cls.__name__}", _module_version(modname))
     raise PolicyError(unknown_policy_message(raw))
 
 
@@ -242,9 +240,7 @@ def make_policy(token: str, **params: float | None) -> PolicySpec:
         value = float(decl.default if given is None else given)
         problem = decl.check(value)
         if problem is not None:
-            raise PolicyError(
-                f"policy {policy_name(cls)}: parameter {pname}={value:g} {problem}"
-            )
+            raise PolicyError(f"policy {policy_name(cls)}: parameter {pname}={value:g} {problem}")
         values[pname] = value
     return PolicySpec(
         name=policy_name(cls),
@@ -318,6 +314,5 @@ def make_policies(
                 f"{', '.join(policy_name(c) for c in classes.values())}{read_by}"
             )
     return [
-        make_policy(t, **{k: v for k, v in given.items() if k in classes[t].params})
-        for t in tokens
+        make_policy(t, **{k: v for k, v in given.items() if k in classes[t].params}) for t in tokens
     ]

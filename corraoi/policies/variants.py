@@ -21,16 +21,16 @@ def variant(
     """A subclass of ``base`` with the candidate set and/or the AoI-aware override on."""
     parts = []
     if correlated:
-        parts.append("restricted to the correlated candidate set A_t + {k_emp}")
+        parts.append("on the correlated candidate set")
     if aware:
-        parts.append("with the AoI-aware override (argmax mu_hat when age > 1/max mu_hat)")
+        parts.append("AoI-aware (argmax mu_hat when age > 1/max mu_hat)")
     attrs = {
         "name": name,
         "correlated": correlated,
         "aoi_aware": aware,
         "color": color if color is not None else base.color,
         "theorem": theorem,
-        "summary": f"{base.describe().rstrip('.')}, " + "; ".join(parts) + ".",
+        "summary": f"{base.name.upper()} " + ", ".join(parts) + ".",
         "reference": "; ".join(r for r in (base.reference, reference) if r),
         "__module__": base.__module__,
         "__doc__": base.__doc__,
