@@ -9,6 +9,7 @@ X path (common random numbers) -- and run ``i`` of a sweep is exactly the run th
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -146,10 +147,35 @@ class Simulation:
             self.pstate = np.zeros((R, max(S, 1)))
             self._fail = _bitsets(np.ascontiguousarray(policy_pseudo_rewards(instance)))
             self._py: Any = None
+            self._warm_up()
         else:
             self._py = self.cls(**policy.params)
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
+
+    def _warm_up(self) -> None:
+        """Compile (or load from the cache) the kernel now, with a call of zero slots, so that
+        timings of the simulation leave it out; the time goes to ``kernels.load_seconds``."""
+        from . import kernels
+
+        if self._kernel.signatures:
+            return
+        start = time.perf_counter()
+        R, K = self.pulls.shape
+        out = _Outputs(R, 0, K)
+        empty = np.empty(0, dtype=np.int64)
+        self._kernel(
+            self._cdf_rows, self._kind, self._trace, self._Y, *self._fail,
+            self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
+            self.t, 0,
+            self.lat, self.pol, self.ncache, self.pstate, self.xprev,
+            self.pulls, self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+            False, out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
+            out.cand, out.pulls, out.muhat,
+            empty, np.empty((R, 0), dtype=np.int64), np.empty((R, 0), dtype=np.int64),
+            np.empty((R, 0, K), dtype=np.int64),
+        )  # fmt: skip
+        kernels.load_seconds += time.perf_counter() - start
 
     @property
     def runs(self) -> int:
@@ -191,6 +217,7 @@ class Simulation:
         B = nslots if record else 0
         out = _Outputs(R, B, K)
         aoisum_before = self.aoisum.copy() if record else None
+        failure: PolicyRuntimeError | None = None
         if self._py is None:
             self._kernel(
                 self._cdf_rows, self._kind, self._trace, self._Y, *self._fail,
@@ -203,7 +230,13 @@ class Simulation:
                 snap_t, s_regret, s_aoisum, s_pulls,
             )  # fmt: skip
         else:
-            self._advance_python(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
+            done, failure = self._advance_python(
+                nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
+            )
+            if failure is not None:  # keep the slots before the failing one
+                nslots = done
+                out.trim(done)
+                snap_t = snap_t[snap_t <= self.t + done]
         snaps = [
             Snapshot(
                 t=int(ts),
@@ -215,7 +248,11 @@ class Simulation:
         ]
         t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)
         self.t += nslots
+        if failure is not None:
+            failure.done = nslots
         if not record:
+            if failure is not None:
+                raise failure
             return None, snaps
         assert aoisum_before is not None
         estimator = aoisum_before[:, None] + np.cumsum(out.aoi, axis=1) - t[None, :] / self.mu_star
@@ -233,6 +270,9 @@ class Simulation:
             pulls=out.pulls,
             candidates=out.cand,
         )
+        if failure is not None:
+            failure.partial = block if nslots > 0 else None
+            raise failure
         return block, snaps
 
     def _advance_python(
@@ -244,7 +284,8 @@ class Simulation:
         s_regret: np.ndarray,
         s_aoisum: np.ndarray,
         s_pulls: np.ndarray,
-    ) -> None:
+    ) -> tuple[int, PolicyRuntimeError | None]:
+        """Advance slot by slot; returns (slots done, the plug-in's failure or None)."""
         policy, state = self._py, self._state
         name = self.policy.name
         R, K = self.pulls.shape
@@ -259,13 +300,19 @@ class Simulation:
         mu = state.mu_hat
         state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
         if self.t == 0:
-            _call(name, 0, policy.reset, state)
+            try:
+                _call(name, 0, policy.reset, state)
+            except PolicyRuntimeError as exc:
+                return 0, exc
         si = 0
         for j in range(nslots):
             t = self.t + j + 1
             state.t = t
-            picked = _call(name, t, policy.select, t, state)
-            arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t)
+            try:
+                picked = _call(name, t, policy.select, t, state)
+                arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t)
+            except PolicyRuntimeError as exc:
+                return j, exc
             x = xs[:, j]
             rew = Y[arms, x]
             idx = offsets + arms
@@ -279,7 +326,6 @@ class Simulation:
             self.oracle_aoi[ybest[x] == 1] = 1
             self.regret += self.aoi - self.oracle_aoi
             self.aoisum += self.aoi
-            _call(name, t, policy.update, t, arms, rew, state)
             if record:
                 out.x[:, j] = x
                 out.arm[:, j] = arms
@@ -296,6 +342,11 @@ class Simulation:
                 s_aoisum[:, si] = self.aoisum
                 s_pulls[:, si] = self.pulls
                 si += 1
+            try:
+                _call(name, t, policy.update, t, arms, rew, state)
+            except PolicyRuntimeError as exc:
+                return j + 1, exc  # the slot itself happened
+        return nslots, None
 
 
 def _call(name: str, t: int, func: Any, *args: Any) -> Any:
@@ -328,6 +379,11 @@ class _Outputs:
         self.pulls = np.empty((R, B, K), dtype=np.int64)
         self.muhat = np.empty((R, B, K), dtype=np.float64)
 
+    def trim(self, done: int) -> None:
+        """Keep the first ``done`` slots (a plug-in failed after them)."""
+        for name, value in vars(self).items():
+            setattr(self, name, value[:, :done])
+
 
 def check_seeds(seeds: Sequence[int] | np.ndarray) -> np.ndarray:
     """The seeds as an int64 array (ConfigError for none, negative or non-integer)."""
@@ -357,7 +413,15 @@ def simulate(
     if block < 1:
         raise ConfigError(f"block size must be >= 1, got {block}")
     sim = Simulation(instance, policy, seeds, horizon, channel=channel)
-    while (out := sim.advance(block)) is not None:
+    while True:
+        try:
+            out = sim.advance(block)
+        except PolicyRuntimeError as exc:
+            if exc.partial is not None:  # hand over the slots before the failure first
+                yield exc.partial
+            raise
+        if out is None:
+            return
         yield out
 
 

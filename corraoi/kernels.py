@@ -43,6 +43,9 @@ _HOOK_LINES = (
     "from corraoi.policies.hooks import score_none as _score  # HOOKS",
     "from corraoi.policies.hooks import update_none as _update  # HOOKS",
 )
+#: Seconds this process spent compiling kernels or loading them from the cache (speed figures
+#: such as record's slots/s leave them out).
+load_seconds = 0.0
 _LOADED: dict[str, Any] = {}
 _LOCK = threading.Lock()
 

@@ -23,9 +23,17 @@ from .rng import argmax_random, beta, integer, normal, uniform
 
 
 class PolicyRuntimeError(CorraoiError):
-    """A policy that returned something that is not one valid arm per run."""
+    """A policy that failed or returned something that is not one valid arm per run.
+
+    ``done``: slots completed before the failure; ``partial``: their columns (when recording).
+    """
 
     exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.done = 0
+        self.partial: Any = None
 
 
 @njit(cache=True)

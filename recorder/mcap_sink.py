@@ -181,10 +181,11 @@ class McapSink(Sink):
 
     def fail(self, error: str) -> Path:
         """The run stopped on ``error``: finish the file with status ``failed`` and that error,
-        and leave it at its ``.partial`` name (the final name is never written)."""
+        and leave it at its ``.partial`` name (the final name is never written). A run that
+        failed before its first slot leaves no file, as any failed run."""
         if self.closed:
             return self.partial_path
-        if self._torn:
+        if self._torn or self.slots == 0:
             return self.abort() or self.partial_path
         self.closed = True
         try:

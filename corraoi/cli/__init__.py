@@ -39,6 +39,10 @@ def main() -> None:
       corraoi sweep --policy all        every policy over 200 paired runs, regret with 95% CI
       corraoi reproduce -o paper        the paper's simulations, figures and tables
     """
+    from .. import kernels
+
+    # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
+    kernels.on_compile = lambda message: click.echo(f"corraoi: {message} ...", err=True)
 
 
 # ---------------------------------------------------------------------------- instances
