@@ -173,9 +173,9 @@ class RunData:
     @cached_property
     def slots(self) -> pd.DataFrame:
         """One row per slot; dtypes as documented (``docs/analysis.md``)."""
-        pd = _pandas()
-        pa = _pyarrow()
-        table = pa.Table.from_batches(list(self.to_arrow()), schema=arrow_schema(self.K))
+        _pandas()
+        pyarrow = _pyarrow()
+        table = pyarrow.Table.from_batches(list(self.to_arrow()), schema=arrow_schema(self.K))
         frame: pd.DataFrame = table.to_pandas()
         return frame
 

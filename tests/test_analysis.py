@@ -169,7 +169,8 @@ def test_results_reader_takes_a_partitioned_dataset(tmp_path: Path):
     for inst in ("I1", "I2"):
         part = table.filter(pa.compute.equal(table["instance"], inst)).drop_columns(["instance"])
         (ds_dir / f"instance={inst}").mkdir(parents=True)
-        pq.write_table(part.replace_schema_metadata(md), ds_dir / f"instance={inst}" / "part-0.parquet")
+        where = ds_dir / f"instance={inst}" / "part-0.parquet"
+        pq.write_table(part.replace_schema_metadata(md), where)
     a = read_results(single)
     b = read_results(ds_dir).sort_values(["instance", "run"]).reset_index(drop=True)
     pd.testing.assert_frame_equal(a, b)

@@ -57,7 +57,8 @@ def test_results_file_has_the_documented_columns_and_metadata(swept):
     assert sorted(set(df["run"])) == list(range(RUNS))
     assert (df["seed"] == df["run"] + 5).all()
     assert set(df.loc[df.policy == "ucb", "params"]) == {'{"c": 2.0}'}
-    md = {k.decode(): v.decode() for k, v in pq.read_schema(out / "results.parquet").metadata.items()}
+    raw = pq.read_schema(out / "results.parquet").metadata
+    md = {k.decode(): v.decode() for k, v in raw.items()}
     assert md["corraoi_version"] == __version__ and md["format_version"] == "1"
     assert json.loads(md["sweep_config"]) == log.config
 

@@ -112,8 +112,14 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     from mcap.writer import CompressionType, Writer
 
     from recorder.errors import LogError
-    from recorder.format import END_METADATA, FLUSH_EVERY, NS_PER_SLOT, TOPIC, decode_messages
-    from recorder.format import MCAP_INDEX_TYPES
+    from recorder.format import (
+        END_METADATA,
+        FLUSH_EVERY,
+        MCAP_INDEX_TYPES,
+        NS_PER_SLOT,
+        TOPIC,
+        decode_messages,
+    )
     from recorder.format import end_metadata as make_end
 
     src, cfg, n_slots = log.path, log.config, log.n_slots

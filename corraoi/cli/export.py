@@ -12,7 +12,8 @@ from .common import handle_errors
 @click.command()
 @click.argument("log", metavar="LOG", type=click.Path(path_type=Path))
 @click.option("--out", "-o", "out", type=click.Path(path_type=Path), required=True,
-              metavar="FILE", help="FILE.csv or FILE.parquet (the format is the extension).")  # fmt: skip
+              metavar="FILE",
+              help="FILE.csv or FILE.parquet (the format is the extension).")  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite FILE if it exists.")
 @handle_errors
 def export(log: Path, out: Path, force: bool) -> None:
