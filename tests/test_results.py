@@ -4,6 +4,7 @@ a sweep, and `corraoi export` round trips."""
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -176,3 +177,31 @@ def test_export_refusals_are_one_line(tmp_path: Path, record_mcap: Callable[...,
     res = run("export", str(tmp_path / "missing.mcap"), "-o", str(tmp_path / "m.csv"))
     assert res.exit_code == 2 and "no such file" in res.stderr
     assert not (tmp_path / "m.csv").exists() and not list(tmp_path.glob("*.partial"))
+
+
+def test_reproduce_writes_per_run_results_per_instance(tmp_path: Path):
+    out = tmp_path / "paper"
+    res = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
+    assert res.exit_code == 0, res.output
+    for inst in ("I1", "I2"):
+        summary = json.loads((out / inst / "summary.json").read_text())
+        df = read_results(out / inst / "results.parquet")
+        assert set(df["instance"]) == {inst} and df["policy"].nunique() == 12
+        at_T = df[df.t == 200]
+        for name, group in at_T.groupby("policy"):
+            assert group["run"].tolist() == [0, 1, 2]
+            assert float(np.mean(group["regret"].to_numpy())) == (
+                summary["policies"][name]["regret_mean"]
+            )
+
+
+def test_sweep_without_pyarrow_warns_and_writes_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)  # import fails as if absent
+    out = tmp_path / "s"
+    res = run("sweep", "-p", "ucb", "-n", "2", "-T", "100", "-o", str(out), "--checkpoints", "5")
+    assert res.exit_code == 0, res.output
+    warning = 'results.parquet not written: install the analysis extra, pip install "corraoi['
+    assert warning in res.stderr
+    assert not (out / "results.parquet").exists() and (out / "sweep.mcap").is_file()
