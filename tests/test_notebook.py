@@ -29,3 +29,10 @@ def test_the_analysis_notebook_runs(tmp_path: Path):
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]  # fmt: skip
     assert images, "the paired comparison plot was drawn"
+    last = nb.cells[-1].outputs
+    try:
+        import rerun_notebook  # noqa: F401
+    except ImportError:
+        assert "rerun-notebook is not installed" in "".join(o.get("text", "") for o in last)
+    else:  # the Rerun viewer widget was displayed inline
+        assert any("application/vnd.jupyter.widget-view+json" in o.get("data", {}) for o in last)
