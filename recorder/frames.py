@@ -89,8 +89,8 @@ def block_batch(block: SlotBlock) -> pa.RecordBatch:
     pa = _pyarrow()
     K = block.mu_hat.shape[1]
     cols = block_columns(block)
-    return pa.RecordBatch.from_arrays([pa.array(cols[n]) for n, _ in slot_columns(K)],
-                                      schema=arrow_schema(K))  # fmt: skip
+    arrays = [pa.array(cols[name]) for name, _ in slot_columns(K)]
+    return pa.RecordBatch.from_arrays(arrays, schema=arrow_schema(K))
 
 
 class RunData:
@@ -205,5 +205,11 @@ def _missing(what: str) -> Exception:
     )
 
 
-__all__ = ["BATCH_SLOTS", "RunData", "arrow_schema", "block_batch", "block_columns",
-           "slot_columns"]  # fmt: skip
+__all__ = [
+    "BATCH_SLOTS",
+    "RunData",
+    "arrow_schema",
+    "block_batch",
+    "block_columns",
+    "slot_columns",
+]
