@@ -1,11 +1,27 @@
 """corraoi: correlated Age-of-Information bandits.
 
 The model (instances, theory), the twelve policies and the engine live here; the recorder
-and viewer packages build on them. Heavy pieces are imported lazily by the CLI.
+and viewer packages build on them. Heavy pieces are imported lazily by the CLI, and
+``corraoi.load`` (logs and sweeps as pandas tables) is imported on first use.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from ._version import __version__
 from .errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError
+
+if TYPE_CHECKING:
+    from .analysis import load
+
+
+def __getattr__(name: str) -> Any:
+    # corraoi.load imports pandas/pyarrow and the recorder only when it is first used
+    if name == "load":
+        from .analysis import load
+
+        return load
+    raise AttributeError(f"module 'corraoi' has no attribute {name!r}")
+
 
 __all__ = [
     "__version__",
@@ -14,4 +30,5 @@ __all__ = [
     "InstanceError",
     "PolicyError",
     "UsageError",
+    "load",
 ]

@@ -29,3 +29,7 @@ class PolicyError(UsageError):
 
 class ConfigError(UsageError):
     """A bad run setting (horizon, runs, seed, ...)."""
+
+
+class MissingExtraError(CorraoiError):
+    """An optional dependency is not installed; the message names the extra to install."""

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import orjson
+from mcap.writer import IndexType
 
 from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
 from corraoi.theory import analyse
@@ -43,6 +44,10 @@ MAX_SLOT = (2**64 - 1) // NS_PER_SLOT
 FLUSH_EVERY = 1000
 #: Message keys in the order the encoder writes them.
 MESSAGE_KEYS = FIELDS
+#: The summary indexes every MCAP file we write carries: chunk, message and metadata
+#: indexes. Not the attachment index: we write no attachment, and the mcap writer would
+#: otherwise end every file with an empty attachment-index summary group.
+MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
 
 _BOOL = (b"false", b"true")
 _TEMPLATE = (
@@ -309,6 +314,7 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MAX_SLOT",
+    "MCAP_INDEX_TYPES",
     "NS_PER_SLOT",
     "RUN_METADATA",
     "SCALAR_FIELDS",

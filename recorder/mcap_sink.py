@@ -25,6 +25,7 @@ from .format import (
     END_METADATA,
     FLUSH_EVERY,
     MAX_SLOT,
+    MCAP_INDEX_TYPES,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     RUN_METADATA,
@@ -85,7 +86,10 @@ class McapSink(Sink):
         self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
         try:
             self._writer = Writer(
-                self._file, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD
+                self._file,
+                chunk_size=_CHUNK_BYTES,
+                compression=CompressionType.ZSTD,
+                index_types=MCAP_INDEX_TYPES,
             )
             self._writer.start(profile="", library=library_name(config.version))
             schema_id = self._writer.register_schema(

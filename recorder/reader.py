@@ -147,6 +147,50 @@ class RunLog:
             return empty_block(self.config.instance.K)
         return parts[0] if len(parts) == 1 else SlotBlock.concat(parts)
 
+    def window(self, first: int, last: int) -> Iterator[SlotBlock]:
+        """The slots ``first..last`` (inclusive, 1-based t), one block per chunk read.
+
+        Chunks whose time range lies outside the window are skipped without being
+        decompressed or decoded: their ranges come from the summary's chunk index when the
+        file has one, else from each chunk's header (a file cut short).
+        """
+        first, last = max(int(first), 1), min(int(last), self.n_slots)
+        if first > last:
+            return
+        K, n = self.config.instance.K, self.config.instance.n_states
+        lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
+        expected = first
+        with _open(self.path) as f:
+            walker = _Walker(f, self.path, stop_at=self._data_end)
+            for offset in _chunk_offsets(f, walker, lo, hi):
+                f.seek(offset)
+                opcode, length = _RECORD.unpack(f.read(_RECORD.size))
+                if opcode != Opcode.CHUNK:
+                    raise LogError(f"{self.path}: the chunk index points at byte {offset}, "
+                                   "which holds no chunk")
+                chunk = walker._chunk(offset, length, read=True)
+                assert chunk.records is not None
+                payloads = _payloads(chunk.records, self._channel_id, self.path, offset)
+                where = f"{self.path}: chunk at byte {offset}"
+                part = decode_messages(payloads, K, n, where=where)
+                keep = (part.t >= first) & (part.t <= last)
+                if not keep.any():
+                    continue
+                idx = np.flatnonzero(keep)
+                part = _slice(part, int(idx[0]), int(idx[-1]) + 1)
+                t = part.t
+                if t[0] != expected or not np.array_equal(
+                    t, np.arange(expected, expected + len(t), dtype=np.int64)
+                ):
+                    raise LogError(
+                        f"{where}: slots are not consecutive (expected slot {expected}, "
+                        f"got {int(t[0])}..{int(t[-1])})"
+                    )
+                expected += len(part)
+                yield part
+        if expected != last + 1:
+            raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
+
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
         K, n = self.config.instance.K, self.config.instance.n_states
         expected = 1
@@ -437,6 +481,29 @@ class _Walker:
         if crc and zlib.crc32(records) != crc:
             raise self._bad(f"chunk at byte {pos} is damaged (CRC mismatch)")
         return _Chunk(pos, start, end_time, records)
+
+
+def _chunk_offsets(f: BinaryIO, walker: _Walker, lo: int, hi: int) -> list[int]:
+    """Byte offsets of the chunks whose message times overlap [lo, hi] (ns), in order."""
+    try:
+        from mcap.reader import SeekingReader
+
+        f.seek(0)
+        summary = SeekingReader(f).get_summary()
+    except Exception:  # noqa: BLE001 - no footer or summary: walk the chunk headers instead
+        summary = None
+    if summary is not None and summary.chunk_indexes:
+        return sorted(
+            c.chunk_start_offset
+            for c in summary.chunk_indexes
+            if c.message_end_time >= lo and c.message_start_time <= hi
+        )
+    f.seek(0)
+    return [
+        c.offset
+        for kind, c in walker.records(read_chunks=False)
+        if kind == "chunk" and isinstance(c, _Chunk) and c.end_time >= lo and c.start_time <= hi
+    ]
 
 
 def _records_in(data: bytes, path: Path, offset: int) -> Iterator[tuple[int, int, int]]:

@@ -31,7 +31,7 @@ from corraoi._version import __version__
 from corraoi.policies import AOI_PREFIX
 
 from .errors import LogError, WriteError
-from .format import SWEEP_METADATA
+from .format import MCAP_INDEX_TYPES, SWEEP_METADATA
 from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
@@ -39,8 +39,10 @@ if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pa
 
 #: Name of the format, stored under ``format`` in the sweep metadata.
 FORMAT_NAME = "corraoi.sweep-log"
-#: Version this code writes and the newest it reads.
-FORMAT_VERSION = 1
+#: Version this code writes and the newest it reads. Version 2: a CI half-width that is
+#: not defined (one run) is an absent key, where version 1 wrote null (type lists such as
+#: ["number", "null"] are rejected by Foxglove's JSON-schema parser).
+FORMAT_VERSION = 2
 TOPIC = "/corraoi/sweep"
 SCHEMA_NAME = "corraoi.SweepPoint"
 MESSAGE_ENCODING = "json"
@@ -53,6 +55,8 @@ NS_PER_SLOT = 1_000_000_000
 #: The open chunk is closed and handed to the OS once FLUSH_EVERY messages wait in it and
 #: whenever the policy changes, so a killed sweep loses fewer than FLUSH_EVERY checkpoints.
 FLUSH_EVERY = 32
+#: Keys a message may lack: a half-width is absent with a single run.
+OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95")
 #: Message keys in the order the writer writes them.
 MESSAGE_KEYS = (
     "policy",
@@ -144,7 +148,7 @@ def _arms(config: dict[str, Any]) -> int:
 
 def sweep_schema(K: int) -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of one :data:`SCHEMA_NAME` message for K arms."""
-    nullable = {"type": ["number", "null"], "minimum": 0}
+    half_width = {"type": "number", "minimum": 0}
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": f"urn:corraoi:sweep-point:v{FORMAT_VERSION}",
@@ -161,9 +165,9 @@ def sweep_schema(K: int) -> dict[str, Any]:
                 "sum_{s<=t} (aoi_s - oracle_aoi_s), in slots",
             },
             "regret_ci95": {
-                **nullable,
+                **half_width,
                 "description": "half-width of the 95% Student t confidence interval of "
-                "regret_mean, in slots; null with a single run",
+                "regret_mean, in slots; absent with a single run",
             },
             "estimator_mean": {
                 "type": "number",
@@ -171,9 +175,9 @@ def sweep_schema(K: int) -> dict[str, Any]:
                 "sum_{s<=t} aoi_s - t / mu*, in slots",
             },
             "estimator_ci95": {
-                **nullable,
+                **half_width,
                 "description": "half-width of the 95% confidence interval of estimator_mean, "
-                "in slots; null with a single run",
+                "in slots; absent with a single run",
             },
             "pull_share": {
                 "type": "array",
@@ -184,7 +188,7 @@ def sweep_schema(K: int) -> dict[str, Any]:
                 "maxItems": K,
             },
         },
-        "required": list(MESSAGE_KEYS),
+        "required": [k for k in MESSAGE_KEYS if k not in OPTIONAL_KEYS],
         "additionalProperties": False,
     }
 
@@ -251,7 +255,9 @@ class SweepMcapSink(Sink):
         metadata = sweep_metadata(config, flush_every=self.flush_every)
         self._stream: BinaryIO = open_partial(self.path, overwrite=overwrite, what="sweep log")
         try:
-            self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
+            self._writer = Writer(
+                self._stream, compression=CompressionType.ZSTD, index_types=MCAP_INDEX_TYPES
+            )
             self._writer.start(profile="", library=f"corraoi/{config.get('version', __version__)}")
             self._writer.add_metadata(SWEEP_METADATA, metadata)
             schema_id = self._writer.register_schema(
@@ -303,17 +309,17 @@ class SweepMcapSink(Sink):
                 f"sweep point {point.policy} t={t}: pull_share has {share.size} entries, "
                 f"the instance has {self.K} arms"
             )
-        return orjson.dumps(
-            {
-                "policy": point.policy,
-                "t": t,
-                "regret_mean": float(point.regret_mean),
-                "regret_ci95": _opt(point.regret_ci95),
-                "estimator_mean": float(point.estimator_mean),
-                "estimator_ci95": _opt(point.estimator_ci95),
-                "pull_share": share.tolist(),
-            }
-        )
+        message = {
+            "policy": point.policy,
+            "t": t,
+            "regret_mean": float(point.regret_mean),
+            "regret_ci95": _opt(point.regret_ci95),
+            "estimator_mean": float(point.estimator_mean),
+            "estimator_ci95": _opt(point.estimator_ci95),
+            "pull_share": share.tolist(),
+        }
+        # an undefined half-width is an absent key (version 1 wrote null)
+        return orjson.dumps({k: v for k, v in message.items() if v is not None})
 
     def write(self, point: SweepPoint) -> None:
         """Append one point; flushes a chunk every ``flush_every`` points and per policy."""
@@ -568,7 +574,12 @@ def _build(
 
 def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve:
     def column(key: str) -> np.ndarray:
-        return np.array([np.nan if r[key] is None else r[key] for r in rows], dtype=np.float64)
+        # an absent key (version 2) or null (version 1) is an undefined half-width
+        if key in OPTIONAL_KEYS:
+            values = [r.get(key) for r in rows]
+        else:
+            values = [r[key] for r in rows]
+        return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
 
     try:
         t = np.array([r["t"] for r in rows], dtype=np.int64)
@@ -601,6 +612,7 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "NS_PER_SLOT",
+    "OPTIONAL_KEYS",
     "POLICY_COLORS",
     "SCHEMA_NAME",
     "SWEEP_METADATA",

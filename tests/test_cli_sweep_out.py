@@ -124,7 +124,9 @@ def test_an_interrupted_forced_sweep_leaves_no_old_complete_files(tmp_path: Path
     res = run(*args, "--force")
     assert res.exit_code == 130
     assert "interrupted; the unfinished logs:" in res.stderr and "sweep.mcap.partial" in res.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["sweep.mcap.partial", "sweep.rrd.partial"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "results.parquet.partial", "sweep.mcap.partial", "sweep.rrd.partial"
+    ]
     # an unfinished sweep is a sweep: refused without --force
     monkeypatch.setattr(corraoi.sweep, "checkpoint_point", real)
     again = run(*args)

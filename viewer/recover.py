@@ -112,7 +112,14 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     from mcap.writer import CompressionType, Writer
 
     from recorder.errors import LogError
-    from recorder.format import END_METADATA, FLUSH_EVERY, NS_PER_SLOT, TOPIC, decode_messages
+    from recorder.format import (
+        END_METADATA,
+        FLUSH_EVERY,
+        MCAP_INDEX_TYPES,
+        NS_PER_SLOT,
+        TOPIC,
+        decode_messages,
+    )
     from recorder.format import end_metadata as make_end
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
@@ -122,7 +129,10 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
         every = FLUSH_EVERY
     complete = _complete_length(fin)
     fin.seek(0)
-    writer = Writer(fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD)
+    writer = Writer(
+        fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD,
+        index_types=MCAP_INDEX_TYPES,
+    )  # fmt: skip
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     slot_channels: set[int] = set()

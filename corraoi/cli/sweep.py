@@ -27,7 +27,9 @@ from .common import (
 )
 
 #: What ``sweep -o DIR`` writes; a DIR holding any of them is refused without --force.
-SWEEP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
+SWEEP_FILES = (
+    "sweep.mcap", "sweep.rrd", "results.parquet", "summary.json", "summary.md", "figure.png"
+)
 #: Suffix of a file that is being written (recorder.paths.PARTIAL_SUFFIX).
 PARTIAL = ".partial"
 
@@ -90,6 +92,9 @@ def _write_text(path: Path, text: str) -> None:
 @click.option("--checkpoints", type=click.IntRange(min=2), default=200, show_default=True,
               help="With -o: about this many checkpoint slots per curve.")  # fmt: skip
 @click.option("--force", is_flag=True, help="With -o: overwrite a DIR that holds a sweep.")
+@click.option("--baseline", default=None, metavar="POLICY",
+              help="Also report, for every other policy, the mean and 95% CI of the per-run "
+              "regret difference against POLICY on the same hidden paths (paired).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
 @handle_errors
 def sweep(
@@ -106,6 +111,7 @@ def sweep(
     out: Path | None,
     checkpoints: int,
     force: bool,
+    baseline: str | None,
     as_json: bool,
 ) -> None:
     """Run policies over paired seeds and report the AoI regret at the horizon.
@@ -130,13 +136,18 @@ def sweep(
     specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
     chan = parse_channel(channel, inst)
     chan.check(inst, horizon)
+    if baseline is not None and baseline not in [s.name for s in specs]:
+        raise ConfigError(
+            f"--baseline {baseline}: not one of the swept policies "
+            f"({', '.join(s.name for s in specs)}); expected one of them"
+        )
     if out is not None:
         check_out_dir(out, force=force)
     used = set_workers(workers)
     try:
         summary = sweep_instance(
             inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
-            checkpoints=checkpoints, channel=chan,
+            checkpoints=checkpoints, channel=chan, baseline=baseline,
         )  # fmt: skip
     except KeyboardInterrupt:
         left = ", ".join(str(out / f) for f in _sweep_files(out)) if out is not None else ""
@@ -164,6 +175,7 @@ def sweep_instance(
     checkpoints: int = 200,
     label: str = "sweep",
     channel: Any = None,
+    baseline: str | None = None,
 ) -> dict[str, Any]:
     """One instance's sweep with a progress bar; with ``out``, its logs, summary and figure."""
     from ..progress import Progress
@@ -187,6 +199,12 @@ def sweep_instance(
             )  # fmt: skip
     summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=workers)
     summary["wall_s"] = round(time.perf_counter() - start, 4)
+    if baseline is not None:
+        from ..paired import paired_against
+
+        summary["baseline"] = baseline
+        for name, entry in paired_against(results, baseline).items():
+            summary["policies"][name].update(entry)
     if out is not None:
         _write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
         _write_text(out / "summary.md", summary_markdown(summary))
@@ -206,10 +224,13 @@ def _sweep_to_dir(
     on_slots: Any,
     channel: Any = None,
 ) -> Any:
+    from contextlib import ExitStack
+
     from recorder.sweep_log import SweepMcapSink
     from recorder.sweep_rerun import open_sweep_recording
 
     from ..sweep import checkpoint_point, run_sweep, sweep_config
+    from ..theory import analyse
 
     out.mkdir(parents=True, exist_ok=True)
     _clear_out_dir(out)
@@ -218,12 +239,27 @@ def _sweep_to_dir(
     with (
         SweepMcapSink(out / "sweep.mcap", config) as mcap_sink,
         open_sweep_recording(out / "sweep.rrd", config) as rerun_sink,
+        ExitStack() as stack,
     ):
+        results_sink = None
+        try:
+            import pyarrow.parquet  # noqa: F401
+        except ImportError:  # pyarrow (the analysis extra) is not installed
+            warn('results.parquet not written: install the analysis extra, '
+                 'pip install "corraoi[analysis]"')  # fmt: skip
+        else:
+            from recorder.results import ResultsWriter
+
+            results_sink = stack.enter_context(
+                ResultsWriter(out / "results.parquet", config, best_arm=analyse(inst).best_arm)
+            )
 
         def hook(policy: Any, snap: Any) -> None:
             point = checkpoint_point(policy, snap)
             mcap_sink.write(point)
             rerun_sink.write(point)
+            if results_sink is not None:
+                results_sink.write(policy, snap)
 
         return run_sweep(
             inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
@@ -264,6 +300,24 @@ def print_table(summary: dict[str, Any]) -> None:
             f"{pname:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
             f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
         )
+    if summary.get("baseline") is not None:
+        _print_paired(summary)
+
+
+def _print_paired(summary: dict[str, Any]) -> None:
+    base = summary["baseline"]
+    click.echo(f"paired against {base}: per-run regret(policy) - regret({base}), same seeds")
+    click.echo(f"{'policy':22s} {'diff':>10} {'+-paired':>9} {'+-unpaired':>11}")
+
+    def ci(v: float | None, width: int) -> str:
+        return f"{v:{width}.1f}" if v is not None else f"{'n/a':>{width}}"
+
+    for pname, s in summary["policies"].items():
+        if "paired_diff_mean" in s:
+            click.echo(
+                f"{pname:22s} {s['paired_diff_mean']:10.1f} {ci(s['paired_diff_ci95'], 9)} "
+                f"{ci(s['unpaired_diff_ci95'], 11)}"
+            )
 
 
 #: The paper's simulation settings (section "Simulations"; 200 runs as its published code).

@@ -1,0 +1,106 @@
+"""Export a slot log or a sweep's per-run results to CSV or Parquet, streamed and atomic.
+
+The table written is exactly what ``corraoi.load`` gives: ``.slots`` of a slot log (one
+row per slot, arms and states from 1) or ``.runs`` of a sweep (``results.parquet``). The
+format comes from the output's extension; the file is written as ``<out>.partial`` and
+renamed when complete.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from corraoi.errors import UsageError
+
+from .errors import WriteError
+from .paths import check_output, partial_path, publish, reason
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+#: Output formats by extension.
+FORMATS = {".csv": "csv", ".parquet": "parquet"}
+
+
+@dataclass(frozen=True)
+class Exported:
+    path: Path
+    kind: str  # "slots" or "runs"
+    rows: int
+    format: str
+
+
+def export_format(out: Path) -> str:
+    """The format named by ``out``'s extension, or a UsageError listing the known ones."""
+    fmt = FORMATS.get(out.suffix.lower())
+    if fmt is None:
+        raise UsageError(
+            f"{out}: unknown export format {out.suffix or '(no extension)'!r}, expected a "
+            f"file name ending in {' or '.join(FORMATS)}"
+        )
+    return fmt
+
+
+def export(
+    source: str | os.PathLike[str], out: str | os.PathLike[str], *, overwrite: bool = False
+) -> Exported:
+    """Write the table of ``source`` (slot log, sweep folder or sweep log) to ``out``."""
+    from corraoi.analysis import require_analysis
+
+    out_p = Path(out)
+    fmt = export_format(out_p)
+    require_analysis()
+    from .frames import RunData
+    from .results import SweepData, is_sweep_path, read_results_table
+
+    src = Path(source)
+    check_output(out_p, overwrite=overwrite, what=f"{fmt} export")
+    if is_sweep_path(src):
+        sweep = SweepData(src)
+        table = read_results_table(sweep.results_path)
+        rows = _write(out_p, fmt, table.schema, table.to_batches())
+        return Exported(out_p, "runs", rows, fmt)
+    run = RunData(src)
+    rows = _write(out_p, fmt, run.arrow_schema(), run.to_arrow())
+    return Exported(out_p, "slots", rows, fmt)
+
+
+def _write(out: Path, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBatch]) -> int:
+    import pyarrow.csv as pcsv
+    import pyarrow.parquet as pq
+
+    part = partial_path(out)
+    rows = 0
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        writer: pq.ParquetWriter | pcsv.CSVWriter
+        if fmt == "parquet":
+            writer = pq.ParquetWriter(str(part), schema, compression="zstd")
+        else:
+            writer = pcsv.CSVWriter(str(part), schema)
+        try:
+            for batch in _nonempty(batches):
+                writer.write_batch(batch)
+                rows += batch.num_rows
+        finally:
+            writer.close()
+    except OSError as exc:
+        raise WriteError(f"{part}: cannot write the export: {reason(exc)}") from None
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    publish(out, overwrite=True)
+    return rows
+
+
+def _nonempty(batches: Iterable[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+    for b in batches:
+        if b.num_rows:
+            yield b
+
+
+__all__ = ["Exported", "FORMATS", "export", "export_format"]

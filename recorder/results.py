@@ -1,0 +1,383 @@
+"""Per-run sweep results, ``results.parquet``: the writer and the reader side by side.
+
+One row per instance x policy x params x run x checkpoint (``docs/log-format.md``,
+section "Per-run results"). :class:`ResultsWriter` is fed by the sweep's checkpoint hook
+and writes a row group per policy (or per :data:`ROWS_PER_GROUP` rows) to
+``results.parquet.partial``, renamed when the sweep finishes: memory stays bounded by one
+row group whatever the number of runs. :func:`read_results` reads a single file or a
+dataset directory partitioned by instance (``results.parquet/instance=I1/part-0.parquet``).
+
+pyarrow (and pandas for the reader) are the optional extra ``analysis``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from corraoi._version import __version__
+
+from .errors import LogError, WriteError
+from .format import SWEEP_METADATA
+from .paths import Sink, partial_path, publish, reason
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import pyarrow as pa
+
+    from corraoi.engine import Snapshot
+
+#: File name inside a sweep folder.
+RESULTS_FILE = "results.parquet"
+#: Name of the format, in the Parquet key-value metadata under ``format``.
+FORMAT_NAME = "corraoi.results"
+#: Version this code writes and the newest it reads.
+FORMAT_VERSION = 1
+#: Rows buffered before a row group is written (a policy change also writes one).
+ROWS_PER_GROUP = 262_144
+#: The columns, in order, with their Arrow types (by name).
+COLUMNS: tuple[tuple[str, str], ...] = (
+    ("instance", "string"),
+    ("policy", "string"),
+    ("params", "string"),
+    ("horizon", "int64"),
+    ("run", "int64"),
+    ("seed", "int64"),
+    ("t", "int64"),
+    ("regret", "float64"),
+    ("estimator", "float64"),
+    ("best_arm_pulls", "int64"),
+)
+
+
+class ResultsError(LogError):
+    """A results file that cannot be read (missing, not Parquet, not ours, newer)."""
+
+
+def results_schema(metadata: dict[str, str] | None = None) -> pa.Schema:
+    """The Arrow schema of ``results.parquet`` (with ``metadata`` as key-value metadata)."""
+    import pyarrow as pa
+
+    types = {"string": pa.string(), "int64": pa.int64(), "float64": pa.float64()}
+    return pa.schema([(n, types[t]) for n, t in COLUMNS], metadata=metadata)
+
+
+def params_json(params: dict[str, float]) -> str:
+    """The ``params`` column: the policy's parameters as JSON with sorted keys."""
+    return json.dumps({k: float(v) for k, v in params.items()}, sort_keys=True)
+
+
+def results_metadata(config: dict[str, Any]) -> dict[str, str]:
+    """The key-value metadata: format, version, corraoi version, the sweep configuration."""
+    return {
+        "format": FORMAT_NAME,
+        "format_version": str(FORMAT_VERSION),
+        "corraoi_version": str(config.get("version", __version__)),
+        "numbering": "run from 0 (seed = master seed + run); t is the checkpoint slot",
+        "sweep_config": json.dumps(config, sort_keys=True),
+    }
+
+
+class ResultsWriter(Sink):
+    """Writes the per-run values of a sweep at its checkpoints to ``results.parquet``.
+
+    ``with ResultsWriter(path, config, best_arm=k) as w: w.write(policy, snapshot)``.
+    ``config`` is :func:`corraoi.sweep.sweep_config` (instance, horizon, seed, ...);
+    ``best_arm`` is the 0-based best arm, whose pulls fill ``best_arm_pulls``.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        config: dict[str, Any],
+        *,
+        best_arm: int,
+        rows_per_group: int = ROWS_PER_GROUP,
+    ) -> None:
+        import pyarrow.parquet as pq
+
+        self.path = Path(path)
+        self.part = partial_path(self.path)
+        self.config = config
+        self.instance = str((config.get("instance") or {}).get("name", ""))
+        self.horizon = int(config["horizon"])
+        self.seed = int(config["seed"])
+        self.best_arm = int(best_arm)
+        self.rows_per_group = int(rows_per_group)
+        self.rows = 0
+        self._schema = results_schema(results_metadata(config))
+        self._buffer: list[pa.RecordBatch] = []
+        self._buffered = 0
+        self._policy: str | None = None
+        self._closed = False
+        try:
+            self.part.unlink(missing_ok=True)
+            self._writer = pq.ParquetWriter(str(self.part), self._schema, compression="zstd")
+        except OSError as exc:
+            raise WriteError(f"{self.part}: cannot write the results: {reason(exc)}") from None
+
+    def write(self, policy: Any, snap: Snapshot) -> None:
+        """Append one row per run at ``snap.t`` for ``policy`` (a spec with name and params)."""
+        import pyarrow as pa
+
+        if self._closed:
+            raise ValueError(f"{self.path}: the results file is closed")
+        name = str(policy.name)
+        if self._policy is not None and name != self._policy:
+            self._flush()
+        self._policy = name
+        regret = np.asarray(snap.regret, dtype=np.float64)
+        R = regret.shape[0]
+        runs = np.arange(R, dtype=np.int64)
+        cols = [
+            pa.array([self.instance] * R, pa.string()),
+            pa.array([name] * R, pa.string()),
+            pa.array([params_json(policy.params)] * R, pa.string()),
+            pa.array(np.full(R, self.horizon, dtype=np.int64)),
+            pa.array(runs),
+            pa.array(runs + self.seed),
+            pa.array(np.full(R, int(snap.t), dtype=np.int64)),
+            pa.array(regret),
+            pa.array(np.asarray(snap.estimator, dtype=np.float64)),
+            pa.array(np.asarray(snap.pulls[:, self.best_arm], dtype=np.int64)),
+        ]
+        self._buffer.append(pa.RecordBatch.from_arrays(cols, schema=self._schema))
+        self._buffered += R
+        if self._buffered >= self.rows_per_group:
+            self._flush()
+
+    def _flush(self) -> None:
+        if not self._buffer:
+            return
+        import pyarrow as pa
+
+        table = pa.Table.from_batches(self._buffer, schema=self._schema)
+        try:
+            self._writer.write_table(table, row_group_size=max(table.num_rows, 1))
+        except OSError as exc:
+            raise WriteError(f"{self.part}: cannot write the results: {reason(exc)}") from None
+        self.rows += table.num_rows
+        self._buffer = []
+        self._buffered = 0
+
+    def _finish(self) -> None:
+        self._closed = True
+        try:
+            self._flush()
+        finally:
+            try:
+                self._writer.close()
+            except OSError as exc:
+                raise WriteError(
+                    f"{self.part}: cannot finish the results: {reason(exc)}"
+                ) from None
+
+    def close(self) -> Path:
+        """Write what is buffered, finish the file and rename it into place."""
+        if not self._closed:
+            self._finish()
+            publish(self.path, overwrite=True)
+        return self.path
+
+    def abort(self) -> Path:
+        """Finish the file with the rows so far and leave it at its ``.partial`` name."""
+        if not self._closed:
+            self._finish()
+        return self.part
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def _files(p: Path) -> list[Path]:
+    if p.is_dir():
+        return sorted(f for f in p.rglob("*.parquet") if f.is_file())
+    return [p]
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, str]:
+    """The key-value metadata of a results file (of its first part for a dataset)."""
+    import pyarrow.parquet as pq
+
+    p = Path(path)
+    if not p.exists():
+        part = partial_path(p)
+        hint = f" ({part} exists: the sweep did not finish)" if part.exists() else ""
+        raise ResultsError(f"{p}: no such results file{hint}")
+    files = _files(p)
+    if not files:
+        raise ResultsError(f"{p}: a directory without .parquet files (expected results)")
+    try:
+        raw = pq.read_schema(files[0]).metadata or {}
+    except (OSError, ValueError) as exc:
+        raise ResultsError(f"{files[0]}: not a readable Parquet file ({exc})") from None
+    md = {k.decode(): v.decode() for k, v in raw.items()}
+    if md.get("format") != FORMAT_NAME:
+        raise ResultsError(
+            f"{files[0]}: a Parquet file but not corraoi's per-run results "
+            f"(no format {FORMAT_NAME!r} in its metadata)"
+        )
+    version = md.get("format_version", "")
+    if not version.isdigit() or int(version) > FORMAT_VERSION:
+        raise ResultsError(
+            f"{files[0]}: results format version {version!r}; this corraoi reads up to "
+            f"{FORMAT_VERSION}: upgrade corraoi"
+        )
+    return md
+
+
+def read_results_table(path: str | os.PathLike[str]) -> pa.Table:
+    """The results as one Arrow table with the documented columns and types.
+
+    ``path`` is ``results.parquet`` (a file) or a dataset directory partitioned by
+    instance (``instance=I1/part-*.parquet``); the partition key becomes the ``instance``
+    column.
+    """
+    import pyarrow as pa
+    import pyarrow.dataset as ds
+
+    p = Path(path)
+    read_metadata(p)
+    try:
+        if p.is_dir():
+            dataset = ds.dataset(str(p), format="parquet", partitioning="hive")
+        else:
+            dataset = ds.dataset(str(p), format="parquet")
+        table = dataset.to_table()
+    except (OSError, ValueError, pa.ArrowException) as exc:
+        raise ResultsError(f"{p}: cannot read the results ({exc})") from None
+    names = [n for n, _ in COLUMNS]
+    missing = [n for n in names if n not in table.column_names]
+    if missing:
+        raise ResultsError(f"{p}: the results lack the column(s) {', '.join(missing)}")
+    schema = results_schema()
+    cols = [table.column(n).cast(schema.field(n).type) for n in names]
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def read_results(path: str | os.PathLike[str]) -> pd.DataFrame:
+    """``results.parquet`` (a file or a partitioned dataset) as a pandas DataFrame."""
+    frame: pd.DataFrame = read_results_table(path).to_pandas()
+    return frame
+
+
+# ---------------------------------------------------------------------------- sweeps
+
+
+def is_sweep_path(p: Path) -> bool:
+    """Whether ``p`` is a sweep folder, its results, or a sweep log (not a slot log)."""
+    if p.is_dir():
+        return any((p / f).exists() for f in (RESULTS_FILE, "sweep.mcap", "summary.json"))
+    if p.suffix == ".parquet":
+        return True
+    return p.is_file() and _first_metadata(p) == SWEEP_METADATA
+
+
+def _first_metadata(p: Path) -> str | None:
+    """The name of the first metadata record of an MCAP file (None: none, or not MCAP)."""
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
+
+    try:
+        with open(p, "rb") as f:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Metadata):
+                    return str(record.name)
+    except Exception:  # noqa: BLE001 - not MCAP or damaged: the slot-log reader says why
+        return None
+    return None
+
+
+class SweepData:
+    """A sweep folder, loaded: ``.runs`` (per-run results), ``.summary``, ``.curves``."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        p = Path(path)
+        # a partitioned results.parquet is a directory too: its parent is the sweep folder
+        self.folder = p.parent if (p.is_file() or p.suffix == ".parquet") else p
+        self.results_path = p if p.suffix == ".parquet" else self.folder / RESULTS_FILE
+        self.log_path = p if p.suffix == ".mcap" else self.folder / "sweep.mcap"
+
+    def __repr__(self) -> str:
+        return f"SweepData({str(self.folder)!r})"
+
+    @cached_property
+    def runs(self) -> pd.DataFrame:
+        """One row per policy x run x checkpoint (columns in ``docs/log-format.md``)."""
+        if not self.results_path.exists() and not partial_path(self.results_path).exists():
+            raise ResultsError(
+                f"{self.results_path}: no per-run results in {self.folder} (written by "
+                "`corraoi sweep -o DIR` with the analysis extra installed)"
+            )
+        return read_results(self.results_path)
+
+    @cached_property
+    def summary(self) -> dict[str, Any] | None:
+        """``summary.json`` (None when the folder has none)."""
+        f = self.folder / "summary.json"
+        if not f.exists():
+            return None
+        try:
+            out: dict[str, Any] = json.loads(f.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ResultsError(f"{f}: cannot read the summary ({exc})") from None
+        return out
+
+    @cached_property
+    def config(self) -> dict[str, Any]:
+        """The sweep configuration (from the results' metadata, else the sweep log)."""
+        if self.results_path.exists():
+            out: dict[str, Any] = json.loads(read_metadata(self.results_path)["sweep_config"])
+            return out
+        from .sweep_log import read_sweep
+
+        return read_sweep(self.log_path).config
+
+    @cached_property
+    def curves(self) -> pd.DataFrame:
+        """The sweep log's aggregated curves: policy, t, means, CI half-widths, shares."""
+        import pandas as pd
+
+        from .sweep_log import read_sweep
+
+        log = read_sweep(self.log_path)
+        parts = []
+        for name in log.policies:
+            c = log.curves[name]
+            part = pd.DataFrame(
+                {
+                    "policy": pd.Series([name] * len(c), dtype="string"),
+                    "t": c.t,
+                    "regret_mean": c.regret_mean,
+                    "regret_ci95": c.regret_ci95,
+                    "estimator_mean": c.estimator_mean,
+                    "estimator_ci95": c.estimator_ci95,
+                }
+            )
+            for k in range(c.pull_share.shape[1]):
+                part[f"pull_share_{k + 1}"] = c.pull_share[:, k]
+            parts.append(part)
+        return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+__all__ = [
+    "COLUMNS",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "RESULTS_FILE",
+    "ResultsError",
+    "ResultsWriter",
+    "SweepData",
+    "is_sweep_path",
+    "params_json",
+    "read_metadata",
+    "read_results",
+    "read_results_table",
+    "results_metadata",
+    "results_schema",
+]
