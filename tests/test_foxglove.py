@@ -17,7 +17,7 @@ from mcap.writer import CompressionType, Writer
 
 from corraoi.cli import main
 from corraoi.instance import load_instance
-from corraoi.policies import POLICY_NAMES, make_policies
+from corraoi.policies import make_policies, paper_names
 from corraoi.sweep import sweep_config
 from recorder.format import SWEEP_METADATA
 from recorder.sweep_log import SCHEMA_NAME, TOPIC, read_sweep
@@ -220,7 +220,7 @@ def test_the_shipped_layout_reads_fields_that_exist(written_files: dict[str, Pat
             used[topic].add(field)
     assert {"aoi", "oracle_aoi", "regret", "arm", "success"} <= used["/corraoi/slot"]
     assert "regret_mean" in used["/corraoi/sweep"]
-    assert policies == set(POLICY_NAMES)
+    assert policies == set(paper_names())
     assert {"Plot", "StateTransitions", "Tab"} <= kinds
     arm_panel = next(v for k, v in config.items() if k.startswith("StateTransitions!"))
     assert [p["value"] for p in arm_panel["paths"]][:2] == [
