@@ -1,49 +1,123 @@
-"""Engine benchmark: the paper's workload (I1, all twelve policies, 200 runs, T = 10,000).
+"""Engine benchmark: the paper's workload, the wide instance, and plain-Python plug-ins.
 
-Prints a table of wall seconds and run-slots per second per policy, the total, the cold
-start (numba compile or cache load) separately, and peak memory (max RSS of a fresh
-process) for the sweep at horizon 10,000 against 1,000,000.
+Prints four tables:
 
-    python benchmarks/bench_engine.py [--runs 200] [--horizon 10000] [--repeat 3]
+1. per policy, the paper's workload in-process (I1, 200 runs, T = 10,000; best of --repeat);
+2. the paper workload as whole processes, ``corraoi sweep --instance I1 --policy all --runs 200
+   --horizon 10000 --json`` (best of --repeat, warm kernel cache), and start-up (the same
+   command with one run of one slot);
+3. the wide instance (K = 256, n = 1024, pinned), 50 runs, T = 2000: CUCB against UCB and CTS
+   against TS on the same work;
+4. a plain-Python plug-in (tests/plugins/eps_greedy.py) in ``sweep`` on I1 with 200 runs;
+
+then peak memory (max RSS of a fresh process) at T = 10,000 and 1,000,000.
+
+    python benchmarks/bench_engine.py [--runs 200] [--horizon 10000] [--repeat 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PLUGIN = ROOT / "tests" / "plugins" / "eps_greedy.py"
 
 
-def workload(runs: int, horizon: int, repeat: int) -> None:
-    t0 = time.perf_counter()
+def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
     from corraoi.engine import Simulation, set_workers
     from corraoi.instance import load_instance
-    from corraoi.policies import POLICY_NAMES, make_policy
+    from corraoi.policies import builtins, make_policy, paper_names
 
     inst = load_instance("I1")
     workers = set_workers(None)
-    # cold start: import + compile (or load from numba's cache) + one tiny run
-    Simulation(inst, make_policy("ucb"), [0], 10).advance(10, record=False)
-    cold = time.perf_counter() - t0
-    best: dict[str, float] = {}
+    names = list(builtins()) if extra else paper_names()
+    times: dict[str, list[float]] = {n: [] for n in names}
     for _ in range(repeat):
-        for name in POLICY_NAMES:
-            sim = Simulation(inst, make_policy(name), list(range(runs)), horizon)
+        for name in names:
+            sim = Simulation(inst, make_policy(name), range(runs), horizon)
             s = time.perf_counter()
             sim.advance(horizon, record=False)
-            dt = time.perf_counter() - s
-            best[name] = min(best.get(name, float("inf")), dt)
+            times[name].append(time.perf_counter() - s)
     run_slots = runs * horizon
-    print(f"workload: I1, {len(best)} policies, {runs} runs, horizon {horizon}, "
-          f"{workers} threads, best of {repeat}")  # fmt: skip
-    print(f"{'policy':22s} {'wall s':>8} {'run-slots/s':>14}")
+    print(f"\n1. per policy: I1, {runs} runs, horizon {horizon}, {workers} threads, best of "
+          f"{repeat} (spread: max/min - 1 over the repeats)")  # fmt: skip
+    print(f"{'policy':22s} {'wall s':>8} {'run-slots/s':>14} {'spread':>7}")
+    best = {n: min(v) for n, v in times.items()}
     for name, dt in best.items():
-        print(f"{name:22s} {dt:8.3f} {run_slots / dt:14,.0f}")
-    total = sum(best.values())
-    print(f"{'total':22s} {total:8.3f} {run_slots * len(best) / total:14,.0f}")
-    print(f"cold start (import + compile or cache load): {cold:.2f} s")
+        spread = max(times[name]) / dt - 1
+        print(f"{name:22s} {dt:8.3f} {run_slots / dt:14,.0f} {spread:6.0%}")
+    paper = [best[n] for n in paper_names()]
+    print(f"{'total (paper twelve)':22s} {sum(paper):8.3f} "
+          f"{run_slots * len(paper) / sum(paper):14,.0f}")  # fmt: skip
+
+
+def whole_process(runs: int, horizon: int, repeat: int) -> None:
+    exe = [sys.executable, "-m", "corraoi", "sweep", "--instance", "I1", "--policy", "all",
+           "--json"]  # fmt: skip
+
+    def timed(args: list[str]) -> float:
+        s = time.perf_counter()
+        subprocess.run(exe + args, check=True, capture_output=True)
+        return time.perf_counter() - s
+
+    timed(["--runs", "1", "--horizon", "1"])  # warm the kernel cache
+    work = [timed(["--runs", str(runs), "--horizon", str(horizon)]) for _ in range(repeat)]
+    start = [timed(["--runs", "1", "--horizon", "1"]) for _ in range(repeat)]
+    print(f"\n2. whole process: corraoi sweep --instance I1 --policy all --runs {runs} "
+          f"--horizon {horizon} --json (best of {repeat}, warm kernel cache)")  # fmt: skip
+    print(f"{'what':40s} {'best s':>7} {'median s':>9}")
+    print(f"{'paper workload':40s} {min(work):7.2f} {statistics.median(work):9.2f}")
+    print(f"{'start-up (1 run of 1 slot)':40s} {min(start):7.2f} {statistics.median(start):9.2f}")
+
+
+def wide(repeat: int) -> None:
+    import numpy as np
+
+    from corraoi.engine import Simulation
+    from corraoi.instance import Instance
+    from corraoi.policies import make_policy
+
+    rng = np.random.default_rng(1)
+    p = rng.dirichlet(np.ones(1024))
+    Y = rng.random((256, 1024)) < 0.3
+    inst = Instance("wide", p, Y.astype(np.int64))
+    runs, T = 50, 2000
+    best: dict[str, float] = {}
+    for _ in range(repeat):
+        for name in ("ucb", "cucb", "ts", "cts"):
+            sim = Simulation(inst, make_policy(name), range(runs), T)
+            s = time.perf_counter()
+            sim.advance(T, record=False)
+            best[name] = min(best.get(name, float("inf")), time.perf_counter() - s)
+    print(f"\n3. wide instance (K = 256, n = 1024), {runs} runs, T = {T}, best of {repeat}")
+    print(f"{'policy':10s} {'wall s':>8}  ratio")
+    for a, b in (("ucb", "cucb"), ("ts", "cts")):
+        print(f"{a:10s} {best[a]:8.3f}")
+        print(f"{b:10s} {best[b]:8.3f}  {best[b] / best[a]:.2f} x {a} (target <= 1.5)")
+
+
+def python_tier(runs: int, horizon: int, repeat: int) -> None:
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policies
+    from corraoi.sweep import default_checkpoints, run_sweep
+
+    spec = make_policies([f"{PLUGIN}:EpsilonGreedy"])
+    inst = load_instance("I1")
+    best = float("inf")
+    for _ in range(repeat):
+        s = time.perf_counter()
+        run_sweep(inst, spec, runs=runs, horizon=horizon,
+                  checkpoints=default_checkpoints(horizon))  # fmt: skip
+        best = min(best, time.perf_counter() - s)
+    print(f"\n4. plain-Python plug-in (eps_greedy.py) in sweep: I1, {runs} runs, T = {horizon},"
+          f" best of {repeat}")  # fmt: skip
+    print(f"wall {best:.3f} s, {runs * horizon / best:,.0f} run-slots/s (target >= 1,000,000)")
 
 
 def peak_rss(horizon: int, runs: int, policies: str) -> float:
@@ -64,18 +138,24 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--horizon", type=int, default=10_000)
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--all-builtins", action="store_true", help="table 1 for every built-in")
     ap.add_argument("--memory-policies", default="ucb,cts")
     ap.add_argument("--skip-memory", action="store_true")
     args = ap.parse_args()
-    print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
-    workload(args.runs, args.horizon, args.repeat)
+    load = os.getloadavg()[0]
+    print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
+          f"load average {load:.2f} at start")  # fmt: skip
+    per_policy(args.runs, args.horizon, args.repeat, args.all_builtins)
+    whole_process(args.runs, args.horizon, args.repeat)
+    wide(args.repeat)
+    python_tier(args.runs, args.horizon, args.repeat)
     if not args.skip_memory:
         small = peak_rss(10_000, args.runs, args.memory_policies)
         large = peak_rss(1_000_000, args.runs, args.memory_policies)
         print(
-            f"peak memory ({args.memory_policies}, {args.runs} runs): T=10,000 {small:.1f} MiB,"
-            f" T=1,000,000 {large:.1f} MiB, ratio {large / small:.3f}"
+            f"\npeak memory ({args.memory_policies}, {args.runs} runs): T=10,000 {small:.1f} "
+            f"MiB, T=1,000,000 {large:.1f} MiB, ratio {large / small:.3f}"
         )
 
 

@@ -22,7 +22,7 @@ from .channels import Channel, default_channel
 from .errors import ConfigError, CorraoiError
 from .instance import Instance
 from .policies.api import CompiledPolicy, PolicySpec
-from .pyengine import PolicyRuntimeError, RunState, Streams, check_arms
+from .pyengine import PolicyRuntimeError, RunState, Streams, apply_slot, check_arms
 from .rng import streams_for_seed, streams_for_seeds
 from .theory import InstanceTheory, analyse, policy_pseudo_rewards
 
@@ -293,11 +293,8 @@ class Simulation:
         draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
                     nslots, xs)  # fmt: skip
         Y = self._Y
-        ybest = Y[self.best]
-        flat_pulls = self.pulls.reshape(-1)
-        flat_succ = self.succ.reshape(-1)
-        offsets = np.arange(R, dtype=np.int64) * K
         mu = state.mu_hat
+        rew = np.empty(R, dtype=np.int8)
         state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
         if self.t == 0:
             try:
@@ -314,22 +311,12 @@ class Simulation:
             except PolicyRuntimeError as exc:
                 return j, exc
             x = xs[:, j]
-            rew = Y[arms, x]
-            idx = offsets + arms
-            flat_pulls[idx] += 1
-            flat_succ[idx] += rew
-            np.divide(self.succ, self.pulls, out=mu, where=self.pulls > 0)
-            ok = rew == 1
-            self.aoi += 1
-            self.aoi[ok] = 1
-            self.oracle_aoi += 1
-            self.oracle_aoi[ybest[x] == 1] = 1
-            self.regret += self.aoi - self.oracle_aoi
-            self.aoisum += self.aoi
+            apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
+                       self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
             if record:
                 out.x[:, j] = x
                 out.arm[:, j] = arms
-                out.succ[:, j] = ok
+                out.succ[:, j] = rew == 1
                 out.aoi[:, j] = self.aoi
                 out.oaoi[:, j] = self.oracle_aoi
                 out.regret[:, j] = self.regret

@@ -50,6 +50,38 @@ def _integers(pol, high, out):
 
 
 @njit(cache=True)
+def _integers_scalar(pol, high, out):
+    for r in range(out.shape[0]):
+        out[r] = integer(pol[r], high)
+
+
+@njit(cache=True)
+def apply_slot(arms, x, Y, best, pulls, succ, mu, aoi, oaoi, regret, aoisum, rewards):
+    """One slot of every run after the policy chose ``arms``: rewards, counts, empirical
+    means, ages and regret (in one compiled call; the Python tier's bookkeeping)."""
+    R, K = pulls.shape
+    for r in range(R):
+        a = arms[r]
+        rew = Y[a, x[r]]
+        rewards[r] = rew
+        pulls[r, a] += 1
+        succ[r, a] += rew
+        mu[r, a] = succ[r, a] / pulls[r, a]
+        aoi[r] = 1 if rew == 1 else aoi[r] + 1
+        oaoi[r] = 1 if Y[best, x[r]] == 1 else oaoi[r] + 1
+        regret[r] += aoi[r] - oaoi[r]
+        aoisum[r] += aoi[r]
+
+
+@njit(cache=True)
+def _argmax_all(pol, vals, out):
+    K = vals.shape[1]
+    mask = np.ones(K, dtype=np.bool_)
+    for r in range(vals.shape[0]):
+        out[r] = argmax_random(vals[r], mask, pol[r], K)
+
+
+@njit(cache=True)
 def _normals(pol, cache, out):
     for r in range(out.shape[0]):
         for j in range(out.shape[1]):
@@ -84,16 +116,21 @@ class Streams:
 
     def random(self, size: int | None = None) -> np.ndarray:
         """Uniforms in [0, 1): shape (runs,) or (runs, size)."""
-        out = np.empty((self.runs, 1 if size is None else int(size)))
+        out = np.empty((self._pol.shape[0], 1 if size is None else int(size)))
         _uniforms(self._pol, out)
         return out[:, 0] if size is None else out
 
     def integers(self, high: int | np.ndarray) -> np.ndarray:
         """A uniform integer in [0, high) per run (``high`` a scalar or (runs,), >= 1)."""
-        h = np.broadcast_to(np.asarray(high, dtype=np.int64), (self.runs,))
+        out = np.empty(self._pol.shape[0], dtype=np.int64)
+        if isinstance(high, (int, np.integer)):
+            if high < 1:
+                raise ValueError("integers: high must be >= 1")
+            _integers_scalar(self._pol, int(high), out)
+            return out
+        h = np.broadcast_to(np.asarray(high, dtype=np.int64), out.shape)
         if (h < 1).any():
             raise ValueError("integers: high must be >= 1")
-        out = np.empty(self.runs, dtype=np.int64)
         _integers(self._pol, np.ascontiguousarray(h), out)
         return out
 
@@ -119,9 +156,11 @@ class Streams:
         """Per run, the index of the largest value (among ``mask``), ties uniformly at random
         -- the rule the built-ins use."""
         vals = np.ascontiguousarray(values, dtype=np.float64)
-        m = np.ones(vals.shape, dtype=np.bool_) if mask is None else np.ascontiguousarray(mask)
         out = np.empty(vals.shape[0], dtype=np.int64)
-        _argmax(self._pol, vals, m, out)
+        if mask is None:
+            _argmax_all(self._pol, vals, out)
+        else:
+            _argmax(self._pol, vals, np.ascontiguousarray(mask, dtype=np.bool_), out)
         return out
 
 

@@ -1,0 +1,66 @@
+"""docs/extending.md runs as shown: its plug-in files, its commands and its test example."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "docs" / "extending.md"
+
+
+def blocks(lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", DOC.read_text(), flags=re.S)
+
+
+def test_first_python_block_is_the_eps_greedy_plugin_file():
+    first = blocks("python")[0]
+    assert first.splitlines()[0] == "# eps_greedy.py"
+    assert "class EpsilonGreedy(Policy)" in first and "Param(0.1" in first
+
+
+def test_every_command_runs_as_shown(tmp_path: Path):
+    for code in blocks("python"):
+        head = code.splitlines()[0]
+        if re.fullmatch(r"# \w+\.py", head):
+            (tmp_path / head[2:]).write_text(code)
+    site = tmp_path / "site"
+    bindir = Path(sys.executable).parent
+    env = {
+        **os.environ,
+        "PATH": f"{bindir}{os.pathsep}{os.environ['PATH']}",
+        "PYTHONPATH": f"{site}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    for block in blocks("bash"):
+        for line in block.splitlines():
+            command = line.split("  #")[0].strip()
+            if not command:
+                continue
+            if command.startswith("pip install"):
+                # the same install, into a folder of the test's (not the test environment)
+                package = ROOT / command.split()[-1]
+                command = (f"{sys.executable} -m pip install -q --no-deps --no-build-isolation "
+                           f"--target {site} {package}")  # fmt: skip
+            res = subprocess.run(command, shell=True, cwd=tmp_path, env=env,
+                                 capture_output=True, text=True, timeout=300)  # fmt: skip
+            assert res.returncode == 0, (command, res.stdout[-2000:], res.stderr[-2000:])
+            assert "Traceback" not in res.stderr, (command, res.stderr)
+            if command.startswith("corraoi policies"):
+                assert re.search(r"^eps-greedy\s", res.stdout, flags=re.M), res.stdout
+    assert (tmp_path / "ep.mcap").exists() and (tmp_path / "cucb-on-trace.mcap").exists()
+
+
+def test_the_doc_test_example_passes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    example = next(b for b in blocks("python") if "check_policy" in b)
+    (tmp_path / "eps_greedy.py").write_text(blocks("python")[0])
+    monkeypatch.chdir(tmp_path)
+    namespace: dict[str, object] = {}
+    exec(compile(example, "extending.md", "exec"), namespace)
+    test = namespace["test_my_policy_conforms"]
+    assert callable(test)
+    test(tmp_path)
