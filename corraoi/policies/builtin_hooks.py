@@ -13,7 +13,7 @@ import math
 from numba import njit
 
 from ..rng import beta as beta_sample
-from ..rng import integer, normal, uniform
+from ..rng import gamma_dc, integer, normal, uniform
 
 
 @njit(cache=True)
@@ -26,9 +26,26 @@ def ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
 
 @njit(cache=True)
 def ts_beta_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
+    # Beta(S + 1, F + 1) as Gamma(S + 1) / (Gamma(S + 1) + Gamma(F + 1)), with each arm's
+    # Marsaglia-Tsang constants cached in ps (d_a, c_a, d_b, c_b; 0 = to compute): the same
+    # draws as rng.beta, about 1.5x faster.
     for k in range(K):
         if cand[k]:
-            vals[k] = beta_sample(pst, cache, nsucc[k] + 1.0, npull[k] - nsucc[k] + 1.0)
+            if ps[k] == 0.0:
+                da = nsucc[k] + 1.0 - 1.0 / 3.0
+                db = npull[k] - nsucc[k] + 1.0 - 1.0 / 3.0
+                ps[k] = da
+                ps[K + k] = 1.0 / math.sqrt(9.0 * da)
+                ps[2 * K + k] = db
+                ps[3 * K + k] = 1.0 / math.sqrt(9.0 * db)
+            ga = gamma_dc(pst, cache, ps[k], ps[K + k])
+            gb = gamma_dc(pst, cache, ps[2 * K + k], ps[3 * K + k])
+            vals[k] = ga / (ga + gb)
+
+
+@njit(cache=True)
+def ts_beta_update(t, arm, reward, K, npull, nsucc, params, ps):
+    ps[arm] = 0.0  # the played arm's posterior changed: recompute its constants
 
 
 @njit(cache=True)

@@ -12,6 +12,8 @@ probability is 0 and no draw is made), one more for the explored arm.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from .api import CompiledPolicy
 from .variants import family
 
@@ -36,6 +38,11 @@ class QTS(CompiledPolicy):
     reference = REFERENCE
     forced = "corraoi.policies.builtin_hooks:q_ts_forced"
     score = "corraoi.policies.builtin_hooks:ts_beta_score"
+    update = "corraoi.policies.builtin_hooks:ts_beta_update"
+
+    @classmethod
+    def state_size(cls, K: int, params: Mapping[str, float]) -> int:
+        return 4 * K  # each arm's cached sampler constants
 
 
 POLICIES = {

@@ -10,6 +10,8 @@ candidate set A_t + {k_emp}). AoI-aware rule: Fatale, Bhandari, Narula, Prakash,
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from .api import CompiledPolicy, Param
 from .variants import family
 
@@ -38,7 +40,12 @@ class TS(CompiledPolicy):
     color = (255, 127, 14)  # orange
     reference = "Agrawal and Goyal (2012)"
     score = "corraoi.policies.builtin_hooks:ts_beta_score"
+    update = "corraoi.policies.builtin_hooks:ts_beta_update"
     paper = True
+
+    @classmethod
+    def state_size(cls, K: int, params: Mapping[str, float]) -> int:
+        return 4 * K  # each arm's cached sampler constants
 
 
 class TSGauss(CompiledPolicy):
