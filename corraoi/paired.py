@@ -42,7 +42,7 @@ def paired_diff(policy: np.ndarray, baseline: np.ndarray) -> dict[str, float | N
 
 def paired_against(results: Sequence[PolicyResult], baseline: str) -> dict[str, dict[str, Any]]:
     """For every policy but ``baseline``: its :func:`paired_diff` of the regret at T."""
-    by_name = {r.policy.name: r for r in results}
+    by_name = {r.name: r for r in results}
     if baseline not in by_name:
         raise ConfigError(
             f"--baseline {baseline}: not one of the swept policies "

@@ -71,7 +71,7 @@ def sweep_summary(
         b = policy_bound(instance, r.policy, horizon)
         if b is not None:
             entry["bound"] = b.to_dict()
-        policies[r.policy.name] = entry
+        policies[r.name] = entry
     ranking = sorted(policies, key=lambda n: policies[n]["regret_mean"])
     for rank, name in enumerate(ranking, start=1):
         policies[name]["rank"] = rank

@@ -47,27 +47,45 @@ def mean_ci95(values: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray
 
 @dataclass
 class PolicyResult:
-    """Final figures of one policy over all runs of a sweep."""
+    """Final figures of one policy over all runs of a sweep.
+
+    ``pulls`` (R, K) per run, or only what the summary needs: ``best_pulls`` (R,) and
+    ``pulls_mean`` (K,) (a grid's cells keep sums of pulls, not every run's). ``label``
+    names the policy in tables (a policy swept over several parameter values gets one each).
+    """
 
     policy: PolicySpec
     regret: np.ndarray  # (R,) pathwise regret at T
     estimator: np.ndarray  # (R,) sum(aoi) - T / mu*
-    pulls: np.ndarray  # (R, K)
+    pulls: np.ndarray | None  # (R, K)
     best_arm: int
     wall_s: float
+    label: str = ""
+    best_pulls: np.ndarray | None = None  # (R,)
+    pulls_mean: np.ndarray | None = None  # (K,)
+    horizon: int = 0
+
+    @property
+    def name(self) -> str:
+        return self.label or self.policy.name
 
     def summary(self) -> dict[str, Any]:
         m, h = mean_ci95(self.regret)
         em, eh = mean_ci95(self.estimator)
-        total = self.pulls.sum(axis=1)
-        share = float((self.pulls[:, self.best_arm] / total).mean())
+        if self.pulls is not None:
+            share = float((self.pulls[:, self.best_arm] / self.pulls.sum(axis=1)).mean())
+            means = self.pulls.mean(axis=0)
+        else:
+            assert self.best_pulls is not None and self.pulls_mean is not None
+            share = float((self.best_pulls / self.horizon).mean())
+            means = self.pulls_mean
         return {
             "regret_mean": float(m),
             "regret_ci95": _finite(float(h)),
             "estimator_mean": float(em),
             "estimator_ci95": _finite(float(eh)),
             "best_arm_share": share,
-            "pulls_mean": [float(v) for v in self.pulls.mean(axis=0)],
+            "pulls_mean": [float(v) for v in means],
             "wall_s": round(self.wall_s, 4),
         }
 

@@ -24,13 +24,12 @@ from corraoi._version import __version__
 
 from .errors import LogError, WriteError
 from .format import SWEEP_METADATA
-from .paths import Sink, partial_path, publish, reason
+from .paths import partial_path, reason
 
 if TYPE_CHECKING:
     import pandas as pd
     import pyarrow as pa
 
-    from corraoi.engine import Snapshot
 
 #: File name inside a sweep folder.
 RESULTS_FILE = "results.parquet"
@@ -83,112 +82,61 @@ def results_metadata(config: dict[str, Any]) -> dict[str, str]:
     }
 
 
-class ResultsWriter(Sink):
-    """Writes the per-run values of a sweep at its checkpoints to ``results.parquet``.
+def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list[Any]]) -> Path:
+    """Compact a grid's finished chunks into ``path`` (``results.parquet``), a dataset
+    partitioned by instance: ``instance=<name>/part-0.parquet``, rows in grid order (cell,
+    checkpoint, run). Written to ``<path>.partial`` and swapped in when complete."""
+    import shutil
+    from urllib.parse import quote
 
-    ``with ResultsWriter(path, config, best_arm=k) as w: w.write(policy, snapshot)``.
-    ``config`` is :func:`corraoi.sweep.sweep_config` (instance, horizon, seed, ...);
-    ``best_arm`` is the 0-based best arm, whose pulls fill ``best_arm_pulls``.
-    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
 
-    def __init__(
-        self,
-        path: str | os.PathLike[str],
-        config: dict[str, Any],
-        *,
-        best_arm: int,
-        rows_per_group: int = ROWS_PER_GROUP,
-    ) -> None:
-        import pyarrow.parquet as pq
-
-        self.path = Path(path)
-        self.part = partial_path(self.path)
-        self.config = config
-        self.instance = str((config.get("instance") or {}).get("name", ""))
-        self.horizon = int(config["horizon"])
-        self.seed = int(config["seed"])
-        self.best_arm = int(best_arm)
-        self.rows_per_group = int(rows_per_group)
-        self.rows = 0
-        self._schema = results_schema(results_metadata(config))
-        self._buffer: list[pa.RecordBatch] = []
-        self._buffered = 0
-        self._policy: str | None = None
-        self._closed = False
-        try:
-            self.part.unlink(missing_ok=True)
-            self._writer = pq.ParquetWriter(str(self.part), self._schema, compression="zstd")
-        except OSError as exc:
-            raise WriteError(f"{self.part}: cannot write the results: {reason(exc)}") from None
-
-    def write(self, policy: Any, snap: Snapshot) -> None:
-        """Append one row per run at ``snap.t`` for ``policy`` (a spec with name and params)."""
-        import pyarrow as pa
-
-        if self._closed:
-            raise ValueError(f"{self.path}: the results file is closed")
-        name = str(policy.name)
-        if self._policy is not None and name != self._policy:
-            self._flush()
-        self._policy = name
-        regret = np.asarray(snap.regret, dtype=np.float64)
-        R = regret.shape[0]
-        runs = np.arange(R, dtype=np.int64)
-        cols = [
-            pa.array([self.instance] * R, pa.string()),
-            pa.array([name] * R, pa.string()),
-            pa.array([params_json(policy.params)] * R, pa.string()),
-            pa.array(np.full(R, self.horizon, dtype=np.int64)),
-            pa.array(runs),
-            pa.array(runs + self.seed),
-            pa.array(np.full(R, int(snap.t), dtype=np.int64)),
-            pa.array(regret),
-            pa.array(np.asarray(snap.estimator, dtype=np.float64)),
-            pa.array(np.asarray(snap.pulls[:, self.best_arm], dtype=np.int64)),
-        ]
-        self._buffer.append(pa.RecordBatch.from_arrays(cols, schema=self._schema))
-        self._buffered += R
-        if self._buffered >= self.rows_per_group:
-            self._flush()
-
-    def _flush(self) -> None:
-        if not self._buffer:
-            return
-        import pyarrow as pa
-
-        table = pa.Table.from_batches(self._buffer, schema=self._schema)
-        try:
-            self._writer.write_table(table, row_group_size=max(table.num_rows, 1))
-        except OSError as exc:
-            raise WriteError(f"{self.part}: cannot write the results: {reason(exc)}") from None
-        self.rows += table.num_rows
-        self._buffer = []
-        self._buffered = 0
-
-    def _finish(self) -> None:
-        self._closed = True
-        try:
-            self._flush()
-        finally:
-            try:
-                self._writer.close()
-            except OSError as exc:
-                raise WriteError(
-                    f"{self.part}: cannot finish the results: {reason(exc)}"
-                ) from None
-
-    def close(self) -> Path:
-        """Write what is buffered, finish the file and rename it into place."""
-        if not self._closed:
-            self._finish()
-            publish(self.path, overwrite=True)
-        return self.path
-
-    def abort(self) -> Path:
-        """Finish the file with the rows so far and leave it at its ``.partial`` name."""
-        if not self._closed:
-            self._finish()
-        return self.part
+    target = Path(path)
+    tmp = partial_path(target)
+    if tmp.exists():
+        shutil.rmtree(tmp) if tmp.is_dir() else tmp.unlink()
+    full = results_schema()
+    schema = pa.schema([f for f in full if f.name != "instance"],
+                       metadata=results_metadata({**grid.to_dict(), "version": __version__}))
+    by_instance: dict[str, list[Any]] = {}
+    for cell in grid.cells:
+        by_instance.setdefault(cell.instance.name, []).append(cell)
+    try:
+        for name, cells in by_instance.items():
+            folder = tmp / f"instance={quote(name, safe='')}"
+            folder.mkdir(parents=True)
+            with pq.ParquetWriter(str(folder / "part-0.parquet"), schema,
+                                  compression="zstd") as writer:  # fmt: skip
+                for cell in cells:
+                    chunks = [p for p in parts.get(cell.key, []) if p.chunk.start < grid.runs]
+                    regret = np.concatenate([p.regret for p in chunks])[: grid.runs]
+                    estimator = np.concatenate([p.estimator for p in chunks])[: grid.runs]
+                    best = np.concatenate([p.best_pulls for p in chunks])[: grid.runs]
+                    R, S = regret.shape
+                    t = np.asarray(chunks[0].t, dtype=np.int64)
+                    runs = np.tile(np.arange(R, dtype=np.int64), S)
+                    n = R * S
+                    cols = [
+                        pa.array([cell.policy.name] * n, pa.string()),
+                        pa.array([params_json(cell.policy.params)] * n, pa.string()),
+                        pa.array(np.full(n, cell.horizon, dtype=np.int64)),
+                        pa.array(runs),
+                        pa.array(runs + grid.seed),
+                        pa.array(np.repeat(t, R)),
+                        pa.array(regret.T.reshape(-1)),
+                        pa.array(estimator.T.reshape(-1)),
+                        pa.array(best.T.reshape(-1).astype(np.int64)),
+                    ]
+                    writer.write_table(pa.Table.from_arrays(cols, schema=schema))
+        if target.is_dir():
+            shutil.rmtree(target)
+        elif target.exists():
+            target.unlink()
+        os.replace(tmp, target)
+    except OSError as exc:
+        raise WriteError(f"{tmp}: cannot write the results: {reason(exc)}") from None
+    return target
 
 
 # ---------------------------------------------------------------------------- reading
@@ -302,6 +250,24 @@ class SweepData:
         self.folder = p.parent if (p.is_file() or p.suffix == ".parquet") else p
         self.results_path = p if p.suffix == ".parquet" else self.folder / RESULTS_FILE
         self.log_path = p if p.suffix == ".mcap" else self.folder / "sweep.mcap"
+        #: (instance, horizon) of a group folder inside a grid's folder: its rows only
+        self.group: tuple[str, int] | None = None
+        if not self.results_path.exists():
+            self._find_grid_results()
+
+    def _find_grid_results(self) -> None:
+        """A group folder of a grid (``DIR/I1``): the results are the grid's, filtered."""
+        manifest = self.folder.parent / "manifest.json"
+        if not manifest.is_file():
+            return
+        try:
+            groups = json.loads(manifest.read_text(encoding="utf-8")).get("groups", {})
+        except (OSError, ValueError):
+            return
+        entry = groups.get(self.folder.name)
+        if isinstance(entry, dict) and "instance" in entry:
+            self.results_path = self.folder.parent / RESULTS_FILE
+            self.group = (str(entry["instance"]), int(entry["horizon"]))
 
     def __repr__(self) -> str:
         return f"SweepData({str(self.folder)!r})"
@@ -314,7 +280,12 @@ class SweepData:
                 f"{self.results_path}: no per-run results in {self.folder} (written by "
                 "`corraoi sweep -o DIR` with the analysis extra installed)"
             )
-        return read_results(self.results_path)
+        frame = read_results(self.results_path)
+        if self.group is not None:
+            name, horizon = self.group
+            keep = (frame["instance"] == name) & (frame["horizon"] == horizon)
+            frame = frame[keep].reset_index(drop=True)
+        return frame
 
     @cached_property
     def summary(self) -> dict[str, Any] | None:
@@ -330,13 +301,13 @@ class SweepData:
 
     @cached_property
     def config(self) -> dict[str, Any]:
-        """The sweep configuration (from the results' metadata, else the sweep log)."""
-        if self.results_path.exists():
-            out: dict[str, Any] = json.loads(read_metadata(self.results_path)["sweep_config"])
-            return out
+        """The sweep configuration (from the sweep log, else the results' metadata: a grid)."""
         from .sweep_log import read_sweep
 
-        return read_sweep(self.log_path).config
+        if self.log_path.exists():
+            return read_sweep(self.log_path).config
+        out: dict[str, Any] = json.loads(read_metadata(self.results_path)["sweep_config"])
+        return out
 
     @cached_property
     def curves(self) -> pd.DataFrame:
@@ -371,7 +342,6 @@ __all__ = [
     "FORMAT_VERSION",
     "RESULTS_FILE",
     "ResultsError",
-    "ResultsWriter",
     "SweepData",
     "is_sweep_path",
     "params_json",

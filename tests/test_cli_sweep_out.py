@@ -58,7 +58,7 @@ def test_sweep_out_under_a_file_is_refused(tmp_path: Path):
     afile.write_text("x")
     res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "-o", str(afile / "sub"))
     assert res.exit_code == 2
-    assert "cannot create the directory" in res.output and "Traceback" not in res.output
+    assert "cannot create the folder" in res.output and "Traceback" not in res.output
 
 
 def test_identical_arms_are_a_stated_result(tmp_path: Path):
@@ -83,7 +83,7 @@ def test_reproduce_small(tmp_path: Path):
     text = (out / "summary.md").read_text()
     assert "Sweep: instance I1" in text and "Sweep: instance I2" in text
     again = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
-    assert again.exit_code == 2 and "already holds a reproduction" in again.output
+    assert again.exit_code == 2 and "already holds a sweep" in again.output
 
 
 def test_an_instance_that_cannot_be_simulated_writes_nothing(tmp_path: Path):
@@ -104,30 +104,34 @@ def test_empty_instance_name():
     assert res.exit_code == 2 and "empty instance name" in res.output
 
 
-def test_an_interrupted_forced_sweep_leaves_no_old_complete_files(tmp_path: Path, monkeypatch):
-    import corraoi.sweep
+def test_an_interrupted_forced_sweep_keeps_its_chunks_and_resumes(tmp_path: Path, monkeypatch):
+    import corraoi.experiments
 
     out = tmp_path / "s"
-    args = ["sweep", "-p", "ucb,cts", "-n", "2", "-T", "300", "-o", str(out), "--checkpoints", "10"]
+    args = ["sweep", "-p", "ucb,cts", "-n", "4", "-T", "300", "-o", str(out), "--checkpoints", "10",
+            "--chunk", "2"]  # fmt: skip
     assert run(*args).exit_code == 0
-    assert (out / "summary.json").exists()
-    real = corraoi.sweep.checkpoint_point
+    complete = (out / "sweep.mcap").read_bytes()
+    real = corraoi.experiments.run_chunk
     calls = []
 
-    def stop_midway(policy, snap):  # type: ignore[no-untyped-def]
+    def stop_midway(task, on_slots=None):  # type: ignore[no-untyped-def]
         calls.append(1)
-        if len(calls) == 5:
+        if len(calls) == 3:
             raise KeyboardInterrupt
-        return real(policy, snap)
+        return real(task, on_slots)
 
-    monkeypatch.setattr(corraoi.sweep, "checkpoint_point", stop_midway)
+    monkeypatch.setattr(corraoi.experiments, "run_chunk", stop_midway)
     res = run(*args, "--force")
     assert res.exit_code == 130
-    assert "interrupted; the unfinished logs:" in res.stderr and "sweep.mcap.partial" in res.stderr
-    assert sorted(p.name for p in out.iterdir()) == [
-        "results.parquet.partial", "sweep.mcap.partial", "sweep.rrd.partial"
-    ]
-    # an unfinished sweep is a sweep: refused without --force
-    monkeypatch.setattr(corraoi.sweep, "checkpoint_point", real)
+    assert f"finished chunks are saved in {out}: --resume continues" in res.stderr
+    # the old sweep's files are gone; the two finished chunks are kept
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "parts"]
+    assert len(list((out / "parts").glob("*.npz"))) == 2
+    # an unfinished sweep is a sweep: refused without --force or --resume
+    monkeypatch.setattr(corraoi.experiments, "run_chunk", real)
     again = run(*args)
-    assert again.exit_code == 2 and "sweep.mcap.partial" in again.output
+    assert again.exit_code == 2 and "--resume to continue" in again.output
+    resumed = run(*args, "--resume")
+    assert resumed.exit_code == 0 and "(2 chunk(s) run, 2 already done)" in resumed.stdout
+    assert (out / "sweep.mcap").read_bytes() == complete

@@ -58,10 +58,14 @@ def test_results_file_has_the_documented_columns_and_metadata(swept):
     assert sorted(set(df["run"])) == list(range(RUNS))
     assert (df["seed"] == df["run"] + 5).all()
     assert set(df.loc[df.policy == "ucb", "params"]) == {'{"c": 2.0}'}
-    raw = pq.read_schema(out / "results.parquet").metadata
+    # a dataset partitioned by instance, the grid in its metadata
+    part = out / "results.parquet" / "instance=I1" / "part-0.parquet"
+    raw = pq.read_schema(part).metadata
     md = {k.decode(): v.decode() for k, v in raw.items()}
     assert md["corraoi_version"] == __version__ and md["format_version"] == "1"
-    assert json.loads(md["sweep_config"]) == log.config
+    grid = json.loads(md["sweep_config"])
+    assert (grid["runs"], grid["seed"]) == (RUNS, 5)
+    assert [c["policy"]["name"] for c in grid["cells"]] == list(POLICIES)
 
 
 def test_per_run_results_average_to_the_printed_means_exactly(swept):
@@ -185,7 +189,7 @@ def test_reproduce_writes_per_run_results_per_instance(tmp_path: Path):
     assert res.exit_code == 0, res.output
     for inst in ("I1", "I2"):
         summary = json.loads((out / inst / "summary.json").read_text())
-        df = read_results(out / inst / "results.parquet")
+        df = corraoi.load(out / inst).runs  # the instance's rows of paper/results.parquet
         assert set(df["instance"]) == {inst} and df["policy"].nunique() == 12
         at_T = df[df.t == 200]
         for name, group in at_T.groupby("policy"):

@@ -113,7 +113,9 @@ def instance_option(func: F) -> F:
     )(func)
 
 
-def policy_option(default: tuple[str, ...] | None = None) -> Callable[[F], F]:
+def policy_option(
+    default: tuple[str, ...] | None = None, *, required: bool | None = None
+) -> Callable[[F], F]:
     def deco(func: F) -> F:
         return click.option(
             "--policy",
@@ -121,7 +123,7 @@ def policy_option(default: tuple[str, ...] | None = None) -> Callable[[F], F]:
             "policy",
             multiple=True,
             default=default,
-            required=default is None,
+            required=default is None if required is None else required,
             metavar="NAME[,NAME...]",
             help="Policy: a built-in (ucb, ts, ts-gauss, cucb, cts, cts-gauss, aoi-aware-<any>, "
             "q-ucb, q-ts, sw-ucb, d-ts, ...: see 'corraoi policies'), a plug-in FILE.py:Class or "

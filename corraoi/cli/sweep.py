@@ -1,6 +1,7 @@
-"""``corraoi sweep``: Monte Carlo sweeps, optionally streamed to a directory of logs and figures.
+"""``corraoi sweep`` and ``corraoi reproduce``: grids of Monte Carlo runs (corraoi.experiments),
+in this process or on a Dask cluster, optionally into a resumable results folder.
 
-recorder and viewer are imported inside the command (only with ``-o``).
+recorder and viewer are imported by the library only with ``-o``; Dask only with --scheduler.
 """
 
 from __future__ import annotations
@@ -14,268 +15,231 @@ from typing import Any
 
 import click
 
+from ..block import MAX_HORIZON, MAX_RUNS
 from ..errors import ConfigError
 from .common import (
     channel_option,
     handle_errors,
     horizon_option,
-    instance_option,
-    param_options,
     policy_option,
     seed_option,
     warn,
 )
 
-#: What ``sweep -o DIR`` writes; a DIR holding any of them is refused without --force.
-SWEEP_FILES = (
-    "sweep.mcap", "sweep.rrd", "results.parquet", "summary.json", "summary.md", "figure.png"
-)
-#: Suffix of a file that is being written (recorder.paths.PARTIAL_SUFFIX).
-PARTIAL = ".partial"
-
-
-def _sweep_files(out: Path) -> list[str]:
-    """The files of a sweep (finished or not) that ``out`` holds."""
-    names = [*SWEEP_FILES, *(f + PARTIAL for f in SWEEP_FILES)]
-    return [f for f in names if (out / f).exists()]
-
-
-def check_out_dir(out: Path, *, force: bool) -> None:
-    """Refuse a file, an unwritable directory, or one that already holds a sweep."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
-    if out.is_dir():
-        present = _sweep_files(out)
-        if present and not force:
-            raise ConfigError(
-                f"{out}: already holds a sweep ({', '.join(present)}); use --force to overwrite"
-            )
-        if not os.access(out, os.W_OK | os.X_OK):
-            raise ConfigError(f"{out}: directory is not writable")
-        return
-    parent = out.parent if str(out.parent) else Path(".")
-    probe = parent
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
-        raise ConfigError(f"{out}: cannot create the directory ({probe} is not writable)")
-
-
-def _clear_out_dir(out: Path) -> None:
-    """Remove an earlier sweep's files (reached only with --force), so that an interrupted
-    sweep never leaves the old complete files beside its own unfinished ones."""
-    for name in _sweep_files(out):
-        (out / name).unlink()
+#: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments).
+SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
+               "summary.md", "figure.png")  # fmt: skip
 
 
 def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + PARTIAL)
+    tmp = path.with_name(path.name + ".partial")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
 
 
 @click.command()
-@instance_option
-@policy_option(default=("all",))
-@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
-              help="Monte Carlo runs per policy (seeds seed .. seed+runs-1, shared by all "
-              "policies).")  # fmt: skip
-@horizon_option(10_000)
+@click.argument("experiment", required=False, type=click.Path(path_type=Path),
+                metavar="[EXPERIMENT.toml]")  # fmt: skip
+@click.option("--instance", "-i", "instance", multiple=True, metavar="NAME|PATH[,...]",
+              help="Instances: built-in names (I1, I2, GE) or instance files; a comma list or "
+              "the flag repeated [default: I1].")  # fmt: skip
+@policy_option(default=(), required=False)
+@click.option("--runs", "-n", type=click.IntRange(min=1, max=MAX_RUNS), default=None,
+              help="Monte Carlo runs per cell (seeds seed .. seed+runs-1, shared by every "
+              "policy and parameter value) [default: 200].")  # fmt: skip
+@click.option("--horizon", "-T", "horizon", multiple=True, metavar="T[,T...]",
+              help="Horizons (slots); a comma list sweeps each [default: 10000].")  # fmt: skip
 @seed_option
-@param_options
+@click.option("--param", "param", multiple=True, metavar="NAME=V[,V...]",
+              help="Sweep a policy parameter over values (repeatable): each value goes to every "
+              "listed policy that declares NAME ('corraoi policies').")  # fmt: skip
+@click.option("--c", "c", type=float, default=None, help="Shorthand for --param c=VALUE.")
+@click.option("--beta", type=float, default=None, help="Shorthand for --param beta=VALUE.")
 @channel_option
-@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
-              help="Threads for the engine [default: every core].")  # fmt: skip
-@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=None,
-              metavar="DIR", help="Stream the curves to DIR/sweep.mcap and DIR/sweep.rrd and "
-              "write DIR/summary.json, DIR/summary.md and DIR/figure.png.")  # fmt: skip
-@click.option("--checkpoints", type=click.IntRange(min=2), default=200, show_default=True,
-              help="With -o: about this many checkpoint slots per curve.")  # fmt: skip
-@click.option("--force", is_flag=True, help="With -o: overwrite a DIR that holds a sweep.")
+@click.option("--workers", "-j", type=click.IntRange(min=1, max=4096), default=None,
+              help="Threads for the in-process engine [default: every core].")  # fmt: skip
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT|local:N",
+              help="Run the chunks on a Dask cluster: a running scheduler, or N local worker "
+              "processes (needs the cluster extra) [default: this process].")  # fmt: skip
+@click.option("--chunk", type=click.IntRange(min=1, max=MAX_RUNS), default=None,
+              help="Runs per chunk, the unit of work that is saved and resumed "
+              "[default: all runs of a cell].")  # fmt: skip
+@click.option("--output", "-o", "--out", "out", type=click.Path(path_type=Path), default=None,
+              metavar="DIR", help="Write the results folder: manifest, per-run results, and per "
+              "instance the sweep log, summary and figure (docs/scaling.md).")  # fmt: skip
+@click.option("--resume", is_flag=True,
+              help="Continue the sweep in DIR (finished chunks are kept), or extend it: more "
+              "runs, policies or parameter values are appended.")  # fmt: skip
+@click.option("--checkpoints", type=click.IntRange(min=2, max=100_000), default=None,
+              help="About this many checkpoint slots per curve [default: 200].")  # fmt: skip
+@click.option("--force", is_flag=True, help="With -o: start over in a DIR that holds a sweep.")
 @click.option("--baseline", default=None, metavar="POLICY",
               help="Also report, for every other policy, the mean and 95% CI of the per-run "
               "regret difference against POLICY on the same hidden paths (paired).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
 @handle_errors
 def sweep(
-    instance: str,
+    experiment: Path | None,
+    instance: tuple[str, ...],
     policy: tuple[str, ...],
-    runs: int,
-    horizon: int,
+    runs: int | None,
+    horizon: tuple[str, ...],
     seed: int,
+    param: tuple[str, ...],
     c: float | None,
     beta: float | None,
-    param: tuple[str, ...],
     channel: str | None,
     workers: int | None,
+    scheduler: str | None,
+    chunk: int | None,
     out: Path | None,
-    checkpoints: int,
+    resume: bool,
+    checkpoints: int | None,
     force: bool,
     baseline: str | None,
     as_json: bool,
 ) -> None:
-    """Run policies over paired seeds and report the AoI regret at the horizon.
+    """Run a grid of policies over paired seeds and report the AoI regret at the horizon.
 
-    Per policy: the mean pathwise AoI regret sum_t (aoi_t - oracle_aoi_t) at T with its 95%
-    confidence half-width, the paper's estimator sum_t aoi_t - T/mu*, the share of pulls on
-    the best arm, the wall time, and the paper's bound where a theorem covers the policy.
+    A grid is every instance x policy x parameter value x horizon (a cell); every cell runs
+    the same seeds, so the numbers pair across policies. Per cell: the mean pathwise AoI
+    regret at T with its 95% half-width, the paper's estimator, the share of pulls on the best
+    arm, the wall time, and the paper's bound where a theorem covers the policy.
 
     \b
     Examples:
       corraoi sweep --instance I1 --policy all --runs 200 --horizon 10000
-      corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
-      corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
+      corraoi sweep -i I1,I2 -p ucb,cucb,sw-ucb --param window=100,1000 -o grid
+      corraoi sweep experiment.toml -o grid --scheduler local:2
+      corraoi sweep experiment.toml -o grid --resume        # after a crash, or to add runs
+      corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from ..channels import parse_channel
-    from ..engine import check_instance, set_workers
-    from ..instance import load_instance
-    from ..policies import make_policies, parse_param_assignments
+    from ..grid import build_grid, parse_param_lists, read_experiment, split_list
 
-    inst = load_instance(instance)
-    check_instance(inst)
-    specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
-    chan = parse_channel(channel, inst)
-    chan.check(inst, horizon)
-    if baseline is not None and baseline not in [s.name for s in specs]:
-        raise ConfigError(
-            f"--baseline {baseline}: not one of the swept policies "
-            f"({', '.join(s.name for s in specs)}); expected one of them"
-        )
-    if out is not None:
-        check_out_dir(out, force=force)
-    used = set_workers(workers)
-    try:
-        summary = sweep_instance(
-            inst, specs, runs=runs, horizon=horizon, seed=seed, workers=used, out=out,
-            checkpoints=checkpoints, channel=chan, baseline=baseline,
-        )  # fmt: skip
-    except KeyboardInterrupt:
-        left = ", ".join(str(out / f) for f in _sweep_files(out)) if out is not None else ""
-        where = f"; the unfinished logs: {left}" if left else ""
-        click.echo(f"corraoi: interrupted{where}", err=True)
-        sys.exit(130)
-    if as_json:
-        click.echo(json.dumps(summary, indent=2))
-    else:
-        print_table(summary)
-    if out is not None:
-        click.echo(f"wrote {out}/: " + ", ".join(f for f in SWEEP_FILES if (out / f).exists()))
-    click.echo(f"total wall time {summary['wall_s']:.2f} s on {used} thread(s)", err=True)
+    if resume and out is None:
+        raise ConfigError("--resume needs -o DIR (the folder of the sweep to continue)")
+    spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
+    given_params = parse_param_lists(param)
+    for key, value in (("c", c), ("beta", beta)):
+        if value is not None:
+            given_params[key] = [value]
+    cli = {
+        "instances": split_list(instance) or None,
+        "policies": list(policy) or None,
+        "horizons": _horizons(horizon) or None,
+        "runs": runs,
+        "seed": seed if seed != 0 or "seed" not in spec else None,
+        "chunk": chunk,
+        "checkpoints": checkpoints,
+        "channel": channel,
+        "baseline": baseline,
+    }
+    spec.update({k: v for k, v in cli.items() if v is not None})
+    spec.setdefault("instances", ["I1"])
+    spec.setdefault("policies", ["all"])
+    spec.setdefault("horizons", [10_000])
+    spec.setdefault("runs", 200)
+    spec["params"] = {**spec.get("params", {}), **given_params}
+    grid = build_grid(**spec)
+    for cell in grid.cells:
+        from ..engine import check_instance
 
-
-def sweep_instance(
-    inst: Any,
-    specs: Any,
-    *,
-    runs: int,
-    horizon: int,
-    seed: int,
-    workers: int,
-    out: Path | None,
-    checkpoints: int = 200,
-    label: str = "sweep",
-    channel: Any = None,
-    baseline: str | None = None,
-) -> dict[str, Any]:
-    """One instance's sweep with a progress bar; with ``out``, its logs, summary and figure."""
-    from ..progress import Progress
-    from ..summary import instance_notes, summary_markdown, sweep_summary
-    from ..sweep import default_checkpoints, run_sweep
-
-    for note in instance_notes(inst):
+        check_instance(cell.instance)
+    for note in _notes(grid):
         warn(note)
-    start = time.perf_counter()
-    with Progress(len(specs) * horizon, label) as bar:
-        if out is None:
-            results = run_sweep(
-                inst, specs, runs=runs, horizon=horizon, seed=seed, on_slots=bar.update,
-                channel=channel,
-            )
+    outcome = _run(grid, out=out, scheduler=scheduler, resume=resume, force=force,
+                   workers=workers, label="sweep")  # fmt: skip
+    if as_json:
+        if len(outcome.summaries) == 1:
+            click.echo(json.dumps(outcome.summaries[0], indent=2))
         else:
-            stops = default_checkpoints(horizon, checkpoints)
-            results = _sweep_to_dir(
-                out, inst, specs, runs=runs, horizon=horizon, seed=seed, stops=stops,
-                on_slots=bar.update, channel=channel,
-            )  # fmt: skip
-    summary = sweep_summary(inst, results, runs=runs, horizon=horizon, seed=seed, workers=workers)
-    summary["wall_s"] = round(time.perf_counter() - start, 4)
-    if baseline is not None:
-        from ..paired import paired_against
-
-        summary["baseline"] = baseline
-        for name, entry in paired_against(results, baseline).items():
-            summary["policies"][name].update(entry)
+            click.echo(json.dumps({"sweeps": outcome.summaries}, indent=2))
+    else:
+        for i, summary in enumerate(outcome.summaries):
+            if i:
+                click.echo("")
+            print_table(summary)
     if out is not None:
-        _write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-        _write_text(out / "summary.md", summary_markdown(summary))
-        _draw(out)
-    return summary
+        done = f"{outcome.chunks_run} chunk(s) run"
+        if outcome.chunks_skipped:
+            done += f", {outcome.chunks_skipped} already done"
+        click.echo(f"wrote {out}/ ({done}): " + ", ".join(
+            str(p.relative_to(out)) + "/" if p != out else "." for p in outcome.folders
+        ), err=as_json)  # fmt: skip
+    wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
+    click.echo(f"total wall time {wall:.2f} s", err=True)
 
 
-def _sweep_to_dir(
-    out: Path,
-    inst: Any,
-    specs: Any,
+def _horizons(values: tuple[str, ...]) -> list[int]:
+    from ..grid import split_list
+
+    out = []
+    for item in split_list(values):
+        try:
+            h = int(item)
+        except ValueError:
+            raise click.BadParameter(f"{item!r} is not a valid integer",
+                                     param_hint="'--horizon' / '-T'") from None  # fmt: skip
+        if not 1 <= h <= MAX_HORIZON:
+            raise click.BadParameter(f"{h} is not in the range 1<=x<={MAX_HORIZON}",
+                                     param_hint="'--horizon' / '-T'")  # fmt: skip
+        out.append(h)
+    return out
+
+
+def _notes(grid: Any) -> list[str]:
+    from ..summary import instance_notes
+
+    seen: dict[str, list[str]] = {}
+    for cell in grid.cells:
+        if cell.instance.name not in seen:
+            seen[cell.instance.name] = instance_notes(cell.instance)
+    return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
+
+
+def _run(
+    grid: Any,
     *,
-    runs: int,
-    horizon: int,
-    seed: int,
-    stops: list[int],
-    on_slots: Any,
-    channel: Any = None,
+    out: Path | None,
+    scheduler: str | None,
+    resume: bool,
+    force: bool,
+    workers: int | None,
+    label: str,
 ) -> Any:
+    """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
     from contextlib import ExitStack
 
-    from recorder.sweep_log import SweepMcapSink
-    from recorder.sweep_rerun import open_sweep_recording
+    from ..experiments import sweep as run_sweep
+    from ..progress import Progress
 
-    from ..sweep import checkpoint_point, run_sweep, sweep_config
-    from ..theory import analyse
+    with ExitStack() as stack:
+        client = None
+        if scheduler is not None:
+            from ..cluster import connect
 
-    out.mkdir(parents=True, exist_ok=True)
-    _clear_out_dir(out)
-    config = sweep_config(inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
-                          channel=channel)  # fmt: skip
-    with (
-        SweepMcapSink(out / "sweep.mcap", config) as mcap_sink,
-        open_sweep_recording(out / "sweep.rrd", config) as rerun_sink,
-        ExitStack() as stack,
-    ):
-        results_sink = None
-        try:
-            import pyarrow.parquet  # noqa: F401
-        except ImportError:  # pyarrow (the analysis extra) is not installed
-            warn('results.parquet not written: install the analysis extra, '
-                 'pip install "corraoi[analysis]"')  # fmt: skip
+            client = stack.enter_context(connect(scheduler))
+        if client is None:
+            total = sum(c.horizon for c in grid.cells) * grid.runs // grid.chunk_runs
+            bar = stack.enter_context(Progress(max(total, 1), label))
+            on_slots = bar.update
+            on_chunk = None
         else:
-            from recorder.results import ResultsWriter
+            chunks = sum(-(-grid.runs // grid.chunk_runs) for _ in grid.cells)
+            bar = stack.enter_context(Progress(chunks, f"{label} (chunks)"))
 
-            results_sink = stack.enter_context(
-                ResultsWriter(out / "results.parquet", config, best_arm=analyse(inst).best_arm)
-            )
+            def on_chunk(done: int, total: int) -> None:
+                bar.update(1, note=f"{done}/{total} chunks")
 
-        def hook(policy: Any, snap: Any) -> None:
-            point = checkpoint_point(policy, snap)
-            mcap_sink.write(point)
-            rerun_sink.write(point)
-            if results_sink is not None:
-                results_sink.write(policy, snap)
-
-        return run_sweep(
-            inst, specs, runs=runs, horizon=horizon, seed=seed, checkpoints=stops,
-            on_checkpoint=hook, on_slots=on_slots, channel=channel,
-        )  # fmt: skip
-
-
-def _draw(out: Path) -> None:
-    """figure.png, drawn from the log alone; skipped with a warning without matplotlib."""
-    from recorder.sweep_log import read_sweep
-    from viewer.figure import FigureUnavailable, draw_figure
-
-    try:
-        draw_figure(read_sweep(out / "sweep.mcap"), out / "figure.png")
-    except FigureUnavailable as exc:
-        warn(f"figure.png not written: {exc}")
+            on_slots = None
+        try:
+            return run_sweep(grid, out=out, client=client, resume=resume, force=force,
+                             workers=workers, on_chunk=on_chunk, on_slots=on_slots,
+                             warn=warn)  # fmt: skip
+        except KeyboardInterrupt:
+            where = f"; finished chunks are saved in {out}: --resume continues" if out else ""
+            click.echo(f"corraoi: interrupted{where}", err=True)
+            sys.exit(130)
 
 
 def print_table(summary: dict[str, Any]) -> None:
@@ -325,8 +289,8 @@ PAPER_INSTANCES = ("I1", "I2")
 
 
 @click.command()
-@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=Path("paper"),
-              show_default=True, metavar="DIR",
+@click.option("--output", "-o", "--out", "out", type=click.Path(path_type=Path),
+              default=Path("paper"), show_default=True, metavar="DIR",
               help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
 @click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
               help="Monte Carlo runs per policy.")  # fmt: skip
@@ -348,26 +312,16 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from ..engine import set_workers
-    from ..instance import load_instance
-    from ..policies import make_policies
+    from ..grid import build_grid
     from ..summary import summary_markdown
 
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
-    if out.is_dir() and (out / "summary.md").exists() and not force:
-        raise ConfigError(f"{out}: already holds a reproduction; use --force to overwrite")
-    for name in PAPER_INSTANCES:
-        check_out_dir(out / name, force=force)
-    used = set_workers(workers)
-    specs = make_policies(["all"])
+    grid = build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
+                      runs=runs, seed=seed)  # fmt: skip
     start = time.perf_counter()
+    outcome = _run(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
+                   label="reproduce")  # fmt: skip
     parts = []
-    for name in PAPER_INSTANCES:
-        summary = sweep_instance(
-            load_instance(name), specs, runs=runs, horizon=horizon, seed=seed, workers=used,
-            out=out / name, label=f"sweep {name}",
-        )  # fmt: skip
+    for summary in outcome.summaries:
         print_table(summary)
         click.echo("")
         parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
@@ -382,4 +336,4 @@ def reproduce(
         head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
     )
     click.echo(f"wrote {out}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES) + ", summary.md")
-    click.echo(f"total wall time {time.perf_counter() - start:.2f} s on {used} thread(s)", err=True)
+    click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)

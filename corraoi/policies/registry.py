@@ -94,11 +94,22 @@ def _check_class(obj: Any, where: str) -> type[PolicyBase]:
     return obj
 
 
+#: Plug-in sources handed over as data (a Dask worker that lacks the client's files).
+_SOURCES: dict[str, bytes] = {}
+
+
+def install_plugin_source(path: str, source: str) -> None:
+    """Make ``FILE.py:Class`` plug-ins at ``path`` importable from ``source`` (on a worker
+    that does not have the file: plug-ins travel with the chunks as data)."""
+    _SOURCES[str(Path(path).resolve())] = source.encode("utf-8")
+
+
 def _file_module(path: Path, where: str) -> tuple[ModuleType, str]:
     """Import a plug-in file once per process under a name derived from its path; returns
     the module and its version (a hash of the source)."""
+    installed = _SOURCES.get(str(path.resolve()))
     try:
-        source = path.read_bytes()
+        source = installed if installed is not None else path.read_bytes()
     except OSError as exc:
         raise PolicyError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
     digest = hashlib.sha256(source).hexdigest()
@@ -114,7 +125,10 @@ def _file_module(path: Path, where: str) -> tuple[ModuleType, str]:
     module.__corraoi_digest__ = digest  # type: ignore[attr-defined]
     sys.modules[modname] = module
     try:
-        spec.loader.exec_module(module)
+        if installed is not None:
+            exec(compile(source, str(path), "exec"), module.__dict__)
+        else:
+            spec.loader.exec_module(module)
     except BaseException as exc:
         sys.modules.pop(modname, None)
         if isinstance(exc, (KeyboardInterrupt, SystemExit)):
@@ -163,7 +177,7 @@ def resolve(token: str) -> Resolved:
             raise PolicyError(f"policy {raw!r}: expected FILE.py:Class or package.module:Class")
         if _is_file_ref(left):
             path = Path(left).expanduser()
-            if not path.is_file():
+            if not path.is_file() and str(path.resolve()) not in _SOURCES:
                 raise PolicyError(f"policy {raw!r}: no such file {left}")
             module, version = _file_module(path, f"policy {raw!r}")
             qual = f"file:{path.resolve()}:{attr}"
