@@ -21,8 +21,8 @@ from .errors import ConfigError, CorraoiError, MissingExtraError
 
 #: Tries of a chunk whose worker died before it is given up.
 RETRIES = 3
-#: Seconds to wait for a scheduler to answer.
-CONNECT_TIMEOUT = 10
+#: Seconds to wait for a scheduler to answer ($CORRAOI_CONNECT_TIMEOUT overrides).
+CONNECT_TIMEOUT = float(os.environ.get("CORRAOI_CONNECT_TIMEOUT", "10"))
 
 
 class ClusterError(CorraoiError):

@@ -16,7 +16,7 @@ from typing import Any
 import click
 
 from ..block import MAX_HORIZON, MAX_RUNS
-from ..errors import ConfigError
+from ..errors import ConfigError, CorraoiError
 from .common import (
     channel_option,
     handle_errors,
@@ -140,7 +140,12 @@ def sweep(
     spec.setdefault("horizons", [10_000])
     spec.setdefault("runs", 200)
     spec["params"] = {**spec.get("params", {}), **given_params}
-    grid = build_grid(**spec)
+    try:
+        grid = build_grid(**spec)
+    except CorraoiError as exc:
+        if experiment is None:
+            raise
+        raise type(exc)(f"{experiment}: {exc}") from None
     for cell in grid.cells:
         from ..engine import check_instance
 
