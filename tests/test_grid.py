@@ -78,7 +78,8 @@ def test_experiment_file_equals_the_command_line(tmp_path: Path):
     )
     a = run("sweep", f, "-o", tmp_path / "a")
     b = run("sweep", "-i", "I1,I2", "-p", "ucb,cucb", "-T", "300", "-n", "6", "-s", "2",
-            "--chunk", "3", "--checkpoints", "10", "--param", "c=1,2", "-o", tmp_path / "b")  # fmt: skip
+            "--chunk", "3", "--checkpoints", "10", "--param", "c=1,2",
+            "-o", tmp_path / "b")  # fmt: skip
     assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
     assert results(tmp_path / "a").equals(results(tmp_path / "b"))
     for inst in ("I1", "I2"):
@@ -192,8 +193,9 @@ def test_a_local_cluster_gives_the_in_process_numbers_and_bytes(tmp_path: Path):
             assert entry["regret_mean"] == sb["policies"][name]["regret_mean"]
 
 
-def test_a_dying_worker_is_retried_and_nothing_is_lost(tmp_path: Path,
-                                                       monkeypatch: pytest.MonkeyPatch):  # fmt: skip
+def test_a_dying_worker_is_retried_and_nothing_is_lost(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
     plugin = f"{PLUGINS / 'dies_once.py'}:DiesOnce"
     args = ["sweep", "-p", plugin, "-n", "8", "-T", "200", "--chunk", "4", "--checkpoints", "5"]
     assert run(*args, "-o", tmp_path / "here").exit_code == 0  # no marker: never dies
@@ -204,8 +206,9 @@ def test_a_dying_worker_is_retried_and_nothing_is_lost(tmp_path: Path,
     assert results(tmp_path / "cluster").equals(results(tmp_path / "here"))
 
 
-def test_a_chunk_that_always_kills_its_worker_is_one_line(tmp_path: Path,
-                                                          monkeypatch: pytest.MonkeyPatch):  # fmt: skip
+def test_a_chunk_that_always_kills_its_worker_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
     plugin = f"{PLUGINS / 'dies_once.py'}:DiesOnce"
     monkeypatch.setenv("CORRAOI_TEST_MARKER", str(tmp_path / "died"))
     monkeypatch.setenv("CORRAOI_TEST_ALWAYS_DIE", "1")
