@@ -94,6 +94,14 @@ def connect(scheduler: str, *, threads_per_worker: int = 1) -> Iterator[Any]:
                 "or local:N (N local workers)"
             )
         try:
+            if cluster is None:  # workers may still be connecting to a fresh scheduler
+                try:
+                    client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+                except (OSError, TimeoutError):
+                    raise ClusterError(
+                        f"--scheduler {scheduler}: no worker joined within "
+                        f"{CONNECT_TIMEOUT:g} s (start some with `dask worker {text}`)"
+                    ) from None
             versions = client.run(_worker_setup, threads_per_worker)
             bad = {w: v for w, v in versions.items() if v != __version__}
             if bad:

@@ -44,8 +44,7 @@ def test_every_command_runs_as_shown(tmp_path: Path):
             if command.startswith("pip install"):
                 # the same install, into a folder of the test's (not the test environment)
                 package = ROOT / command.split()[-1]
-                command = (f"{sys.executable} -m pip install -q --no-deps --no-build-isolation "
-                           f"--target {site} {package}")  # fmt: skip
+                command = f"{sys.executable} -m pip install -q --no-deps --target {site} {package}"
             res = subprocess.run(command, shell=True, cwd=tmp_path, env=env,
                                  capture_output=True, text=True, timeout=300)  # fmt: skip
             assert res.returncode == 0, (command, res.stdout[-2000:], res.stderr[-2000:])
