@@ -51,7 +51,9 @@ class Bound:
         }
 
 
-def _not_applicable(th: InstanceTheory, mu_min: float) -> str | None:
+def _not_applicable(th: InstanceTheory, mu_min: float, inst: Instance) -> str | None:
+    if not inst.is_iid:
+        return "the theorems assume i.i.d. hidden states; this instance is a Markov chain"
     if len(th.best_tied) > 1:
         arms = ", ".join(str(a + 1) for a in th.best_tied)
         if len(th.best_tied) == th.mu.size:
@@ -137,7 +139,7 @@ def cucb_bound(inst: Instance, horizon: int) -> Bound:
     """Theorem 2: the CUCB bound at ``horizon``."""
     th = analyse(inst)
     mu_min = float(th.mu.min())
-    why = _not_applicable(th, mu_min)
+    why = _not_applicable(th, mu_min, inst)
     if why:
         return Bound("Theorem 2 (CUCB)", horizon, None, "n/a", None, why)
     K = inst.K
@@ -162,7 +164,7 @@ def cts_bound(inst: Instance, horizon: int, beta: float = DEFAULT_BOUND_BETA) ->
     th = analyse(inst)
     name = f"Theorem 3 (CTS, beta={beta:g})"
     mu_min = float(th.mu.min())
-    why = _not_applicable(th, mu_min)
+    why = _not_applicable(th, mu_min, inst)
     if why:
         return Bound(name, horizon, None, "n/a", None, why)
     if not beta > 1.0:

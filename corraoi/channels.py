@@ -41,6 +41,7 @@ class Channel:
     source: str = ""
     trace: np.ndarray | None = field(default=None, repr=False)
     digest: str = ""
+    length: int = 0  # slots of the trace (kept when a log's channel comes without its states)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Channel):
@@ -57,8 +58,8 @@ class Channel:
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind}
         if self.kind == "trace":
-            assert self.trace is not None
-            out.update(source=self.source, digest=self.digest, length=int(self.trace.size))
+            length = int(self.trace.size) if self.trace is not None else self.length
+            out.update(source=self.source, digest=self.digest, length=length)
         return out
 
     @classmethod
@@ -69,8 +70,10 @@ class Channel:
         if kind != "trace":
             return cls(kind=kind)
         # The states themselves are the log's x column; the config names where they came from.
+        length = data.get("length", 0)
         return cls(kind="trace", source=str(data.get("source", "")),
-                   digest=str(data.get("digest", "")))  # fmt: skip
+                   digest=str(data.get("digest", "")),
+                   length=length if isinstance(length, int) else 0)  # fmt: skip
 
     def describe(self) -> str:
         if self.kind == "trace":

@@ -41,6 +41,8 @@ class Instance:
     Y: np.ndarray
     arm_names: tuple[str, ...] = field(default=())
     state_names: tuple[str, ...] = field(default=())
+    #: Markov hidden state: the n x n transition matrix (p is then its stationary law).
+    transition: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.p, dtype=np.float64)
@@ -71,6 +73,18 @@ class Instance:
             raise InstanceError(f"{where}: {len(arms)} arm names for {Y.shape[0]} arms")
         if len(states) != p.size:
             raise InstanceError(f"{where}: {len(states)} state names for {p.size} states")
+        if self.transition is not None:
+            from .markov import STATIONARY_TOL, check_chain, check_transition, stationary
+
+            P = check_transition(self.transition, p.size, where)
+            check_chain(P, where, states)
+            pi = stationary(P)
+            if np.max(np.abs(pi - p)) > STATIONARY_TOL:
+                raise InstanceError(
+                    f"{where}: p {p.tolist()} is not the stationary law of the transition matrix "
+                    f"({[round(float(v), 9) for v in pi]}); leave p out or give that law"
+                )
+            object.__setattr__(self, "transition", P)
         p = p.copy()
         Yi = Y.astype(np.int8)
         p.setflags(write=False)
@@ -102,28 +116,55 @@ class Instance:
             and np.array_equal(self.Y, other.Y)
             and self.arm_names == other.arm_names
             and self.state_names == other.state_names
+            and _same_matrix(self.transition, other.transition)
         )
 
     def __hash__(self) -> int:
         return hash((self.name, self.p.tobytes(), self.Y.tobytes()))
 
+    @property
+    def is_iid(self) -> bool:
+        """Whether the hidden state is drawn i.i.d. (no transition matrix)."""
+        return self.transition is None
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description; ``from_dict`` inverts it exactly."""
-        return {
+        """JSON-ready description; ``from_dict`` inverts it exactly (i.i.d. instances have no
+        ``transition`` key, as before Markov instances existed)."""
+        out: dict[str, Any] = {
             "name": self.name,
             "p": [float(v) for v in self.p],
             "Y": self.Y.astype(int).tolist(),
             "arms": list(self.arm_names),
             "states": list(self.state_names),
         }
+        if self.transition is not None:
+            out["transition"] = [[float(v) for v in row] for row in self.transition]
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], *, where: str = "instance") -> Instance:
         if not isinstance(data, dict):
             raise InstanceError(f"{where}: expected a table with keys p and Y")
-        missing = [k for k in ("p", "Y") if k not in data]
+        transition = data.get("transition")
+        required = ("Y",) if transition is not None else ("p", "Y")
+        missing = [k for k in required if k not in data]
         if missing:
             raise InstanceError(f"{where}: missing key(s) {', '.join(missing)} (expected p and Y)")
+        if transition is not None:
+            from .markov import check_transition, stationary
+
+            if not isinstance(transition, list) or not all(isinstance(r, list) for r in transition):
+                raise InstanceError(f"{where}: transition must be a list of rows (n x n)")
+            for i, row in enumerate(transition):
+                bad = [v for v in row if not _is_number(v)]
+                if bad:
+                    raise InstanceError(
+                        f"{where}: transition row {i + 1}: {bad[0]!r} is not a finite number"
+                    )
+            n_given = len(data["p"]) if isinstance(data.get("p"), list) else None
+            P = check_transition(transition, n_given, where)
+            if "p" not in data:
+                data = {**data, "p": [float(v) for v in stationary(P)]}
         p, Y = data["p"], data["Y"]
         if not isinstance(p, list) or not all(_is_number(v) for v in p):
             raise InstanceError(f"{where}: p must be a list of numbers")
@@ -144,7 +185,14 @@ class Instance:
             Y=np.array(Y, dtype=np.int64).reshape(len(Y), len(p)),
             arm_names=tuple(str(a) for a in data.get("arms", ()) or ()),
             state_names=tuple(str(s) for s in data.get("states", ()) or ()),
+            transition=None if transition is None else np.array(transition, dtype=np.float64),
         )
+
+
+def _same_matrix(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
 
 
 def _is_number(v: object) -> bool:
@@ -161,6 +209,16 @@ BUILTINS: dict[str, dict[str, Any]] = {
         "name": "I2",
         "p": [0.1, 0.1, 0.5, 0.3],
         "Y": [[1, 0, 0, 0], [1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]],
+    },
+    # Gilbert-Elliott: a bursty two-state channel (good -> bad w.p. 0.1, bad -> good w.p. 0.3,
+    # stationary law 0.75 / 0.25); the direct link works in the good state, the fallback in
+    # the bad one. Bursts of the bad state make the direct link's failures come in runs.
+    "GE": {
+        "name": "GE",
+        "transition": [[0.9, 0.1], [0.3, 0.7]],
+        "Y": [[1, 0], [0, 1]],
+        "arms": ["direct", "fallback"],
+        "states": ["good", "bad"],
     },
 }
 
@@ -207,10 +265,14 @@ def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
     return parse_text_instance(raw, where=text, name=path.stem)
 
 
+def _renamed(inst: Instance, name: str) -> Instance:
+    return Instance(name, inst.p, inst.Y, inst.arm_names, inst.state_names, inst.transition)
+
+
 def _named(inst: Instance, data: dict[str, Any], path: Path) -> Instance:
     if "name" in data:
         return inst
-    return Instance(path.stem, inst.p, inst.Y, inst.arm_names, inst.state_names)
+    return _renamed(inst, path.stem)
 
 
 def parse_text_instance(raw: str, *, where: str = "<text>", name: str = "instance") -> Instance:

@@ -59,6 +59,21 @@ def info_text(info: dict[str, Any]) -> str:
         f"  {'theory':<22} mu = [{mu}], best arm {th['best_arm']}, competitive arms: {comp}"
         f" (C = {th['C']})",
         f"  {'policy':<22} {pol['name']}" + (f" ({params})" if params else ""),
+    ]
+    plugin = pol.get("plugin")
+    if isinstance(plugin, dict):
+        lines.append(
+            f"  {'plug-in':<22} {plugin.get('qualname', '?')} ({plugin.get('tier', '?')}, "
+            f"version {plugin.get('version') or '?'})"
+        )
+    channel = cfg.get("channel") or {"kind": "iid"}
+    chan = str(channel.get("kind", "iid"))
+    if chan == "trace":
+        chan += f" of {channel.get('length', '?')} slots from {channel.get('source', '?')}"
+    elif chan == "markov":
+        chan += " (the instance's transition matrix)"
+    lines += [
+        f"  {'hidden states':<22} {chan}",
         f"  {'seed':<22} {cfg['seed']}",
         f"  {'horizon':<22} {cfg['horizon']}",
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",

@@ -95,12 +95,32 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
         "cucb": cucb_bound(inst, horizon),
         "cts": cts_bound(inst, horizon, DEFAULT_BOUND_BETA if bound_beta is None else bound_beta),
     }
+    chain = None
+    if inst.transition is not None:
+        from ..markov import mixing
+
+        chain = mixing(inst.transition, inst.p)
     if as_json:
         out: dict[str, Any] = {"name": inst.name, "instance": inst.to_dict(), **th.to_dict()}
         out["bounds"] = {k: b.to_dict() for k, b in bounds.items()}
+        if chain is not None:
+            out["markov"] = {
+                "stationary": [float(v) for v in inst.p],
+                "t_mix": chain.t_mix,
+                "mixing_definition": "first t with max_x TV(P^t(x, .), pi) <= 1/4",
+                "spectral_gap": chain.spectral_gap,
+            }
         click.echo(json.dumps(out, indent=2))
         return
-    click.echo(f"instance {inst.name}: K={inst.K} arms, {inst.n_states} hidden states")
+    kind = "Markov" if chain is not None else "i.i.d."
+    click.echo(f"instance {inst.name}: K={inst.K} arms, {inst.n_states} hidden states ({kind})")
+    if inst.transition is not None and chain is not None:
+        click.echo("transition matrix P (row: from, column: to):")
+        width = max(len(s) for s in inst.state_names)
+        for s, row in zip(inst.state_names, inst.transition, strict=True):
+            click.echo(f"  {s:>{width}}  " + "  ".join(f"{v:6.4g}" for v in row))
+        click.echo(chain.describe())
+        click.echo("p below is the stationary law of P")
     click.echo(
         "p      " + "  ".join(f"{s}={v:g}" for s, v in zip(inst.state_names, inst.p, strict=True))
     )
