@@ -114,6 +114,15 @@ def advance(
     R = pulls.shape[0]
     K = pulls.shape[1]
     W = fail0.shape[1]
+    # which pulled arms can remove candidates through their failure or success rate at all
+    has1 = np.zeros(K, dtype=np.bool_)
+    has2 = np.zeros(K, dtype=np.bool_)
+    for l in range(K):
+        for w in range(W):
+            if fail1[l, w] != np.uint64(0):
+                has1[l] = True
+            if fail2[l, w] != np.uint64(0):
+                has2[l] = True
     for r in prange(R):
         lst = lat[r]
         pst = pol[r]
@@ -162,8 +171,8 @@ def advance(
                     if not in_s[l] or npull[l] == 0:
                         continue
                     drop0 = target > 0.0
-                    drop1 = (npull[l] - nsucc[l]) / npull[l] < target
-                    drop2 = nsucc[l] / npull[l] < target
+                    drop1 = has1[l] and (npull[l] - nsucc[l]) / npull[l] < target
+                    drop2 = has2[l] and muhat[l] < target  # muhat[l] = S_l / n_l
                     if drop0 or drop1 or drop2:
                         for w in range(W):
                             m64 = np.uint64(0)
