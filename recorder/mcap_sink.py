@@ -15,7 +15,7 @@ from types import TracebackType
 from typing import BinaryIO
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
+from mcap.records import Channel, Schema
 
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError
@@ -37,12 +37,8 @@ from .format import (
     run_metadata,
     schema_bytes,
 )
+from .mcap_chunks import ChunkWriter
 from .paths import Sink, check_output, open_partial, partial_path, publish, reason
-
-#: Chunks are closed by slot count (FLUSH_EVERY), not by size; this only caps a huge chunk.
-_CHUNK_BYTES = 64 * 1024 * 1024
-#: Slots whose log_time t * 1e9 still fits a signed 64-bit integer (numpy fast path).
-_I64_SAFE = (2**63 - 1) // NS_PER_SLOT
 
 
 class McapSink(Sink):
@@ -82,21 +78,26 @@ class McapSink(Sink):
         self._torn = False
         self._last: SlotBlock | None = None
         self._encoder = BlockEncoder(config.instance.K)
+        # messages of the chunk being filled: slots t with t % flush_every != 0 so far
+        self._pending: list[bytes] = []
+        self._pending_t: list[np.ndarray] = []
         self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
         try:
-            self._writer = Writer(
-                self._file, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD
+            self._writer = ChunkWriter(
+                self._file,
+                schema=Schema(
+                    id=1, name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
+                ),
+                channel=Channel(
+                    id=1,
+                    topic=TOPIC,
+                    message_encoding=MESSAGE_ENCODING,
+                    schema_id=1,
+                    metadata={"format_version": run_metadata(config)["format_version"]},
+                ),
+                library=library_name(config.version),
             )
-            self._writer.start(profile="", library=library_name(config.version))
-            schema_id = self._writer.register_schema(
-                name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
-            )
-            self._channel = self._writer.register_channel(
-                topic=TOPIC,
-                message_encoding=MESSAGE_ENCODING,
-                schema_id=schema_id,
-                metadata={"format_version": run_metadata(config)["format_version"]},
-            )
+            self._writer.start()
             self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
             self._file.flush()
         except OSError as exc:
@@ -126,27 +127,33 @@ class McapSink(Sink):
             raise ValueError(f"block goes past the horizon {self.config.horizon}")
         messages = self._encoder.encode(block)
         t = block.t.astype(np.int64, copy=False)
-        times = (
-            (t * NS_PER_SLOT).tolist()
-            if t[-1] <= _I64_SAFE
-            else [v * NS_PER_SLOT for v in t.tolist()]
-        )
-        sequences = (t & 0xFFFFFFFF).tolist()  # MCAP sequence is 32-bit: t modulo 2**32
-        ends = (t % self.flush_every == 0).tolist()
-        add = self._writer.add_message
-        flush = self._writer.flush
-        channel = self._channel
+        # a chunk ends after every slot t with t % flush_every == 0, wherever the blocks
+        # end: the file is the same for any block size
+        ends = (np.flatnonzero(t % self.flush_every == 0) + 1).tolist()
         self._torn = True  # until this block is fully handed to the writer
         try:
-            for ns, seq, data, end in zip(times, sequences, messages, ends, strict=True):
-                add(channel, ns, data, ns, seq)
-                if end:
-                    flush()
+            begin = 0
+            for end in ends:
+                self._pending += messages[begin:end]
+                self._pending_t.append(t[begin:end])
+                self._flush_chunk()
+                begin = end
+            if begin < n:
+                self._pending += messages[begin:]
+                self._pending_t.append(t[begin:])
         except OSError as exc:
             raise self._write_error(exc) from None
         self._torn = False
         self.slots += n
         self._last = block
+
+    def _flush_chunk(self) -> None:
+        """Write the pending messages as one chunk (and hand it to the OS)."""
+        if not self._pending:
+            return
+        t = np.concatenate(self._pending_t).astype(np.uint64)
+        self._writer.add_chunk(t * np.uint64(NS_PER_SLOT), t & 0xFFFFFFFF, self._pending)
+        self._pending, self._pending_t = [], []
 
     # ------------------------------------------------------------------ closing
 
@@ -162,7 +169,7 @@ class McapSink(Sink):
             return self.abort() or self.partial_path
         self.closed = True
         try:
-            self._writer.flush()
+            self._flush_chunk()
             self._writer.add_metadata(
                 END_METADATA,
                 end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last),
@@ -186,7 +193,7 @@ class McapSink(Sink):
             self.closed = True
             try:
                 if not self._torn:
-                    self._writer.flush()
+                    self._flush_chunk()
             except OSError:
                 pass
             self._close_file()

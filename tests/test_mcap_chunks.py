@@ -1,0 +1,132 @@
+"""The hand-framed MCAP writer (recorder.mcap_chunks) against mcap's own writer and readers."""
+
+from __future__ import annotations
+
+import io
+import struct
+
+import numpy as np
+import pytest
+from mcap.opcode import Opcode
+from mcap.reader import make_reader
+from mcap.records import Channel, Schema
+from mcap.writer import CompressionType, IndexType, Writer
+
+from corraoi.block import SlotBlock
+from recorder.format import FLUSH_EVERY, NS_PER_SLOT
+from recorder.mcap_chunks import ChunkWriter
+from recorder.mcap_sink import McapSink
+from recorder.reader import open_log
+
+
+def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:
+    """What mcap's Writer writes for the same calls, without the (empty) attachment group."""
+    buf = io.BytesIO()
+    w = Writer(
+        buf,
+        chunk_size=1 << 30,
+        compression=CompressionType.ZSTD,
+        index_types=IndexType.ALL & ~IndexType.ATTACHMENT,
+    )
+    w.start(profile="", library="corraoi/test")
+    sid = w.register_schema(name="s", encoding="jsonschema", data=b'{"type":"object"}')
+    cid = w.register_channel(topic="/x", message_encoding="json", schema_id=sid,
+                             metadata={"format_version": "1"})  # fmt: skip
+    w.add_metadata("a", {"k": "v"})
+    for t, data in messages:
+        w.add_message(cid, t * NS_PER_SLOT, data, t * NS_PER_SLOT, t)
+        if t % every == 0:
+            w.flush()
+    w.flush()
+    w.add_metadata("b", {"end": "1"})
+    w.finish()
+    return buf.getvalue()
+
+
+def _ours(messages: list[tuple[int, bytes]], every: int) -> bytes:
+    buf = io.BytesIO()
+    w = ChunkWriter(
+        buf,
+        schema=Schema(id=1, name="s", encoding="jsonschema", data=b'{"type":"object"}'),
+        channel=Channel(id=1, topic="/x", message_encoding="json", schema_id=1,
+                        metadata={"format_version": "1"}),  # fmt: skip
+        library="corraoi/test",
+    )
+    w.start()
+    w.add_metadata("a", {"k": "v"})
+    chunk: list[tuple[int, bytes]] = []
+    for t, data in messages:
+        chunk.append((t, data))
+        if t % every == 0:
+            ts = np.array([c[0] for c in chunk], dtype=np.uint64)
+            w.add_chunk(ts * np.uint64(NS_PER_SLOT), ts, [c[1] for c in chunk])
+            chunk = []
+    if chunk:
+        ts = np.array([c[0] for c in chunk], dtype=np.uint64)
+        w.add_chunk(ts * np.uint64(NS_PER_SLOT), ts, [c[1] for c in chunk])
+    w.add_metadata("b", {"end": "1"})
+    w.finish()
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("count", [1, 7, 25])
+def test_same_bytes_as_the_mcap_writer_without_its_empty_group(count):
+    rng = np.random.default_rng(count)
+    messages = [(t, b'{"v":%d}' % int(v) * (1 + t % 3))
+                for t, v in zip(range(1, count + 1), rng.integers(0, 10**6, count), strict=True)]  # fmt: skip
+    ours = _ours(messages, every=10)
+    assert ours == _reference(messages, every=10)
+    got = [(m.log_time, m.publish_time, m.sequence, m.data)
+           for _, _, m in make_reader(io.BytesIO(ours)).iter_messages()]  # fmt: skip
+    assert got == [(t * NS_PER_SLOT, t * NS_PER_SLOT, t, d) for t, d in messages]
+
+
+def _summary_groups(data: bytes) -> list[tuple[int, int]]:
+    """(opcode, length) of every summary group, from the footer's summary offset records."""
+    footer = len(data) - 8 - 29  # footer record: opcode, length, 8 + 8 + 4 bytes
+    assert data[footer] == Opcode.FOOTER
+    _, offsets_start, _ = struct.unpack_from("<QQI", data, footer + 9)
+    out, pos = [], offsets_start
+    while data[pos] == Opcode.SUMMARY_OFFSET:
+        op, _, length = struct.unpack_from("<BQQ", data, pos + 9)
+        out.append((op, length))
+        pos += 9 + 17
+    assert pos == footer and out
+    return out
+
+
+def test_a_log_without_messages_has_no_empty_group_either():
+    data = _ours([], every=10)
+    assert all(length > 0 for _, length in _summary_groups(data))
+    assert {op for op, _ in _summary_groups(data)} == {
+        Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS, Opcode.METADATA_INDEX}  # fmt: skip
+    assert list(make_reader(io.BytesIO(data)).iter_messages()) == []
+
+
+def test_a_recorded_log_has_no_empty_summary_group_and_reads_back(record_mcap):
+    path, _, ref = record_mcap(horizon=2345, block=611)
+    data = path.read_bytes()
+    groups = _summary_groups(data)
+    assert {op for op, _ in groups} == {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS,
+                                        Opcode.CHUNK_INDEX, Opcode.METADATA_INDEX}  # fmt: skip
+    assert all(length > 0 for _, length in groups)
+    summary = make_reader(io.BytesIO(data)).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 2345
+    assert summary.statistics.chunk_count == 3  # 1..1000, 1001..2000, 2001..2345
+    assert [c.message_start_time // NS_PER_SLOT for c in summary.chunk_indexes] == [1, 1001, 2001]
+    assert open_log(path).read_all().equals(ref)
+
+
+@pytest.mark.parametrize("block", [1, 999, 1001, 4096])
+def test_bytes_do_not_depend_on_the_block_size(tmp_path, make_config, engine, block):
+    config = make_config("cts", horizon=2 * FLUSH_EVERY + 17)
+    paths = []
+    for b_size in (1000, block):
+        path = tmp_path / f"b{b_size}.mcap"
+        with McapSink(path, config, fsync=False) as sink:
+            for b in engine(config, block=b_size):
+                sink.write(b)
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    assert open_log(paths[1]).read_all().equals(SlotBlock.concat(engine(config)))
