@@ -125,10 +125,9 @@ class ChunkWriter:
         head["seq"] = sequences
         head["log"] = log_times
         head["pub"] = log_times
-        hb = head.tobytes()
         size = _MESSAGE_HEADER.itemsize
         parts: list[bytes] = [b""] * (2 * n)
-        parts[0::2] = [hb[i : i + size] for i in range(0, size * n, size)]
+        parts[0::2] = head.view(f"V{size}").tolist()  # one bytes object per header
         parts[1::2] = messages
         records = prefix + b"".join(parts)
         index = np.empty(n, dtype=_INDEX_ENTRY)

@@ -6,6 +6,7 @@ import io
 import struct
 
 import numpy as np
+import orjson
 import pytest
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
@@ -13,7 +14,7 @@ from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, IndexType, Writer
 
 from corraoi.block import SlotBlock
-from recorder.format import FLUSH_EVERY, NS_PER_SLOT
+from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
 from recorder.mcap_chunks import ChunkWriter
 from recorder.mcap_sink import McapSink
 from recorder.reader import open_log
@@ -130,3 +131,36 @@ def test_bytes_do_not_depend_on_the_block_size(tmp_path, make_config, engine, bl
         paths.append(path)
     assert paths[0].read_bytes() == paths[1].read_bytes()
     assert open_log(paths[1]).read_all().equals(SlotBlock.concat(engine(config)))
+
+
+#: The per-slot template the encoder used before it joined whole columns: the reference.
+_TEMPLATE = (
+    b'{"t":%d,"x":%d,"arm":%d,"success":%b,"aoi":%d,"oracle_aoi":%d,"regret":%d,'
+    b'"estimator":%b,"override":%b,"mu_hat":[%b],"pulls":[%b],"candidates":%b}'
+)
+
+
+def _slow_encode(b: SlotBlock) -> list[bytes]:
+    def num(v: float) -> bytes:
+        return orjson.dumps(v)
+
+    return [
+        _TEMPLATE % (int(b.t[i]), int(b.x[i]) + 1, int(b.arm[i]) + 1,
+                     b"true" if b.success[i] else b"false", int(b.aoi[i]),
+                     int(b.oracle_aoi[i]), int(b.regret[i]), num(float(b.estimator[i])),
+                     b"true" if b.override[i] else b"false",
+                     b",".join(num(float(v)) for v in b.mu_hat[i]),
+                     b",".join(b"%d" % v for v in b.pulls[i]),
+                     orjson.dumps([int(k) + 1 for k in np.flatnonzero(b.candidates[i])]))
+        for i in range(len(b))
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("policy", ["cucb", "aoi-aware-cts", "ts"])
+def test_the_column_encoder_writes_what_a_per_slot_encoder_writes(make_config, engine, policy):
+    config = make_config(policy, horizon=1500)
+    block = SlotBlock.concat(engine(config))
+    got = BlockEncoder(config.instance.K).encode(block)
+    assert got == _slow_encode(block)
+    assert len(got) == 1500 and all(orjson.loads(m)["t"] == i + 1 for i, m in enumerate(got))
+    assert block.candidates.sum(axis=1).min() < config.instance.K or policy != "cucb"
