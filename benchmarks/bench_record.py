@@ -79,16 +79,15 @@ def main() -> None:
     import os
 
     os.environ.setdefault("RUST_LOG", "off")
+    import numpy as np
     import rerun as rr
+    from mcap.records import Channel, Schema
     from mcap.writer import CompressionType, Writer
 
     from corraoi.block import RunConfig
     from corraoi.engine import set_workers, simulate_run
     from corraoi.instance import load_instance
     from corraoi.policies import make_policy
-    import numpy as np
-    from mcap.records import Channel, Schema
-
     from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
     from recorder.mcap_chunks import ChunkWriter
     from recorder.mcap_sink import McapSink

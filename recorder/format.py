@@ -190,7 +190,7 @@ class BlockEncoder:
                 text = orjson.dumps([k + 1 for k in range(self.K) if code >> k & 1])
                 sets[code] = text
             texts[i] = text
-        return texts[inverse].tolist()  # type: ignore[no-any-return]
+        return texts[inverse].tolist()
 
     def encode(self, b: SlotBlock) -> list[bytes]:
         n = len(b)

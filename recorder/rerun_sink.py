@@ -20,9 +20,10 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 
 Styling (names, colours, markers) is logged once as static data when the sink is made.
 Data go with ``send_columns``, one call per entity and batch of :data:`BATCH` slots
-(blocks are gathered first): ``rr.log`` per slot would cost ~50 us a call. No global Rerun state: the caller passes a ``RecordingStream``
-(:func:`new_recording` makes one with reproducible settings) and owns where it goes;
-:class:`RrdOutput` is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
+(blocks are gathered first): ``rr.log`` per slot would cost ~50 us a call. No global
+Rerun state: the caller passes a ``RecordingStream`` (:func:`new_recording` makes one
+with reproducible settings) and owns where it goes; :class:`RrdOutput` is the owner
+``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
 """
 
 from __future__ import annotations

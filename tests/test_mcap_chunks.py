@@ -73,8 +73,8 @@ def _ours(messages: list[tuple[int, bytes]], every: int) -> bytes:
 @pytest.mark.parametrize("count", [1, 7, 25])
 def test_same_bytes_as_the_mcap_writer_without_its_empty_group(count):
     rng = np.random.default_rng(count)
-    messages = [(t, b'{"v":%d}' % int(v) * (1 + t % 3))
-                for t, v in zip(range(1, count + 1), rng.integers(0, 10**6, count), strict=True)]  # fmt: skip
+    values = rng.integers(0, 10**6, count).tolist()
+    messages = [(t, b'{"v":%d}' % v * (1 + t % 3)) for t, v in enumerate(values, start=1)]
     ours = _ours(messages, every=10)
     assert ours == _reference(messages, every=10)
     got = [(m.log_time, m.publish_time, m.sequence, m.data)
