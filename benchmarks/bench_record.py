@@ -121,8 +121,13 @@ def main() -> None:
                 w = ChunkWriter(
                     f,
                     schema=Schema(id=1, name="s", encoding="jsonschema", data=b"{}"),
-                    channel=Channel(id=1, topic="/corraoi/slot", message_encoding="json",
-                                    schema_id=1, metadata={}),  # fmt: skip
+                    channel=Channel(
+                        id=1,
+                        topic="/corraoi/slot",
+                        message_encoding="json",
+                        schema_id=1,
+                        metadata={},
+                    ),  # fmt: skip
                     library="bench",
                 )
                 w.start()

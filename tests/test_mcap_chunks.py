@@ -49,8 +49,9 @@ def _ours(messages: list[tuple[int, bytes]], every: int) -> bytes:
     w = ChunkWriter(
         buf,
         schema=Schema(id=1, name="s", encoding="jsonschema", data=b'{"type":"object"}'),
-        channel=Channel(id=1, topic="/x", message_encoding="json", schema_id=1,
-                        metadata={"format_version": "1"}),  # fmt: skip
+        channel=Channel(
+            id=1, topic="/x", message_encoding="json", schema_id=1, metadata={"format_version": "1"}
+        ),  # fmt: skip
         library="corraoi/test",
     )
     w.start()
