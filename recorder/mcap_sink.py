@@ -5,6 +5,9 @@ so a file at ``<path>`` is always complete. Every :data:`~recorder.format.FLUSH_
 slots the current chunk is closed and handed to the operating system, so a writer killed
 with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
 the ``.partial`` file and says the log was cut short.
+
+The chunks are framed by :class:`recorder.mcap_chunks.ChunkWriter` (whole chunks built
+with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
 """
 
 from __future__ import annotations
