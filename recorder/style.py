@@ -117,6 +117,18 @@ def spec_label(spec: Any) -> str:
     return str(getattr(spec, "label", "") or spec.name)
 
 
+def config_colors(config: dict[str, Any]) -> dict[str, RGB]:
+    """The colour of every policy of a sweep configuration (``config["policies"]``, as
+    written into sweep logs), each policy's own ``color`` where its entry carries one."""
+    out: dict[str, RGB] = {}
+    for p in config.get("policies") or []:
+        if isinstance(p, dict) and isinstance(p.get("name"), str):
+            own = p.get("color")
+            ok = isinstance(own, (list, tuple)) and len(own) == 3
+            out[p["name"]] = policy_color(p["name"], own if ok else None)
+    return out
+
+
 def lighter(rgb: Sequence[int], amount: float = 0.5) -> RGB:
     """``rgb`` mixed with white (``amount`` = 0: unchanged, 1: white)."""
     r, g, b = (round(c + (255 - c) * amount) for c in rgb)
@@ -178,6 +190,7 @@ __all__ = [
     "arm_color",
     "arm_label",
     "base_policy",
+    "config_colors",
     "darker",
     "is_aoi_aware",
     "lighter",

@@ -46,6 +46,7 @@ from .style import (
     WIDTH_MAIN,
     arm_color,
     arm_label,
+    config_colors,
     is_aoi_aware,
     lighter,
     policy_color,
@@ -215,6 +216,7 @@ class SweepRerunSink(Sink):
         self.K = len(self.arm_labels)
         self._buffer: list[SweepPoint] = []
         self._styled: set[str] = set()
+        self._colors = config_colors(config)  # a policy's own colour, where it has one
         self._closed = False
         self._owned_path: Path | None = None
         self._overwrite = True
@@ -257,7 +259,7 @@ class SweepRerunSink(Sink):
             return
         self._styled.add(name)
         rec = self.recording
-        color = policy_color(name)
+        color = self._colors.get(name) or policy_color(name)
         aware = is_aoi_aware(name)
         width = WIDTH_AOI_AWARE if aware else WIDTH_BASE
         for path in (regret_path(name), estimator_path(name)):

@@ -135,3 +135,29 @@ def test_true_means_are_constant_reference_lines(tmp_path, make_config, engine):
     mu = analyse(config.instance).mu
     assert np.allclose(np.array(values), np.tile(mu, (len(values), 1)))
     assert slots[0] == 1 and slots[-1] == 2500 and len(slots) < 2500 / 100
+
+
+def test_a_sweep_policy_with_its_own_colour_keeps_it_in_the_recording_and_figure(tmp_path):
+    pytest.importorskip("matplotlib")
+    from matplotlib.image import imread
+
+    from recorder.sweep_log import SweepMcapSink, read_sweep
+    from viewer.figure import draw_figure
+
+    config, points = small_sweep(("cucb", "ucb"), runs=2, horizon=300)
+    assert [p["name"] for p in config["policies"]] == ["cucb", "ucb"]
+    config["policies"][0]["color"] = [150, 30, 200]  # as the plug-in API writes it
+    assert style.config_colors(config) == {"cucb": (150, 30, 200), "ucb": (31, 119, 180)}
+    with SweepRerunSink.to_file(tmp_path / "s.rrd", config) as sink:
+        for p in points:
+            sink.write(p)
+    styles = static_styles(tmp_path / "s.rrd")
+    assert line_color(styles, "/" + regret_path("cucb")) == rgba((150, 30, 200))
+    with SweepMcapSink(tmp_path / "s.mcap", config, fsync=False) as log:
+        for p in points:
+            log.write(p)
+    png = draw_figure(read_sweep(tmp_path / "s.mcap"), tmp_path / "f.png")
+    img = np.round(imread(png)[..., :3] * 255).astype(int)
+    assert ((np.abs(img - np.array((150, 30, 200))).max(axis=-1) <= 2).sum()) > 100
+    green = style.POLICY_COLORS["cucb"]
+    assert ((np.abs(img - np.array(green)).max(axis=-1) <= 2).sum()) == 0

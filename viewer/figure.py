@@ -22,7 +22,15 @@ from typing import Any
 import numpy as np
 
 from corraoi.errors import CorraoiError, UsageError
-from recorder.style import DASH_AOI_AWARE, REGRET_UNIT, is_aoi_aware, mpl, policy_color
+from recorder.style import (
+    DASH_AOI_AWARE,
+    REGRET_UNIT,
+    RGB,
+    config_colors,
+    is_aoi_aware,
+    mpl,
+    policy_color,
+)
 from recorder.sweep_log import SweepCurve, SweepLog
 
 #: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
@@ -141,8 +149,11 @@ def draw_figure(
                  layout="constrained")  # fmt: skip
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(groups), sharey=True, squeeze=False)[0]
+    colors = config_colors(sweep.config)
+    for c in curves:
+        colors.setdefault(c.policy, policy_color(c.policy))
     for i, (ax, group) in enumerate(zip(axes, groups, strict=True)):
-        _draw_curves(ax, group, len(curves))
+        _draw_curves(ax, group, len(curves), colors)
         if len(groups) > 1:
             ax.set_title("AoI-aware forms" if is_aoi_aware(group[0].policy) else "policies",
                          fontsize=10)  # fmt: skip
@@ -157,7 +168,7 @@ def draw_figure(
             ax.set_ylabel(YLABEL + ("  (symmetric log scale)" if log_y else ""))
         ax.grid(True, which="major", alpha=0.3, linewidth=0.6)
         ax.spines[["top", "right"]].set_visible(False)
-    _legend(axes[-1], curves)
+    _legend(axes[-1], curves, colors)
     if len(groups) > 1:
         fig.suptitle(figure_title(sweep), fontsize=11)
     else:
@@ -176,12 +187,12 @@ def draw_figure(
     return out
 
 
-def _draw_curves(ax: Any, curves: Sequence[SweepCurve], total: int) -> None:
+def _draw_curves(ax: Any, curves: Sequence[SweepCurve], total: int, colors: dict[str, RGB]) -> None:
     """One line per curve with its shaded band (fainter bands as curves are added, so
     twelve overlapping bands stay readable)."""
     alpha = 0.2 if total <= 4 else 0.13 if total <= 8 else 0.09
     for c in curves:
-        rgb = mpl(policy_color(c.policy))
+        rgb = mpl(colors[c.policy])
         dashed = is_aoi_aware(c.policy)
         t = c.t.astype(np.float64)
         ax.plot(
@@ -207,13 +218,13 @@ def _draw_curves(ax: Any, curves: Sequence[SweepCurve], total: int) -> None:
             )
 
 
-def _legend(ax: Any, curves: Sequence[SweepCurve]) -> None:
+def _legend(ax: Any, curves: Sequence[SweepCurve], colors: dict[str, RGB]) -> None:
     """Every policy's entry, the band and the dash, outside the axes on the right."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     handles: list[object] = [
-        Line2D([], [], color=mpl(policy_color(c.policy)), linewidth=1.6, label=c.policy,
+        Line2D([], [], color=mpl(colors[c.policy]), linewidth=1.6, label=c.policy,
                linestyle=DASH_AOI_AWARE if is_aoi_aware(c.policy) else "-")
         for c in curves
     ]  # fmt: skip
