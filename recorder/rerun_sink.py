@@ -5,7 +5,7 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 
 ==================  =====================================================================
 ``aoi``             age of information after the slot (line)
-``oracle_aoi``      age of the oracle playing the best arm on the same hidden path (line)
+``oracle_aoi``      age of the oracle playing the best arm on the same hidden path (dots)
 ``regret``          pathwise AoI regret sum (aoi - oracle_aoi) (line)
 ``estimator``       the paper's estimator sum aoi - t / mu* (line)
 ``arm/success``     the arm played, at the slots where it delivered (points)
@@ -13,7 +13,7 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``override``        the arm played, at the slots where the AoI-aware rule chose it (points)
 ``x``               the hidden state X_t (points)
 ``mu_hat``          empirical mean of every arm after the slot, K series
-``mu_true``         true mean of every arm (constant), K series named ``mu_k (true)``
+``mu_true``         true mean of every arm (constant: two points a batch), ``mu_k (true)``
 ``pulls``           pulls of every arm after the slot, K series
 ``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
 ``about``           the run configuration (static markdown)
