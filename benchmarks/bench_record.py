@@ -133,7 +133,8 @@ def main() -> None:
                 w.start()
                 for ts, messages in pre:
                     t = np.asarray(ts, dtype=np.uint64)
-                    w.add_chunk(t * np.uint64(NS_PER_SLOT), t, messages)
+                    w.add_messages(t * np.uint64(NS_PER_SLOT), t, messages)
+                    w.flush()
                 w.finish()
 
         def rerun_send() -> None:

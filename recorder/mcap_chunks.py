@@ -63,9 +63,10 @@ ZSTD_LEVEL = 1
 class ChunkWriter:
     """Writes ``stream`` as an MCAP file with one schema and one channel (id 1).
 
-    ``start()``, ``add_metadata()`` any number of times, ``add_chunk()`` per chunk of
-    messages, ``finish()``. Each chunk is written and the stream flushed at once (not
-    fsynced), so a killed writer leaves every chunk added before it on disk.
+    The calls of ``mcap.writer.Writer`` it replaces: ``start()``, ``add_metadata()``,
+    ``add_messages()`` (a batch of ``add_message``), ``flush()`` to close the open chunk,
+    write it and hand it to the OS (not fsynced: a killed writer leaves every flushed
+    chunk on disk), ``finish()``. Chunks end only at ``flush()``, never by size.
     """
 
     def __init__(
@@ -90,6 +91,10 @@ class ChunkWriter:
         self._start_time = 0
         self._end_time = 0
         self._zstd = zstandard.ZstdCompressor(level=zstd_level)
+        # the open chunk: messages added since the last flush
+        self._open: list[bytes] = []
+        self._open_times: list[np.ndarray] = []
+        self._open_seqs: list[np.ndarray] = []
 
     def _write(self, data: bytes) -> None:
         self._stream.write(data)
@@ -109,10 +114,31 @@ class ChunkWriter:
         )
         self._write(record)
 
-    def add_chunk(
+    def add_messages(
         self, log_times: np.ndarray, sequences: np.ndarray, messages: Sequence[bytes]
     ) -> None:
-        """One chunk: ``messages[i]`` at ``log_times[i]`` (= publish time), in time order."""
+        """Add ``messages[i]`` at ``log_times[i]`` (= publish time) to the open chunk, in
+        time order. Nothing is written until :meth:`flush` (or :meth:`finish`)."""
+        if len(messages) != len(log_times) or len(messages) != len(sequences):
+            raise ValueError("add_messages: times, sequences and messages differ in length")
+        if len(messages):
+            self._open.extend(messages)
+            self._open_times.append(np.asarray(log_times, dtype=np.uint64))
+            self._open_seqs.append(np.asarray(sequences, dtype=np.uint64))
+
+    def flush(self) -> None:
+        """Write the open chunk (if it holds a message) and hand everything to the OS, as
+        ``mcap.writer.Writer.flush`` does. Not fsynced."""
+        if self._open:
+            messages, self._open = self._open, []
+            times, self._open_times = np.concatenate(self._open_times), []
+            seqs, self._open_seqs = np.concatenate(self._open_seqs), []
+            self._write_chunk(times, seqs, messages)
+        self._stream.flush()
+
+    def _write_chunk(
+        self, log_times: np.ndarray, sequences: np.ndarray, messages: Sequence[bytes]
+    ) -> None:
         n = len(messages)
         if n == 0:
             return
@@ -176,19 +202,16 @@ class ChunkWriter:
             )
         )
         self._write(chunk + message_index)
-        self._stream.flush()
         if self._messages == 0:
             self._start_time = start
         self._messages += n
         self._end_time = end
 
-    def flush(self) -> None:
-        """Hand what was written to the OS (chunks are flushed as they are added)."""
-        self._stream.flush()
-
     def finish(self) -> None:
-        """DataEnd, the summary (schema, channel, statistics, chunk and metadata indexes,
-        each group with its summary offset) and the footer. Does not close the stream."""
+        """The open chunk, DataEnd, the summary (schema, channel, statistics, chunk and
+        metadata indexes, each group with its summary offset) and the footer. Does not
+        close the stream."""
+        self.flush()
         b = RecordBuilder()
         DataEnd(data_section_crc=0).write(b)
         self._write(b.end())

@@ -81,9 +81,6 @@ class McapSink(Sink):
         self._torn = False
         self._last: SlotBlock | None = None
         self._encoder = BlockEncoder(config.instance.K)
-        # messages of the chunk being filled: slots t with t % flush_every != 0 so far
-        self._pending: list[bytes] = []
-        self._pending_t: list[np.ndarray] = []
         self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
         try:
             self._writer = ChunkWriter(
@@ -129,34 +126,27 @@ class McapSink(Sink):
         if self.slots + n > self.config.horizon:
             raise ValueError(f"block goes past the horizon {self.config.horizon}")
         messages = self._encoder.encode(block)
-        t = block.t.astype(np.int64, copy=False)
+        t = block.t.astype(np.uint64)
+        times = t * np.uint64(NS_PER_SLOT)  # no overflow: the horizon is at most MAX_SLOT
+        sequences = t & np.uint64(0xFFFFFFFF)  # MCAP sequence is 32-bit: t modulo 2**32
         # a chunk ends after every slot t with t % flush_every == 0, wherever the blocks
         # end: the file is the same for any block size
-        ends = (np.flatnonzero(t % self.flush_every == 0) + 1).tolist()
+        ends = (np.flatnonzero(t % np.uint64(self.flush_every) == 0) + 1).tolist()
+        add, flush = self._writer.add_messages, self._writer.flush
         self._torn = True  # until this block is fully handed to the writer
         try:
             begin = 0
             for end in ends:
-                self._pending += messages[begin:end]
-                self._pending_t.append(t[begin:end])
-                self._flush_chunk()
+                add(times[begin:end], sequences[begin:end], messages[begin:end])
+                flush()
                 begin = end
-            if begin < n:
-                self._pending += messages[begin:]
-                self._pending_t.append(t[begin:])
+            if begin < n:  # the rest stays in the open chunk
+                add(times[begin:], sequences[begin:], messages[begin:])
         except OSError as exc:
             raise self._write_error(exc) from None
         self._torn = False
         self.slots += n
         self._last = block
-
-    def _flush_chunk(self) -> None:
-        """Write the pending messages as one chunk (and hand it to the OS)."""
-        if not self._pending:
-            return
-        t = np.concatenate(self._pending_t).astype(np.uint64)
-        self._writer.add_chunk(t * np.uint64(NS_PER_SLOT), t & 0xFFFFFFFF, self._pending)
-        self._pending, self._pending_t = [], []
 
     # ------------------------------------------------------------------ closing
 
@@ -172,7 +162,7 @@ class McapSink(Sink):
             return self.abort() or self.partial_path
         self.closed = True
         try:
-            self._flush_chunk()
+            self._writer.flush()
             self._writer.add_metadata(
                 END_METADATA,
                 end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last),
@@ -196,7 +186,7 @@ class McapSink(Sink):
             self.closed = True
             try:
                 if not self._torn:
-                    self._flush_chunk()
+                    self._writer.flush()
             except OSError:
                 pass
             self._close_file()

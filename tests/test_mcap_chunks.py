@@ -57,16 +57,11 @@ def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3) ->
     )
     w.start()
     w.add_metadata("a", {"k": "v"})
-    chunk: list[tuple[int, bytes]] = []
-    for t, data in messages:
-        chunk.append((t, data))
+    for t, data in messages:  # one at a time, as mcap's writer is called
+        w.add_messages(np.array([t * NS_PER_SLOT], dtype=np.uint64), np.array([t]), [data])
         if t % every == 0:
-            ts = np.array([c[0] for c in chunk], dtype=np.uint64)
-            w.add_chunk(ts * np.uint64(NS_PER_SLOT), ts, [c[1] for c in chunk])
-            chunk = []
-    if chunk:
-        ts = np.array([c[0] for c in chunk], dtype=np.uint64)
-        w.add_chunk(ts * np.uint64(NS_PER_SLOT), ts, [c[1] for c in chunk])
+            w.flush()
+    w.flush()
     w.add_metadata("b", {"end": "1"})
     w.finish()
     return buf.getvalue()
