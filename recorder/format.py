@@ -49,11 +49,6 @@ MESSAGE_KEYS = FIELDS
 #: otherwise end every file with an empty attachment-index summary group.
 MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
 
-_BOOL = (b"false", b"true")
-_TEMPLATE = (
-    b'{"t":%d,"x":%d,"arm":%d,"success":%b,"aoi":%d,"oracle_aoi":%d,"regret":%d,'
-    b'"estimator":%b,"override":%b,"mu_hat":[%b],"pulls":[%b],"candidates":%b}'
-)
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 
@@ -181,8 +176,11 @@ def end_metadata(
 class BlockEncoder:
     """Encodes a SlotBlock into one JSON message per slot, a column at a time.
 
-    The per-slot work is one bytes ``%`` formatting; numbers are formatted by orjson
-    (shortest round-trip text, so the decoder gets back the same float64 values).
+    Numbers are formatted by orjson a whole column at a time (shortest round-trip text, so
+    the decoder gets back the same float64 values); the messages are then put together by
+    one ``bytes.join`` over the columns interleaved with the constant key texts, and split
+    at a separator no JSON text of ours contains (a newline). That is about twice as fast
+    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py).
     """
 
     def __init__(self, K: int) -> None:
@@ -193,42 +191,60 @@ class BlockEncoder:
     def _candidates(self, mask: np.ndarray) -> list[bytes]:
         if self._weights is None:  # too many arms for a bit code: one row at a time
             return [orjson.dumps(np.flatnonzero(row) + 1, option=_NUMPY) for row in mask]
-        codes = (mask.astype(np.int64) @ self._weights).tolist()
+        codes, inverse = np.unique(mask.astype(np.int64) @ self._weights, return_inverse=True)
         sets = self._sets
-        out = []
-        for code in codes:
+        texts = np.empty(len(codes), dtype=object)
+        for i, code in enumerate(codes.tolist()):
             text = sets.get(code)
             if text is None:
                 text = orjson.dumps([k + 1 for k in range(self.K) if code >> k & 1])
                 sets[code] = text
-            out.append(text)
-        return out
+            texts[i] = text
+        return texts[inverse].tolist()
 
     def encode(self, b: SlotBlock) -> list[bytes]:
         n = len(b)
         if n == 0:
             return []
-        est = _items(b.estimator)
-        mu = _rows(b.mu_hat, n)
-        pulls = _rows(b.pulls, n)
-        return [
-            _TEMPLATE % row
-            for row in zip(
-                b.t.tolist(),
-                (b.x + 1).tolist(),
-                (b.arm + 1).tolist(),
-                [_BOOL[s] for s in b.success.tolist()],
-                b.aoi.tolist(),
-                b.oracle_aoi.tolist(),
-                b.regret.tolist(),
-                est,
-                [_BOOL[s] for s in b.override.tolist()],
-                mu,
-                pulls,
-                self._candidates(b.candidates),
-                strict=True,
-            )
+        columns: list[list[bytes]] = [
+            _items(b.t),
+            _items(b.x + 1),
+            _items(b.arm + 1),
+            _BOOLS[np.asarray(b.success, dtype=np.intp)].tolist(),
+            _items(b.aoi),
+            _items(b.oracle_aoi),
+            _items(b.regret),
+            _items(b.estimator),
+            _BOOLS[np.asarray(b.override, dtype=np.intp)].tolist(),
+            _rows(b.mu_hat, n),
+            _rows(b.pulls, n),
+            self._candidates(b.candidates),
         ]
+        step = 2 * len(_KEYS) + 1
+        parts: list[bytes] = [b"}\n"] * (step * n)  # every message ends with "}\n"
+        for i, (key, column) in enumerate(zip(_KEYS, columns, strict=True)):
+            parts[2 * i :: step] = [key] * n
+            parts[2 * i + 1 :: step] = column
+        return b"".join(parts)[:-1].split(b"\n")
+
+
+#: The text before each value of a message; ``encode`` ends each with "}\n" and splits at
+#: the newlines (orjson escapes any newline inside a JSON string).
+_KEYS = (
+    b'{"t":',
+    b',"x":',
+    b',"arm":',
+    b',"success":',
+    b',"aoi":',
+    b',"oracle_aoi":',
+    b',"regret":',
+    b',"estimator":',
+    b',"override":',
+    b',"mu_hat":[',
+    b'],"pulls":[',
+    b'],"candidates":',
+)
+_BOOLS = np.array([b"false", b"true"], dtype=object)
 
 
 def _items(column: np.ndarray) -> list[bytes]:

@@ -5,6 +5,9 @@ so a file at ``<path>`` is always complete. Every :data:`~recorder.format.FLUSH_
 slots the current chunk is closed and handed to the operating system, so a writer killed
 with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
 the ``.partial`` file and says the log was cut short.
+
+The chunks are framed by :class:`recorder.mcap_chunks.ChunkWriter` (whole chunks built
+with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from types import TracebackType
 from typing import BinaryIO
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
+from mcap.records import Channel, Schema
 
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError
@@ -25,7 +28,6 @@ from .format import (
     END_METADATA,
     FLUSH_EVERY,
     MAX_SLOT,
-    MCAP_INDEX_TYPES,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     RUN_METADATA,
@@ -38,12 +40,8 @@ from .format import (
     run_metadata,
     schema_bytes,
 )
+from .mcap_chunks import ChunkWriter
 from .paths import Sink, check_output, open_partial, partial_path, publish, reason
-
-#: Chunks are closed by slot count (FLUSH_EVERY), not by size; this only caps a huge chunk.
-_CHUNK_BYTES = 64 * 1024 * 1024
-#: Slots whose log_time t * 1e9 still fits a signed 64-bit integer (numpy fast path).
-_I64_SAFE = (2**63 - 1) // NS_PER_SLOT
 
 
 class McapSink(Sink):
@@ -85,22 +83,21 @@ class McapSink(Sink):
         self._encoder = BlockEncoder(config.instance.K)
         self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
         try:
-            self._writer = Writer(
+            self._writer = ChunkWriter(
                 self._file,
-                chunk_size=_CHUNK_BYTES,
-                compression=CompressionType.ZSTD,
-                index_types=MCAP_INDEX_TYPES,
+                schema=Schema(
+                    id=1, name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
+                ),
+                channel=Channel(
+                    id=1,
+                    topic=TOPIC,
+                    message_encoding=MESSAGE_ENCODING,
+                    schema_id=1,
+                    metadata={"format_version": run_metadata(config)["format_version"]},
+                ),
+                library=library_name(config.version),
             )
-            self._writer.start(profile="", library=library_name(config.version))
-            schema_id = self._writer.register_schema(
-                name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
-            )
-            self._channel = self._writer.register_channel(
-                topic=TOPIC,
-                message_encoding=MESSAGE_ENCODING,
-                schema_id=schema_id,
-                metadata={"format_version": run_metadata(config)["format_version"]},
-            )
+            self._writer.start()
             self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
             self._file.flush()
         except OSError as exc:
@@ -129,23 +126,22 @@ class McapSink(Sink):
         if self.slots + n > self.config.horizon:
             raise ValueError(f"block goes past the horizon {self.config.horizon}")
         messages = self._encoder.encode(block)
-        t = block.t.astype(np.int64, copy=False)
-        times = (
-            (t * NS_PER_SLOT).tolist()
-            if t[-1] <= _I64_SAFE
-            else [v * NS_PER_SLOT for v in t.tolist()]
-        )
-        sequences = (t & 0xFFFFFFFF).tolist()  # MCAP sequence is 32-bit: t modulo 2**32
-        ends = (t % self.flush_every == 0).tolist()
-        add = self._writer.add_message
-        flush = self._writer.flush
-        channel = self._channel
+        t = block.t.astype(np.uint64)
+        times = t * np.uint64(NS_PER_SLOT)  # no overflow: the horizon is at most MAX_SLOT
+        sequences = t & np.uint64(0xFFFFFFFF)  # MCAP sequence is 32-bit: t modulo 2**32
+        # a chunk ends after every slot t with t % flush_every == 0, wherever the blocks
+        # end: the file is the same for any block size
+        ends = (np.flatnonzero(t % np.uint64(self.flush_every) == 0) + 1).tolist()
+        add, flush = self._writer.add_messages, self._writer.flush
         self._torn = True  # until this block is fully handed to the writer
         try:
-            for ns, seq, data, end in zip(times, sequences, messages, ends, strict=True):
-                add(channel, ns, data, ns, seq)
-                if end:
-                    flush()
+            begin = 0
+            for end in ends:
+                add(times[begin:end], sequences[begin:end], messages[begin:end])
+                flush()
+                begin = end
+            if begin < n:  # the rest stays in the open chunk
+                add(times[begin:], sequences[begin:], messages[begin:])
         except OSError as exc:
             raise self._write_error(exc) from None
         self._torn = False

@@ -5,7 +5,7 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 
 ==================  =====================================================================
 ``aoi``             age of information after the slot (line)
-``oracle_aoi``      age of the oracle playing the best arm on the same hidden path (line)
+``oracle_aoi``      age of the oracle playing the best arm on the same hidden path (dots)
 ``regret``          pathwise AoI regret sum (aoi - oracle_aoi) (line)
 ``estimator``       the paper's estimator sum aoi - t / mu* (line)
 ``arm/success``     the arm played, at the slots where it delivered (points)
@@ -13,16 +13,20 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``override``        the arm played, at the slots where the AoI-aware rule chose it (points)
 ``x``               the hidden state X_t (points)
 ``mu_hat``          empirical mean of every arm after the slot, K series
+``mu_true``         true mean of every arm (constant: two points a batch), ``mu_k (true)``
 ``pulls``           pulls of every arm after the slot, K series
 ``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
 ``about``           the run configuration (static markdown)
 ==================  =====================================================================
 
-Styling (names, colours, markers) is logged once as static data when the sink is made.
-Data go with ``send_columns``, one call per entity and block: ``rr.log`` per slot would
-cost ~50 us a call. No global Rerun state: the caller passes a ``RecordingStream``
-(:func:`new_recording` makes one with reproducible settings) and owns where it goes;
-:class:`RrdOutput` is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
+Styling (names, colours, markers; :mod:`recorder.style` owns them) is logged once as
+static data when the sink is made. rerun-sdk 0.41 has no axis titles: units are in the
+view titles and series names.
+Data go with ``send_columns``, one call per entity and batch of :data:`BATCH` slots
+(blocks are gathered first): ``rr.log`` per slot would cost ~50 us a call. No global
+Rerun state: the caller passes a ``RecordingStream`` (:func:`new_recording` makes one
+with reproducible settings) and owns where it goes; :class:`RrdOutput` is the owner
+``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
 """
 
 from __future__ import annotations
@@ -41,21 +45,21 @@ import rerun.blueprint as rrb
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.theory import analyse
 
+from . import style
 from .errors import ViewerError, WriteError
 from .paths import Sink, check_output, open_partial, partial_path, publish, reason
-from .sweep_log import arm_color, lighter, policy_color
 
 APPLICATION_ID = "corraoi"
 TIMELINE = "slot"
 ROOT = "runs"
-#: Slots shown by the windowed views (AoI, arms, states, candidates) left of the cursor.
-WINDOW = 300
-
-ORACLE_COLOR = (150, 150, 150)
-SUCCESS_COLOR = (46, 160, 67)
-FAILURE_COLOR = (214, 39, 40)
-OVERRIDE_COLOR = (255, 187, 0)
-STATE_COLOR = (90, 90, 160)
+#: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
+#: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
+#: slots cost 3.0 us a slot, 5,000 1.2 us, 20,000 1.0 us. A viewer then sees the data in
+#: steps of ~8,000 slots (30 ms at recording speed).
+BATCH = 8192
+#: Slots shown by the windowed views (AoI, arms, states, candidates) left of the cursor:
+#: few enough that every success and failure marker stays legible.
+WINDOW = 200
 
 #: Entities of a run, relative to :func:`run_path` (``candidates`` has one child per arm).
 ENTITIES = (
@@ -68,6 +72,7 @@ ENTITIES = (
     "override",
     "x",
     "mu_hat",
+    "mu_true",
     "pulls",
     "candidates",
     "about",
@@ -108,11 +113,7 @@ def new_recording(
 
 
 def _arm_names(config: RunConfig) -> list[str]:
-    names = config.instance.arm_names
-    return [
-        f"arm {k + 1}" if name == str(k + 1) else f"arm {k + 1} ({name})"
-        for k, name in enumerate(names)
-    ]
+    return [style.arm_label(k, name) for k, name in enumerate(config.instance.arm_names)]
 
 
 def about_markdown(config: RunConfig) -> str:
@@ -203,7 +204,10 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
             plot_legend=legend,
         )
 
-    aoi = windowed(f"AoI vs oracle (last {window} slots)", ["$origin/aoi", "$origin/oracle_aoi"])
+    aoi = windowed(
+        f"AoI {style.AOI_UNIT}: policy vs oracle (last {window} slots)",
+        ["$origin/aoi", "$origin/oracle_aoi"],
+    )
 
     def whole(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
         return rrb.TimeSeriesView(
@@ -217,17 +221,23 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
         )
 
     regret = whole(
-        "AoI regret (pathwise) and the paper's estimator", ["$origin/regret", "$origin/estimator"]
+        f"AoI regret {style.REGRET_UNIT}: pathwise and the paper's estimator",
+        ["$origin/regret", "$origin/estimator"],
     )
     arms = windowed(
-        "channel played: success / failure / AoI-aware override",
+        f"arm played (1..{K}): success / failure / AoI-aware override",
         ["$origin/arm/**", "$origin/override"],
         (0.5, K + 0.5),
     )
-    candidates = windowed("candidate set", ["$origin/candidates/**"], (0.5, K + 0.5))
-    means = whole("empirical means mu_hat", ["$origin/mu_hat"], (0.0, 1.0))
-    pulls = whole("pulls per arm", ["$origin/pulls"])
-    state = windowed("hidden state x", ["$origin/x"], (0.5, n + 0.5))
+    candidates = windowed(f"candidate set (arms 1..{K})", ["$origin/candidates/**"],
+                          (0.5, K + 0.5))  # fmt: skip
+    means = whole(
+        "mean reward per arm: empirical and true [probability]",
+        ["$origin/mu_hat", "$origin/mu_true"],
+        (0.0, 1.0),
+    )
+    pulls = whole("pulls per arm [count]", ["$origin/pulls"])
+    state = windowed(f"hidden state x (1..{n})", ["$origin/x"], (0.5, n + 0.5))
     about = rrb.TextDocumentView(origin=f"{base}/about", name="run")
     return rrb.Blueprint(
         rrb.Vertical(
@@ -239,10 +249,12 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
                 about,
                 column_shares=[2, 2, 1],
             ),
-            row_shares=[3, 3, 2],
+            row_shares=[3, 2.5, 3],  # the means' legend lists 2 K series
         ),
-        rrb.TimePanel(timeline=TIMELINE),
-        collapse_panels=False,
+        # the views get the room: the time panel shows only its scrubber, the selection
+        # panel opens when asked
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        rrb.SelectionPanel(state="hidden"),
     )
 
 
@@ -262,8 +274,15 @@ class RerunSink(Sink):
         config: RunConfig,
         *,
         flush_timeout: float = 30.0,
+        batch: int = BATCH,
+        color: style.RGB | None = None,
     ) -> None:
+        if batch < 1:
+            raise ValueError(f"batch must be >= 1, got {batch}")
         self.recording = recording
+        self.batch = int(batch)
+        self._pending: list[SlotBlock] = []
+        self._pending_slots = 0
         self.label = label
         self.config = config
         self.base = run_path(label)
@@ -273,15 +292,19 @@ class RerunSink(Sink):
         self.flush_timeout = flush_timeout
         self.problem: str | None = None
         self._arm_values = np.arange(1, self.K + 1, dtype=np.float64)
+        #: the run's colour: ``color`` (compare gives runs of one policy distinct shades),
+        #: else the policy's own (``spec.color``) or its base policy's
+        self.color = color if color is not None else style.spec_color(config.policy)
+        self._mu = np.asarray(analyse(config.instance).mu, dtype=np.float64)
         self._style()
 
     def _style(self) -> None:
-        rec, base = self.recording, self.base
-        color = policy_color(self.config.policy.name)
+        rec, base, st = self.recording, self.base, style
+        color = self.color
         names = _arm_names(self.config)
-        colors = [arm_color(k) for k in range(self.K)]
+        colors = [st.arm_color(k) for k in range(self.K)]
 
-        def line(path: str, rgb: Any, name: str, width: float = 1.5) -> None:
+        def line(path: str, rgb: Any, name: str, width: float) -> None:
             rec.log(
                 f"{base}/{path}",
                 rr.SeriesLines(colors=[rgb], widths=[width], names=[name]),
@@ -296,26 +319,41 @@ class RerunSink(Sink):
             )
 
         shape = rr.components.MarkerShape
-        line("aoi", color, "AoI", 2.0)
-        line("oracle_aoi", ORACLE_COLOR, "oracle AoI (best arm)", 1.0)
-        line("regret", color, "pathwise regret sum(aoi - oracle_aoi)", 2.0)
-        line("estimator", lighter(color, 0.5), "estimator sum(aoi) - t/mu*", 1.0)
-        points("arm/success", SUCCESS_COLOR, "success", shape.Circle, 2.5)
-        points("arm/failure", FAILURE_COLOR, "failure", shape.Cross, 2.5)
-        points("override", OVERRIDE_COLOR, "AoI-aware override", shape.Diamond, 4.0)
-        points("x", STATE_COLOR, "hidden state x", shape.Square, 2.0)
+        line("aoi", color, st.AOI_NAME, st.WIDTH_MAIN)
+        # the oracle: another colour AND another line style (dotted: a point per slot, no
+        # line, since Rerun 0.41 lines cannot be dashed), named
+        points("oracle_aoi", st.ORACLE_COLOR, st.ORACLE_NAME, shape.Circle, st.MARKER_ORACLE)
+        line("regret", color, st.REGRET_NAME, st.WIDTH_MAIN)
+        line("estimator", st.lighter(color, 0.5), st.ESTIMATOR_NAME, st.WIDTH_SECONDARY)
+        points("arm/success", st.SUCCESS_COLOR, st.SUCCESS_NAME, shape.Circle, st.MARKER_SUCCESS)
+        points("arm/failure", st.FAILURE_COLOR, st.FAILURE_NAME, shape.Cross, st.MARKER_FAILURE)
+        points("override", st.OVERRIDE_COLOR, st.OVERRIDE_NAME, shape.Diamond, st.MARKER_OVERRIDE)
+        points("x", st.STATE_COLOR, st.STATE_NAME, shape.Square, st.MARKER_STATE)
         rec.log(
             f"{base}/mu_hat",
-            rr.SeriesLines(colors=colors, widths=[1.5] * self.K, names=names),
+            rr.SeriesLines(
+                colors=colors,
+                widths=[st.WIDTH_ARM] * self.K,
+                names=[st.mean_name(k, true=False) for k in range(self.K)],
+            ),
+            static=True,
+        )
+        rec.log(
+            f"{base}/mu_true",
+            rr.SeriesLines(
+                colors=[st.true_mean_color(k) for k in range(self.K)],
+                widths=[st.WIDTH_TRUE_MEAN] * self.K,
+                names=[st.mean_name(k, true=True) for k in range(self.K)],
+            ),
             static=True,
         )
         rec.log(
             f"{base}/pulls",
-            rr.SeriesLines(colors=colors, widths=[1.5] * self.K, names=names),
+            rr.SeriesLines(colors=colors, widths=[st.WIDTH_ARM] * self.K, names=names),
             static=True,
         )
         for k in range(self.K):
-            points(f"candidates/{k + 1}", colors[k], names[k], shape.Square, 2.0)
+            points(f"candidates/{k + 1}", colors[k], names[k], shape.Square, st.MARKER_CANDIDATE)
         rec.log(
             f"{base}/about",
             rr.TextDocument(about_markdown(self.config), media_type=rr.MediaType.MARKDOWN),
@@ -323,12 +361,27 @@ class RerunSink(Sink):
         )
 
     def write(self, block: SlotBlock) -> None:
-        """Send the block's slots, one ``send_columns`` per entity."""
+        """Queue the block's slots; they are sent once ``batch`` slots wait (and by
+        :meth:`send` or :meth:`close`)."""
         if self.closed:
             raise ValueError(f"RerunSink {self.label}: write() after close()")
-        n = len(block)
-        if n == 0:
+        if len(block) == 0:
             return
+        self._pending.append(block)
+        self._pending_slots += len(block)
+        if self._pending_slots >= self.batch:
+            self.send()
+
+    def send(self) -> None:
+        """Send the queued slots now, one ``send_columns`` per entity."""
+        if not self._pending:
+            return
+        block = self._pending[0] if len(self._pending) == 1 else SlotBlock.concat(self._pending)
+        self._pending, self._pending_slots = [], 0
+        self._send(block)
+
+    def _send(self, block: SlotBlock) -> None:
+        n = len(block)
         send, base = self.recording.send_columns, self.base
         t = np.ascontiguousarray(block.t, dtype=np.int64)
 
@@ -353,6 +406,8 @@ class RerunSink(Sink):
         column("override", t[over], arm[over])
         column("x", t, (block.x + 1).astype(f64))
         column("mu_hat", t, np.ascontiguousarray(block.mu_hat, dtype=f64))
+        ends = t[[0, -1]] if n > 1 else t[:1]  # a constant: two points draw the line
+        column("mu_true", ends, np.tile(self._mu, (len(ends), 1)))
         column("pulls", t, block.pulls.astype(f64))
         cand = np.asarray(block.candidates, dtype=bool)
         for k in range(self.K):
@@ -370,6 +425,7 @@ class RerunSink(Sink):
         """
         if self.closed:
             return self.problem
+        self.send()
         self.closed = True
         try:
             self.recording.flush(timeout_sec=self.flush_timeout)

@@ -28,11 +28,21 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
-from corraoi.policies import AOI_PREFIX
 
 from .errors import LogError, WriteError
 from .format import MCAP_INDEX_TYPES, SWEEP_METADATA
 from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
+
+# Colours live in recorder.style (one place for every view); re-exported for old imports.
+from .style import (
+    ARM_COLORS,
+    POLICY_COLORS,
+    arm_color,
+    base_policy,
+    is_aoi_aware,
+    lighter,
+    policy_color,
+)
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
@@ -73,62 +83,6 @@ _SLOT_SCHEMA = "corraoi.SlotEvent"
 
 class SweepLogError(LogError):
     """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
-
-
-# ---------------------------------------------------------------------------- styling
-# Shared by the Rerun sink and the figure, so both draw a policy in the same colour.
-
-RGB = tuple[int, int, int]
-
-#: One colour per base policy; its ``aoi-aware-`` variant uses the same colour.
-POLICY_COLORS: dict[str, RGB] = {
-    "ucb": (31, 119, 180),  # blue
-    "ts": (255, 127, 14),  # orange
-    "ts-gauss": (140, 86, 75),  # brown
-    "cucb": (44, 160, 44),  # green
-    "cts": (214, 39, 40),  # red
-    "cts-gauss": (148, 103, 189),  # purple
-}
-_EXTRA_COLORS: tuple[RGB, ...] = ((227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
-#: Colours of arms 1, 2, ... in the pulls views (cycled beyond eight arms).
-ARM_COLORS: tuple[RGB, ...] = (
-    (102, 194, 165),
-    (252, 141, 98),
-    (141, 160, 203),
-    (231, 138, 195),
-    (166, 216, 84),
-    (255, 217, 47),
-    (229, 196, 148),
-    (179, 179, 179),
-)
-
-
-def base_policy(name: str) -> str:
-    """``aoi-aware-cts`` -> ``cts``; any other name unchanged."""
-    return name.removeprefix(AOI_PREFIX)
-
-
-def is_aoi_aware(name: str) -> bool:
-    return name.startswith(AOI_PREFIX)
-
-
-def policy_color(name: str) -> RGB:
-    """The colour of a policy: its base policy's (unknown bases get a stable extra colour)."""
-    base = base_policy(name)
-    if base in POLICY_COLORS:
-        return POLICY_COLORS[base]
-    return _EXTRA_COLORS[sum(base.encode()) % len(_EXTRA_COLORS)]
-
-
-def lighter(rgb: RGB, amount: float = 0.5) -> RGB:
-    """``rgb`` mixed with white (``amount`` = 0: unchanged, 1: white)."""
-    r, g, b = (round(c + (255 - c) * amount) for c in rgb)
-    return (r, g, b)
-
-
-def arm_color(k: int) -> RGB:
-    """Colour of the arm with 0-based index ``k``."""
-    return ARM_COLORS[k % len(ARM_COLORS)]
 
 
 # ---------------------------------------------------------------------------- format

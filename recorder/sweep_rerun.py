@@ -9,9 +9,10 @@ Entities (timeline ``slot``, a sequence; arms numbered from 1):
 * ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t.
 
 Styling (``SeriesLines``/``SeriesPoints`` colours, names, widths) is logged once as static.
-Each base policy has a colour (``recorder.sweep_log.POLICY_COLORS``); its ``aoi-aware-``
-variant uses the same colour with a thinner line plus a cross marker at every checkpoint,
-since Rerun 0.41 lines cannot be dashed. :func:`sweep_blueprint` is the default layout: the
+Colours, widths and markers come from :mod:`recorder.style`: each base policy has a colour;
+its ``aoi-aware-`` variant uses the same colour with a thinner line plus a cross marker at
+every checkpoint, since Rerun 0.41 lines cannot be dashed. Units are in the view titles
+and series names (Rerun 0.41 has no axis titles). :func:`sweep_blueprint` is the default layout: the
 regret overlay on top, the pulls per arm of each policy in tabs below.
 
 No global Rerun state: everything goes through the ``RecordingStream`` passed in. With
@@ -36,17 +37,32 @@ from corraoi.sweep import SweepPoint
 
 from .errors import WriteError
 from .paths import Sink, partial_path, publish, reason
-from .sweep_log import FLUSH_EVERY, arm_color, is_aoi_aware, lighter, policy_color
+from .style import (
+    MARKER_AOI_AWARE,
+    REGRET_UNIT,
+    WIDTH_AOI_AWARE,
+    WIDTH_ARM,
+    WIDTH_BAND,
+    WIDTH_MAIN,
+    arm_color,
+    arm_label,
+    config_colors,
+    is_aoi_aware,
+    lighter,
+    policy_color,
+)
+from .sweep_log import FLUSH_EVERY
 
 TIMELINE = "slot"
 ROOT = "sweep"
-#: Line widths (UI points) of the mean curves, AoI-aware curves and band lines.
-WIDTH_BASE = 2.0
-WIDTH_AOI_AWARE = 1.25
-WIDTH_BAND = 0.75
+#: Line widths (UI points) of the mean curves (AoI-aware and band: recorder.style).
+WIDTH_BASE = WIDTH_MAIN
+#: More policies than this: the regret view opens as small multiples (base policies beside
+#: their AoI-aware forms), each legend short enough to fit.
+SMALL_MULTIPLES_FROM = 6
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
-AOI_AWARE_MARKER_SIZE = 2.5
+AOI_AWARE_MARKER_SIZE = MARKER_AOI_AWARE
 
 
 def _part(name: str) -> str:
@@ -75,9 +91,7 @@ def _arm_labels(config: dict[str, Any]) -> list[str]:
     inst = config.get("instance") or {}
     K = len(inst.get("Y", []))
     names = list(inst.get("arms") or [str(k + 1) for k in range(K)])
-    return [
-        f"arm {k + 1}" if names[k] == str(k + 1) else f"arm {k + 1} ({names[k]})" for k in range(K)
-    ]
+    return [arm_label(k, names[k]) for k in range(K)]
 
 
 def sweep_recording_id(config: dict[str, Any]) -> str:
@@ -90,7 +104,8 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
     """The default layout: the regret overlay (and estimator tab), pulls per policy below."""
     inst = config.get("instance") or {}
     title = (
-        f"AoI regret, {inst.get('name', '?')}: {config.get('runs', '?')} runs, mean and 95% band"
+        f"AoI regret {REGRET_UNIT}, {inst.get('name', '?')}: {config.get('runs', '?')} runs, "
+        "mean and 95% band"
     )
     horizon = config.get("horizon")
     # The whole horizon, not a window around the time cursor.
@@ -105,19 +120,48 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
         else None
     )
     legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
+    names = _policy_names(config)
+    overlay = rrb.TimeSeriesView(
+        origin=f"{ROOT}/regret", name=title, plot_legend=legend, axis_x=axis
+    )
+    first: list[rrb.Container | rrb.View] = [overlay]
+    base = [p for p in names if not is_aoi_aware(p)]
+    aware = [p for p in names if is_aoi_aware(p)]
+    if len(names) > SMALL_MULTIPLES_FROM and base and aware:
+        # too many curves for one legend: the base policies beside their AoI-aware forms
+        # (same colours), the overlay of all in the next tab
+        def group(members: list[str], what: str) -> rrb.TimeSeriesView:
+            return rrb.TimeSeriesView(
+                origin=f"{ROOT}/regret",
+                contents=[f"{regret_path(p)}/**" for p in members],
+                name=f"AoI regret {REGRET_UNIT}, {what}",
+                plot_legend=legend,
+                axis_x=axis,
+            )
+
+        first = [
+            rrb.Horizontal(group(base, "policies"), group(aware, "AoI-aware forms"),
+                           name=f"{title}: policies | AoI-aware forms"),
+            overlay,
+        ]  # fmt: skip
     top = rrb.Tabs(
-        rrb.TimeSeriesView(origin=f"{ROOT}/regret", name=title, plot_legend=legend, axis_x=axis),
+        *first,
         rrb.TimeSeriesView(
             origin=f"{ROOT}/estimator",
-            name="estimator sum aoi - t / mu*",
+            name=f"estimator sum aoi - t / mu* {REGRET_UNIT}",
             plot_legend=legend,
             axis_x=axis,
         ),
         active_tab=0,
     )
     pulls = [
-        rrb.TimeSeriesView(origin=pulls_path(p), name=f"pull share, {p}", axis_x=axis)
-        for p in _policy_names(config)
+        rrb.TimeSeriesView(
+            origin=pulls_path(p),
+            name=f"pull share per arm [fraction], {p}",
+            axis_x=axis,
+            plot_legend=legend,
+        )  # fmt: skip
+        for p in names
     ]
     parts: list[rrb.Container | rrb.View] = [top]
     if pulls:
@@ -172,6 +216,7 @@ class SweepRerunSink(Sink):
         self.K = len(self.arm_labels)
         self._buffer: list[SweepPoint] = []
         self._styled: set[str] = set()
+        self._colors = config_colors(config)  # a policy's own colour, where it has one
         self._closed = False
         self._owned_path: Path | None = None
         self._overwrite = True
@@ -214,7 +259,7 @@ class SweepRerunSink(Sink):
             return
         self._styled.add(name)
         rec = self.recording
-        color = policy_color(name)
+        color = self._colors.get(name) or policy_color(name)
         aware = is_aoi_aware(name)
         width = WIDTH_AOI_AWARE if aware else WIDTH_BASE
         for path in (regret_path(name), estimator_path(name)):
@@ -237,7 +282,7 @@ class SweepRerunSink(Sink):
         for k, label in enumerate(self.arm_labels):
             rec.log(
                 pulls_path(name, k + 1),
-                rr.SeriesLines(colors=[arm_color(k)], widths=[1.5], names=[label]),
+                rr.SeriesLines(colors=[arm_color(k)], widths=[WIDTH_ARM], names=[label]),
                 static=True,
             )
 

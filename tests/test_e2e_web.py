@@ -2,12 +2,14 @@
 
 The Rerun web viewer bundled in rerun-sdk is served on 127.0.0.1 by ``corraoi compare
 --serve-web``; headless Chromium (Debian's ``chromium``, driven over the DevTools protocol
-on a pipe: no extra Python package) opens it, and the screenshot must show every run's
-series colour -- a blank or error page has none of them. The test stops the browser and
-the server itself and checks that the ports are closed again.
+on a pipe: no extra Python package) opens it, and the screenshot must look like a
+comparison a person can read: every run's series colour, the success and failure markers,
+the arms' colours in the means panels and enough drawn (non-background) pixels -- a blank,
+error or welcome page has none of them. The test stops the browser and the server itself
+and checks that the ports are closed again.
 
 ``CORRAOI_SCREENSHOT_TO=docs/compare-screenshot.png pytest tests/test_e2e_web.py`` also
-keeps the screenshot (reduced to a small palette PNG).
+keeps the screenshot (as a 256-colour palette PNG).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from urllib.parse import unquote, urlsplit
 import numpy as np
 import pytest
 
-from recorder.sweep_log import policy_color
+from recorder import style
 
 POLICIES = ("ucb", "ts", "cts-gauss")  # colours unlike any arm, success or failure colour
 WIDTH, HEIGHT = 1400, 900
@@ -142,13 +144,33 @@ def listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def colour_pixels(png: bytes, rgb: tuple[int, int, int], tol: int = 14) -> int:
+def _pixels(png: bytes) -> np.ndarray:
     import io
 
     from PIL import Image
 
-    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def colour_pixels(png: bytes, rgb: tuple[int, int, int], tol: int = 14) -> int:
+    img = _pixels(png)
     return int((np.abs(img - np.array(rgb, dtype=np.int16)) <= tol).all(axis=2).sum())
+
+
+def drawn_share(png: bytes) -> float:
+    """Share of pixels that differ from the page background (its most common colour)."""
+    flat = _pixels(png).reshape(-1, 3)
+    values, counts = np.unique(flat, axis=0, return_counts=True)
+    background = values[counts.argmax()]
+    return float((np.abs(flat - background).max(axis=1) > 24).mean())
+
+
+#: What a readable compare screenshot shows besides the run colours: (name, colour).
+MARKS = (
+    ("success marker", style.SUCCESS_COLOR),
+    ("failure marker", style.FAILURE_COLOR),
+    *((f"arm {k + 1}", style.arm_color(k)) for k in range(4)),
+)
 
 
 def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
@@ -189,7 +211,7 @@ def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
         assert listening(web_port) and grpc_port and listening(grpc_port)
         browser = Chromium(exe)
         browser.open(url)
-        wanted = {p: policy_color(p) for p in POLICIES}
+        wanted = {p: style.policy_color(p) for p in POLICIES} | dict(MARKS)
         found: dict[str, int] = {}
         png = b""
         deadline = time.monotonic() + 60
@@ -198,17 +220,24 @@ def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
             png = browser.screenshot()
             found = {p: colour_pixels(png, rgb) for p, rgb in wanted.items()}
             if all(n >= 40 for n in found.values()):
+                time.sleep(2)  # let the last panels finish drawing
+                png = browser.screenshot()
+                found = {p: colour_pixels(png, rgb) for p, rgb in wanted.items()}
                 break
         (tmp_path / "compare.png").write_bytes(png)
         keep = os.environ.get("CORRAOI_SCREENSHOT_TO")
         if keep:
             from PIL import Image
 
-            Image.open(tmp_path / "compare.png").convert("RGB").quantize(colors=64).save(
+            Image.open(tmp_path / "compare.png").convert("RGB").quantize(colors=256).save(
                 keep, optimize=True
             )
         missing = {p: n for p, n in found.items() if n < 40}
-        assert not missing, f"run colours missing from the screenshot: {missing} (all: {found})"
+        assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
+        # a page with a few coloured dots is not a comparison: most of a blank, error or
+        # welcome page is background, a drawn compare view has about 8% other pixels
+        share = drawn_share(png)
+        assert share >= 0.04, f"the screenshot is nearly blank ({share:.1%} drawn pixels)"
     finally:
         if browser is not None:
             browser.close()

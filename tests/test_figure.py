@@ -14,7 +14,9 @@ import pytest
 from click.testing import CliRunner
 
 from corraoi.cli import main
-from recorder.sweep_log import POLICY_COLORS, SweepMcapSink, read_sweep
+from corraoi.errors import UsageError
+from recorder.style import POLICY_COLORS
+from recorder.sweep_log import SweepMcapSink, read_sweep
 from viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, FigureUnavailable, draw_figure
 
 from .test_sweep_log import POLICIES, small_sweep, write_log
@@ -245,3 +247,100 @@ def test_cli_figure_never_simulates(tmp_path: Path, log_path: Path):
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
     assert png_size(tmp_path / "f.png") == (1500, 900)
+
+
+# ---------------------------------------------------------------------------- options (issue 10)
+
+BASES = ("ucb", "ts", "ts-gauss", "cucb", "cts", "cts-gauss")
+ALL12 = BASES + tuple(f"aoi-aware-{b}" for b in BASES)
+
+
+@pytest.fixture(scope="module")
+def log12(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("sweep12") / "sweep.mcap"
+    return write_log(path, small_sweep(ALL12, runs=3, horizon=300))
+
+
+def _boxes_overlap(a: Any, b: Any) -> bool:
+    return bool(a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1)
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_twelve_policies_never_overlap_the_legend(tmp_path, log12, monkeypatch, split):
+    pytest.importorskip("matplotlib")
+    saved = capture_figures(monkeypatch)
+    out = draw_figure(read_sweep(log12), tmp_path / "f.png", split=split)
+    (fig,) = saved
+    renderer = fig.canvas.get_renderer()
+    axes = fig.axes
+    assert len(axes) == (2 if split else 1)
+    (legend,) = [ax.get_legend() for ax in axes if ax.get_legend() is not None]
+    box = legend.get_window_extent(renderer)
+    assert [t.get_text() for t in legend.get_texts()][:12] == list(ALL12)
+    for ax in axes:
+        assert not _boxes_overlap(box, ax.get_window_extent(renderer))
+    assert box.x1 <= fig.bbox.x1 + 1 and box.y0 >= fig.bbox.y0 - 1  # inside the figure
+    if split:  # small multiples: base policies left, their AoI-aware forms right, one y scale
+        left, right = ([line.get_label() for line in ax.get_lines()] for ax in axes)
+        assert left == list(ALL12[:6]) and right == list(ALL12[6:])
+        assert axes[0].get_ylim() == axes[1].get_ylim()
+        assert all(line.get_linestyle() == "--" for line in axes[1].get_lines())
+    for name in ("ts-gauss", "cts-gauss"):
+        assert has_color(out, POLICY_COLORS[name]), name
+
+
+def test_log_y_and_dpi(tmp_path, log_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    saved = capture_figures(monkeypatch)
+    out = draw_figure(read_sweep(log_path), tmp_path / "f.png", log_y=True, dpi=60)
+    (ax,) = saved[0].axes
+    assert ax.get_yscale() == "symlog" and "symmetric log" in ax.get_ylabel()
+    assert "[slot-ages]" in ax.get_ylabel()
+    assert png_size(out) == (round(FIGSIZE[0] * 60), round(FIGSIZE[1] * 60))
+    res = run("figure", str(log_path), "-o", str(tmp_path / "g.png"), "--dpi", "40", "--log-y")
+    assert res.exit_code == 0, res.output
+    assert png_size(tmp_path / "g.png") == (400, 240)
+
+
+MAGIC = {
+    "png": b"\x89PNG",
+    "svg": b"<?xml",
+    "pdf": b"%PDF",
+    "jpg": b"\xff\xd8\xff",
+    "jpeg": b"\xff\xd8\xff",
+    "webp": b"RIFF",
+    "tif": b"II*\x00",
+    "tiff": b"II*\x00",
+}
+
+
+@pytest.mark.parametrize("ext", sorted(MAGIC))
+def test_the_extension_picks_the_format(tmp_path, log_path, ext):
+    pytest.importorskip("matplotlib")
+    out = tmp_path / f"fig.{ext.upper() if ext == 'png' else ext}"
+    res = run("figure", str(log_path), "-o", str(out))
+    assert res.exit_code == 0, res.output
+    assert out.read_bytes().startswith(MAGIC[ext])
+    if ext == "webp":
+        assert out.read_bytes()[8:12] == b"WEBP"
+
+
+@pytest.mark.parametrize(
+    "name, args, expected",
+    [
+        ("fig.bmp", [], "fig.bmp: cannot tell the figure format (extension '.bmp'); expected a "
+         "file name ending in .png, .svg, .pdf, .jpg, .webp or .tif"),
+        ("fig", [], "fig: cannot tell the figure format (no extension)"),
+        ("fig.png", ["--dpi", "5"], "--dpi 5: out of range, expected 20..1200 dots per inch"),
+        ("fig.png", ["--dpi", "5000"], "--dpi 5000: out of range"),
+    ],
+)  # fmt: skip
+def test_bad_extension_or_dpi_is_one_line_and_no_file(tmp_path, log_path, name, args, expected):
+    out = tmp_path / name
+    res = run("figure", str(log_path), "-o", str(out), *args)
+    assert res.exit_code == 2, res.output
+    assert res.output.startswith("corraoi: error: ") and res.output.count("\n") == 1
+    assert expected in res.output
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(UsageError, match="cannot tell the figure format"):
+        draw_figure(read_sweep(log_path), tmp_path / "x.gif")

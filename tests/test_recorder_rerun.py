@@ -86,9 +86,15 @@ def test_styling_is_static_and_the_blueprint_is_embedded(tmp_path, make_config, 
         if chunk.is_static:
             static[chunk.entity_path] = chunk.to_record_batch().to_pydict()
     base = "/" + run_path(config.label)
-    assert static[f"{base}/aoi"]["SeriesLines:names"] == [["AoI"]]
-    assert static[f"{base}/mu_hat"]["SeriesLines:names"] == [[f"arm {k}" for k in range(1, 5)]]
-    assert static[f"{base}/arm/failure"]["SeriesPoints:names"] == [["failure"]]
+    assert static[f"{base}/aoi"]["SeriesLines:names"] == [["AoI [slots]"]]
+    oracle = static[f"{base}/oracle_aoi"]  # dotted: points, no line, named
+    assert oracle["SeriesPoints:names"] == [["oracle AoI, best arm k* [slots]"]]
+    assert "SeriesLines:names" not in oracle
+    arms = range(1, 5)
+    assert static[f"{base}/mu_hat"]["SeriesLines:names"] == [[f"mu_{k} (empirical)" for k in arms]]
+    assert static[f"{base}/mu_true"]["SeriesLines:names"] == [[f"mu_{k} (true)" for k in arms]]
+    assert static[f"{base}/pulls"]["SeriesLines:names"] == [[f"arm {k}" for k in range(1, 5)]]
+    assert static[f"{base}/arm/failure"]["SeriesPoints:names"] == [["failure (arm played)"]]
     about = static[f"{base}/about"]["TextDocument:text"][0][0]
     assert "cucb" in about and "seed 0" in about and "best (k*)" in about
     texts = []
@@ -97,7 +103,8 @@ def test_styling_is_static_and_the_blueprint_is_embedded(tmp_path, make_config, 
             if "string" in str(column.type):  # view names, origins, queries
                 texts.append(str(column.to_pylist()))
     blueprint_text = " ".join(texts)
-    views = ("AoI vs oracle", "AoI regret", "channel played", "candidate set")
+    views = ("AoI [slots]: policy vs oracle", "AoI regret [slot-ages]", "arm played",
+             "candidate set", "[probability]")  # fmt: skip
     for view in (*views, run_path(config.label), "$origin/candidates/**"):
         assert view in blueprint_text
 

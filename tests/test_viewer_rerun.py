@@ -123,9 +123,15 @@ def test_compare_puts_every_run_side_by_side(tmp_path, record_mcap):
     regrets = " | ".join(str(int(refs[p][1].regret[-1])) for p in ("ucb", "cucb", "aoi-aware-ts"))
     assert f"| pathwise regret | {regrets} |" in table
     bp = blueprint_text(out)
-    assert "AoI regret (pathwise), every run" in bp
+    assert "AoI regret [slot-ages] (pathwise), every run" in bp
     for label in ("ucb", "cucb", "aoi-aware-ts"):
-        for view in ("AoI vs oracle", "channel played", "empirical means", "candidate set"):
+        views = (
+            "AoI [slots] vs oracle",
+            "arm played (1..4)",
+            "mean reward per arm, empirical and true",
+            "candidate set (arms 1..4)",
+        )
+        for view in views:
             assert f"{label}: {view}" in bp
         assert f"{run_path(label)}/regret" in bp
     printed = result.table()

@@ -19,6 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from recorder.style import AOI_UNIT, REGRET_UNIT, RGB, spec_color
+from recorder.style import run_colors as _shades
+
 from .info import summary_rows
 from .readahead import read_ahead
 from .runs import LogLike, as_log, require_slots, unique_labels
@@ -34,10 +37,10 @@ if TYPE_CHECKING:
 BLOCK = 1000
 #: Entity of the summary table (a markdown document) in a compare recording.
 SUMMARY_ENTITY = "compare/summary"
-#: Slots shown left of the cursor in the windowed views (AoI, arms, candidates).
-WINDOW = 300
+#: Slots shown left of the cursor in the windowed views (AoI, arms, candidates): few
+#: enough that a success or failure marker stays legible in a third of a screen.
+WINDOW = 120
 
-RGB = tuple[int, int, int]
 
 
 @dataclass
@@ -115,17 +118,9 @@ def comparability_warnings(logs: Sequence[RunLog]) -> list[str]:
 
 
 def run_colors(logs: Sequence[RunLog]) -> list[RGB]:
-    """A colour per run: its policy's, in lighter shades for runs that would share one."""
-    from recorder.sweep_log import lighter, policy_color
-
-    seen: dict[RGB, int] = {}
-    out = []
-    for log in logs:
-        base = policy_color(log.config.policy.name)
-        i = seen.get(base, 0)
-        seen[base] = i + 1
-        out.append(base if i == 0 else lighter(base, min(0.2 * i, 0.7)))
-    return out
+    """A colour per run (:func:`recorder.style.run_colors`): its policy's, in lighter
+    shades for runs that would share one."""
+    return _shades([spec_color(log.config.policy) for log in logs])
 
 
 def compare_recording_id(runs: Sequence[ComparedRun]) -> str:
@@ -144,7 +139,6 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
     tw = time_windows(window)
     window_axis, window_query, whole = tw.window_axis, tw.window_query, tw.whole_axis
     legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
-    hidden = rrb.PlotLegend(visible=False)
 
     def windowed(base: str, name: str, contents: list[str], K: int | None = None) -> Any:
         return rrb.TimeSeriesView(
@@ -154,27 +148,34 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
             axis_x=window_axis,
             axis_y=rrb.ScalarAxis(range=(0.5, K + 0.5), zoom_lock=True) if K else None,
             time_ranges=[window_query],
-            plot_legend=hidden,
+            plot_legend=legend,
         )
 
     columns = []
     for r in runs:
         base = run_path(r.label)
         K = r.config.instance.K
+        means = rrb.TimeSeriesView(
+            origin=base,
+            contents=["$origin/mu_hat", "$origin/mu_true"],
+            name=f"{r.label}: mean reward per arm, empirical and true",
+            axis_x=whole,
+            axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+            plot_legend=legend,
+        )
         columns.append(
             rrb.Vertical(
-                windowed(base, f"{r.label}: AoI vs oracle", ["$origin/aoi", "$origin/oracle_aoi"]),
-                windowed(base, f"{r.label}: channel played", ["$origin/arm/**",
-                                                               "$origin/override"], K),
-                rrb.TimeSeriesView(
-                    origin=base,
-                    contents=["$origin/mu_hat"],
-                    name=f"{r.label}: empirical means",
-                    axis_x=whole,
-                    axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
-                    plot_legend=hidden,
+                windowed(base, f"{r.label}: AoI {AOI_UNIT} vs oracle",
+                         ["$origin/aoi", "$origin/oracle_aoi"]),
+                windowed(base, f"{r.label}: arm played (1..{K})", ["$origin/arm/**",
+                                                                  "$origin/override"], K),
+                rrb.Tabs(
+                    means,
+                    windowed(base, f"{r.label}: candidate set (arms 1..{K})",
+                             ["$origin/candidates/**"], K),
+                    active_tab=0,
                 ),
-                windowed(base, f"{r.label}: candidate set", ["$origin/candidates/**"], K),
+                row_shares=[1, 1, 2],  # the means' legend lists 2 K series
                 name=r.label,
             )
         )  # fmt: skip
@@ -187,7 +188,7 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
     overlay = rrb.TimeSeriesView(
         origin="/",
         contents=[f"{run_path(r.label)}/regret" for r in runs],
-        name="AoI regret (pathwise), every run",
+        name=f"AoI regret {REGRET_UNIT} (pathwise), every run",
         axis_x=whole,
         overrides=overrides,  # type: ignore[arg-type]
         plot_legend=legend,
@@ -197,7 +198,7 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
         rrb.Vertical(
             rrb.Horizontal(*columns, name="runs"),
             rrb.Horizontal(overlay, summary, column_shares=[3, 2]),
-            row_shares=[3, 1.4],
+            row_shares=[3.4, 2],
         ),
         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
         rrb.BlueprintPanel(state="hidden"),
@@ -248,7 +249,6 @@ def compare(
     import rerun as rr
 
     from recorder.rerun_sink import RerunSink, RrdOutput
-    from recorder.sweep_log import policy_color
 
     with RrdOutput(
         runs[0].config,
@@ -262,9 +262,7 @@ def compare(
     ) as out:
         sinks = []
         for r in runs:
-            sinks.append(RerunSink(out.recording, r.label, r.config))
-            if r.color != policy_color(r.config.policy.name):
-                _restyle(out.recording, r)
+            sinks.append(RerunSink(out.recording, r.label, r.config, color=r.color))
         accs = [SummaryAccumulator(r.config) for r in runs]
         opened = [r.log for r in runs]
 
@@ -285,19 +283,6 @@ def compare(
             static=True,
         )
     return Comparison(runs, warnings, out.path)
-
-
-def _restyle(recording: Any, run: ComparedRun) -> None:
-    """Give the run's AoI line the run's colour (runs of one policy get distinct shades)."""
-    import rerun as rr
-
-    from recorder.rerun_sink import run_path
-
-    recording.log(
-        f"{run_path(run.label)}/aoi",
-        rr.SeriesLines(colors=[run.color], widths=[1.5], names=[f"AoI {run.label}"]),
-        static=True,
-    )
 
 
 # ---------------------------------------------------------------------------- tables
@@ -334,14 +319,36 @@ def summary_table(runs: Sequence[ComparedRun]) -> str:
 
 
 def summary_markdown(runs: Sequence[ComparedRun], warnings: Sequence[str]) -> str:
-    """The summary table as markdown (shown in the compare recording)."""
+    """The summary table as markdown (shown in the compare recording).
+
+    Made to fit its panel: a row whose value is the same for every run (instance, seed,
+    slots, best arm; the policy when the labels are the policy names) becomes one line
+    under the table instead.
+    """
     names, cells = _rows(runs)
+    keep, same = [], []
+    for i, name in enumerate(names):
+        values = {col[i] for col in cells}
+        if len(runs) > 1 and len(values) == 1 and name not in _ALWAYS:
+            same.append(f"{name} {values.pop()}")
+        elif name == "policy" and all(r.label == col[i] for r, col in zip(runs, cells,
+                                                                          strict=True)):
+            continue  # the column headings already say it
+        else:
+            keep.append(i)
     lines = ["| | " + " | ".join(r.label for r in runs) + " |",
              "|---|" + "---:|" * len(runs)]  # fmt: skip
-    for i, name in enumerate(names):
-        lines.append(f"| {name} | " + " | ".join(col[i] for col in cells) + " |")
+    for i in keep:
+        lines.append(f"| {names[i]} | " + " | ".join(col[i] for col in cells) + " |")
+    if same:
+        lines += ["", "Every run: " + ", ".join(same) + "."]
     if warnings:
         lines.append("")
         lines += [f"**warning:** {w}" for w in warnings]
-    lines += ["", "Arms numbered from 1. Regret in slots, pathwise: sum(aoi - oracle_aoi)."]
+    lines += ["", f"Arms numbered from 1. Regret and estimator {REGRET_UNIT}: sums over slots "
+              "of AoI in slots; pathwise regret = sum(aoi - oracle_aoi)."]  # fmt: skip
     return "\n".join(lines)
+
+
+#: Rows the compare summary keeps even when every run has the same value.
+_ALWAYS = ("pathwise regret", "paper's estimator", "pulls per arm", "share on best arm")

@@ -1,9 +1,12 @@
 """The sweep figure: AoI regret against t, one line per policy with its 95% band.
 
 Drawn from a sweep log alone (:func:`recorder.sweep_log.read_sweep`), never by simulating.
-Style of the paper's figures: a line per policy in its base policy's colour
-(:data:`recorder.sweep_log.POLICY_COLORS`), AoI-aware variants dashed in the same colour, a
-shaded 95% confidence band, the legend outside the axes. matplotlib is an optional extra
+Style of the paper's figures, from :mod:`recorder.style` (the colours of every view): a
+line per policy in its base policy's colour, AoI-aware variants dashed in the same colour,
+a shaded 95% confidence band, the legend outside the axes so that twelve curves never hide
+behind it. ``split=True`` draws small multiples instead: the base policies beside their
+AoI-aware forms, on a shared y axis. The format comes from the file's extension
+(:data:`FORMATS`); anything else is one clear error. matplotlib is an optional extra
 (``pip install 'corraoi[plot]'``) and is imported inside :func:`draw_figure` only; the
 figure is drawn with the object-oriented API (no pyplot, no global backend switch).
 """
@@ -14,15 +17,40 @@ import contextlib
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from corraoi.errors import CorraoiError, UsageError
-from recorder.sweep_log import SweepLog, is_aoi_aware, policy_color
+from recorder.style import (
+    DASH_AOI_AWARE,
+    REGRET_UNIT,
+    RGB,
+    config_colors,
+    is_aoi_aware,
+    mpl,
+    policy_color,
+)
+from recorder.sweep_log import SweepCurve, SweepLog
 
-#: Figure size in inches and resolution: 1500 x 900 pixels.
+#: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
 FIGSIZE = (10.0, 6.0)
+FIGSIZE_SPLIT = (14.0, 6.0)
 DPI = 150
+#: Resolutions ``--dpi`` accepts.
+DPI_RANGE = (20, 1200)
+#: Extensions a figure may have, and the matplotlib format each one means.
+FORMATS = {
+    "png": "png",
+    "svg": "svg",
+    "pdf": "pdf",
+    "jpg": "jpg",
+    "jpeg": "jpg",
+    "webp": "webp",
+    "tif": "tif",
+    "tiff": "tif",
+}
+YLABEL = f"pathwise AoI regret  sum (aoi - oracle aoi)  {REGRET_UNIT}"
 MISSING_MATPLOTLIB = "figures need matplotlib: pip install 'corraoi[plot]'"
 _PARTIAL = ".partial"
 
@@ -49,6 +77,26 @@ def check_policies(sweep: SweepLog, policies: Sequence[str] | None) -> list[str]
     return list(dict.fromkeys(chosen))
 
 
+def figure_format(out: str | os.PathLike[str]) -> str:
+    """The format of a figure file, from its extension; UsageError for any other."""
+    suffix = Path(out).suffix.lower()
+    fmt = FORMATS.get(suffix[1:]) if suffix else None
+    if fmt is None:
+        what = f"extension '{suffix}'" if suffix else "no extension"
+        raise UsageError(
+            f"{out}: cannot tell the figure format ({what}); expected a file name ending in "
+            ".png, .svg, .pdf, .jpg, .webp or .tif"
+        )
+    return fmt
+
+
+def check_dpi(dpi: int) -> int:
+    lo, hi = DPI_RANGE
+    if not lo <= dpi <= hi:
+        raise UsageError(f"--dpi {dpi}: out of range, expected {lo}..{hi} dots per inch")
+    return int(dpi)
+
+
 def figure_title(sweep: SweepLog) -> str:
     runs, horizon = sweep.runs, sweep.horizon
     title = (
@@ -65,19 +113,26 @@ def draw_figure(
     out: str | os.PathLike[str],
     *,
     log_x: bool = False,
+    log_y: bool = False,
+    dpi: int = DPI,
+    split: bool = False,
     policies: Sequence[str] | None = None,
 ) -> Path:
-    """Draw the regret figure of ``sweep`` to ``out`` (format from its suffix, PNG default).
+    """Draw the regret figure of ``sweep`` to ``out`` (format from its extension).
 
-    Raises :class:`FigureUnavailable` without matplotlib, ``UsageError`` for policies the
-    log does not hold or a log without points. The file is written as ``<out>.partial``
-    and renamed into place.
+    ``log_y`` uses a symmetric log scale (linear within +-1 slot-age: pathwise regret can
+    be 0 or negative early on); ``split`` draws the base policies and their AoI-aware
+    forms side by side. Raises :class:`FigureUnavailable` without matplotlib,
+    ``UsageError`` for an unknown extension, a bad ``dpi``, policies the log does not
+    hold or a log without points. The file is written as ``<out>.partial`` and renamed
+    into place.
     """
+    out = Path(out)
+    fmt = figure_format(out)
+    dpi = check_dpi(dpi)
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Patch
     except ImportError:
         raise FigureUnavailable(MISSING_MATPLOTLIB) from None
 
@@ -85,68 +140,39 @@ def draw_figure(
     curves = [sweep.curves[n] for n in names if len(sweep.curves[n])]
     if not curves:
         raise UsageError(f"{sweep.path}: the sweep log holds no points to draw")
-    out = Path(out)
-    fmt = (out.suffix[1:] or "png").lower()
-    fig = Figure(figsize=FIGSIZE, dpi=DPI, layout="constrained")
-    canvas = FigureCanvasAgg(fig)
-    if fmt not in canvas.get_supported_filetypes():
-        known = ", ".join(sorted(canvas.get_supported_filetypes()))
-        raise UsageError(f"{out}: cannot write a .{fmt} figure (known: {known})")
-
-    ax = fig.add_subplot()
-    # Fainter bands as curves are added, so twelve overlapping bands stay readable.
-    alpha = 0.2 if len(curves) <= 4 else 0.13 if len(curves) <= 8 else 0.09
-    handles: list[object] = []
+    groups = [curves]
+    if split:
+        base = [c for c in curves if not is_aoi_aware(c.policy)]
+        aware = [c for c in curves if is_aoi_aware(c.policy)]
+        groups = [g for g in (base, aware) if g]
+    fig = Figure(figsize=FIGSIZE_SPLIT if len(groups) > 1 else FIGSIZE, dpi=dpi,
+                 layout="constrained")  # fmt: skip
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(groups), sharey=True, squeeze=False)[0]
+    colors = config_colors(sweep.config)
     for c in curves:
-        rgb = tuple(v / 255 for v in policy_color(c.policy))
-        dashed = is_aoi_aware(c.policy)
-        t = c.t.astype(np.float64)
-        (line,) = ax.plot(
-            t,
-            c.regret_mean,
-            color=rgb,
-            linestyle=(0, (5, 2.5)) if dashed else "-",
-            linewidth=1.6,
-            label=c.policy,
-            zorder=3,
-        )
-        handles.append(line)
-        band = np.isfinite(c.regret_ci95)
-        if band.any():
-            ax.fill_between(
-                t,
-                c.regret_mean - c.regret_ci95,
-                c.regret_mean + c.regret_ci95,
-                where=band,
-                color=rgb,
-                alpha=alpha * (0.7 if dashed else 1.0),
-                linewidth=0,
-                zorder=2,
-            )
-    handles.append(Patch(facecolor=(0.5, 0.5, 0.5), alpha=0.3, label="95% confidence band"))
-    if any(is_aoi_aware(c.policy) for c in curves):
-        handles.append(
-            Line2D([], [], color="0.3", linestyle=(0, (5, 2.5)), label="dashed: AoI-aware variant")
-        )
-    ax.legend(
-        handles=handles,
-        loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
-        borderaxespad=0.0,
-        fontsize=9,
-        frameon=False,
-        title="policy",
-        title_fontsize=9,
-    )
-    if log_x:
-        ax.set_xscale("log")
+        colors.setdefault(c.policy, policy_color(c.policy))
+    for i, (ax, group) in enumerate(zip(axes, groups, strict=True)):
+        _draw_curves(ax, group, len(curves), colors)
+        if len(groups) > 1:
+            ax.set_title("AoI-aware forms" if is_aoi_aware(group[0].policy) else "policies",
+                         fontsize=10)  # fmt: skip
+        if log_x:
+            ax.set_xscale("log")
+        else:
+            ax.set_xlim(left=0)
+        if log_y:
+            ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_xlabel("slot t (log scale)" if log_x else "slot t")
+        if i == 0:
+            ax.set_ylabel(YLABEL + ("  (symmetric log scale)" if log_y else ""))
+        ax.grid(True, which="major", alpha=0.3, linewidth=0.6)
+        ax.spines[["top", "right"]].set_visible(False)
+    _legend(axes[-1], curves, colors)
+    if len(groups) > 1:
+        fig.suptitle(figure_title(sweep), fontsize=11)
     else:
-        ax.set_xlim(left=0)
-    ax.set_xlabel("slot t (log scale)" if log_x else "slot t")
-    ax.set_ylabel("pathwise AoI regret  sum (aoi - oracle aoi)  [slots]")
-    ax.set_title(figure_title(sweep), fontsize=11)
-    ax.grid(True, which="major", alpha=0.3, linewidth=0.6)
-    ax.spines[["top", "right"]].set_visible(False)
+        axes[0].set_title(figure_title(sweep), fontsize=11)
 
     part = out.with_name(out.name + _PARTIAL)
     try:
@@ -161,15 +187,82 @@ def draw_figure(
     return out
 
 
-def _metadata(fmt: str) -> dict[str, str | None]:
-    """Reproducible files: no creation date, no version string where the format has one."""
+def _draw_curves(ax: Any, curves: Sequence[SweepCurve], total: int, colors: dict[str, RGB]) -> None:
+    """One line per curve with its shaded band (fainter bands as curves are added, so
+    twelve overlapping bands stay readable)."""
+    alpha = 0.2 if total <= 4 else 0.13 if total <= 8 else 0.09
+    for c in curves:
+        rgb = mpl(colors[c.policy])
+        dashed = is_aoi_aware(c.policy)
+        t = c.t.astype(np.float64)
+        ax.plot(
+            t,
+            c.regret_mean,
+            color=rgb,
+            linestyle=DASH_AOI_AWARE if dashed else "-",
+            linewidth=1.6,
+            label=c.policy,
+            zorder=3,
+        )
+        band = np.isfinite(c.regret_ci95)
+        if band.any():
+            ax.fill_between(
+                t,
+                c.regret_mean - c.regret_ci95,
+                c.regret_mean + c.regret_ci95,
+                where=band,
+                color=rgb,
+                alpha=alpha * (0.7 if dashed else 1.0),
+                linewidth=0,
+                zorder=2,
+            )
+
+
+def _legend(ax: Any, curves: Sequence[SweepCurve], colors: dict[str, RGB]) -> None:
+    """Every policy's entry, the band and the dash, outside the axes on the right."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles: list[object] = [
+        Line2D([], [], color=mpl(colors[c.policy]), linewidth=1.6, label=c.policy,
+               linestyle=DASH_AOI_AWARE if is_aoi_aware(c.policy) else "-")
+        for c in curves
+    ]  # fmt: skip
+    handles.append(Patch(facecolor=(0.5, 0.5, 0.5), alpha=0.3, label="95% confidence band"))
+    if any(is_aoi_aware(c.policy) for c in curves):
+        handles.append(
+            Line2D([], [], color="0.3", linestyle=DASH_AOI_AWARE, label="dashed: AoI-aware variant")
+        )
+    ax.legend(
+        handles=handles,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0.0,
+        fontsize=9,
+        frameon=False,
+        title="policy",
+        title_fontsize=9,
+    )
+
+
+def _metadata(fmt: str) -> dict[str, str | None] | None:
+    """Reproducible files: no creation date, no version string where the format has one
+    (the Pillow-written formats take no metadata)."""
     if fmt == "png":
         return {"Software": None}
     if fmt == "pdf":
         return {"Creator": None, "Producer": None, "CreationDate": None}
     if fmt == "svg":
         return {"Creator": None, "Date": None}
-    return {}
+    return None
 
 
-__all__ = ["FigureUnavailable", "MISSING_MATPLOTLIB", "check_policies", "draw_figure"]
+__all__ = [
+    "FORMATS",
+    "FigureUnavailable",
+    "MISSING_MATPLOTLIB",
+    "check_dpi",
+    "check_policies",
+    "draw_figure",
+    "figure_format",
+]

@@ -19,15 +19,31 @@ def _split(values: tuple[str, ...]) -> list[str] | None:
 @click.argument("sweep_log", metavar="SWEEP_MCAP", type=click.Path(path_type=Path))
 @click.option("--output", "-o", "output", required=True, metavar="OUT.png",
               type=click.Path(path_type=Path),
-              help="Figure file; its suffix picks the format (.png, .pdf, .svg).")  # fmt: skip
+              help="Figure file; its extension picks the format: .png, .svg, .pdf, .jpg, "
+              ".webp or .tif.")  # fmt: skip
 @click.option("--log-x", is_flag=True, help="Logarithmic t axis.")
+@click.option("--log-y", is_flag=True,
+              help="Logarithmic regret axis (symmetric: linear within +-1, as regret can be "
+              "0 or negative early on).")  # fmt: skip
+@click.option("--dpi", type=int, default=150, show_default=True,
+              help="Resolution in dots per inch (20..1200; the size is 10 x 6 inches).")
+@click.option("--split", is_flag=True,
+              help="Small multiples: the base policies beside their AoI-aware forms, on "
+              "one y scale.")  # fmt: skip
 @click.option("--policies", "policies", multiple=True, metavar="NAME[,NAME...]",
               help="Draw only these policies, in this order [default: every policy in the "
               "log].")  # fmt: skip
 @click.option("--force", "-f", is_flag=True, help="Overwrite OUT if it exists.")
 @handle_errors
 def figure(
-    sweep_log: Path, output: Path, log_x: bool, policies: tuple[str, ...], force: bool
+    sweep_log: Path,
+    output: Path,
+    log_x: bool,
+    log_y: bool,
+    dpi: int,
+    split: bool,
+    policies: tuple[str, ...],
+    force: bool,
 ) -> None:
     """Draw the AoI regret figure of a sweep from its log (DIR/sweep.mcap) alone.
 
@@ -39,12 +55,15 @@ def figure(
     Example:
       corraoi sweep --instance I1 -o sweeps/I1
       corraoi figure sweeps/I1/sweep.mcap -o i1.png --log-x --policies ucb,cucb,ts,cts
+      corraoi figure sweeps/I1/sweep.mcap -o i1.pdf --split --log-y
     """
     from recorder.sweep_log import read_sweep
-    from viewer.figure import check_policies, draw_figure
+    from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
 
     if output.is_dir():
         raise UsageError(f"{output}: is a directory; give a file name for the figure")
+    figure_format(output)  # before reading the log: a wrong name is the first thing said
+    check_dpi(dpi)
     if output.exists() and not force:
         raise UsageError(f"{output}: already exists (use --force to overwrite it)")
     sweep = read_sweep(sweep_log)
@@ -54,7 +73,7 @@ def figure(
             f"{sweep_log}: the sweep did not finish ({sweep.status}); drawing the "
             f"{sweep.messages} checkpoint(s) it holds"
         )
-    draw_figure(sweep, output, log_x=log_x, policies=names)
+    draw_figure(sweep, output, log_x=log_x, log_y=log_y, dpi=dpi, split=split, policies=names)
     click.echo(
         f"wrote {output}: {len(names)} polic{'y' if len(names) == 1 else 'ies'}, instance "
         f"{sweep.instance_name}, {sweep.runs} runs, horizon {sweep.horizon}"

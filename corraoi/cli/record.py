@@ -320,6 +320,8 @@ def _record_into(
             if output is not None:
                 if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                     try:
+                        if sink is not None:
+                            sink.close()  # send the slots it still holds (up to a batch)
                         output.close()
                     except (ViewerError, WriteError):
                         pass

@@ -1,0 +1,204 @@
+"""How corraoi draws things: colours, names, line styles and units, for every view.
+
+One place for the look of the Rerun views (``record``, ``replay``, ``compare``, the sweep
+recording) and the matplotlib figures (``figure``, ``sweep -o``, ``reproduce``), so that a
+policy has the same colour everywhere and a series the same name.
+
+* A policy's colour: its own (``spec.color``, a plug-in's choice) if it has one, else its
+  base policy's from :data:`POLICY_COLORS`; an ``aoi-aware-`` variant shares its base
+  policy's colour and is told apart by its line style: dashed in figures, a thinner line
+  with cross markers in Rerun (rerun-sdk 0.41 lines cannot be dashed).
+* The oracle (the best arm k* played on the same hidden path) is near-black and dotted
+  (a point per slot, no line): never the hue nor the line style of a policy.
+* Arms have their own palette (:func:`arm_color`); the true mean of an arm is drawn in a
+  darker shade of its colour, thin, named ``mu_k (true)``.
+* rerun-sdk 0.41 has no axis titles: units go into view titles and series names
+  (:data:`AOI_UNIT`, :data:`REGRET_UNIT`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from corraoi.policies import AOI_PREFIX
+
+RGB = tuple[int, int, int]
+
+#: Units, in brackets after a quantity's name (view titles, series names, axis labels).
+AOI_UNIT = "[slots]"
+REGRET_UNIT = "[slot-ages]"
+SLOT_UNIT = "[slot]"
+
+#: One colour per base policy; its ``aoi-aware-`` variant uses the same colour.
+POLICY_COLORS: dict[str, RGB] = {
+    "ucb": (31, 119, 180),  # blue
+    "ts": (255, 127, 14),  # orange
+    "ts-gauss": (140, 86, 75),  # brown
+    "cucb": (44, 160, 44),  # green
+    "cts": (214, 39, 40),  # red
+    "cts-gauss": (148, 103, 189),  # purple
+}
+_EXTRA_COLORS: tuple[RGB, ...] = ((227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
+#: Colours of arms 1, 2, ... (cycled beyond eight arms).
+ARM_COLORS: tuple[RGB, ...] = (
+    (102, 194, 165),
+    (252, 141, 98),
+    (141, 160, 203),
+    (231, 138, 195),
+    (166, 216, 84),
+    (255, 217, 47),
+    (229, 196, 148),
+    (179, 179, 179),
+)
+#: The oracle's AoI: near-black, unlike every policy and arm colour.
+ORACLE_COLOR: RGB = (40, 40, 40)
+SUCCESS_COLOR: RGB = (46, 160, 67)
+FAILURE_COLOR: RGB = (214, 39, 40)
+OVERRIDE_COLOR: RGB = (255, 187, 0)
+STATE_COLOR: RGB = (90, 90, 160)
+
+# Rerun line widths and marker sizes (UI points).
+WIDTH_MAIN = 2.0
+WIDTH_SECONDARY = 1.0
+WIDTH_ARM = 1.5
+WIDTH_TRUE_MEAN = 1.0
+WIDTH_AOI_AWARE = 1.25
+WIDTH_BAND = 0.75
+MARKER_SUCCESS = 4.0
+MARKER_FAILURE = 5.0
+MARKER_OVERRIDE = 5.0
+MARKER_ORACLE = 2.0
+MARKER_STATE = 3.0
+MARKER_CANDIDATE = 3.0
+MARKER_AOI_AWARE = 2.5
+#: matplotlib dash pattern of the AoI-aware variants in figures.
+DASH_AOI_AWARE: tuple[int, tuple[float, float]] = (0, (5, 2.5))
+
+#: Series names (the legend entries) of a run's views.
+AOI_NAME = f"AoI {AOI_UNIT}"
+ORACLE_NAME = f"oracle AoI, best arm k* {AOI_UNIT}"
+REGRET_NAME = f"pathwise regret sum(aoi - oracle_aoi) {REGRET_UNIT}"
+ESTIMATOR_NAME = f"estimator sum(aoi) - t/mu* {REGRET_UNIT}"
+SUCCESS_NAME = "success (arm played)"
+FAILURE_NAME = "failure (arm played)"
+OVERRIDE_NAME = "AoI-aware override"
+STATE_NAME = "hidden state x"
+
+
+def base_policy(name: str) -> str:
+    """``aoi-aware-cts`` -> ``cts``; any other name unchanged."""
+    return name.removeprefix(AOI_PREFIX)
+
+
+def is_aoi_aware(name: str) -> bool:
+    return name.startswith(AOI_PREFIX)
+
+
+def policy_color(name: str, color: Sequence[int] | None = None) -> RGB:
+    """The colour of a policy: ``color`` when given (a policy's own ``spec.color``), else
+    its base policy's; unknown bases get a stable extra colour."""
+    if color is not None:
+        r, g, b = (int(c) for c in color)
+        return (r, g, b)
+    base = base_policy(name)
+    if base in POLICY_COLORS:
+        return POLICY_COLORS[base]
+    return _EXTRA_COLORS[sum(base.encode()) % len(_EXTRA_COLORS)]
+
+
+def spec_color(spec: Any) -> RGB:
+    """The colour of a policy spec (``.name`` and, where it has one, ``.color``)."""
+    return policy_color(spec.name, getattr(spec, "color", None))
+
+
+def spec_label(spec: Any) -> str:
+    """The legend label of a policy spec: its ``.label`` where it has one, else its name."""
+    return str(getattr(spec, "label", "") or spec.name)
+
+
+def config_colors(config: dict[str, Any]) -> dict[str, RGB]:
+    """The colour of every policy of a sweep configuration (``config["policies"]``, as
+    written into sweep logs), each policy's own ``color`` where its entry carries one."""
+    out: dict[str, RGB] = {}
+    for p in config.get("policies") or []:
+        if isinstance(p, dict) and isinstance(p.get("name"), str):
+            own = p.get("color")
+            ok = isinstance(own, (list, tuple)) and len(own) == 3
+            out[p["name"]] = policy_color(p["name"], own if ok else None)
+    return out
+
+
+def lighter(rgb: Sequence[int], amount: float = 0.5) -> RGB:
+    """``rgb`` mixed with white (``amount`` = 0: unchanged, 1: white)."""
+    r, g, b = (round(c + (255 - c) * amount) for c in rgb)
+    return (r, g, b)
+
+
+def arm_color(k: int) -> RGB:
+    """Colour of the arm with 0-based index ``k``."""
+    return ARM_COLORS[k % len(ARM_COLORS)]
+
+
+def darker(rgb: Sequence[int], amount: float = 0.5) -> RGB:
+    """``rgb`` mixed with black (``amount`` = 0: unchanged, 1: black)."""
+    r, g, b = (round(c * (1 - amount)) for c in rgb)
+    return (r, g, b)
+
+
+def true_mean_color(k: int) -> RGB:
+    """Colour of arm ``k``'s true mean line: a darker shade of the arm's colour, so the
+    reference stays visible where the empirical mean has settled on it."""
+    return darker(arm_color(k), 0.4)
+
+
+def arm_label(k: int, name: str | None = None) -> str:
+    """``arm 2`` or ``arm 2 (name)`` for the arm with 0-based index ``k``."""
+    return f"arm {k + 1}" if name in (None, str(k + 1)) else f"arm {k + 1} ({name})"
+
+
+def mean_name(k: int, *, true: bool) -> str:
+    """``mu_2 (true)`` / ``mu_2 (empirical)`` for the arm with 0-based index ``k``."""
+    return f"mu_{k + 1} ({'true' if true else 'empirical'})"
+
+
+def run_colors(colors: Sequence[RGB]) -> list[RGB]:
+    """Colours for runs drawn together: each its policy's, in lighter shades for runs
+    that would share one (two seeds of one policy, a policy and its AoI-aware form)."""
+    seen: dict[RGB, int] = {}
+    out = []
+    for base in colors:
+        i = seen.get(base, 0)
+        seen[base] = i + 1
+        out.append(base if i == 0 else lighter(base, min(0.25 * i, 0.7)))
+    return out
+
+
+def mpl(rgb: Sequence[int]) -> tuple[float, float, float]:
+    """An RGB colour as matplotlib takes it (0..1 floats)."""
+    r, g, b = (c / 255 for c in rgb)
+    return (r, g, b)
+
+
+__all__ = [
+    "AOI_UNIT",
+    "ARM_COLORS",
+    "ORACLE_COLOR",
+    "POLICY_COLORS",
+    "REGRET_UNIT",
+    "RGB",
+    "arm_color",
+    "arm_label",
+    "base_policy",
+    "config_colors",
+    "darker",
+    "is_aoi_aware",
+    "lighter",
+    "mean_name",
+    "mpl",
+    "policy_color",
+    "run_colors",
+    "spec_color",
+    "spec_label",
+    "true_mean_color",
+]

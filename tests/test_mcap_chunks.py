@@ -1,0 +1,163 @@
+"""The hand-framed MCAP writer (recorder.mcap_chunks) against mcap's own writer and readers."""
+
+from __future__ import annotations
+
+import io
+import struct
+
+import numpy as np
+import orjson
+import pytest
+from mcap.opcode import Opcode
+from mcap.reader import make_reader
+from mcap.records import Channel, Schema
+from mcap.writer import CompressionType, IndexType, Writer
+
+from corraoi.block import SlotBlock
+from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
+from recorder.mcap_chunks import ZSTD_LEVEL, ChunkWriter
+from recorder.mcap_sink import McapSink
+from recorder.reader import open_log
+
+
+def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:
+    """What mcap's Writer writes for the same calls, without the (empty) attachment group."""
+    buf = io.BytesIO()
+    w = Writer(
+        buf,
+        chunk_size=1 << 30,
+        compression=CompressionType.ZSTD,
+        index_types=IndexType.ALL & ~IndexType.ATTACHMENT,
+    )
+    w.start(profile="", library="corraoi/test")
+    sid = w.register_schema(name="s", encoding="jsonschema", data=b'{"type":"object"}')
+    cid = w.register_channel(topic="/x", message_encoding="json", schema_id=sid,
+                             metadata={"format_version": "1"})  # fmt: skip
+    w.add_metadata("a", {"k": "v"})
+    for t, data in messages:
+        w.add_message(cid, t * NS_PER_SLOT, data, t * NS_PER_SLOT, t)
+        if t % every == 0:
+            w.flush()
+    w.flush()
+    w.add_metadata("b", {"end": "1"})
+    w.finish()
+    return buf.getvalue()
+
+
+def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3) -> bytes:
+    buf = io.BytesIO()
+    w = ChunkWriter(
+        buf,
+        schema=Schema(id=1, name="s", encoding="jsonschema", data=b'{"type":"object"}'),
+        channel=Channel(
+            id=1, topic="/x", message_encoding="json", schema_id=1, metadata={"format_version": "1"}
+        ),  # fmt: skip
+        library="corraoi/test",
+        zstd_level=zstd_level,
+    )
+    w.start()
+    w.add_metadata("a", {"k": "v"})
+    for t, data in messages:  # one at a time, as mcap's writer is called
+        w.add_messages(np.array([t * NS_PER_SLOT], dtype=np.uint64), np.array([t]), [data])
+        if t % every == 0:
+            w.flush()
+    w.flush()
+    w.add_metadata("b", {"end": "1"})
+    w.finish()
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("count", [1, 7, 25])
+def test_same_bytes_as_the_mcap_writer_without_its_empty_group(count):
+    rng = np.random.default_rng(count)
+    values = rng.integers(0, 10**6, count).tolist()
+    messages = [(t, b'{"v":%d}' % v * (1 + t % 3)) for t, v in enumerate(values, start=1)]
+    assert _ours(messages, every=10, zstd_level=3) == _reference(messages, every=10)
+    ours = _ours(messages, every=10, zstd_level=ZSTD_LEVEL)  # what McapSink writes
+    reader = make_reader(io.BytesIO(ours), validate_crcs=True)
+    got = [(m.log_time, m.publish_time, m.sequence, m.data) for _, _, m in reader.iter_messages()]
+    assert got == [(t * NS_PER_SLOT, t * NS_PER_SLOT, t, d) for t, d in messages]
+
+
+def _summary_groups(data: bytes) -> list[tuple[int, int]]:
+    """(opcode, length) of every summary group, from the footer's summary offset records."""
+    footer = len(data) - 8 - 29  # footer record: opcode, length, 8 + 8 + 4 bytes
+    assert data[footer] == Opcode.FOOTER
+    _, offsets_start, _ = struct.unpack_from("<QQI", data, footer + 9)
+    out, pos = [], offsets_start
+    while data[pos] == Opcode.SUMMARY_OFFSET:
+        op, _, length = struct.unpack_from("<BQQ", data, pos + 9)
+        out.append((op, length))
+        pos += 9 + 17
+    assert pos == footer and out
+    return out
+
+
+def test_a_log_without_messages_has_no_empty_group_either():
+    data = _ours([], every=10)
+    assert all(length > 0 for _, length in _summary_groups(data))
+    assert {op for op, _ in _summary_groups(data)} == {
+        Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS, Opcode.METADATA_INDEX}  # fmt: skip
+    assert list(make_reader(io.BytesIO(data)).iter_messages()) == []
+
+
+def test_a_recorded_log_has_no_empty_summary_group_and_reads_back(record_mcap):
+    path, _, ref = record_mcap(horizon=2345, block=611)
+    data = path.read_bytes()
+    groups = _summary_groups(data)
+    assert {op for op, _ in groups} == {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS,
+                                        Opcode.CHUNK_INDEX, Opcode.METADATA_INDEX}  # fmt: skip
+    assert all(length > 0 for _, length in groups)
+    summary = make_reader(io.BytesIO(data)).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 2345
+    assert summary.statistics.chunk_count == 3  # 1..1000, 1001..2000, 2001..2345
+    assert [c.message_start_time // NS_PER_SLOT for c in summary.chunk_indexes] == [1, 1001, 2001]
+    assert open_log(path).read_all().equals(ref)
+
+
+@pytest.mark.parametrize("block", [1, 999, 1001, 4096])
+def test_bytes_do_not_depend_on_the_block_size(tmp_path, make_config, engine, block):
+    config = make_config("cts", horizon=2 * FLUSH_EVERY + 17)
+    paths = []
+    for b_size in (1000, block):
+        path = tmp_path / f"b{b_size}.mcap"
+        with McapSink(path, config, fsync=False) as sink:
+            for b in engine(config, block=b_size):
+                sink.write(b)
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    assert open_log(paths[1]).read_all().equals(SlotBlock.concat(engine(config)))
+
+
+#: The per-slot template the encoder used before it joined whole columns: the reference.
+_TEMPLATE = (
+    b'{"t":%d,"x":%d,"arm":%d,"success":%b,"aoi":%d,"oracle_aoi":%d,"regret":%d,'
+    b'"estimator":%b,"override":%b,"mu_hat":[%b],"pulls":[%b],"candidates":%b}'
+)
+
+
+def _slow_encode(b: SlotBlock) -> list[bytes]:
+    def num(v: float) -> bytes:
+        return orjson.dumps(v)
+
+    return [
+        _TEMPLATE % (int(b.t[i]), int(b.x[i]) + 1, int(b.arm[i]) + 1,
+                     b"true" if b.success[i] else b"false", int(b.aoi[i]),
+                     int(b.oracle_aoi[i]), int(b.regret[i]), num(float(b.estimator[i])),
+                     b"true" if b.override[i] else b"false",
+                     b",".join(num(float(v)) for v in b.mu_hat[i]),
+                     b",".join(b"%d" % v for v in b.pulls[i]),
+                     orjson.dumps([int(k) + 1 for k in np.flatnonzero(b.candidates[i])]))
+        for i in range(len(b))
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("policy", ["cucb", "aoi-aware-cts", "ts"])
+def test_the_column_encoder_writes_what_a_per_slot_encoder_writes(make_config, engine, policy):
+    config = make_config(policy, horizon=1500)
+    block = SlotBlock.concat(engine(config))
+    got = BlockEncoder(config.instance.K).encode(block)
+    assert got == _slow_encode(block)
+    assert len(got) == 1500 and all(orjson.loads(m)["t"] == i + 1 for i, m in enumerate(got))
+    assert block.candidates.sum(axis=1).min() < config.instance.K or policy != "cucb"
