@@ -380,6 +380,8 @@ def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
                           channel=c0.channel)  # fmt: skip
     for entry, c in zip(config["policies"], cells, strict=True):
         entry["name"] = c.label
+        if c.cell.policy.color is not None:  # every view draws the policy in its own colour
+            entry["color"] = list(c.cell.policy.color)
     return config
 
 

@@ -67,8 +67,21 @@ class Instance:
             )
         if not np.all((Y == 0) | (Y == 1)):
             raise InstanceError(f"{where}: rewards Y must be 0 or 1")
+        if Y.shape[0] > MAX_ARMS or p.size > MAX_STATES:
+            raise InstanceError(
+                f"{where}: {Y.shape[0]} arms and {p.size} states; at most {MAX_ARMS} arms and "
+                f"{MAX_STATES} states"
+            )
         arms = tuple(self.arm_names) or tuple(str(k + 1) for k in range(Y.shape[0]))
         states = tuple(self.state_names) or tuple(f"x{x + 1}" for x in range(p.size))
+        for kind, names in (("instance", (self.name,)), ("arm", arms), ("state", states)):
+            for label in names:
+                if len(label) > MAX_NAME or not label.isprintable():
+                    shown = label[:40].encode("unicode_escape").decode("ascii")
+                    raise InstanceError(
+                        f"{kind} name '{shown}': expected printable text of at most "
+                        f"{MAX_NAME} characters"
+                    )
         if len(arms) != Y.shape[0]:
             raise InstanceError(f"{where}: {len(arms)} arm names for {Y.shape[0]} arms")
         if len(states) != p.size:
@@ -241,16 +254,16 @@ def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
         raise InstanceError(f"{text}: no such instance file (built-in instances: {known})")
     if path.is_dir():
         raise InstanceError(f"{text}: is a directory, expected an instance file")
-    try:
-        raw = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InstanceError(f"{text}: cannot read instance file: {exc}") from None
+    raw = _read_regular(path, text)
     suffix = path.suffix.lower()
     if suffix == ".json":
         try:
             data = json.loads(raw)
         except json.JSONDecodeError as exc:
             raise InstanceError(f"{text}:{exc.lineno}: invalid JSON: {exc.msg}") from None
+        except RecursionError:
+            raise InstanceError(f"{text}: nested too deeply (expected p, Y, ...)") from None
+        _check_depth(data, text)
         return _named(Instance.from_dict(data, where=text), data, path)
     if suffix == ".toml":
         try:
@@ -261,8 +274,68 @@ def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
             data = tomllib.loads(raw)
         except tomllib.TOMLDecodeError as exc:
             raise InstanceError(f"{text}: invalid TOML: {exc}") from None
+        except RecursionError:
+            raise InstanceError(f"{text}: nested too deeply (expected p, Y, ...)") from None
+        _check_depth(data, text)
         return _named(Instance.from_dict(data, where=text), data, path)
     return parse_text_instance(raw, where=text, name=path.stem)
+
+
+#: Instance files larger than this are refused before they are read (a 1024 x 1024
+#: transition matrix written out in full takes about 20 MiB of JSON).
+MAX_FILE_BYTES = 64 << 20
+#: Deepest nesting an instance file may use (Y and transition are lists of lists: 3).
+MAX_DEPTH = 8
+#: Most arms and hidden states (the engine's int32 columns and per-slot arrays stay sane).
+MAX_ARMS = 4096
+MAX_STATES = 1 << 20
+#: Longest instance, arm or state name.
+MAX_NAME = 200
+
+
+def _read_regular(path: Path, where: str) -> str:
+    """The text of a regular file of at most MAX_FILE_BYTES; FIFOs, devices and sockets are
+    refused at once (opened non-blocking and checked before any read), so a FIFO never hangs
+    and an endless device never fills memory."""
+    import stat
+
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as exc:
+        raise InstanceError(f"{where}: cannot read instance file: {exc.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise InstanceError(
+                f"{where}: not a regular file (a FIFO, device or socket); expected an "
+                "instance file"
+            )
+        if st.st_size > MAX_FILE_BYTES:
+            raise InstanceError(
+                f"{where}: {st.st_size} bytes, larger than the limit of {MAX_FILE_BYTES} bytes"
+            )
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    finally:
+        os.close(fd)
+    if len(data) > MAX_FILE_BYTES:
+        raise InstanceError(f"{where}: larger than the limit of {MAX_FILE_BYTES} bytes")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InstanceError(f"{where}: not UTF-8 text (byte {exc.start})") from None
+
+
+def _check_depth(data: object, where: str, depth: int = 0) -> None:
+    if depth > MAX_DEPTH:
+        raise InstanceError(f"{where}: nested deeper than {MAX_DEPTH} levels (expected p, Y, ...)")
+    if isinstance(data, dict):
+        for v in data.values():
+            _check_depth(v, where, depth + 1)
+    elif isinstance(data, list):
+        for v in data:
+            if isinstance(v, (list, dict)):
+                _check_depth(v, where, depth + 1)
 
 
 def _renamed(inst: Instance, name: str) -> Instance:

@@ -57,17 +57,16 @@ def check_transition(P: object, n: int | None, where: str) -> np.ndarray:
     return out
 
 
-def _reach(P: np.ndarray) -> np.ndarray:
-    """reach[i, j]: state j can be reached from i in one or more steps."""
-    n = P.shape[0]
-    adj = P > 0
-    reach = adj.copy()
-    for _ in range(max(1, math.ceil(math.log2(n))) + 1):
-        nxt = reach | ((reach.astype(np.int64) @ reach.astype(np.int64)) > 0)
-        if np.array_equal(nxt, reach):
-            break
-        reach = nxt
-    return reach
+def _reached(adj: np.ndarray, start: int) -> np.ndarray:
+    """The states reachable from ``start`` (breadth first over the adjacency matrix)."""
+    seen = np.zeros(adj.shape[0], dtype=bool)
+    seen[start] = True
+    frontier = seen.copy()
+    while frontier.any():
+        nxt = adj[frontier].any(axis=0) & ~seen
+        seen |= nxt
+        frontier = nxt
+    return seen
 
 
 def period(P: np.ndarray) -> int:
@@ -93,14 +92,17 @@ def check_chain(P: np.ndarray, where: str, names: Sequence[str] | None = None) -
     """InstanceError unless the chain is irreducible and aperiodic (with the reason)."""
     n = P.shape[0]
     label = list(names) if names is not None else [f"x{i + 1}" for i in range(n)]
-    reach = _reach(P)
-    for i in range(n):
-        for j in range(n):
-            if i != j and not reach[i, j]:
-                raise InstanceError(
-                    f"{where}: the chain is reducible: state {label[j]} cannot be reached from "
-                    f"state {label[i]} (expected every state to reach every other)"
-                )
+    adj = P > 0
+    # irreducible iff every state is reached from state 1 and reaches it (reversed graph)
+    for graph, forward in ((adj, True), (adj.T, False)):
+        seen = _reached(graph, 0)
+        if not seen.all():
+            j = int(np.flatnonzero(~seen)[0])
+            a, b = (label[0], label[j]) if forward else (label[j], label[0])
+            raise InstanceError(
+                f"{where}: the chain is reducible: state {b} cannot be reached from "
+                f"state {a} (expected every state to reach every other)"
+            )
     d = period(P)
     if d > 1:
         raise InstanceError(
@@ -137,16 +139,28 @@ class Mixing:
 
 
 def mixing(P: np.ndarray, pi: np.ndarray) -> Mixing:
+    """t_mix(1/4) by doubling then bisection over t (the worst-start distance to pi does not
+    increase with t), each P^t by repeated squaring: O(log^2 t) matrix products."""
     eig = np.sort(np.abs(np.linalg.eigvals(P)))[::-1]
     gap = float(1.0 - eig[1]) if eig.size > 1 else 1.0
-    M = np.eye(P.shape[0])
-    t_mix: int | None = None
-    for t in range(1, MIXING_CAP + 1):
-        M = M @ P
-        if 0.5 * np.abs(M - pi[None, :]).sum(axis=1).max() <= 0.25:
-            t_mix = t
-            break
-    return Mixing(t_mix, gap)
+
+    def mixed(t: int) -> bool:
+        M = np.linalg.matrix_power(P, t)
+        return bool(0.5 * np.abs(M - pi[None, :]).sum(axis=1).max() <= 0.25)
+
+    hi = 1
+    while not mixed(hi):
+        hi *= 2
+        if hi > MIXING_CAP:
+            return Mixing(None, gap)
+    lo = hi // 2  # not mixed at lo (or lo = 0)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if mixed(mid):
+            hi = mid
+        else:
+            lo = mid
+    return Mixing(hi, gap)
 
 
 def gilbert_elliott(*, p_gb: float = 0.1, p_bg: float = 0.3) -> np.ndarray:

@@ -5,7 +5,7 @@ recording) and the matplotlib figures (``figure``, ``sweep -o``, ``reproduce``),
 policy has the same colour everywhere and a series the same name.
 
 * A policy's colour: its own (``spec.color``, a plug-in's choice) if it has one, else its
-  base policy's from :data:`POLICY_COLORS`; an ``aoi-aware-`` variant shares its base
+  built-in class's (:data:`POLICY_COLORS`); an ``aoi-aware-`` variant shares its base
   policy's colour and is told apart by its line style: dashed in figures, a thinner line
   with cross markers in Rerun (rerun-sdk 0.41 lines cannot be dashed).
 * The oracle (the best arm k* played on the same hidden path) is near-black and dotted
@@ -30,15 +30,15 @@ AOI_UNIT = "[slots]"
 REGRET_UNIT = "[slot-ages]"
 SLOT_UNIT = "[slot]"
 
-#: One colour per base policy; its ``aoi-aware-`` variant uses the same colour.
-POLICY_COLORS: dict[str, RGB] = {
-    "ucb": (31, 119, 180),  # blue
-    "ts": (255, 127, 14),  # orange
-    "ts-gauss": (140, 86, 75),  # brown
-    "cucb": (44, 160, 44),  # green
-    "cts": (214, 39, 40),  # red
-    "cts-gauss": (148, 103, 189),  # purple
-}
+def _builtin_colors() -> dict[str, RGB]:
+    from corraoi.policies import builtins  # the registry imports without numba
+
+    return {n: cls.color for n, cls in builtins().items() if cls.color is not None}
+
+
+#: The built-in policies' colours, as each policy class declares its own (one place: the
+#: class); an ``aoi-aware-`` variant has its base policy's colour.
+POLICY_COLORS: dict[str, RGB] = _builtin_colors()
 _EXTRA_COLORS: tuple[RGB, ...] = ((227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
 #: Colours of arms 1, 2, ... (cycled beyond eight arms).
 ARM_COLORS: tuple[RGB, ...] = (
