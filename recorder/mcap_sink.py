@@ -37,7 +37,15 @@ from .format import (
     run_metadata,
     schema_bytes,
 )
-from .paths import Sink, check_output, open_partial, partial_path, publish, reason
+from .paths import (
+    Sink,
+    check_output,
+    open_partial,
+    partial_path,
+    publish,
+    reason,
+    unlink_partial,
+)
 
 #: Chunks are closed by slot count (FLUSH_EVERY), not by size; this only caps a huge chunk.
 _CHUNK_BYTES = 64 * 1024 * 1024
@@ -171,11 +179,13 @@ class McapSink(Sink):
             self._file.flush()
             if self._fsync:
                 os.fsync(self._file.fileno())
-            self._file.close()
         except OSError as exc:
             self._close_file()
             raise self._write_error(exc) from None
-        publish(self.path, overwrite=self.overwrite)
+        try:  # renamed while still open: the lock on it is held until it is in place
+            publish(self.path, overwrite=self.overwrite)
+        finally:
+            self._close_file()
         self.finished = True
         return self.path
 
@@ -191,7 +201,7 @@ class McapSink(Sink):
                 pass
             self._close_file()
             if self.slots == 0:
-                self.partial_path.unlink(missing_ok=True)
+                unlink_partial(self.path)
         if self.slots == 0:
             return None
         return self.partial_path

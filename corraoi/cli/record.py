@@ -18,10 +18,12 @@ from typing import Any
 import click
 
 from ..errors import UsageError
+from ..text import safe_text
 from .common import (
     handle_errors,
     horizon_option,
     instance_option,
+    output_option,
     param_options,
     policy_option,
     seed_option,
@@ -80,12 +82,21 @@ class _Stop:
 
 
 def _expand(template: str, config: Any) -> Path:
-    return Path(
-        template.replace("{label}", config.label)
-        .replace("{policy}", config.policy.name)
-        .replace("{instance}", config.instance.name)
-        .replace("{seed}", str(config.seed))
-    )
+    """The path ``template`` names for ``config``. The names filled in are data (from an
+    instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
+    climb out of one (``../``) or carry control codes into the file name."""
+    from ..text import safe_name
+
+    values = {
+        "{label}": config.label,
+        "{policy}": config.policy.name,
+        "{instance}": config.instance.name,
+        "{seed}": str(config.seed),
+    }
+    out = template
+    for key, value in values.items():
+        out = out.replace(key, safe_name(value))
+    return Path(out)
 
 
 def _rrd_beside(mcap: Path) -> Path:
@@ -94,7 +105,7 @@ def _rrd_beside(mcap: Path) -> Path:
 
 def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -> list[_Plan]:
     several = len(configs) > 1
-    for option, value in (("-o/--out", out), ("--rrd", rrd)):
+    for option, value in (("-o/--output", out), ("--rrd", rrd)):
         if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
             raise UsageError(
                 f"{option} {value}: names one file but {len(configs)} policies are recorded; "
@@ -125,13 +136,12 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @horizon_option(10_000)
 @seed_option
 @param_options
-@click.option(
-    "-o",
-    "--out",
+@output_option(
     metavar="PATH",
-    default=None,
+    path=False,
     help="MCAP log to write [default: runs/{label}.mcap]. {label}, {policy}, "
-    "{instance} and {seed} are filled in (needed with several policies).",
+    "{instance} and {seed} are filled in (needed with several policies), each made a "
+    "safe file name.",
 )
 @click.option(
     "--rrd",
@@ -151,7 +161,7 @@ def record(
     seed: int,
     c: float | None,
     beta: float | None,
-    out: str | None,
+    output: str | None,
     rrd: str | None,
     no_rrd: bool,
     force: bool,
@@ -186,11 +196,28 @@ def record(
     inst = load_instance(instance)
     specs = make_policies(policy, c=c, beta=beta)
     configs = [RunConfig(inst, spec, seed, horizon) for spec in specs]
-    plans = _plans(configs, out, rrd, no_rrd)
+    plans = _plans(configs, output, rrd, no_rrd)
 
+    from recorder.errors import OutputError
     from recorder.paths import check_output
 
+    if not force and not viewer.asked:
+        fresh = [p for p in plans if _up_to_date(p)]
+        if fresh and len(fresh) == len(plans):
+            for p in fresh:
+                click.echo(
+                    f"up to date: {safe_text(p.mcap)}"
+                    + (f" and {safe_text(p.rrd)}" if p.rrd is not None else "")
+                    + " hold this run (same configuration, complete); use --force to "
+                    "record it again"
+                )
+            return
     for plan in plans:  # refuse before simulating anything
+        if not force and plan.mcap.is_file():
+            raise OutputError(
+                f"{plan.mcap}: already exists and holds another run (a different "
+                "configuration, or not complete); use --force to overwrite it"
+            )
         check_output(plan.mcap, overwrite=force, what="MCAP log")
         if plan.rrd is not None:
             check_output(plan.rrd, overwrite=force, what="Rerun recording")
@@ -221,6 +248,21 @@ def record(
     viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
+
+
+def _up_to_date(plan: _Plan) -> bool:
+    """The plan's files exist, and its MCAP log is complete with the same configuration
+    (the version of corraoi included): recording again would write the same bytes."""
+    from recorder.errors import LogError
+    from recorder.reader import open_log
+
+    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
+        return False
+    try:
+        log = open_log(plan.mcap, verify=False)
+    except LogError:
+        return False
+    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
 
 
 def _record_all(
@@ -348,7 +390,8 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
         rate = r.slots / r.wall if r.wall > 0 else 0.0
         done = "" if r.slots == c.horizon else " (interrupted)"
         click.echo(
-            f"{c.policy.name}{f' ({params})' if params else ''} on {c.instance.name}, seed "
+            f"{safe_text(c.policy.name)}{f' ({params})' if params else ''} on "
+            f"{safe_text(c.instance.name)}, seed "
             f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
             f"({rate:,.0f} slots/s)"
         )
@@ -359,11 +402,11 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
             )
             pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
             click.echo(f"  pulls per arm: {pulls}")
-        click.echo(f"  MCAP log:        {r.mcap}")
+        click.echo(f"  MCAP log:        {safe_text(r.mcap)}")
         if r.rrd is not None:
-            click.echo(f"  Rerun recording: {r.rrd}")
+            click.echo(f"  Rerun recording: {safe_text(r.rrd)}")
     if command:
-        click.echo(f"open in the Rerun viewer:  {command}")
+        click.echo(f"open in the Rerun viewer:  {safe_text(command)}")
 
 
 __all__ = ["record"]

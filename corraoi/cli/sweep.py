@@ -15,12 +15,18 @@ from typing import Any
 import click
 
 from ..errors import ConfigError
+from ..text import safe_text
 from .common import (
+    CHECKPOINTS,
+    RUNS,
+    WORKERS,
     handle_errors,
     horizon_option,
     instance_option,
+    output_option,
     param_options,
     policy_option,
+    say,
     seed_option,
     warn,
 )
@@ -74,18 +80,17 @@ def _write_text(path: Path, text: str) -> None:
 @click.command()
 @instance_option
 @policy_option(default=("all",))
-@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
+@click.option("--runs", "-n", type=RUNS, default=200, show_default=True,
               help="Monte Carlo runs per policy (seeds seed .. seed+runs-1, shared by all "
               "policies).")  # fmt: skip
 @horizon_option(10_000)
 @seed_option
 @param_options
-@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
+@click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
-@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=None,
-              metavar="DIR", help="Stream the curves to DIR/sweep.mcap and DIR/sweep.rrd and "
-              "write DIR/summary.json, DIR/summary.md and DIR/figure.png.")  # fmt: skip
-@click.option("--checkpoints", type=click.IntRange(min=2), default=200, show_default=True,
+@output_option(metavar="DIR", help="Stream the curves to DIR/sweep.mcap and DIR/sweep.rrd "
+               "and write DIR/summary.json, DIR/summary.md and DIR/figure.png.")  # fmt: skip
+@click.option("--checkpoints", type=CHECKPOINTS, default=200, show_default=True,
               help="With -o: about this many checkpoint slots per curve.")  # fmt: skip
 @click.option("--force", is_flag=True, help="With -o: overwrite a DIR that holds a sweep.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
@@ -99,7 +104,7 @@ def sweep(
     c: float | None,
     beta: float | None,
     workers: int | None,
-    out: Path | None,
+    output: Path | None,
     checkpoints: int,
     force: bool,
     as_json: bool,
@@ -116,12 +121,16 @@ def sweep(
       corraoi sweep --instance I2 -o sweeps/I2      # logs, summary and figure
       corraoi figure sweeps/I2/sweep.mcap -o i2.png --log-x
     """
+    from .. import limits
     from ..engine import check_instance, set_workers
     from ..instance import load_instance
     from ..policies import make_policies
 
+    out = output
+    limits.check_seed(seed, runs=runs, name="--seed")
     inst = load_instance(instance)
     check_instance(inst)
+    limits.check_sweep_memory(runs, inst.K)
     specs = make_policies(policy, c=c, beta=beta)
     if out is not None:
         check_out_dir(out, force=force)
@@ -232,7 +241,7 @@ def _draw(out: Path) -> None:
 
 
 def print_table(summary: dict[str, Any]) -> None:
-    name = summary["instance"]["name"]
+    name = safe_text(summary["instance"]["name"])
     runs, seed = summary["runs"], summary["seed"]
     click.echo(
         f"instance {name}, {runs} runs (seeds {seed}..{seed + runs - 1}), "
@@ -249,8 +258,9 @@ def print_table(summary: dict[str, Any]) -> None:
         btext = ""
         if bound is not None:
             btext = f"  {bound['value']:.4g}" if bound["value"] is not None else "  n/a"
-        click.echo(
-            f"{pname:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
+        say(
+            f"{safe_text(pname):22s} {s['regret_mean']:10.1f} {ci_text} "
+            f"{s['estimator_mean']:11.1f} "
             f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
         )
 
@@ -260,19 +270,18 @@ PAPER_INSTANCES = ("I1", "I2")
 
 
 @click.command()
-@click.option("--out", "-o", "out", type=click.Path(path_type=Path), default=Path("paper"),
-              show_default=True, metavar="DIR",
-              help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
-@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
+@output_option(metavar="DIR", default=Path("paper"), show_default=True,
+               help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
+@click.option("--runs", "-n", type=RUNS, default=200, show_default=True,
               help="Monte Carlo runs per policy.")  # fmt: skip
 @horizon_option(10_000)
 @seed_option
-@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
+@click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
 @handle_errors
 def reproduce(
-    out: Path, runs: int, horizon: int, seed: int, workers: int | None, force: bool
+    output: Path, runs: int, horizon: int, seed: int, workers: int | None, force: bool
 ) -> None:
     """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
 
@@ -283,11 +292,16 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
+    from .. import limits
     from ..engine import set_workers
     from ..instance import load_instance
     from ..policies import make_policies
     from ..summary import summary_markdown
 
+    out = output
+    limits.check_seed(seed, runs=runs, name="--seed")
+    for name in PAPER_INSTANCES:
+        limits.check_sweep_memory(runs, load_instance(name).K)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
     if out.is_dir() and (out / "summary.md").exists() and not force:
