@@ -154,7 +154,6 @@ class RunLog:
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
         K, n = self.config.instance.K, self.config.instance.n_states
         expected = 1
-        prev: tuple[int, int] | None = None  # (aoi, regret) of the last slot read
         with _open(self.path) as f:
             walker = _Walker(f, self.path, stop_at=self._data_end)
             for kind, item in walker.records(read_chunks=True):
@@ -174,8 +173,6 @@ class RunLog:
                         f"{where}: slots are not consecutive (expected slot {expected}, "
                         f"got {int(t[0])}..{int(t[-1])})"
                     )
-                _check_continues(part, prev, where)
-                prev = (int(part.aoi[-1]), int(part.regret[-1]))
                 if expected + len(part) - 1 > self.n_slots:
                     part = _slice(part, 0, self.n_slots - expected + 1)
                 expected += len(part)
@@ -218,7 +215,6 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         walker = _Walker(f, p)
         damage = ""
         expected = 1
-        prev: tuple[int, int] | None = None
         library = ""
         run_md: dict[str, str] | None = None
         end_md: dict[str, str] = {}
@@ -261,9 +257,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                             channel_id = _find_channel(item.records, p, item.offset)
                         last = _last_slot(item.records, channel_id, p, item.offset)
                         if salvage:
-                            expected, prev = _validate_chunk(
-                                item, run_md, channel_id, p, expected, prev
-                            )
+                            expected = _validate_chunk(item, run_md, channel_id, p, expected)
                     else:  # not verified: trust the chunk header (our chunks hold only slots)
                         last = item.end_time // NS_PER_SLOT
                 except LogError as exc:
@@ -359,31 +353,14 @@ def _strip_path(exc: LogError, p: Path) -> str:
     return text[len(prefix) :] if text.startswith(prefix) else text
 
 
-def _check_continues(part: SlotBlock, prev: tuple[int, int] | None, where: str) -> None:
-    """The first slot of a chunk must follow the last one read (AoI and regret)."""
-    if prev is None or not len(part):
-        return
-    aoi0, regret0 = int(part.aoi[0]), int(part.regret[0])
-    want_aoi = 1 if bool(part.success[0]) else prev[0] + 1
-    t = int(part.t[0])
-    if aoi0 != want_aoi:
-        raise LogError(f"{where}: slot {t}: aoi is {aoi0}, expected {want_aoi} (1 after a "
-                       "success, the previous age + 1 otherwise)")  # fmt: skip
-    want_regret = prev[1] + aoi0 - int(part.oracle_aoi[0])
-    if regret0 != want_regret:
-        raise LogError(f"{where}: slot {t}: regret is {regret0}, expected {want_regret} (the "
-                       "previous regret + aoi - oracle_aoi)")  # fmt: skip
-
-
 def _validate_chunk(
     chunk: _Chunk,
     run_md: dict[str, str] | None,
     channel_id: int,
     p: Path,
     expected: int,
-    prev: tuple[int, int] | None,
-) -> tuple[int, tuple[int, int] | None]:
-    """Decode and check one chunk's slots (salvage); returns (next slot, last aoi/regret)."""
+) -> int:
+    """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     try:
         config = RunConfig.from_dict(json.loads(run_md["config"]))
@@ -391,7 +368,7 @@ def _validate_chunk(
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
     payloads = _payloads(chunk.records, channel_id, p, chunk.offset)
     if not payloads:
-        return expected, prev
+        return expected
     where = f"{p}: chunk at byte {chunk.offset}"
     part = decode_messages(payloads, config.instance.K, config.instance.n_states, where=where)
     t = part.t
@@ -400,8 +377,7 @@ def _validate_chunk(
     ):
         raise LogError(f"{where}: slots are not consecutive (expected slot {expected}, got "
                        f"{int(t[0])}..{int(t[-1])})")  # fmt: skip
-    _check_continues(part, prev, where)
-    return expected + len(t), (int(part.aoi[-1]), int(part.regret[-1]))
+    return expected + len(t)
 
 
 def _not_ours(p: Path, library: str, sweep: bool = False) -> LogError:

@@ -180,15 +180,15 @@ class Bounded(click.ParamType):
                 number = int(text, 10)
             except ValueError:
                 self.fail(
-                    f"{safe_text(str(value))!r} is not an integer; expected "
+                    f"{safe_text(str(value))!r} is not a valid integer; expected "
                     f"{self.lo}..{self.hi}{because}",
                     param,
                     ctx,
                 )
         if not self.lo <= number <= self.hi:
             shown = str(number) if len(str(number)) <= 30 else f"{str(number)[:20]}..."
-            expected = f"expected {self.lo}..{self.hi}{because}"
-            self.fail(f"{shown} is out of range; {expected}", param, ctx)
+            rng = f"{self.lo}..{self.hi}{because}"
+            self.fail(f"{shown} is not in the range {rng}", param, ctx)
         return number
 
 
