@@ -51,6 +51,8 @@ class _Result:
     pulls: list[int] = field(default_factory=list)
     mcap: Path | None = None
     rrd: Path | None = None
+    #: seconds of the wall time spent compiling the kernels (first use only)
+    compile_s: float = 0.0
 
 
 class _Stop:
@@ -302,8 +304,11 @@ def _record_one(
     from recorder.errors import ViewerError, WriteError
     from recorder.mcap_sink import McapSink
 
+    from ..progress import CompileWatch
+
     config = plan.config
     start = time.perf_counter()
+    watch = CompileWatch()
     problem: str | None = None
     rrd_error: WriteError | None = None
     with McapSink(plan.mcap, config, overwrite=force) as mcap:
@@ -315,6 +320,7 @@ def _record_one(
             sink = RerunSink(output.recording, config.label, config)
         try:
             for block in simulate_run(config.instance, config.policy, config.seed, config.horizon):
+                watch.first_block()
                 mcap.write(block)
                 if sink is not None:
                     sink.write(block)
@@ -347,6 +353,7 @@ def _record_one(
                 rrd_error = exc
     result.mcap = mcap.path if mcap.finished else mcap.partial_path
     result.wall = time.perf_counter() - start
+    result.compile_s = watch.seconds
     if rrd_error is not None:
         if mcap.finished:
             raise WriteError(f"{rrd_error} (the MCAP log {mcap.path} is complete)")
@@ -377,6 +384,7 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
                     "mcap": str(r.mcap) if r.mcap else None,
                     "rrd": str(r.rrd) if r.rrd else None,
                     "wall_s": round(r.wall, 4),
+                    "compile_s": round(r.compile_s, 4),
                 }
                 for r in results
             ],
@@ -387,13 +395,15 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
     for r in results:
         c = r.plan.config
         params = ", ".join(f"{k}={v:g}" for k, v in c.policy.params.items())
-        rate = r.slots / r.wall if r.wall > 0 else 0.0
+        run_s = r.wall - r.compile_s
+        rate = r.slots / run_s if run_s > 0 else 0.0
+        compiled = f", after {r.compile_s:.1f} s compiling" if r.compile_s else ""
         done = "" if r.slots == c.horizon else " (interrupted)"
         click.echo(
             f"{safe_text(c.policy.name)}{f' ({params})' if params else ''} on "
             f"{safe_text(c.instance.name)}, seed "
             f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
-            f"({rate:,.0f} slots/s)"
+            f"({rate:,.0f} slots/s{compiled})"
         )
         if r.regret is not None and r.estimator is not None:
             click.echo(
