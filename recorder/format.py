@@ -268,7 +268,7 @@ def _shown(value: Any) -> str:
             else f"{value}"
         )
     if isinstance(value, float):
-        if value.is_integer() and not (_I64_MIN <= value <= _I64_MAX):
+        if value.is_integer() and abs(value) >= 2.0**63:  # a JSON integer beyond int64
             return f"{value:.6g} (outside the 64-bit integer range)"
         return (
             f"{value!r} (a number with a fraction)"

@@ -102,10 +102,10 @@ def recover(
         os.fchmod(fd, 0o666 & ~_umask())
         with src.open("rb") as fin, os.fdopen(fd, "wb") as fout:
             consumed = _copy(log, fin, fout)
-        if log.damage:
-            consumed = log._data_end
             fout.flush()
             os.fsync(fout.fileno())
+        if log.damage:
+            consumed = log._data_end
         size = src.stat().st_size
         check = open_log(tmp)
         if check.n_slots != log.n_slots or not check.finished:

@@ -77,8 +77,22 @@ class OneLineGroup(click.Group):
         base = super().main
         if not standalone_mode:
             return base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+        from .. import _signals
+
+        if not _signals.is_cli():  # in-process (tests, CliRunner): leave signals alone
+            return self._main(base, args, kwargs)
+        _signals.install()
         try:
-            code = base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+            self._main(base, args, kwargs)
+        except KeyboardInterrupt:  # between the handlers: still one line and 130
+            _signals.quiet_exit()
+        except SystemExit as done:
+            _signals.finished()
+            raise done from None
+
+    def _main(self, base: Any, args: Any, kwargs: Any) -> None:
+        try:
+            code = base(*args, standalone_mode=False, **kwargs)
         except click.exceptions.NoArgsIsHelpError as exc:  # `corraoi` alone: the help
             click.echo(exc.format_message())
             sys.exit(0)
