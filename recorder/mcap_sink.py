@@ -191,7 +191,9 @@ class McapSink(Sink):
 
     def abort(self) -> Path | None:
         """Stop without finishing: the ``.partial`` file stays (readable up to its last
-        chunk), unless no slot was written, in which case it is deleted (None)."""
+        chunk), unless no slot was written and no write failed, in which case it is
+        deleted (None). After a failed write (disk full) it always stays: the error
+        message points to it."""
         if not self.closed:
             self.closed = True
             try:
@@ -200,9 +202,9 @@ class McapSink(Sink):
             except OSError:
                 pass
             self._close_file()
-            if self.slots == 0:
+            if self.slots == 0 and not self._torn:
                 unlink_partial(self.path)
-        if self.slots == 0:
+        if self.slots == 0 and not self.partial_path.exists():
             return None
         return self.partial_path
 
