@@ -420,8 +420,8 @@ def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[
         bad = (col < lo) | (col > hi) if hi is not None else col < lo
         if bad.any():
             i = int(np.argmax(bad))
-            want = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-            raise _Bad(i, f, str(int(col[i])), f"an integer in {want}")
+            want = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
+            raise _Bad(i, f, str(int(col[i])), f"an integer {want}")
     bounds: tuple[tuple[str, np.ndarray, float, float | None], ...] = (
         ("mu_hat", out["mu_hat"], 0.0, 1.0),
         ("pulls", out["pulls"], 0, None),

@@ -110,11 +110,12 @@ LIES = [
         "arm is 2.5 (a number with a fraction), expected an integer (int64)",
     ),
     ("arm-bool", set_field("arm", True), "arm is true (a bool), expected a number, not a bool"),
-    ("aoi-zero", set_field("aoi", 0), "aoi is 0, expected an integer in >= 1"),
+    ("aoi-zero", set_field("aoi", 0), "aoi is 0, expected an integer >= 1"),
     (
         "aoi-beyond-int64",
         set_field("aoi", 2**63),
-        "aoi is 9223372036854775808 (outside the 64-bit integer range), expected an integer (int64)",
+        "aoi is 9223372036854775808 (outside the 64-bit integer range), "
+        "expected an integer (int64)",
     ),
     (
         "regret-beyond-uint64",
