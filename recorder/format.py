@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -330,7 +331,8 @@ def _real(v: Any) -> bool:
 
 def _table(values: list[Any], field: str, K: int, ok: Any, expected: str) -> np.ndarray:
     """A (B, K) column: each row a list of K numbers of the kind ``ok`` accepts."""
-    for i, row in enumerate(values):
+    fine = set(map(type, values)) == {list} and set(map(len, values)) == {K}
+    for i, row in enumerate(() if fine else values):
         if type(row) is not list or len(row) != K:
             raise _Bad(i, field, _shown(row), f"a list of {K} numbers (one per arm)")
     arr = np.asarray(values)
@@ -367,7 +369,9 @@ def decode_messages(
     except orjson.JSONDecodeError:
         raise _json_error(payloads, where) from None
     B = len(rows)
-    for i, r in enumerate(rows):
+    # C-level checks first (map/set); the Python loop below runs only to name a bad row
+    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {_N_KEYS}
+    for i, r in enumerate(() if fine else rows):
         if type(r) is not dict or len(r) != _N_KEYS:
             if type(r) is not dict:
                 raise LogError(f"{where}: message {i + 1} is {_shown(r)}, expected a JSON object")
@@ -439,12 +443,17 @@ def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[
 
 
 def _candidates(cand: list[Any], B: int, K: int) -> np.ndarray:
-    for i, c in enumerate(cand):
-        if type(c) is not list or not 1 <= len(c) <= K:
-            raise _Bad(i, "candidates", _shown(c), f"a list of 1..{K} distinct arms")
-    lengths = np.fromiter((len(c) for c in cand), dtype=np.int64, count=B)
-    flat_list = [a for c in cand for a in c]
-    flat = np.asarray(flat_list)
+    lengths = (
+        np.fromiter(map(len, cand), dtype=np.int64, count=B)
+        if set(map(type, cand)) == {list}
+        else None
+    )
+    if lengths is None or lengths.min() < 1 or lengths.max() > K:
+        for i, c in enumerate(cand):
+            if type(c) is not list or not 1 <= len(c) <= K:
+                raise _Bad(i, "candidates", _shown(c), f"a list of 1..{K} distinct arms")
+    assert lengths is not None
+    flat = np.asarray(list(chain.from_iterable(cand)))
     if flat.dtype != np.int64:
         for i, c in enumerate(cand):
             j = _first(c, _is_int)

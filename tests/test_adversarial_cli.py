@@ -404,3 +404,20 @@ def test_python_dash_m_corraoi(tmp_path):
     res = subprocess.run([sys.executable, "-m", "corraoi", "--version"], capture_output=True,
                          text=True, cwd=tmp_path, timeout=60)  # fmt: skip
     assert res.returncode == 0 and res.stdout.startswith("corraoi, version ")
+
+
+def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
+    out = tmp_path / "sw"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    held = paths.open_partial(out / "sweep.mcap", overwrite=False)
+    try:
+        err = one_line_error(cli("sweep", "-n", 2, "-T", 10, "-p", "ucb", "-o", out, "--force"))
+        assert err == (
+            f"corraoi: error: {out / 'sweep.mcap.partial'}: is being written by process "
+            f"{os.getpid()} right now; not touched (wait for it, stop it, or give another "
+            "output folder)"
+        )
+        assert sorted(os.listdir(out)) == ["summary.json", "sweep.mcap.partial"]
+    finally:
+        held.close()

@@ -49,6 +49,16 @@ def check_out_dir(out: Path, *, force: bool) -> None:
         raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
     if out.is_dir():
         present = _sweep_files(out)
+        from recorder.paths import lock_holder
+
+        for name in present:  # --force or not: never touch what another sweep is writing
+            holder = lock_holder(out / name)
+            if holder is not None:
+                who = f"process {holder}" if holder else "another process"
+                raise ConfigError(
+                    f"{out / name}: is being written by {who} right now; not touched (wait "
+                    "for it, stop it, or give another output folder)"
+                )
         if present and not force:
             raise ConfigError(
                 f"{out}: already holds a sweep ({', '.join(present)}); use --force to overwrite"
