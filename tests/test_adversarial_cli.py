@@ -333,7 +333,7 @@ def test_the_quick_start_twice_is_up_to_date(tmp_path, monkeypatch):
     again = cli("record", "--policy", "cucb", "-T", T, "--no-rrd")
     assert again.exit_code == 0, again.output
     assert again.stdout == (
-        "up to date: runs/cucb-I1-s0.mcap hold this run (same configuration, complete); "
+        "up to date: runs/cucb-I1-s0.mcap holds this run (same configuration, complete); "
         "use --force to record it again\n"
     )
     assert (tmp_path / "runs/cucb-I1-s0.mcap").stat().st_mtime_ns == stamp
@@ -421,3 +421,18 @@ def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
         assert sorted(os.listdir(out)) == ["summary.json", "sweep.mcap.partial"]
     finally:
         held.close()
+
+
+def test_only_the_runs_that_are_not_up_to_date_are_recorded(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli("record", "-p", "ucb", "-T", 200, "--no-rrd").exit_code == 0
+    stamp = (tmp_path / "runs/ucb-I1-s0.mcap").stat().st_mtime_ns
+    res = cli("record", "-p", "ucb,cucb", "-T", 200, "--no-rrd", "--json")
+    assert res.exit_code == 0, res.output
+    assert res.stderr.startswith("up to date: runs/ucb-I1-s0.mcap holds this run")
+    assert [r["label"] for r in json.loads(res.stdout)["runs"]] == ["cucb-I1-s0"]
+    assert (tmp_path / "runs/ucb-I1-s0.mcap").stat().st_mtime_ns == stamp
+    again = cli("record", "-p", "ucb,cucb", "-T", 200, "--no-rrd", "--json")
+    assert again.exit_code == 0 and json.loads(again.stdout) == {
+        "runs": [], "up_to_date": ["runs/ucb-I1-s0.mcap", "runs/cucb-I1-s0.mcap"]
+    }  # fmt: skip

@@ -203,17 +203,20 @@ def record(
     from recorder.errors import OutputError
     from recorder.paths import check_output
 
-    if not force and not viewer.asked:
-        fresh = [p for p in plans if _up_to_date(p)]
-        if fresh and len(fresh) == len(plans):
-            for p in fresh:
-                click.echo(
-                    f"up to date: {safe_text(p.mcap)}"
-                    + (f" and {safe_text(p.rrd)}" if p.rrd is not None else "")
-                    + " hold this run (same configuration, complete); use --force to "
-                    "record it again"
-                )
-            return
+    fresh = [p for p in plans if _up_to_date(p)] if not force and not viewer.asked else []
+    plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
+    for p in fresh:
+        click.echo(
+            f"up to date: {safe_text(p.mcap)}"
+            + (f" and {safe_text(p.rrd)}" if p.rrd is not None else "")
+            + (" hold" if p.rrd is not None else " holds")
+            + " this run (same configuration, complete); use --force to record it again",
+            err=as_json,
+        )
+    if not plans:
+        if as_json:
+            click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in fresh]}))
+        return
     for plan in plans:  # refuse before simulating anything
         if not force and plan.mcap.is_file():
             raise OutputError(
