@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from ..errors import UsageError
-from .common import handle_errors, warn
+from ..text import safe_text
+from .common import handle_errors, say, warn
 
 
 def _split(values: tuple[str, ...]) -> list[str] | None:
@@ -55,7 +56,8 @@ def figure(
             f"{sweep.messages} checkpoint(s) it holds"
         )
     draw_figure(sweep, output, log_x=log_x, policies=names)
-    click.echo(
-        f"wrote {output}: {len(names)} polic{'y' if len(names) == 1 else 'ies'}, instance "
-        f"{sweep.instance_name}, {sweep.runs} runs, horizon {sweep.horizon}"
+    say(
+        f"wrote {safe_text(output)}: {len(names)} polic{'y' if len(names) == 1 else 'ies'}, "
+        "instance "
+        f"{safe_text(sweep.instance_name)}, {sweep.runs} runs, horizon {sweep.horizon}"
     )

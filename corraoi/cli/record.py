@@ -238,7 +238,7 @@ def record(
         viewer.stop()
         raise
     if viewer_problem:
-        click.echo(f"corraoi: error: {viewer_problem}", err=True)
+        click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
     _report(results, as_json=as_json)
     if stopped:
