@@ -46,6 +46,7 @@ from .format import (
     decode_messages,
     empty_block,
 )
+from .paths import lock_holder
 
 MAGIC = b"\x89MCAP0\r\n"
 #: The largest uncompressed chunk the reader accepts (writers close chunks at 64 MiB).
@@ -90,6 +91,8 @@ class RunLog:
     n_chunks: int = 0
     #: With ``open_log(salvage=True)``: what was wrong where reading stopped ("" if nothing).
     damage: str = ""
+    #: PID of the process writing the file right now (it holds the writer's lock), if any.
+    writer: int | None = None
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
@@ -120,6 +123,12 @@ class RunLog:
             return (
                 f"cut short: the run was stopped after slot {self.n_slots} of {T} "
                 "(the file was finished properly)"
+            )
+        if self.writer is not None:
+            who = f"process {self.writer}" if self.writer else "another process"
+            return (
+                f"being written right now by {who}: {self.n_slots} of {T} slots so far, up "
+                "to the last complete chunk"
             )
         return (
             f"cut short: the writer did not finish the file (killed?); recovered "
@@ -318,6 +327,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         library=library,
         n_chunks=n_chunks,
         damage=damage,
+        writer=None if finished else lock_holder(p),
         _channel_id=channel_id or 1,
         _data_end=data_end,
     )

@@ -338,3 +338,21 @@ def test_info_on_a_missing_log_points_to_its_partial(tmp_path):
         f"writer that did not finish, or one still writing): read it with `corraoi info "
         f"{part}`, finish it with `corraoi recover {part}`"
     )
+
+
+def test_info_on_a_log_being_written_names_its_writer(tmp_path):
+    config = _config()
+    blocks = list(simulate_run(config.instance, config.policy, 0, T))
+    with McapSink(tmp_path / "live.mcap", config, fsync=False) as sink:
+        for b in blocks[:2]:
+            sink.write(b)
+        res = cli("info", tmp_path / "live.mcap.partial", "--json")
+        assert res.exit_code == 0, res.output
+        data = json.loads(res.stdout)
+        assert data["description"] == (
+            f"being written right now by process {os.getpid()}: 2000 of {T} slots so far, up "
+            "to the last complete chunk"
+        )
+        for b in blocks[2:]:
+            sink.write(b)
+    assert open_log(tmp_path / "live.mcap").writer is None
