@@ -299,6 +299,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    _check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
     if damage:
@@ -355,6 +356,25 @@ def _open(p: Path) -> BinaryIO:
         )
         raise LogError(f"{p}: is {kind}, not a regular file; expected an MCAP log file")
     return os.fdopen(fd, "rb")
+
+
+def _check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
+    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
+    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
+    facts = {
+        "seed": str(config.seed),
+        "horizon": str(config.horizon),
+        "arms": str(config.instance.K),
+        "states": str(config.instance.n_states),
+        "policy": config.policy.name,
+        "instance": config.instance.name,
+    }
+    for key, value in facts.items():
+        if key in md and md[key] != value:
+            raise LogError(
+                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
+                f"{value!r} in the configuration; expected both to agree"
+            )
 
 
 def _strip_path(exc: LogError, p: Path) -> str:

@@ -356,3 +356,24 @@ def test_info_on_a_log_being_written_names_its_writer(tmp_path):
         for b in blocks[2:]:
             sink.write(b)
     assert open_log(tmp_path / "live.mcap").writer is None
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "tail"),
+    [
+        (b'"seed": 0,', b'"seed": 7,', "seed is '0' in its own field but '7' in the configuration"),
+        (
+            b"horizon\x04\x00\x00\x002500",
+            b"horizon\x04\x00\x00\x002501",
+            "horizon is '2501' in its own field but '2500' in the configuration",
+        ),
+    ],
+    ids=["config-seed", "flat-horizon"],
+)
+def test_a_flipped_digit_in_the_run_metadata_is_damage(tmp_path, old, new, tail):
+    log = write_log(tmp_path / "run.mcap")
+    data = log.read_bytes()
+    assert data.count(old) == 1
+    log.write_bytes(data.replace(old, new))
+    err = one_line_error(cli("info", log))
+    assert err == f"corraoi: error: {log}: damaged run metadata: {tail}; expected both to agree"
