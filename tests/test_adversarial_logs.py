@@ -377,3 +377,25 @@ def test_a_flipped_digit_in_the_run_metadata_is_damage(tmp_path, old, new, tail)
     log.write_bytes(data.replace(old, new))
     err = one_line_error(cli("info", log))
     assert err == f"corraoi: error: {log}: damaged run metadata: {tail}; expected both to agree"
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_byte_flips_never_give_a_traceback(tmp_path, seed):
+    import random
+
+    rng = random.Random(seed)
+    log = write_log(tmp_path / "run.mcap", horizon=1200)
+    data = bytearray(log.read_bytes())
+    for _ in range(rng.choice([1, 2, 4])):
+        data[rng.randrange(len(data))] = rng.randrange(256)
+    if seed % 3 == 0:
+        data = data[: rng.randrange(len(data))]
+    log.write_bytes(bytes(data))
+    for args in (("info", log), ("recover", log, "-o", tmp_path / "fixed.mcap", "-f")):
+        res = cli(*args)
+        assert res.exit_code in (0, 2), res.output
+        assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+        if res.exit_code == 2:
+            one_line_error(res)
+        elif args[0] == "recover":  # what recover wrote reads back as a finished log
+            assert open_log(tmp_path / "fixed.mcap").finished
