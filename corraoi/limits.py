@@ -49,10 +49,13 @@ MAX_WORKERS: Final = 1024
 #: TCP ports.
 MIN_PORT: Final = 1
 MAX_PORT: Final = 65535
-#: Bytes the engine keeps per run and arm, and per run, while a sweep runs (its state
-#: arrays: pulls, successes, means, indices and the per-run sums; generous by design).
-SWEEP_BYTES_PER_RUN_ARM: Final = 64
-SWEEP_BYTES_PER_RUN: Final = 256
+#: Bytes a sweep keeps per run (seed lists, generator states, sums; generous by design),
+#: per run and arm (pulls and successes), and per run, arm and kept figure (the results of
+#: each policy and the checkpoint snapshots: regret, AoI sum, pulls per arm).
+SWEEP_BYTES_PER_RUN: Final = 512
+SWEEP_BYTES_PER_RUN_ARM: Final = 32
+SWEEP_BYTES_PER_FIGURE: Final = 16
+SWEEP_BYTES_PER_FIGURE_ARM: Final = 8
 
 
 def check_int(value: object, *, name: str, lo: int, hi: int, why: str = "") -> int:
@@ -94,17 +97,28 @@ def physical_memory() -> int | None:
         return None
 
 
-def sweep_memory(runs: int, arms: int) -> int:
-    """An upper estimate of the bytes a sweep of ``runs`` runs on ``arms`` arms holds."""
-    return int(runs) * (SWEEP_BYTES_PER_RUN + SWEEP_BYTES_PER_RUN_ARM * int(arms))
+def sweep_memory(runs: int, arms: int, *, policies: int = 1, checkpoints: int = 0) -> int:
+    """An upper estimate of the bytes a sweep of ``runs`` runs on ``arms`` arms holds:
+    the engine's per-run state, each policy's results and every checkpoint snapshot."""
+    figures = int(policies) + int(checkpoints) + 1
+    per_figure = SWEEP_BYTES_PER_FIGURE + SWEEP_BYTES_PER_FIGURE_ARM * int(arms)
+    per_run = SWEEP_BYTES_PER_RUN + SWEEP_BYTES_PER_RUN_ARM * int(arms) + figures * per_figure
+    return int(runs) * per_run
 
 
-def check_sweep_memory(runs: int, arms: int, *, available: int | None = None) -> int:
+def check_sweep_memory(
+    runs: int,
+    arms: int,
+    *,
+    policies: int = 1,
+    checkpoints: int = 0,
+    available: int | None = None,
+) -> int:
     """Refuse a sweep whose state would not fit in half of this machine's memory.
 
-    Checked before any array is made; returns the estimate in bytes.
+    Checked before any array (or list of seeds) is made; returns the estimate in bytes.
     """
-    need = sweep_memory(runs, arms)
+    need = sweep_memory(runs, arms, policies=policies, checkpoints=checkpoints)
     have = physical_memory() if available is None else available
     if have is not None and need > have // 2:
         raise ConfigError(

@@ -436,3 +436,13 @@ def test_only_the_runs_that_are_not_up_to_date_are_recorded(tmp_path, monkeypatc
     assert again.exit_code == 0 and json.loads(again.stdout) == {
         "runs": [], "up_to_date": ["runs/ucb-I1-s0.mcap", "runs/cucb-I1-s0.mcap"]
     }  # fmt: skip
+
+
+def test_the_sweep_memory_estimate_grows_with_runs_policies_and_checkpoints():
+    base = limits.sweep_memory(1000, 4)
+    assert limits.sweep_memory(2000, 4) == 2 * base
+    assert limits.sweep_memory(1000, 4, policies=12) > base
+    assert limits.sweep_memory(1000, 4, checkpoints=200) > limits.sweep_memory(1000, 4)
+    assert limits.check_sweep_memory(1000, 4, available=10 * base) == base
+    with pytest.raises(limits.ConfigError, match=r"--runs 1000: a sweep of 1000 runs on 4 arms"):
+        limits.check_sweep_memory(1000, 4, available=base)

@@ -140,8 +140,10 @@ def sweep(
     limits.check_seed(seed, runs=runs, name="--seed")
     inst = load_instance(instance)
     check_instance(inst)
-    limits.check_sweep_memory(runs, inst.K)
     specs = make_policies(policy, c=c, beta=beta)
+    limits.check_sweep_memory(
+        runs, inst.K, policies=len(specs), checkpoints=checkpoints if out is not None else 0
+    )
     if out is not None:
         check_out_dir(out, force=force)
     used = set_workers(workers)
@@ -320,7 +322,7 @@ def reproduce(
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")
     for name in PAPER_INSTANCES:
-        limits.check_sweep_memory(runs, load_instance(name).K)
+        limits.check_sweep_memory(runs, load_instance(name).K, policies=12, checkpoints=200)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a directory (expected a directory for -o)")
     if out.is_dir() and (out / "summary.md").exists() and not force:
