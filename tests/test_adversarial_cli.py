@@ -446,3 +446,21 @@ def test_the_sweep_memory_estimate_grows_with_runs_policies_and_checkpoints():
     assert limits.check_sweep_memory(1000, 4, available=10 * base) == base
     with pytest.raises(limits.ConfigError, match=r"--runs 1000: a sweep of 1000 runs on 4 arms"):
         limits.check_sweep_memory(1000, 4, available=base)
+
+
+def test_reproduce_and_figure_print_json(tmp_path):
+    out = tmp_path / "paper"
+    res = cli("reproduce", "-o", out, "-n", 2, "-T", 100, "--json")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["output"] == str(out) and sorted(data["instances"]) == ["I1", "I2"]
+    assert data["instances"]["I2"]["runs"] == 2 and data["instances"]["I2"]["horizon"] == 100
+    pytest.importorskip("matplotlib")
+    fig = cli("figure", out / "I1" / "sweep.mcap", "-o", tmp_path / "f.png", "--json",
+              "--policies", "ucb,cucb")  # fmt: skip
+    assert fig.exit_code == 0, fig.output
+    assert json.loads(fig.stdout) == {
+        "output": str(tmp_path / "f.png"), "sweep": str(out / "I1" / "sweep.mcap"),
+        "policies": ["ucb", "cucb"], "instance": "I1", "runs": 2, "horizon": 100,
+        "complete": True,
+    }  # fmt: skip

@@ -300,9 +300,17 @@ PAPER_INSTANCES = ("I1", "I2")
 @click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print both summaries as one JSON object instead of tables.")  # fmt: skip
 @handle_errors
 def reproduce(
-    output: Path, runs: int, horizon: int, seed: int, workers: int | None, force: bool
+    output: Path,
+    runs: int,
+    horizon: int,
+    seed: int,
+    workers: int | None,
+    force: bool,
+    as_json: bool,
 ) -> None:
     """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
 
@@ -333,13 +341,16 @@ def reproduce(
     specs = make_policies(["all"])
     start = time.perf_counter()
     parts = []
+    summaries: dict[str, Any] = {}
     for name in PAPER_INSTANCES:
         summary = sweep_instance(
             load_instance(name), specs, runs=runs, horizon=horizon, seed=seed, workers=used,
             out=out / name, label=f"sweep {name}",
         )  # fmt: skip
-        print_table(summary)
-        click.echo("")
+        summaries[name] = summary
+        if not as_json:
+            print_table(summary)
+            click.echo("")
         parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
     head = (
         "# The paper's simulations, regenerated\n\n"
@@ -351,5 +362,8 @@ def reproduce(
         out / "summary.md",
         head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
     )
-    click.echo(f"wrote {out}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES) + ", summary.md")
+    if as_json:
+        click.echo(json.dumps({"output": str(out), "instances": summaries}, indent=2))
+    else:
+        click.echo(f"wrote {out}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES) + ", summary.md")
     click.echo(f"total wall time {time.perf_counter() - start:.2f} s on {used} thread(s)", err=True)
