@@ -36,10 +36,21 @@ def quiet_exit(code: int = INTERRUPTED) -> None:
     """Say ``corraoi: interrupted`` on stderr and leave at once with ``code``."""
     try:
         sys.stderr.write("corraoi: interrupted\n")
-        sys.stderr.flush()
-        sys.stdout.flush()
     except (OSError, ValueError):
         pass
+    leave(code)
+
+
+def leave(code: int) -> None:
+    """Flush stdout and stderr and exit with exactly ``code``, skipping the interpreter's
+    shutdown: after an interrupt, a KeyboardInterrupt seen anywhere earlier can make
+    CPython end the process by re-raising SIGINT (status -2 instead of 130). The commands
+    have finished or discarded their files before they get here."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
     os._exit(code)
 
 

@@ -88,6 +88,8 @@ class OneLineGroup(click.Group):
             _signals.quiet_exit()
         except SystemExit as done:
             _signals.finished()
+            if done.code == _signals.INTERRUPTED:  # said so already: leave with exactly 130
+                _signals.leave(_signals.INTERRUPTED)
             raise done from None
 
     def _main(self, base: Any, args: Any, kwargs: Any) -> None:
