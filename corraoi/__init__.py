@@ -7,8 +7,13 @@ and viewer packages build on them. Heavy pieces are imported lazily by the CLI, 
 
 from typing import TYPE_CHECKING, Any
 
-from ._version import __version__
-from .errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError
+from . import _signals
+
+if _signals.is_cli():  # the command line: Ctrl-C at start-up is one line, exit 130
+    _signals.install()
+
+from ._version import __version__  # noqa: E402
+from .errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError  # noqa: E402
 
 if TYPE_CHECKING:
     from .analysis import load

@@ -77,14 +77,9 @@ class RunConfig:
         )
 
 
-#: The longest horizon: sums of ages reach T (T + 1) / 2, which must fit in int64, and slot
-#: times t * 1e9 ns in MCAP's uint64 (T < 1.8e10); 3e9 keeps both with room.
-MAX_HORIZON = 3_000_000_000
-#: The most runs of one batch or sweep cell.
-MAX_RUNS = 100_000_000
-
-
 def check_horizon(horizon: int) -> None:
+    from .limits import MAX_HORIZON
+
     if not isinstance(horizon, (int, np.integer)) or horizon < 1:
         raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
     if horizon > MAX_HORIZON:

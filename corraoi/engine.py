@@ -175,7 +175,7 @@ class Simulation:
             empty, np.empty((R, 0), dtype=np.int64), np.empty((R, 0), dtype=np.int64),
             np.empty((R, 0, K), dtype=np.int64),
         )  # fmt: skip
-        kernels.load_seconds += time.perf_counter() - start
+        kernels.note_warm_up(self._kernel, time.perf_counter() - start)
 
     @property
     def runs(self) -> int:

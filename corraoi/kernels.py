@@ -43,9 +43,11 @@ _HOOK_LINES = (
     "from corraoi.policies.hooks import score_none as _score  # HOOKS",
     "from corraoi.policies.hooks import update_none as _update  # HOOKS",
 )
-#: Seconds this process spent compiling kernels or loading them from the cache (speed figures
-#: such as record's slots/s leave them out).
+#: Seconds this process spent compiling kernels, and loading them from the cache (speed
+#: figures such as record's slots/s leave the compilation out).
+compile_seconds = 0.0
 load_seconds = 0.0
+_COMPILING: set[str] = set()
 _LOADED: dict[str, Any] = {}
 _LOCK = threading.Lock()
 
@@ -167,10 +169,12 @@ def kernel_for(policy: type[CompiledPolicy]) -> Any:
             tmp = folder / f".{modname}.{os.getpid()}.tmp"
             tmp.write_text(source, encoding="utf-8")
             os.replace(tmp, path)  # atomic: concurrent processes write the same bytes
-        if not _is_cached(folder, modname) and on_compile is not None:
-            on_compile(
-                f"compiling the engine for {policy.name} (first use; cached in {folder})"
-            )
+        if not _is_cached(folder, modname):
+            _COMPILING.add(modname)
+            if on_compile is not None:
+                on_compile(
+                    f"compiling the engine for {policy.name} (first use; cached in {folder})"
+                )
         spec = importlib.util.spec_from_file_location(modname, path)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
@@ -178,3 +182,14 @@ def kernel_for(policy: type[CompiledPolicy]) -> Any:
         spec.loader.exec_module(module)
         _LOADED[modname] = module.advance
         return module.advance
+
+
+def note_warm_up(kernel: Any, seconds: float) -> None:
+    """Account a kernel's first call: compiling (a fresh cache) or loading from the cache."""
+    global compile_seconds, load_seconds
+    name = getattr(getattr(kernel, "py_func", None), "__module__", "")
+    if name in _COMPILING:
+        _COMPILING.discard(name)
+        compile_seconds += seconds
+    else:
+        load_seconds += seconds

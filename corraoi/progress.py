@@ -1,14 +1,22 @@
-"""A dependency-free progress bar on stderr, shown only when stderr is a terminal."""
+"""Progress on stderr (click's progress bar), drawn only when stderr is a terminal; and the
+one-line notice shown while the engine's kernels compile on first use."""
 
 from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import Any, TextIO
+
+import click
 
 
 class Progress:
-    """``with Progress(total, "sweep") as bar: bar.update(n)``; silent when not a TTY."""
+    """``with Progress(total, "sweep") as bar: bar.update(n)``; silent when not a TTY.
+
+    A thin wrapper over :func:`click.progressbar` that keeps a count (``done``), takes a
+    note per update (shown after the bar) and redraws at most every ``min_interval``
+    seconds (and at 100%).
+    """
 
     def __init__(
         self,
@@ -27,39 +35,45 @@ class Progress:
             enabled = bool(isatty and isatty())
         self.enabled = enabled
         self.done = 0
-        self._start = time.perf_counter()
-        self._last = 0.0
+        self._pending = 0
+        self._last = float("-inf")
         self._min_interval = min_interval
+        self._bar: Any = None
 
     def __enter__(self) -> Progress:
-        self._start = time.perf_counter()
+        if self.enabled:
+            self._bar = click.progressbar(
+                length=self.total,
+                label=self.label,
+                file=self.stream,
+                show_eta=True,
+                show_percent=True,
+                width=30,
+                item_show_func=lambda note: note,
+            )
+            self._bar.__enter__()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
     def update(self, n: int = 1, *, note: str = "") -> None:
-        self.done = min(self.done + int(n), self.total)
+        step = min(int(n), self.total - self.done)
+        self.done += step
+        if self._bar is None:
+            return
+        self._pending += step
         now = time.perf_counter()
-        if self.enabled and (now - self._last >= self._min_interval or self.done == self.total):
+        if now - self._last >= self._min_interval or self.done == self.total:
             self._last = now
-            self._draw(note)
-
-    def _draw(self, note: str) -> None:
-        frac = self.done / self.total
-        width = 30
-        filled = int(frac * width)
-        elapsed = time.perf_counter() - self._start
-        eta = elapsed / frac - elapsed if frac > 0 else 0.0
-        bar = "#" * filled + "-" * (width - filled)
-        extra = f" {note}" if note else ""
-        self.stream.write(
-            f"\r{self.label} [{bar}] {frac:6.1%} {elapsed:5.1f}s eta {eta:5.1f}s{extra}\x1b[K"
-        )
-        self.stream.flush()
+            self._bar.update(self._pending, current_item=note or None)
+            self._pending = 0
 
     def close(self) -> None:
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
+        bar, self._bar = self._bar, None
+        if bar is not None:
+            if self._pending:
+                bar.update(self._pending)
+                self._pending = 0
+            bar.__exit__(None, None, None)
             self.enabled = False

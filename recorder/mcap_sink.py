@@ -41,7 +41,15 @@ from .format import (
     schema_bytes,
 )
 from .mcap_chunks import ChunkWriter
-from .paths import Sink, check_output, open_partial, partial_path, publish, reason
+from .paths import (
+    Sink,
+    check_output,
+    open_partial,
+    partial_path,
+    publish,
+    reason,
+    unlink_partial,
+)
 
 
 class McapSink(Sink):
@@ -171,11 +179,13 @@ class McapSink(Sink):
             self._file.flush()
             if self._fsync:
                 os.fsync(self._file.fileno())
-            self._file.close()
         except OSError as exc:
             self._close_file()
             raise self._write_error(exc) from None
-        publish(self.path, overwrite=self.overwrite)
+        try:  # renamed while still open: the lock on it is held until it is in place
+            publish(self.path, overwrite=self.overwrite)
+        finally:
+            self._close_file()
         self.finished = True
         return self.path
 
@@ -205,7 +215,9 @@ class McapSink(Sink):
 
     def abort(self) -> Path | None:
         """Stop without finishing: the ``.partial`` file stays (readable up to its last
-        chunk), unless no slot was written, in which case it is deleted (None)."""
+        chunk), unless no slot was written and no write failed, in which case it is
+        deleted (None). After a failed write (disk full) it always stays: the error
+        message points to it."""
         if not self.closed:
             self.closed = True
             try:
@@ -214,9 +226,9 @@ class McapSink(Sink):
             except OSError:
                 pass
             self._close_file()
-            if self.slots == 0:
-                self.partial_path.unlink(missing_ok=True)
-        if self.slots == 0:
+            if self.slots == 0 and not self._torn:
+                unlink_partial(self.path)
+        if self.slots == 0 and not self.partial_path.exists():
             return None
         return self.partial_path
 

@@ -1,8 +1,17 @@
-"""Output files that are never presented as complete before they are.
+"""Output files that are never presented as complete before they are, and never shared.
 
 A writer writes ``<path>.partial`` and renames it to ``<path>`` only once the file is
 finished (footer written, data on disk). A writer that is killed leaves the ``.partial``
 file, which the reader opens and reports as cut short.
+
+The ``.partial`` file itself carries an exclusive lock (``flock``) for as long as its
+writer has it open: no lock file beside it, and the lock dies with the process. A second
+writer of the same path, with or without ``--force``, is refused at once with one line
+that names the process holding it (:func:`lock_holder`); ``--force`` only ever replaces
+files nobody is writing.
+
+Output names made from data (instance, policy, plug-in names) go through
+:func:`safe_name` first, so that they cannot leave the output folder.
 """
 
 from __future__ import annotations
@@ -16,7 +25,14 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 if TYPE_CHECKING:
     from typing_extensions import Self
 
+from corraoi.text import safe_name
+
 from .errors import OutputError, WriteError
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: no locks
+    fcntl = None  # type: ignore[assignment]
 
 PARTIAL_SUFFIX = ".partial"
 
@@ -51,6 +67,20 @@ class Sink:
             self.abort()
 
 
+__all__ = [
+    "PARTIAL_SUFFIX",
+    "Sink",
+    "check_output",
+    "lock_holder",
+    "open_partial",
+    "partial_path",
+    "publish",
+    "reason",
+    "safe_name",
+    "unlink_partial",
+]
+
+
 def partial_path(path: str | os.PathLike[str]) -> Path:
     """Where the file for ``path`` lives while it is being written."""
     p = Path(path)
@@ -62,19 +92,31 @@ def check_output(path: str | os.PathLike[str], *, overwrite: bool, what: str = "
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
         raise OutputError(f"{path!s}: not a file name for the {what}")
+    if "\0" in str(path):
+        raise OutputError(f"{path!r}: a NUL byte in the path of the {what}")
     if p.is_dir():
         raise OutputError(f"{p}: is a directory; give a file path for the {what}")
+    _no_dangling_link(p, what)
+    if p.exists() and not p.is_file():
+        raise OutputError(f"{p}: is not a regular file (a device, FIFO or socket); give a "
+                          f"file path for the {what}")  # fmt: skip
     parent = p.parent
     for up in (parent, *parent.parents):
         if up.exists():
             if not up.is_dir():
                 raise OutputError(f"{p}: {up} is not a directory")
+            if not os.access(up, os.W_OK | os.X_OK):
+                raise OutputError(f"{p}: the folder {up} is not writable")
             break
+    part = partial_path(p)
+    holder = lock_holder(part)
+    if holder is not None:
+        raise OutputError(_busy(part, holder))
     if p.exists() and not overwrite:
         raise OutputError(f"{p}: already exists (use --force to overwrite it)")
-    part = partial_path(p)
     if part.is_dir():
         raise OutputError(f"{part}: is a directory; cannot write the {what} there")
+    _no_dangling_link(part, what)
     if part.exists() and not overwrite:
         raise OutputError(
             f"{part}: a partial file of an earlier run that did not finish is in the way "
@@ -83,18 +125,132 @@ def check_output(path: str | os.PathLike[str], *, overwrite: bool, what: str = "
     return p
 
 
+def _no_dangling_link(p: Path, what: str) -> None:
+    if p.is_symlink() and not p.exists():
+        try:
+            target = os.readlink(p)
+        except OSError:
+            target = "?"
+        raise OutputError(
+            f"{p}: is a symbolic link to {target}, which does not exist; remove the link "
+            f"or give another path for the {what}"
+        )
+
+
+def _busy(part: Path, holder: int) -> str:
+    who = f"process {holder}" if holder > 0 else "another process"
+    return (
+        f"{part}: is being written by {who} right now; not touched (wait for it, stop it, "
+        "or give another output path)"
+    )
+
+
+def lock_holder(part: str | os.PathLike[str]) -> int | None:
+    """Who holds the writer's lock on ``part``: its PID, 0 if the PID is unknown, or None
+    when nobody writes it (or it does not exist)."""
+    if fcntl is None:
+        return None
+    try:
+        fd = os.open(part, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        st = os.fstat(fd)
+        if not _is_regular(st.st_mode):
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return _pid_of_lock(st.st_dev, st.st_ino)
+        except OSError:
+            return None
+        return None
+    finally:
+        os.close(fd)  # also drops the shared lock taken to test
+
+
+def _is_regular(mode: int) -> bool:
+    import stat
+
+    return stat.S_ISREG(mode)
+
+
+def _pid_of_lock(dev: int, ino: int) -> int:
+    """The PID holding a flock on (dev, ino), from /proc/locks (Linux); 0 if unknown."""
+    want = f"{os.major(dev):02x}:{os.minor(dev):02x}:{ino}"
+    try:
+        with open("/proc/locks", encoding="ascii", errors="replace") as f:
+            for line in f:
+                parts = line.split()
+                # "1: FLOCK  ADVISORY  WRITE 1234 00:2e:5678 0 EOF" ("->" marks waiters)
+                if "->" in parts or len(parts) < 6 or parts[1] != "FLOCK":
+                    continue
+                if parts[5] == want and parts[3] == "WRITE":
+                    return int(parts[4])
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def _fdopen(fd: int) -> BinaryIO:
+    """The file object of a locked ``.partial`` (a seam: tests inject faults here)."""
+    return os.fdopen(fd, "wb")
+
+
 def open_partial(path: Path, *, overwrite: bool, what: str = "output") -> BinaryIO:
-    """Create the parent directories and open ``<path>.partial`` for writing."""
+    """Create the parent directories and open ``<path>.partial`` for writing, locked.
+
+    The exclusive lock lives as long as the returned file is open: keep it open until the
+    file is renamed into place (:func:`publish`). A ``.partial`` that another process
+    holds is refused, even with ``overwrite``; it is truncated only once it is ours.
+    """
     part = partial_path(path)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC
+    if not overwrite:
+        flags |= os.O_EXCL
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        return open(part, "wb" if overwrite else "xb")  # noqa: SIM115 - the sink owns it
+        for _ in range(10):
+            fd = os.open(part, flags, 0o666)
+            try:
+                if not _is_regular(os.fstat(fd).st_mode):
+                    raise OutputError(f"{part}: is not a regular file; cannot write the {what}")
+                if fcntl is not None:
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    except BlockingIOError:
+                        st = os.fstat(fd)
+                        raise OutputError(_busy(part, _pid_of_lock(st.st_dev, st.st_ino))) from None
+                    # the file we locked may have been renamed or removed by its last owner
+                    # between our open and our lock: then lock the one at the path now
+                    try:
+                        same = os.path.samestat(os.fstat(fd), os.stat(part, follow_symlinks=False))
+                    except FileNotFoundError:
+                        same = False
+                    if not same:
+                        os.close(fd)
+                        flags &= ~os.O_EXCL
+                        continue
+                os.ftruncate(fd, 0)
+                return _fdopen(fd)
+            except BaseException:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+                raise
+        raise OutputError(f"{part}: keeps being replaced by another process; not written")
     except FileExistsError:
+        holder = lock_holder(part)
+        if holder is not None:
+            raise OutputError(_busy(part, holder)) from None
         raise OutputError(
             f"{part}: appeared while starting (another corraoi writing the same file?); "
             "use --force to overwrite it"
         ) from None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise OutputError(f"{part}: is a symbolic link; not followed for the {what}") from None
         raise OutputError(f"{part}: cannot create the {what}: {reason(exc)}") from None
 
 
@@ -125,6 +281,14 @@ def publish(path: Path, *, overwrite: bool) -> None:
         os.unlink(part)
     except OSError as exc:
         raise WriteError(f"{path}: cannot rename {part} into place: {reason(exc)}") from None
+
+
+def unlink_partial(path: Path) -> None:
+    """Remove ``<path>.partial`` unless another process holds it (an abort with nothing
+    written: never delete what someone else is writing)."""
+    part = partial_path(path)
+    if lock_holder(part) is None:
+        part.unlink(missing_ok=True)
 
 
 def reason(exc: OSError) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import struct
 import zlib
 from collections.abc import Iterator
@@ -45,8 +46,13 @@ from .format import (
     decode_messages,
     empty_block,
 )
+from .paths import lock_holder
 
 MAGIC = b"\x89MCAP0\r\n"
+#: The largest uncompressed chunk the reader accepts (writers close chunks at 64 MiB).
+_MAX_CHUNK = 1 << 28
+#: The most a chunk can expand when decompressed (zstd's limit is far below this).
+_MAX_RATIO = 1 << 16
 _RECORD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
 _MSG_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log_time, publish_time
@@ -83,6 +89,10 @@ class RunLog:
     end: dict[str, str] = field(default_factory=dict)
     library: str = ""
     n_chunks: int = 0
+    #: With ``open_log(salvage=True)``: what was wrong where reading stopped ("" if nothing).
+    damage: str = ""
+    #: PID of the process writing the file right now (it holds the writer's lock), if any.
+    writer: int | None = None
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
@@ -112,10 +122,18 @@ class RunLog:
                 f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
                 f"{self.end.get('error', '(no message)')}"
             )
+        if self.status == "damaged":
+            return f"damaged: {self.damage}; read {self.n_slots} of {T} slots before the damage"
         if self.status == "interrupted":
             return (
                 f"cut short: the run was stopped after slot {self.n_slots} of {T} "
                 "(the file was finished properly)"
+            )
+        if self.writer is not None:
+            who = f"process {self.writer}" if self.writer else "another process"
+            return (
+                f"being written right now by {who}: {self.n_slots} of {T} slots so far, up "
+                "to the last complete chunk"
             )
         return (
             f"cut short: the writer did not finish the file (killed?); recovered "
@@ -222,15 +240,29 @@ class RunLog:
                     return
 
 
-def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
+def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool = False) -> RunLog:
     """Open a corraoi MCAP log, checking what it is and how complete it is.
 
     With ``verify`` (the default) every chunk is decompressed and its CRC checked now, so
     a damaged file is refused here rather than half-way through a replay. Raises
-    :class:`~recorder.errors.LogError` with a one-line message when the file cannot be used.
+    :class:`~recorder.errors.LogError` with a one-line message when the file cannot be used:
+    a finished file with a record that does not fit, a bad CRC, a bad size or an invalid
+    slot is *damaged* (file, byte offset, what is wrong), which is told apart from a file
+    whose writer was killed (*cut short*: no footer, a torn last record).
+
+    With ``salvage`` every chunk is decoded and validated, and the first damage ends the
+    log instead of raising: the RunLog holds the slots before it, ``status`` is
+    "damaged" and ``damage`` says what and where (``corraoi recover`` uses this).
     """
     p = Path(path)
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():
+        part = p.with_name(p.name + ".partial")
+        if part.exists():
+            raise LogError(
+                f"{p}: no such file, but {part} is there (a writer that did not finish, or "
+                f"one still writing): read it with `corraoi info {part}`, finish it with "
+                f"`corraoi recover {part}`"
+            )
         raise LogError(f"{p}: no such file")
     if p.is_dir():
         raise LogError(f"{p}: is a directory, expected an MCAP log file")
@@ -239,6 +271,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         if size == 0:
             raise LogError(f"{p}: empty file (0 bytes), not an MCAP log")
         walker = _Walker(f, p)
+        damage = ""
+        expected = 1
         library = ""
         run_md: dict[str, str] | None = None
         end_md: dict[str, str] = {}
@@ -248,7 +282,17 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         data_end = 0
         finished = False
         sweep = False  # a sweep log's metadata was seen
-        for kind, item in walker.records(read_chunks=True, lazy_after_first=not verify):
+        records = walker.records(read_chunks=True, lazy_after_first=not (verify or salvage))
+        while True:
+            try:
+                kind, item = next(records)
+            except StopIteration:
+                break
+            except LogError as exc:
+                if not salvage or run_md is None or not n_chunks:
+                    raise
+                damage = _strip_path(exc, p)
+                break
             if kind == "header":
                 assert isinstance(item, Header)
                 library = item.library
@@ -265,12 +309,20 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
                 assert isinstance(item, _Chunk)
                 if run_md is None:
                     raise _not_ours(p, library, sweep)
-                if item.records is not None:
-                    if not channel_id:
-                        channel_id = _find_channel(item.records, p, item.offset)
-                    last = _last_slot(item.records, channel_id, p, item.offset)
-                else:  # not verified: trust the chunk header (our chunks hold only slots)
-                    last = item.end_time // NS_PER_SLOT
+                try:
+                    if item.records is not None:
+                        if not channel_id:
+                            channel_id = _find_channel(item.records, p, item.offset)
+                        last = _last_slot(item.records, channel_id, p, item.offset)
+                        if salvage:
+                            expected = _validate_chunk(item, run_md, channel_id, p, expected)
+                    else:  # not verified: trust the chunk header (our chunks hold only slots)
+                        last = item.end_time // NS_PER_SLOT
+                except LogError as exc:
+                    if not salvage or not n_chunks:
+                        raise
+                    damage = _strip_path(exc, p)
+                    break
                 if last:
                     n_slots = max(n_slots, last)
                 n_chunks += 1
@@ -296,9 +348,13 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    _check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
-    if not finished:
+    if damage:
+        finished = False
+        status = "damaged"
+    elif not finished:
         status = "truncated"
     elif end_md.get("status") == "failed":
         status = "failed"
@@ -322,6 +378,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
         end=end_md,
         library=library,
         n_chunks=n_chunks,
+        damage=damage,
+        writer=None if finished else lock_holder(p),
         _channel_id=channel_id or 1,
         _data_end=data_end,
     )
@@ -331,12 +389,76 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True) -> RunLog:
 
 
 def _open(p: Path) -> BinaryIO:
+    """Open a log for reading; a FIFO, device or socket is refused at once (never read:
+    a FIFO would block and a device may never end)."""
     try:
-        return open(p, "rb")  # noqa: SIM115 - used as a context manager by the callers
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except IsADirectoryError:
         raise LogError(f"{p}: is a directory, expected an MCAP log file") from None
     except OSError as exc:
         raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        if stat.S_ISDIR(mode):
+            raise LogError(f"{p}: is a directory, expected an MCAP log file")
+        kind = (
+            "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else ("a device")
+        )
+        raise LogError(f"{p}: is {kind}, not a regular file; expected an MCAP log file")
+    return os.fdopen(fd, "rb")
+
+
+def _check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
+    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
+    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
+    facts = {
+        "seed": str(config.seed),
+        "horizon": str(config.horizon),
+        "arms": str(config.instance.K),
+        "states": str(config.instance.n_states),
+        "policy": config.policy.name,
+        "instance": config.instance.name,
+    }
+    for key, value in facts.items():
+        if key in md and md[key] != value:
+            raise LogError(
+                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
+                f"{value!r} in the configuration; expected both to agree"
+            )
+
+
+def _strip_path(exc: LogError, p: Path) -> str:
+    text = str(exc)
+    prefix = f"{p}: "
+    return text[len(prefix) :] if text.startswith(prefix) else text
+
+
+def _validate_chunk(
+    chunk: _Chunk,
+    run_md: dict[str, str] | None,
+    channel_id: int,
+    p: Path,
+    expected: int,
+) -> int:
+    """Decode and check one chunk's slots (salvage); returns the next slot expected."""
+    assert chunk.records is not None and run_md is not None
+    try:
+        config = RunConfig.from_dict(json.loads(run_md["config"]))
+    except (CorraoiError, KeyError, TypeError, ValueError) as exc:
+        raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    payloads = _payloads(chunk.records, channel_id, p, chunk.offset)
+    if not payloads:
+        return expected
+    where = f"{p}: chunk at byte {chunk.offset}"
+    part = decode_messages(payloads, config.instance.K, config.instance.n_states, where=where)
+    t = part.t
+    if t[0] != expected or not np.array_equal(
+        t, np.arange(expected, expected + len(t), dtype=np.int64)
+    ):
+        raise LogError(f"{where}: slots are not consecutive (expected slot {expected}, got "
+                       f"{int(t[0])}..{int(t[-1])})")  # fmt: skip
+    return expected + len(t)
 
 
 def _not_ours(p: Path, library: str, sweep: bool = False) -> LogError:
@@ -378,6 +500,14 @@ class _Walker:
         self.position = 0
         self.records_seen = 0
         self.truncated = False
+        # A file that ends with the MCAP magic was finished by its writer: a record that
+        # does not fit in it is damage, not a writer killed half-way.
+        self.sealed = False
+        if self.size >= 2 * len(MAGIC) + _RECORD.size:
+            here = f.tell()
+            f.seek(self.size - len(MAGIC))
+            self.sealed = f.read(len(MAGIC)) == MAGIC
+            f.seek(here)
 
     def _bad(self, what: str) -> LogError:
         return LogError(f"{self.path}: {what}")
@@ -398,16 +528,28 @@ class _Walker:
                 return
             head = f.read(_RECORD.size)
             if len(head) < _RECORD.size:
+                if self.sealed:
+                    raise self._bad(
+                        f"damaged at byte {pos}: the file (finished, {self.size} bytes) ends "
+                        "there without its footer record"
+                    )
                 self.truncated = True
                 return
             opcode, length = _RECORD.unpack(head)
             body_at = pos + _RECORD.size
             end = body_at + length
             if end > self.size:
+                if self.sealed:
+                    raise self._bad(
+                        f"damaged at byte {pos}: a record (opcode 0x{opcode:02x}) claims "
+                        f"{length} bytes, past the end of the file ({self.size} bytes), "
+                        "though the file was finished"
+                    )
                 self.truncated = True  # the writer died in the middle of this record
                 return
-            if opcode == 0:
-                raise self._bad(f"damaged MCAP record at byte {pos} (opcode {opcode})")
+            if opcode == 0 or 0x0F < opcode < 0x80:
+                raise self._bad(f"damaged at byte {pos}: unknown MCAP record opcode "
+                                f"0x{opcode:02x}")  # fmt: skip
             if self.records_seen == 0 and opcode != Opcode.HEADER:
                 raise self._bad("not an MCAP file (no header record after the magic bytes)")
             self.records_seen += 1
@@ -447,13 +589,24 @@ class _Walker:
 
     def _chunk(self, pos: int, length: int, *, read: bool) -> _Chunk:
         f = self.f
+        if length < _CHUNK_HEAD.size + 8:
+            raise self._bad(f"chunk at byte {pos} is damaged (a record of {length} bytes is "
+                            "too short for a chunk)")  # fmt: skip
         fixed = f.read(_CHUNK_HEAD.size)
         start, end_time, usize, crc, clen = _CHUNK_HEAD.unpack(fixed)
+        if _CHUNK_HEAD.size + clen + 8 > length:
+            raise self._bad(f"chunk at byte {pos} is damaged (its sizes do not add up)")
         compression = f.read(clen).decode("utf-8", "replace")
         (dlen,) = _U64.unpack(f.read(8))
         data_at = pos + _RECORD.size + _CHUNK_HEAD.size + clen + 8
         if data_at + dlen > pos + _RECORD.size + length:
             raise self._bad(f"chunk at byte {pos} is damaged (its sizes do not add up)")
+        if usize > _MAX_CHUNK or (compression != "" and usize > _MAX_RATIO * dlen + 4096):
+            raise self._bad(
+                f"chunk at byte {pos} is damaged (it claims {usize} bytes uncompressed from "
+                f"{dlen} compressed; at most {min(_MAX_CHUNK, _MAX_RATIO * dlen + 4096)} "
+                "are possible)"
+            )
         if not read:
             f.seek(pos + _RECORD.size + length)
             return _Chunk(pos, start, end_time, None)

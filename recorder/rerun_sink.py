@@ -36,7 +36,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 import rerun as rr
@@ -47,7 +47,15 @@ from corraoi.theory import analyse
 
 from . import style
 from .errors import ViewerError, WriteError
-from .paths import Sink, check_output, open_partial, partial_path, publish, reason
+from .paths import (
+    Sink,
+    check_output,
+    open_partial,
+    partial_path,
+    publish,
+    reason,
+    unlink_partial,
+)
 
 APPLICATION_ID = "corraoi"
 TIMELINE = "slot"
@@ -473,12 +481,14 @@ class RrdOutput(Sink):
         self.discard_on_abort = discard_on_abort
         self.closed = False
         self.finished = False
+        self._lock: BinaryIO | None = None
         sinks: list[Any] = []
         if rrd_path is not None:
             self.path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording")
             # create (or truncate) the .partial file here, so that an unwritable place is
-            # one clear error now rather than a log line from Rerun's writer thread later
-            open_partial(self.path, overwrite=overwrite, what="Rerun recording").close()
+            # one clear error now rather than a log line from Rerun's writer thread later;
+            # kept open (locked) until the file is in place, so no other writer takes it
+            self._lock = open_partial(self.path, overwrite=overwrite, what="Rerun recording")
             sinks.append(rr.FileSink(str(partial_path(self.path))))
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
@@ -489,8 +499,9 @@ class RrdOutput(Sink):
                 default_blueprint=blueprint or one_run_blueprint(self.label, config),
             )
         except (OSError, RuntimeError, ValueError) as exc:
+            self._unlock()
             if self.path is not None:
-                partial_path(self.path).unlink(missing_ok=True)
+                unlink_partial(self.path)
             raise WriteError(f"{self._where()}: cannot start the Rerun recording: {exc}") from None
 
     def _where(self) -> str:
@@ -518,8 +529,11 @@ class RrdOutput(Sink):
         self.closed = True
         problem = self._finish()
         if self.path is not None:
-            self._check_file(problem)
-            publish(self.path, overwrite=self.overwrite)
+            try:
+                self._check_file(problem)
+                publish(self.path, overwrite=self.overwrite)
+            finally:
+                self._unlock()
             self.finished = True
         if problem and self.viewer_url is not None:
             raise ViewerError(f"viewer {self.viewer_url}: {problem}")
@@ -533,15 +547,25 @@ class RrdOutput(Sink):
         if not self.closed:
             self.closed = True
             self._finish()
+        self._unlock()
         if self.path is None:
             return None
         if discard is None:
             discard = self.discard_on_abort
         part = partial_path(self.path)
         if discard:
-            part.unlink(missing_ok=True)
+            unlink_partial(self.path)
             return None
         return part
+
+    def _unlock(self) -> None:
+        """Close the locked handle of the ``.partial`` file (safe twice)."""
+        lock, self._lock = self._lock, None
+        if lock is not None:
+            try:
+                lock.close()
+            except OSError:
+                pass
 
     def _check_file(self, problem: str | None) -> None:
         """Refuse to present a damaged .rrd as complete: its footer must read back."""

@@ -15,6 +15,14 @@ from corraoi.policies import make_policy
 Recorded = tuple[Path, RunConfig, SlotBlock]
 
 
+@pytest.fixture(autouse=True)
+def _own_working_directory(tmp_path_factory: pytest.TempPathFactory, monkeypatch) -> None:
+    """Every test runs in a fresh empty directory, never the checkout: a `runs/` left there
+    by the README's quick start (or anything else) cannot change a test's outcome, and no
+    test can write into the checkout by a relative path."""
+    monkeypatch.chdir(tmp_path_factory.mktemp("cwd"))
+
+
 def _config(
     policy: str = "cucb", instance: str = "I1", seed: int = 0, horizon: int = 2500
 ) -> RunConfig:

@@ -167,7 +167,9 @@ def test_refuses_to_clobber_unless_forced(tmp_path):
     args = ["-T", "1200", "-o", str(tmp_path / "a.mcap")]
     assert run(*args).exit_code == 0
     before = (tmp_path / "a.mcap").read_bytes(), (tmp_path / "a.rrd").stat().st_mtime_ns
-    one_line_error(run(*args), 2, "a.mcap: already exists", "--force")
+    same = run(*args)  # the same run again: up to date, nothing rewritten
+    assert same.exit_code == 0 and same.stdout.startswith("up to date: ")
+    one_line_error(run(*args, "-s", "1"), 2, "a.mcap: already exists", "--force")
     assert (tmp_path / "a.mcap").read_bytes() == before[0]
     one_line_error(run("-T", "10", "-o", str(tmp_path / "b.mcap"), "--rrd",
                        str(tmp_path / "a.rrd")), 2, "a.rrd: already exists")  # fmt: skip

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from corraoi.text import safe_text
 from corraoi.theory import analyse
 
 from .runs import LogLike, as_log
@@ -80,7 +81,8 @@ def info_text(info: dict[str, Any]) -> str:
         f"  {'corraoi version':<22} {cfg['version']}",
     ]
     lines += ["summary figures:"] + [f"  {k:<22} {v}" for k, v in summary_rows(s)]
-    return "\n".join(lines)
+    # names and paths come from the file: one line each, no control codes
+    return "\n".join(safe_text(line) for line in lines)
 
 
 def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:

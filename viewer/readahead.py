@@ -53,9 +53,29 @@ def _can_fork() -> bool:
     return "fork" in multiprocessing.get_all_start_methods()
 
 
-def _produce(make_items: Callable[[], Iterable[Any]], conn: Any) -> None:
+def _die_with_parent(parent: int) -> None:
+    """Linux: have the kernel send SIGKILL to this process when its parent dies (even by
+    SIGKILL), so that a killed replay or compare never leaves its reader behind."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux/glibc: the pipe's EOF still ends us
+        pass
+    if os.getppid() != parent:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _produce(make_items: Callable[[], Iterable[Any]], conn: Any, parent: int = 0) -> None:
     """The reader process: send every item, then _Done (or _Raised)."""
+    if parent:
+        _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # terminate() from the parent ends us
     try:
         for item in make_items():
             conn.send(item)
@@ -76,7 +96,7 @@ def _forked(make_items: Callable[[], Iterable[T]], depth: int) -> Iterator[T]:
 
     ctx = multiprocessing.get_context("fork")
     receive, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_produce, args=(make_items, send), daemon=True)
+    proc = ctx.Process(target=_produce, args=(make_items, send, os.getpid()), daemon=True)
     for stream in (sys.stdout, sys.stderr):  # the child must not repeat buffered output
         try:
             stream.flush()

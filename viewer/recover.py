@@ -47,6 +47,30 @@ class Recovered:
     status: str
     #: Bytes at the end of the source that held no complete record (the torn tail).
     dropped_bytes: int
+    #: What was damaged in the source, and where ("" when nothing was): the copy ends there.
+    damage: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """What ``corraoi recover --json`` prints."""
+        return {
+            "source": str(self.source),
+            "output": str(self.path),
+            "slots": self.slots,
+            "horizon": self.horizon,
+            "source_status": self.source_status,
+            "status": self.status,
+            "dropped_bytes": self.dropped_bytes,
+            "damage": self.damage or None,
+        }
+
+
+def default_output(source: str | os.PathLike[str]) -> Path:
+    """``RUN.mcap.partial`` and ``RUN.mcap`` -> ``RUN.recovered.mcap`` beside them; any other
+    name gets ``.recovered.mcap`` appended."""
+    src = Path(source)
+    name = src.name.removesuffix(".partial")
+    base = name.removesuffix(".mcap")
+    return src.with_name(f"{base}.recovered.mcap")
 
 
 def recover(
@@ -66,7 +90,7 @@ def recover(
     from recorder.reader import open_log
 
     src = Path(source)
-    log = require_slots(open_log(src), "recover")
+    log = require_slots(open_log(src, salvage=True), "recover")
     dest = _check_dest(src, Path(out), overwrite=overwrite)
     try:
         dest.parent.mkdir(parents=True, exist_ok=True)
@@ -80,6 +104,8 @@ def recover(
             consumed = _copy(log, fin, fout)
             fout.flush()
             os.fsync(fout.fileno())
+        if log.damage:
+            consumed = log._data_end
         size = src.stat().st_size
         check = open_log(tmp)
         if check.n_slots != log.n_slots or not check.finished:
@@ -98,6 +124,7 @@ def recover(
         source_status=log.status,
         status=check.status,
         dropped_bytes=max(size - consumed, 0) if not log.finished else 0,
+        damage=f"{src}: {log.damage}" if log.damage else "",
     )
 
 
@@ -128,6 +155,8 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     except ValueError:
         every = FLUSH_EVERY
     complete = _complete_length(fin)
+    if log.damage:  # stop before the damaged record: what follows is not trusted
+        complete = min(complete, log._data_end)
     fin.seek(0)
     writer = Writer(
         fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD,

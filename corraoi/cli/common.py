@@ -8,23 +8,32 @@ from __future__ import annotations
 import functools
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
 
+from .. import limits
 from ..errors import CorraoiError
+from ..text import safe_text
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
 def fail(message: str, code: int = 1) -> None:
     """Print ``corraoi: error: <message>`` on stderr and exit with ``code``."""
-    click.echo(f"corraoi: error: {message}", err=True)
+    click.echo(f"corraoi: error: {safe_text(message)}", err=True)
     sys.exit(code)
 
 
+def say(text: object) -> None:
+    """Print program output on stdout with anything read from a file made terminal-safe
+    (control codes escaped; the program's own newlines kept)."""
+    click.echo(safe_text(text, newlines=True))
+
+
 def warn(message: str) -> None:
-    click.echo(f"corraoi: warning: {message}", err=True)
+    click.echo(f"corraoi: warning: {safe_text(message)}", err=True)
 
 
 def errors_exit(code: int | None = None) -> Callable[[F], F]:
@@ -68,8 +77,24 @@ class OneLineGroup(click.Group):
         base = super().main
         if not standalone_mode:
             return base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+        from .. import _signals
+
+        if not _signals.is_cli():  # in-process (tests, CliRunner): leave signals alone
+            return self._main(base, args, kwargs)
+        _signals.install()
         try:
-            code = base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
+            self._main(base, args, kwargs)
+        except KeyboardInterrupt:  # between the handlers: still one line and 130
+            _signals.quiet_exit()
+        except SystemExit as done:
+            _signals.finished()
+            if done.code == _signals.INTERRUPTED:  # said so already: leave with exactly 130
+                _signals.leave(_signals.INTERRUPTED)
+            raise done from None
+
+    def _main(self, base: Any, args: Any, kwargs: Any) -> None:
+        try:
+            code = base(*args, standalone_mode=False, **kwargs)
         except click.exceptions.NoArgsIsHelpError as exc:  # `corraoi` alone: the help
             click.echo(exc.format_message())
             sys.exit(0)
@@ -172,14 +197,58 @@ def channel_option(func: F) -> F:
     )(func)
 
 
+class Bounded(click.ParamType):
+    """An integer option in ``lo..hi``: anything else (a float, 1e30, a value beyond int64)
+    is one line naming the option, the value and the range, before anything is allocated.
+    """
+
+    name = "integer"
+
+    def __init__(self, lo: int, hi: int, why: str = "") -> None:
+        self.lo, self.hi, self.why = lo, hi, why
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return "INTEGER"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        because = f" ({self.why})" if self.why else ""
+        if isinstance(value, int) and not isinstance(value, bool):
+            number = value
+        else:
+            text = str(value).strip().replace("_", "")
+            try:
+                number = int(text, 10)
+            except ValueError:
+                self.fail(
+                    f"{safe_text(str(value))!r} is not a valid integer; expected "
+                    f"{self.lo}..{self.hi}{because}",
+                    param,
+                    ctx,
+                )
+        if not self.lo <= number <= self.hi:
+            shown = str(number) if len(str(number)) <= 30 else f"{str(number)[:20]}..."
+            rng = f"{self.lo}..{self.hi}{because}"
+            self.fail(f"{shown} is not in the range {rng}", param, ctx)
+        return number
+
+
+#: The range types of the shared numeric options (corraoi.limits holds the numbers).
+HORIZON = Bounded(1, limits.MAX_HORIZON, "the AoI sums must fit in 64 bits")
+SEED = Bounded(0, limits.MAX_SEED, "seeds are 64-bit")
+RUNS = Bounded(1, limits.MAX_RUNS)
+WORKERS = Bounded(1, limits.MAX_WORKERS)
+CHECKPOINTS = Bounded(2, limits.MAX_CHECKPOINTS)
+PORT = Bounded(limits.MIN_PORT, limits.MAX_PORT, "a TCP port")
+
+
 def horizon_option(default: int) -> Callable[[F], F]:
     return click.option(
         "--horizon",
         "-T",
-        type=click.IntRange(min=1),
+        type=HORIZON,
         default=default,
         show_default=True,
-        help="Number of slots T.",
+        help=f"Number of slots T (at most {limits.MAX_HORIZON:,}).",
     )
 
 
@@ -187,9 +256,77 @@ def seed_option(func: F) -> F:
     return click.option(
         "--seed",
         "-s",
-        type=click.IntRange(min=0),
+        type=SEED,
         default=0,
         show_default=True,
         help="Integer seed. Run i of a batch uses seed+i; the hidden path depends only on "
         "(instance, seed), so runs of different policies are paired.",
     )(func)
+
+
+_OUTPUT_KEY = "corraoi.output"
+
+
+def output_option(
+    *,
+    metavar: str,
+    help: str,
+    aliases: tuple[str, ...] = ("--out",),
+    default: Any = None,
+    path: bool = True,
+    show_default: bool = False,
+) -> Callable[[F], F]:
+    """``-o/--output``: the primary output of a command, passed as ``output``.
+
+    The spellings earlier versions used (``--out``, ``--rrd``, ...) stay accepted as
+    hidden aliases; giving two of them is one usage error.
+    """
+    kind: Any = click.Path(path_type=Path) if path else None
+
+    def take(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        seen = ctx.meta.get(_OUTPUT_KEY)
+        source = ctx.get_parameter_source(param.name or "")
+        given = source is not None and source.name == "COMMANDLINE"
+        if param.name == "output":
+            if seen is not None:
+                if given:
+                    raise click.UsageError(f"-o/--output and {seen[0]}: give the output once")
+                return seen[1]
+            return value
+        if given:  # a hidden alias
+            if ctx.params.get("output") is not None and ctx.meta.get("corraoi.output.given"):
+                raise click.UsageError(f"-o/--output and {param.opts[0]}: give the output once")
+            ctx.meta[_OUTPUT_KEY] = (param.opts[0], value)
+            ctx.params["output"] = value
+        return None
+
+    def mark(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        source = ctx.get_parameter_source(param.name or "")
+        if source is not None and source.name == "COMMANDLINE":
+            ctx.meta["corraoi.output.given"] = True
+        return take(ctx, param, value)
+
+    def deco(func: F) -> F:
+        for alias in reversed(aliases):
+            func = click.option(
+                alias,
+                f"_alias_{alias.lstrip('-').replace('-', '_')}",
+                type=kind,
+                default=None,
+                hidden=True,
+                expose_value=False,
+                callback=take,
+            )(func)
+        return click.option(
+            "-o",
+            "--output",
+            "output",
+            type=kind,
+            default=default,
+            show_default=show_default,
+            metavar=metavar,
+            help=help,
+            callback=mark,
+        )(func)
+
+    return deco

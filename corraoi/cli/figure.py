@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
 
 from ..errors import UsageError
-from .common import handle_errors, warn
+from ..text import safe_text
+from .common import handle_errors, say, warn
 
 
 def _split(values: tuple[str, ...]) -> list[str] | None:
@@ -34,6 +36,7 @@ def _split(values: tuple[str, ...]) -> list[str] | None:
               help="Draw only these policies, in this order [default: every policy in the "
               "log].")  # fmt: skip
 @click.option("--force", "-f", is_flag=True, help="Overwrite OUT if it exists.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @handle_errors
 def figure(
     sweep_log: Path,
@@ -44,6 +47,7 @@ def figure(
     split: bool,
     policies: tuple[str, ...],
     force: bool,
+    as_json: bool,
 ) -> None:
     """Draw the AoI regret figure of a sweep from its log (DIR/sweep.mcap) alone.
 
@@ -74,7 +78,15 @@ def figure(
             f"{sweep.messages} checkpoint(s) it holds"
         )
     draw_figure(sweep, output, log_x=log_x, log_y=log_y, dpi=dpi, split=split, policies=names)
-    click.echo(
-        f"wrote {output}: {len(names)} polic{'y' if len(names) == 1 else 'ies'}, instance "
-        f"{sweep.instance_name}, {sweep.runs} runs, horizon {sweep.horizon}"
+    if as_json:
+        click.echo(json.dumps({
+            "output": str(output), "sweep": str(sweep_log), "policies": list(names),
+            "instance": sweep.instance_name, "runs": sweep.runs, "horizon": sweep.horizon,
+            "complete": bool(sweep.complete),
+        }, indent=2))  # fmt: skip
+        return
+    say(
+        f"wrote {safe_text(output)}: {len(names)} polic{'y' if len(names) == 1 else 'ies'}, "
+        "instance "
+        f"{safe_text(sweep.instance_name)}, {sweep.runs} runs, horizon {sweep.horizon}"
     )

@@ -15,6 +15,7 @@ from typing import Any, TypeVar
 import click
 
 from ..errors import UsageError
+from .common import PORT
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -26,7 +27,7 @@ def viewer_options(func: F) -> F:
     """Add --spawn, --connect [URL], --serve-web and --web-port to a command."""
     func = click.option(
         "--web-port",
-        type=click.IntRange(1, 65535),
+        type=PORT,
         default=9090,
         show_default=True,
         help="Port of --serve-web (another free one is taken if it is busy).",

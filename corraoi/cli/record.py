@@ -18,11 +18,13 @@ from typing import Any
 import click
 
 from ..errors import UsageError
+from ..text import safe_text
 from .common import (
     channel_option,
     handle_errors,
     horizon_option,
     instance_option,
+    output_option,
     param_options,
     policy_option,
     seed_option,
@@ -50,6 +52,8 @@ class _Result:
     pulls: list[int] = field(default_factory=list)
     mcap: Path | None = None
     rrd: Path | None = None
+    #: seconds of the wall time spent compiling the kernels (first use only)
+    compile_s: float = 0.0
 
 
 class _Stop:
@@ -81,12 +85,21 @@ class _Stop:
 
 
 def _expand(template: str, config: Any) -> Path:
-    return Path(
-        template.replace("{label}", config.label)
-        .replace("{policy}", config.policy.name)
-        .replace("{instance}", config.instance.name)
-        .replace("{seed}", str(config.seed))
-    )
+    """The path ``template`` names for ``config``. The names filled in are data (from an
+    instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
+    climb out of one (``../``) or carry control codes into the file name."""
+    from ..text import safe_name
+
+    values = {
+        "{label}": config.label,
+        "{policy}": config.policy.name,
+        "{instance}": config.instance.name,
+        "{seed}": str(config.seed),
+    }
+    out = template
+    for key, value in values.items():
+        out = out.replace(key, safe_name(value))
+    return Path(out)
 
 
 def _rrd_beside(mcap: Path) -> Path:
@@ -95,7 +108,7 @@ def _rrd_beside(mcap: Path) -> Path:
 
 def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -> list[_Plan]:
     several = len(configs) > 1
-    for option, value in (("-o/--out", out), ("--rrd", rrd)):
+    for option, value in (("-o/--output", out), ("--rrd", rrd)):
         if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
             raise UsageError(
                 f"{option} {value}: names one file but {len(configs)} policies are recorded; "
@@ -127,13 +140,12 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @seed_option
 @param_options
 @channel_option
-@click.option(
-    "-o",
-    "--out",
+@output_option(
     metavar="PATH",
-    default=None,
+    path=False,
     help="MCAP log to write [default: runs/{label}.mcap]. {label}, {policy}, "
-    "{instance} and {seed} are filled in (needed with several policies).",
+    "{instance} and {seed} are filled in (needed with several policies), each made a "
+    "safe file name.",
 )
 @click.option(
     "--rrd",
@@ -155,7 +167,7 @@ def record(
     beta: float | None,
     param: tuple[str, ...],
     channel: str | None,
-    out: str | None,
+    output: str | None,
     rrd: str | None,
     no_rrd: bool,
     force: bool,
@@ -193,11 +205,31 @@ def record(
     chan = parse_channel(channel, inst)
     chan.check(inst, horizon)
     configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
-    plans = _plans(configs, out, rrd, no_rrd)
+    plans = _plans(configs, output, rrd, no_rrd)
 
+    from recorder.errors import OutputError
     from recorder.paths import check_output
 
+    fresh = [p for p in plans if _up_to_date(p)] if not force and not viewer.asked else []
+    plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
+    for p in fresh:
+        click.echo(
+            f"up to date: {safe_text(p.mcap)}"
+            + (f" and {safe_text(p.rrd)}" if p.rrd is not None else "")
+            + (" hold" if p.rrd is not None else " holds")
+            + " this run (same configuration, complete); use --force to record it again",
+            err=as_json,
+        )
+    if not plans:
+        if as_json:
+            click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in fresh]}))
+        return
     for plan in plans:  # refuse before simulating anything
+        if not force and plan.mcap.is_file():
+            raise OutputError(
+                f"{plan.mcap}: already exists and holds another run (a different "
+                "configuration, or not complete); use --force to overwrite it"
+            )
         check_output(plan.mcap, overwrite=force, what="MCAP log")
         if plan.rrd is not None:
             check_output(plan.rrd, overwrite=force, what="Rerun recording")
@@ -213,7 +245,7 @@ def record(
         viewer.stop()
         raise
     if viewer_problem:
-        click.echo(f"corraoi: error: {viewer_problem}", err=True)
+        click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
     _report(results, as_json=as_json)
     if stopped:
@@ -228,6 +260,21 @@ def record(
     viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
+
+
+def _up_to_date(plan: _Plan) -> bool:
+    """The plan's files exist, and its MCAP log is complete with the same configuration
+    (the version of corraoi included): recording again would write the same bytes."""
+    from recorder.errors import LogError
+    from recorder.reader import open_log
+
+    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
+        return False
+    try:
+        log = open_log(plan.mcap, verify=False)
+    except LogError:
+        return False
+    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
 
 
 def _record_all(
@@ -267,9 +314,11 @@ def _record_one(
     from .. import kernels
     from ..pyengine import PolicyRuntimeError
 
-    start = time.perf_counter() - kernels.load_seconds  # the kernel's load is not the run's
+    start = time.perf_counter()
+    compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
     try:
-        return _record_into(plan, result, viewer_url, force, stop, bar, simulate_run, start)
+        return _record_into(plan, result, viewer_url, force, stop, bar, simulate_run, start,
+                            compiled_before)  # fmt: skip
     except PolicyRuntimeError as exc:
         from recorder.paths import partial_path
 
@@ -287,6 +336,7 @@ def _record_into(
     bar: Any,
     simulate_run: Any,
     start: float,
+    compiled_before: float,
 ) -> str | None:
     from recorder.errors import ViewerError, WriteError
     from recorder.mcap_sink import McapSink
@@ -341,7 +391,8 @@ def _record_into(
     result.mcap = mcap.path if mcap.finished else mcap.partial_path
     from .. import kernels
 
-    result.wall = time.perf_counter() - kernels.load_seconds - start
+    result.wall = time.perf_counter() - start
+    result.compile_s = kernels.compile_seconds - compiled_before
     if rrd_error is not None:
         if mcap.finished:
             raise WriteError(f"{rrd_error} (the MCAP log {mcap.path} is complete)")
@@ -372,6 +423,7 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
                     "mcap": str(r.mcap) if r.mcap else None,
                     "rrd": str(r.rrd) if r.rrd else None,
                     "wall_s": round(r.wall, 4),
+                    "compile_s": round(r.compile_s, 4),
                 }
                 for r in results
             ],
@@ -382,12 +434,15 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
     for r in results:
         c = r.plan.config
         params = ", ".join(f"{k}={v:g}" for k, v in c.policy.params.items())
-        rate = r.slots / r.wall if r.wall > 0 else 0.0
+        run_s = r.wall - r.compile_s
+        rate = r.slots / run_s if run_s > 0 else 0.0
+        compiled = f", after {r.compile_s:.1f} s compiling" if r.compile_s else ""
         done = "" if r.slots == c.horizon else " (interrupted)"
         click.echo(
-            f"{c.policy.name}{f' ({params})' if params else ''} on {c.instance.name}, seed "
+            f"{safe_text(c.policy.name)}{f' ({params})' if params else ''} on "
+            f"{safe_text(c.instance.name)}, seed "
             f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
-            f"({rate:,.0f} slots/s)"
+            f"({rate:,.0f} slots/s{compiled})"
         )
         if r.regret is not None and r.estimator is not None:
             click.echo(
@@ -396,11 +451,11 @@ def _report(results: list[_Result], *, as_json: bool) -> None:
             )
             pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
             click.echo(f"  pulls per arm: {pulls}")
-        click.echo(f"  MCAP log:        {r.mcap}")
+        click.echo(f"  MCAP log:        {safe_text(r.mcap)}")
         if r.rrd is not None:
-            click.echo(f"  Rerun recording: {r.rrd}")
+            click.echo(f"  Rerun recording: {safe_text(r.rrd)}")
     if command:
-        click.echo(f"open in the Rerun viewer:  {command}")
+        click.echo(f"open in the Rerun viewer:  {safe_text(command)}")
 
 
 __all__ = ["record"]

@@ -15,13 +15,19 @@ from typing import Any
 
 import click
 
-from ..block import MAX_HORIZON, MAX_RUNS
+from .. import limits
 from ..errors import ConfigError, CorraoiError
+from ..text import safe_text
 from .common import (
+    CHECKPOINTS,
+    RUNS,
+    WORKERS,
     channel_option,
     handle_errors,
     horizon_option,
+    output_option,
     policy_option,
+    say,
     seed_option,
     warn,
 )
@@ -44,7 +50,7 @@ def _write_text(path: Path, text: str) -> None:
               help="Instances: built-in names (I1, I2, GE) or instance files; a comma list or "
               "the flag repeated [default: I1].")  # fmt: skip
 @policy_option(default=(), required=False)
-@click.option("--runs", "-n", type=click.IntRange(min=1, max=MAX_RUNS), default=None,
+@click.option("--runs", "-n", type=RUNS, default=None,
               help="Monte Carlo runs per cell (seeds seed .. seed+runs-1, shared by every "
               "policy and parameter value) [default: 200].")  # fmt: skip
 @click.option("--horizon", "-T", "horizon", multiple=True, metavar="T[,T...]",
@@ -56,21 +62,20 @@ def _write_text(path: Path, text: str) -> None:
 @click.option("--c", "c", type=float, default=None, help="Shorthand for --param c=VALUE.")
 @click.option("--beta", type=float, default=None, help="Shorthand for --param beta=VALUE.")
 @channel_option
-@click.option("--workers", "-j", type=click.IntRange(min=1, max=4096), default=None,
+@click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the in-process engine [default: every core].")  # fmt: skip
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT|local:N",
               help="Run the chunks on a Dask cluster: a running scheduler, or N local worker "
               "processes (needs the cluster extra) [default: this process].")  # fmt: skip
-@click.option("--chunk", type=click.IntRange(min=1, max=MAX_RUNS), default=None,
+@click.option("--chunk", type=RUNS, default=None,
               help="Runs per chunk, the unit of work that is saved and resumed "
               "[default: all runs of a cell].")  # fmt: skip
-@click.option("--output", "-o", "--out", "out", type=click.Path(path_type=Path), default=None,
-              metavar="DIR", help="Write the results folder: manifest, per-run results, and per "
-              "instance the sweep log, summary and figure (docs/scaling.md).")  # fmt: skip
+@output_option(metavar="DIR", help="Write the results folder: manifest, per-run results, and "
+               "per instance the sweep log, summary and figure (docs/scaling.md).")  # fmt: skip
 @click.option("--resume", is_flag=True,
               help="Continue the sweep in DIR (finished chunks are kept), or extend it: more "
               "runs, policies or parameter values are appended.")  # fmt: skip
-@click.option("--checkpoints", type=click.IntRange(min=2, max=100_000), default=None,
+@click.option("--checkpoints", type=CHECKPOINTS, default=None,
               help="About this many checkpoint slots per curve [default: 200].")  # fmt: skip
 @click.option("--force", is_flag=True, help="With -o: start over in a DIR that holds a sweep.")
 @click.option("--baseline", default=None, metavar="POLICY",
@@ -92,7 +97,7 @@ def sweep(
     workers: int | None,
     scheduler: str | None,
     chunk: int | None,
-    out: Path | None,
+    output: Path | None,
     resume: bool,
     checkpoints: int | None,
     force: bool,
@@ -116,6 +121,7 @@ def sweep(
     """
     from ..grid import build_grid, parse_param_lists, read_experiment, split_list
 
+    out = output
     if resume and out is None:
         raise ConfigError("--resume needs -o DIR (the folder of the sweep to continue)")
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
@@ -140,6 +146,7 @@ def sweep(
     spec.setdefault("horizons", [10_000])
     spec.setdefault("runs", 200)
     spec["params"] = {**spec.get("params", {}), **given_params}
+    limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
     try:
         grid = build_grid(**spec)
     except CorraoiError as exc:
@@ -150,6 +157,9 @@ def sweep(
         from ..engine import check_instance
 
         check_instance(cell.instance)
+    # the biggest cell's runs x checkpoints are held at once when its results are joined
+    limits.check_sweep_memory(grid.runs, max(c.instance.K for c in grid.cells), policies=1,
+                              checkpoints=grid.checkpoints if out is not None else 0)  # fmt: skip
     for note in _notes(grid):
         warn(note)
     outcome = _run(grid, out=out, scheduler=scheduler, resume=resume, force=force,
@@ -185,8 +195,8 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
         except ValueError:
             raise click.BadParameter(f"{item!r} is not a valid integer",
                                      param_hint="'--horizon' / '-T'") from None  # fmt: skip
-        if not 1 <= h <= MAX_HORIZON:
-            raise click.BadParameter(f"{h} is not in the range 1<=x<={MAX_HORIZON}",
+        if not 1 <= h <= limits.MAX_HORIZON:
+            raise click.BadParameter(f"{h} is not in the range 1<=x<={limits.MAX_HORIZON}",
                                      param_hint="'--horizon' / '-T'")  # fmt: skip
         out.append(h)
     return out
@@ -248,7 +258,7 @@ def _run(
 
 
 def print_table(summary: dict[str, Any]) -> None:
-    name = summary["instance"]["name"]
+    name = safe_text(summary["instance"]["name"])
     runs, seed = summary["runs"], summary["seed"]
     click.echo(
         f"instance {name}, {runs} runs (seeds {seed}..{seed + runs - 1}), "
@@ -265,8 +275,9 @@ def print_table(summary: dict[str, Any]) -> None:
         btext = ""
         if bound is not None:
             btext = f"  {bound['value']:.4g}" if bound["value"] is not None else "  n/a"
-        click.echo(
-            f"{pname:22s} {s['regret_mean']:10.1f} {ci_text} {s['estimator_mean']:11.1f} "
+        say(
+            f"{safe_text(pname):22s} {s['regret_mean']:10.1f} {ci_text} "
+            f"{s['estimator_mean']:11.1f} "
             f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
         )
     if summary.get("baseline") is not None:
@@ -294,19 +305,26 @@ PAPER_INSTANCES = ("I1", "I2")
 
 
 @click.command()
-@click.option("--output", "-o", "--out", "out", type=click.Path(path_type=Path),
-              default=Path("paper"), show_default=True, metavar="DIR",
-              help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
-@click.option("--runs", "-n", type=click.IntRange(min=1), default=200, show_default=True,
+@output_option(metavar="DIR", default=Path("paper"), show_default=True,
+               help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
+@click.option("--runs", "-n", type=RUNS, default=200, show_default=True,
               help="Monte Carlo runs per policy.")  # fmt: skip
 @horizon_option(10_000)
 @seed_option
-@click.option("--workers", "-j", type=click.IntRange(min=1), default=None,
+@click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print both summaries as one JSON object instead of tables.")  # fmt: skip
 @handle_errors
 def reproduce(
-    out: Path, runs: int, horizon: int, seed: int, workers: int | None, force: bool
+    output: Path,
+    runs: int,
+    horizon: int,
+    seed: int,
+    workers: int | None,
+    force: bool,
+    as_json: bool,
 ) -> None:
     """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
 
@@ -320,15 +338,21 @@ def reproduce(
     from ..grid import build_grid
     from ..summary import summary_markdown
 
+    out = output
+    limits.check_seed(seed, runs=runs, name="--seed")
     grid = build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
                       runs=runs, seed=seed)  # fmt: skip
+    limits.check_sweep_memory(runs, 4, policies=1, checkpoints=grid.checkpoints)
     start = time.perf_counter()
     outcome = _run(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
                    label="reproduce")  # fmt: skip
     parts = []
+    summaries: dict[str, Any] = {}
     for summary in outcome.summaries:
-        print_table(summary)
-        click.echo("")
+        summaries[summary["instance"]["name"]] = summary
+        if not as_json:
+            print_table(summary)
+            click.echo("")
         parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
     head = (
         "# The paper's simulations, regenerated\n\n"
@@ -340,5 +364,9 @@ def reproduce(
         out / "summary.md",
         head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
     )
-    click.echo(f"wrote {out}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES) + ", summary.md")
+    if as_json:
+        click.echo(json.dumps({"output": str(out), "instances": summaries}, indent=2))
+    else:
+        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES)
+                   + ", summary.md")  # fmt: skip
     click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)

@@ -16,7 +16,8 @@ from typing import Any, TypeVar
 import click
 
 from ..errors import UsageError
-from .common import errors_exit, handle_errors, warn
+from ..text import safe_text
+from .common import errors_exit, handle_errors, output_option, say, warn
 from .live import ViewerChoice, viewer_options
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -53,20 +54,22 @@ def _progress(total: int, label: str) -> Any:
 
 @click.command("replay")
 @click.argument("log", type=_LOG, metavar="RUN.mcap")
-@click.option("--rrd", "rrd", metavar="OUT.rrd", type=click.Path(path_type=Path), default=None,
-              help="Rerun recording to write [default: RUN.rrd beside the log, unless a viewer "
-              "option is given].")  # fmt: skip
+@output_option(metavar="OUT.rrd", aliases=("--rrd", "--out"),
+               help="Rerun recording to write [default: RUN.rrd beside the log, unless a viewer "
+               "option is given].")  # fmt: skip
 @viewer_options
 @click.option("--force", "-f", is_flag=True, help="Overwrite an existing .rrd.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @handle_errors
 def replay(
     log: Path,
-    rrd: Path | None,
+    output: Path | None,
     spawn: bool,
     connect: str | None,
     serve_web: bool,
     web_port: int,
     force: bool,
+    as_json: bool,
 ) -> None:
     """Re-render one recorded run into Rerun, without recomputing anything.
 
@@ -77,13 +80,14 @@ def replay(
 
     \b
     Examples:
-      corraoi replay runs/cucb-I1-s0.mcap --rrd replay.rrd
+      corraoi replay runs/cucb-I1-s0.mcap -o replay.rrd
       corraoi replay runs/cucb-I1-s0.mcap --serve-web      # then open the printed URL
     """
     from recorder.reader import open_log
     from viewer.replay import replay as do_replay
     from viewer.runs import require_slots
 
+    rrd = output
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
     # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
@@ -95,7 +99,7 @@ def replay(
 
         _not_an_input(rrd, [log])
         check_output(rrd, overwrite=force, what="Rerun recording")
-    if run.cut_short:
+    if run.cut_short and not as_json:
         warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
     url = viewer.start() if viewer.asked else None
     try:
@@ -105,15 +109,23 @@ def replay(
     except BaseException:
         viewer.stop()
         raise
-    where = [str(done.path)] if done.path is not None else []
+    if as_json:
+        click.echo(json.dumps({
+            "log": str(log), "label": done.label, "slots": done.slots,
+            "horizon": done.horizon, "status": done.status,
+            "rrd": None if done.path is None else str(done.path), "viewer": url,
+        }, indent=2))  # fmt: skip
+        viewer.serve_until_stopped()
+        return
+    where = [safe_text(done.path)] if done.path is not None else []
     if url is not None:
         where.append(f"the viewer at {url}")
-    click.echo(f"replayed {done.label}: slots 1..{done.slots} of {done.horizon} "
+    click.echo(f"replayed {safe_text(done.label)}: slots 1..{done.slots} of {done.horizon} "
                f"({done.status}) to {' and '.join(where)}")  # fmt: skip
     if done.path is not None and not viewer.asked:
         from recorder.live import view_command
 
-        click.echo(f"open in the Rerun viewer:  {view_command([str(done.path)])}")
+        click.echo(f"open in the Rerun viewer:  {safe_text(view_command([str(done.path)]))}")
     viewer.serve_until_stopped()
 
 
@@ -122,9 +134,9 @@ def replay(
 
 @click.command("compare")
 @click.argument("logs", nargs=-1, required=True, type=_LOG, metavar="A.mcap B.mcap ...")
-@click.option("-o", "--out", metavar="OUT.rrd", type=click.Path(path_type=Path), default=None,
-              help="Rerun recording to write [default: compare.rrd, unless a viewer option "
-              "is given].")  # fmt: skip
+@output_option(metavar="OUT.rrd", aliases=("--out", "--rrd"),
+               help="Rerun recording to write [default: compare.rrd, unless a viewer option "
+               "is given].")  # fmt: skip
 @click.option("--no-rrd", is_flag=True, help="Only print the summary table; write nothing.")
 @viewer_options
 @click.option("--force", "-f", is_flag=True, help="Overwrite an existing recording.")
@@ -132,7 +144,7 @@ def replay(
 @handle_errors
 def compare(
     logs: tuple[Path, ...],
-    out: Path | None,
+    output: Path | None,
     no_rrd: bool,
     spawn: bool,
     connect: str | None,
@@ -160,6 +172,7 @@ def compare(
     from viewer.compare import compare as do_compare
     from viewer.compare import prepare
 
+    out = output
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and (out is not None or viewer.asked):
         raise UsageError("--no-rrd: nothing to send; leave out -o and the viewer options")
@@ -185,13 +198,15 @@ def compare(
     if as_json:
         click.echo(json.dumps(result.to_dict(), indent=2))
     else:
-        click.echo(result.table())
+        say(result.table())
         if result.path is not None:
-            click.echo(f"Rerun recording: {result.path}")
+            click.echo(f"Rerun recording: {safe_text(result.path)}")
             if not viewer.asked:
                 from recorder.live import view_command
 
-                click.echo(f"open in the Rerun viewer:  {view_command([str(result.path)])}")
+                click.echo(
+                    f"open in the Rerun viewer:  {safe_text(view_command([str(result.path)]))}"
+                )
     viewer.serve_until_stopped()
 
 
@@ -232,7 +247,7 @@ def diff(
         if as_json:
             click.echo(json.dumps(report.to_dict(), indent=2))
         else:
-            click.echo(report.message())
+            say(report.message())
     sys.exit(0 if report.identical else 1)
 
 
@@ -255,7 +270,7 @@ def info(log: Path, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(data, indent=2))
     else:
-        click.echo(info_text(data))
+        say(info_text(data))
 
 
 # ---------------------------------------------------------------------------- recover
@@ -263,30 +278,43 @@ def info(log: Path, as_json: bool) -> None:
 
 @click.command("recover")
 @click.argument("log", type=_LOG, metavar="BROKEN.mcap")
-@click.option("-o", "--out", metavar="FIXED.mcap", type=click.Path(path_type=Path),
-              required=True, help="Where to write the finished log.")  # fmt: skip
+@output_option(metavar="FIXED.mcap",
+               help="Where to write the finished log [default: BROKEN.recovered.mcap beside "
+               "it; for RUN.mcap.partial, RUN.recovered.mcap].")  # fmt: skip
 @click.option("--force", "-f", is_flag=True, help="Overwrite FIXED.mcap if it exists.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @handle_errors
-def recover(log: Path, out: Path, force: bool) -> None:
+def recover(log: Path, output: Path | None, force: bool, as_json: bool) -> None:
     """Rewrite a log whose writer died into a finished, indexed one.
 
     Every complete chunk of BROKEN.mcap is copied (message bytes unchanged) into
     FIXED.mcap, which gets the end record, indexes, summary and footer, so that every
-    MCAP reader opens it. BROKEN.mcap is not modified.
+    MCAP reader opens it. A damaged chunk (bad CRC, bad sizes, invalid slots) ends the
+    copy: the slots before it are kept and the damage is named. BROKEN.mcap is not
+    modified.
 
     \b
-    Example:
+    Examples:
+      corraoi recover runs/cucb-I1-s0.mcap.partial     # -> runs/cucb-I1-s0.recovered.mcap
       corraoi recover runs/cucb-I1-s0.mcap.partial -o runs/cucb-I1-s0.mcap
     """
+    from viewer.recover import default_output
     from viewer.recover import recover as do_recover
 
+    out = output if output is not None else default_output(log)
     done = do_recover(log, out, overwrite=force)
+    if as_json:
+        click.echo(json.dumps(done.to_dict(), indent=2))
+        return
     if done.source_status == "complete":
         warn(f"{done.source}: was already finished; wrote an identical re-indexed copy")
+    if done.damage:
+        warn(f"{done.damage}; kept the slots before it")
     dropped = f"; dropped {done.dropped_bytes} bytes of a torn record" if done.dropped_bytes else ""
     click.echo(
         f"recovered {done.slots} of {done.horizon} slots (slots 1..{done.slots}) from "
-        f"{done.source} ({done.source_status}{dropped}) into {done.path} ({done.status})"
+        f"{safe_text(done.source)} ({done.source_status}{dropped}) into "
+        f"{safe_text(done.path)} ({done.status})"
     )
 
 

@@ -1,0 +1,92 @@
+"""Ctrl-C and SIGTERM in the command line: exit 130 with one line, never a traceback.
+
+Installed by the CLI only (a library user's signal handling is left alone): from the
+import of ``corraoi`` on when the process is the ``corraoi`` command, and again when the
+command group starts. SIGTERM raises KeyboardInterrupt like Ctrl-C, so both take the same
+way out: the commands finish what they wrote (a record's log is finished and marked
+interrupted) and exit 130. A KeyboardInterrupt that reaches the top (start-up, before any
+handler) prints ``corraoi: interrupted`` and exits 130.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from types import FrameType, TracebackType
+
+INTERRUPTED = 130
+_installed = False
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+def _hook(kind: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
+    if issubclass(kind, KeyboardInterrupt):
+        quiet_exit()
+    _previous_hook(kind, exc, tb)
+
+
+_previous_hook = sys.excepthook
+
+
+def quiet_exit(code: int = INTERRUPTED) -> None:
+    """Say ``corraoi: interrupted`` on stderr and leave at once with ``code``."""
+    try:
+        sys.stderr.write("corraoi: interrupted\n")
+    except (OSError, ValueError):
+        pass
+    leave(code)
+
+
+def leave(code: int) -> None:
+    """Flush stdout and stderr and exit with exactly ``code``, skipping the interpreter's
+    shutdown: after an interrupt, a KeyboardInterrupt seen anywhere earlier can make
+    CPython end the process by re-raising SIGINT (status -2 instead of 130). The commands
+    have finished or discarded their files before they get here."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(code)
+
+
+def install() -> None:
+    """SIGTERM as Ctrl-C, and no traceback for a Ctrl-C that nothing caught (main thread)."""
+    global _installed
+    if _installed:
+        return
+    try:
+        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+            signal.signal(signal.SIGTERM, _terminate)
+        if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+            pass  # started in the background with SIGINT ignored: keep it so
+    except ValueError:  # not the main thread
+        return
+    sys.excepthook = _hook
+    _installed = True
+
+
+def is_cli() -> bool:
+    """Whether this process is the ``corraoi`` command (console script or ``-m corraoi``)."""
+    argv0 = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    if argv0 == "corraoi":
+        return True
+    orig = list(getattr(sys, "orig_argv", []))
+    for i, word in enumerate(orig[:-1]):
+        if word == "-m":
+            return orig[i + 1] in ("corraoi", "corraoi.cli")
+    return False
+
+
+def finished() -> None:
+    """The command is done and about to exit: ignore further Ctrl-C/SIGTERM, so that the
+    interpreter's shutdown is never interrupted into a traceback."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    except ValueError:
+        pass

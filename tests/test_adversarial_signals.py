@@ -1,0 +1,132 @@
+"""Signals at random moments: exit 130 (or 0 if the run had finished), never a traceback,
+never a lost or half-written run, never an orphaned child process.
+
+Subprocesses, since signals are involved; bounded: a handful of seeded random moments.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from corraoi.block import RunConfig
+from corraoi.engine import simulate_run
+from corraoi.instance import load_instance
+from corraoi.policies import make_policy
+from recorder.mcap_sink import McapSink
+from recorder.reader import open_log
+
+CORRAOI = [sys.executable, "-m", "corraoi"]
+
+
+def _alive(pid: int) -> bool:
+    """A process that exists and is not a zombie (a dead child nobody reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def _check_stderr(err: str) -> None:
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    for line in err.splitlines():
+        assert line.startswith("corraoi: "), err
+
+
+# moments: seconds after the start (start-up imports, the run, the finalisation); from
+# 0.3 s on, when the interpreter has surely imported corraoi (before it, Python's own
+# default handling applies)
+_RNG = random.Random(11)
+MOMENTS = [_RNG.uniform(lo, hi) for lo, hi in ((0.3, 0.9), (0.9, 1.6), (1.6, 2.4), (2.0, 3.0),
+                                                (0.3, 3.0))]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("delay", "sig"),
+    [(d, (signal.SIGINT, signal.SIGTERM)[i % 2]) for i, d in enumerate(MOMENTS)],
+    ids=[f"{d:.2f}s-{('INT', 'TERM')[i % 2]}" for i, d in enumerate(MOMENTS)],
+)
+def test_record_interrupted_at_a_random_moment(tmp_path, delay, sig):
+    proc = subprocess.Popen(
+        [*CORRAOI, "record", "-p", "cucb", "-T", "60000"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "RUST_LOG": "off"},
+    )  # fmt: skip
+    time.sleep(delay)
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=60)
+    _check_stderr(err)
+    assert proc.returncode in (0, 130), (proc.returncode, err)
+    runs = tmp_path / "runs"
+    names = sorted(os.listdir(runs)) if runs.exists() else []
+    assert not any(n.endswith(".partial") for n in names), names  # nothing half-written
+    if proc.returncode == 0:
+        assert names == ["cucb-I1-s0.mcap", "cucb-I1-s0.rrd"]
+    if "cucb-I1-s0.mcap" in names:  # once the run started: a finished log
+        log = open_log(runs / "cucb-I1-s0.mcap")
+        assert log.finished and log.status in ("interrupted", "complete")
+        if proc.returncode == 130 and log.status == "interrupted":
+            assert f"after slot {log.n_slots} of 60000" in err
+    else:
+        assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
+    assert not [c for c in _children(proc.pid) if _alive(c)]
+
+
+@pytest.fixture(scope="module")
+def long_log(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("long") / "long.mcap"
+    config = RunConfig(load_instance("I1"), make_policy("ucb"), 0, 400_000)
+    with McapSink(path, config, fsync=False) as sink:
+        for block in simulate_run(config.instance, config.policy, 0, config.horizon):
+            sink.write(block)
+    return path
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the read-ahead process needs 2 cores")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL, signal.SIGINT])
+def test_the_read_ahead_child_dies_with_replay(tmp_path, long_log, sig):
+    proc = subprocess.Popen(
+        [*CORRAOI, "replay", str(long_log), "-o", str(tmp_path / "r.rrd")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "RUST_LOG": "off", "CORRAOI_READ_AHEAD": "fork"},
+    )  # fmt: skip
+    deadline = time.monotonic() + 30
+    kids: list[int] = []
+    while not kids and time.monotonic() < deadline and proc.poll() is None:
+        kids = [c for c in _children(proc.pid) if _alive(c)]
+        time.sleep(0.05)
+    assert kids, "the replay finished before it started its reader"
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    deadline = time.monotonic() + 5
+    while any(_alive(k) for k in kids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(k) for k in kids), "an orphaned read-ahead process"
+    if sig == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode == 130 and err.strip().endswith("corraoi: interrupted"), err
+        _check_stderr(err)
+        assert not (tmp_path / "r.rrd").exists()  # nothing presented as complete
