@@ -40,8 +40,8 @@ def _max_horizon() -> int:
 MAX_HORIZON: Final = _max_horizon()
 #: Seeds are int64; run i of a batch uses seed + i, so seed + runs - 1 must fit as well.
 MAX_SEED: Final = INT64_MAX
-#: Monte Carlo runs of one sweep (the memory estimate below refuses far fewer on most hosts).
-MAX_RUNS: Final = 10**9
+#: Monte Carlo runs of one sweep (the memory estimate below refuses fewer on most hosts).
+MAX_RUNS: Final = 10**8
 #: Checkpoint slots per sweep curve.
 MAX_CHECKPOINTS: Final = 1_000_000
 #: Engine threads.

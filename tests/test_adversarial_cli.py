@@ -138,13 +138,13 @@ LIMIT_CASES = [
     (("record", "--seed", "-1"), "'--seed' / '-s': -1 is not in the range 0..9223372036854775807"),
     (("record", "--seed", str(2**63)), "'--seed' / '-s': 9223372036854775808 is not in the range"),
     (("sweep", "--runs", str(10**10)), "'--runs' / '-n': 10000000000 is not in the range 1.."),
-    (("sweep", "--runs", "0"), "'--runs' / '-n': 0 is not in the range 1..1000000000"),
+    (("sweep", "--runs", "0"), "'--runs' / '-n': 0 is not in the range 1..100000000"),
     (("sweep", "--checkpoints", "10000000"), "'--checkpoints': 10000000 is not in the range 2.."),
     (("sweep", "--workers", "0"), "'--workers' / '-j': 0 is not in the range 1..1024"),
     (("sweep", "--workers", "100000"), "'--workers' / '-j': 100000 is not in the range 1..1024"),
     (("record", "--web-port", "0"), "'--web-port': 0 is not in the range 1..65535 (a TCP port)"),
     (("record", "--web-port", "70000"), "'--web-port': 70000 is not in the range 1..65535"),
-    (("reproduce", "--runs", "-5"), "'--runs' / '-n': -5 is not in the range 1..1000000000"),
+    (("reproduce", "--runs", "-5"), "'--runs' / '-n': -5 is not in the range 1..100000000"),
     (("sweep", "-T", "0.5"), "'--horizon' / '-T': '0.5' is not a valid integer"),
 ]
 
