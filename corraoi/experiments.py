@@ -417,12 +417,40 @@ def sweep(
     the sweep in ``out`` (finished chunks are skipped; new runs, policies or parameter
     values are appended). ``on_chunk(done, total)`` after each chunk; ``on_slots(n)`` as the
     in-process engine advances. Returns the summaries, one per (instance, horizon) group.
+    A folder is locked while the sweep writes it: a second sweep into it is refused at once.
     """
+    from contextlib import ExitStack
+
+    folder = Path(out) if out is not None else None
+    with ExitStack() as stack:
+        if folder is not None:
+            from recorder.paths import folder_lock
+
+            _check_parent(folder)
+            folder.mkdir(parents=True, exist_ok=True)
+            stack.enter_context(folder_lock(folder, "sweep folder"))
+        return _sweep(grid, folder, client=client, resume=resume, force=force, workers=workers,
+                      threads_per_worker=threads_per_worker, on_chunk=on_chunk,
+                      on_slots=on_slots, warn=warn)  # fmt: skip
+
+
+def _sweep(
+    grid: Grid,
+    folder: Path | None,
+    *,
+    client: Any,
+    resume: bool,
+    force: bool,
+    workers: int | None,
+    threads_per_worker: int | None,
+    on_chunk: Callable[[int, int], None] | None,
+    on_slots: Callable[[int], None] | None,
+    warn: Callable[[str], None] | None,
+) -> SweepOutcome:
     from .engine import set_workers
 
     start = time.perf_counter()
     used = set_workers(workers) if client is None else int(threads_per_worker or 1)
-    folder = Path(out) if out is not None else None
     parts: dict[str, list[ChunkResult]] = {}
     if folder is not None:
         grid = _prepare_folder(folder, grid, resume=resume, force=force)
@@ -468,7 +496,7 @@ def sweep(
                         total, skipped)  # fmt: skip
 
 
-def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> Grid:
+def _check_parent(folder: Path) -> None:
     if folder.exists() and not folder.is_dir():
         raise ConfigError(f"{folder}: exists and is not a directory (expected a folder for -o)")
     probe = folder
@@ -478,6 +506,9 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
         raise ConfigError(f"{folder}: cannot create the folder ({probe} is not a directory)")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise ConfigError(f"{folder}: cannot create the folder ({probe} is not writable)")
+
+
+def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> Grid:
     old = read_manifest(folder) if folder.is_dir() else None
     legacy = folder.is_dir() and old is None and any(
         (folder / f).exists() for f in (*GROUP_FILES, "results.parquet")

@@ -16,8 +16,10 @@ Output names made from data (instance, policy, plug-in names) go through
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -167,6 +169,30 @@ def lock_holder(part: str | os.PathLike[str]) -> int | None:
         return None
     finally:
         os.close(fd)  # also drops the shared lock taken to test
+
+
+@contextlib.contextmanager
+def folder_lock(folder: Path, what: str = "folder") -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` itself (flock on the directory: no lock file)
+    while a writer fills it; a second writer is refused at once, naming the holder's PID."""
+    if fcntl is None:  # pragma: no cover - not Linux
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            st = os.fstat(fd)
+            holder = _pid_of_lock(st.st_dev, st.st_ino)
+            who = f"process {holder}" if holder > 0 else "another process"
+            raise OutputError(
+                f"{folder}: {who} is writing this {what} right now; not touched (wait for it, "
+                "stop it, or give another folder)"
+            ) from None
+        yield
+    finally:
+        os.close(fd)
 
 
 def _is_regular(mode: int) -> bool:

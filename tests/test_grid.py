@@ -269,3 +269,15 @@ def test_library_sweep_with_a_client(tmp_path: Path):
 
         Grid((), runs=1)
     assert np.isfinite(here.summaries[0]["policies"]["cucb"]["regret_mean"])
+
+
+def test_a_folder_another_sweep_is_writing_is_refused_naming_it(tmp_path: Path):
+    from recorder.paths import folder_lock
+
+    out = tmp_path / "busy"
+    out.mkdir()
+    with folder_lock(out, "sweep folder"):  # this process holds it, as a running sweep would
+        line = one_line(run("sweep", "-p", "ucb", "-n", "2", "-T", "20", "-o", out), code=2)
+    assert f"process {os.getpid()} is writing this sweep folder right now" in line
+    assert list(out.iterdir()) == []
+    assert run("sweep", "-p", "ucb", "-n", "2", "-T", "20", "-o", out).exit_code == 0
