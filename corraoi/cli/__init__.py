@@ -13,6 +13,7 @@ import click
 
 from .._version import __version__
 from .common import (
+    HORIZON,
     OneLineGroup,
     handle_errors,
 )
@@ -72,7 +73,7 @@ def instance_list() -> None:
 
 @instance.command("show")
 @click.argument("spec", metavar="NAME|PATH")
-@click.option("--horizon", "-T", type=click.IntRange(min=1), default=10_000, show_default=True,
+@click.option("--horizon", "-T", type=HORIZON, default=10_000, show_default=True,
               help="Horizon at which the regret bounds are evaluated.")  # fmt: skip
 @click.option("--bound-beta", type=float, default=None,
               help="beta of Theorem 3 (CTS, Gaussian priors; needs beta > 1) "
