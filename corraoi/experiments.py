@@ -533,7 +533,19 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
 
 
 def _clear(folder: Path, old: Grid | None) -> None:
-    """Remove an earlier sweep's files (only with --force)."""
+    """Remove an earlier sweep's files (only with --force); a file another process is
+    writing right now is never touched (nothing is removed then)."""
+    from recorder.errors import OutputError
+    from recorder.paths import lock_holder
+
+    for f in sorted(folder.rglob("*")):
+        holder = lock_holder(f) if f.is_file() else None
+        if holder is not None:
+            who = f"process {holder}" if holder else "another process"
+            raise OutputError(
+                f"{f}: is being written by {who} right now; not touched (wait for it, stop it, "
+                "or give another output folder)"
+            )
     targets = [folder / PARTS, folder / "results.parquet", folder / MANIFEST]
     if old is not None:
         targets += list(group_dirs(old, folder).values())

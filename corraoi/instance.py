@@ -74,14 +74,7 @@ class Instance:
             )
         arms = tuple(self.arm_names) or tuple(str(k + 1) for k in range(Y.shape[0]))
         states = tuple(self.state_names) or tuple(f"x{x + 1}" for x in range(p.size))
-        for kind, names in (("instance", (self.name,)), ("arm", arms), ("state", states)):
-            for label in names:
-                if len(label) > MAX_NAME or not label.isprintable():
-                    shown = label[:40].encode("unicode_escape").decode("ascii")
-                    raise InstanceError(
-                        f"{kind} name '{shown}': expected printable text of at most "
-                        f"{MAX_NAME} characters"
-                    )
+
         if len(arms) != Y.shape[0]:
             raise InstanceError(f"{where}: {len(arms)} arm names for {Y.shape[0]} arms")
         if len(states) != p.size:
@@ -289,8 +282,6 @@ MAX_DEPTH = 8
 #: Most arms and hidden states (the engine's int32 columns and per-slot arrays stay sane).
 MAX_ARMS = 4096
 MAX_STATES = 1 << 20
-#: Longest instance, arm or state name.
-MAX_NAME = 200
 
 
 def _read_regular(path: Path, where: str) -> str:

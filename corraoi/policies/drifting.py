@@ -46,7 +46,7 @@ class DTS(CompiledPolicy):
     name = "d-ts"
     params = {"gamma": Param(0.95, "discount factor of the counts", low=0.0, high=1.0,
                              open_low=True)}  # fmt: skip
-    color = (127, 127, 127)  # grey
+    color = (255, 152, 150)  # salmon
     reference = "Raj and Kalyani (2017), arXiv:1707.09727"
     score = "corraoi.policies.builtin_hooks:d_ts_score"
     update = "corraoi.policies.builtin_hooks:d_ts_update"

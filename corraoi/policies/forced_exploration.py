@@ -48,8 +48,8 @@ class QTS(CompiledPolicy):
 POLICIES = {
     cls.name: cls
     for fam in (
-        family(QUCB, correlated_name="cq-ucb", correlated_color=(0, 128, 128)),
-        family(QTS, correlated_name="cq-ts", correlated_color=(128, 128, 0)),
+        family(QUCB, correlated_name="cq-ucb", correlated_color=(0, 170, 170)),
+        family(QTS, correlated_name="cq-ts", correlated_color=(160, 160, 0)),
     )
     for cls in fam
 }
