@@ -307,66 +307,49 @@ class RerunSink(Sink):
         self._style()
 
     def _style(self) -> None:
+        """Log the static styling and the ``about`` note.
+
+        They go with ``send_columns`` without a time index (static data), like the slots:
+        ``rr.log`` would queue them in Rerun's batcher, whose timer could let a first
+        batch of slots reach the file before them, and two recordings of one run would
+        then differ in the order of their chunks.
+        """
         rec, base, st = self.recording, self.base, style
         color = self.color
         names = _arm_names(self.config)
         colors = [st.arm_color(k) for k in range(self.K)]
 
-        def line(path: str, rgb: Any, name: str, width: float) -> None:
-            rec.log(
-                f"{base}/{path}",
-                rr.SeriesLines(colors=[rgb], widths=[width], names=[name]),
-                static=True,
-            )
+        def static(path: str, columns: Any, count: int = 1) -> None:
+            rec.send_columns(f"{base}/{path}", indexes=[], columns=columns.partition([count]))
+
+        def lines(path: str, rgb: list[Any], name: list[str], width: list[float]) -> None:
+            static(path, rr.SeriesLines.columns(colors=rgb, widths=width, names=name), len(rgb))
 
         def points(path: str, rgb: Any, name: str, marker: Any, size: float) -> None:
-            rec.log(
-                f"{base}/{path}",
-                rr.SeriesPoints(colors=[rgb], names=[name], markers=[marker], marker_sizes=[size]),
-                static=True,
-            )
+            static(path, rr.SeriesPoints.columns(colors=[rgb], names=[name], markers=[marker],
+                                                 marker_sizes=[size]))  # fmt: skip
 
         shape = rr.components.MarkerShape
-        line("aoi", color, st.AOI_NAME, st.WIDTH_MAIN)
+        lines("aoi", [color], [st.AOI_NAME], [st.WIDTH_MAIN])
         # the oracle: another colour AND another line style (dotted: a point per slot, no
         # line, since Rerun 0.41 lines cannot be dashed), named
         points("oracle_aoi", st.ORACLE_COLOR, st.ORACLE_NAME, shape.Circle, st.MARKER_ORACLE)
-        line("regret", color, st.REGRET_NAME, st.WIDTH_MAIN)
-        line("estimator", st.lighter(color, 0.5), st.ESTIMATOR_NAME, st.WIDTH_SECONDARY)
+        lines("regret", [color], [st.REGRET_NAME], [st.WIDTH_MAIN])
+        lines("estimator", [st.lighter(color, 0.5)], [st.ESTIMATOR_NAME], [st.WIDTH_SECONDARY])
         points("arm/success", st.SUCCESS_COLOR, st.SUCCESS_NAME, shape.Circle, st.MARKER_SUCCESS)
         points("arm/failure", st.FAILURE_COLOR, st.FAILURE_NAME, shape.Cross, st.MARKER_FAILURE)
         points("override", st.OVERRIDE_COLOR, st.OVERRIDE_NAME, shape.Diamond, st.MARKER_OVERRIDE)
         points("x", st.STATE_COLOR, st.STATE_NAME, shape.Square, st.MARKER_STATE)
-        rec.log(
-            f"{base}/mu_hat",
-            rr.SeriesLines(
-                colors=colors,
-                widths=[st.WIDTH_ARM] * self.K,
-                names=[st.mean_name(k, true=False) for k in range(self.K)],
-            ),
-            static=True,
-        )
-        rec.log(
-            f"{base}/mu_true",
-            rr.SeriesLines(
-                colors=[st.true_mean_color(k) for k in range(self.K)],
-                widths=[st.WIDTH_TRUE_MEAN] * self.K,
-                names=[st.mean_name(k, true=True) for k in range(self.K)],
-            ),
-            static=True,
-        )
-        rec.log(
-            f"{base}/pulls",
-            rr.SeriesLines(colors=colors, widths=[st.WIDTH_ARM] * self.K, names=names),
-            static=True,
-        )
-        for k in range(self.K):
+        arms = range(self.K)
+        lines("mu_hat", colors, [st.mean_name(k, true=False) for k in arms],
+              [st.WIDTH_ARM] * self.K)
+        lines("mu_true", [st.true_mean_color(k) for k in arms],
+              [st.mean_name(k, true=True) for k in arms], [st.WIDTH_TRUE_MEAN] * self.K)
+        lines("pulls", colors, names, [st.WIDTH_ARM] * self.K)  # fmt: skip
+        for k in arms:
             points(f"candidates/{k + 1}", colors[k], names[k], shape.Square, st.MARKER_CANDIDATE)
-        rec.log(
-            f"{base}/about",
-            rr.TextDocument(about_markdown(self.config), media_type=rr.MediaType.MARKDOWN),
-            static=True,
-        )
+        static("about", rr.TextDocument.columns(text=[about_markdown(self.config)],
+                                                media_type=[rr.MediaType.MARKDOWN]))  # fmt: skip
 
     def write(self, block: SlotBlock) -> None:
         """Queue the block's slots; they are sent once ``batch`` slots wait (and by

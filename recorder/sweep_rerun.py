@@ -255,6 +255,9 @@ class SweepRerunSink(Sink):
     # ------------------------------------------------------------------ styling
 
     def _style(self, name: str) -> None:
+        """Static styling of one policy's entities, sent with ``send_columns`` (no time
+        index) like the data, so it always precedes the data in the file (``rr.log`` would
+        queue it in Rerun's batcher, whose timer decides when it follows)."""
         if name in self._styled:
             return
         self._styled.add(name)
@@ -262,29 +265,32 @@ class SweepRerunSink(Sink):
         color = self._colors.get(name) or policy_color(name)
         aware = is_aoi_aware(name)
         width = WIDTH_AOI_AWARE if aware else WIDTH_BASE
+
+        def static(path: str, *columns: Any) -> None:
+            parts = [c for group in columns for c in group.partition([1])]
+            rec.send_columns(path, indexes=[], columns=parts)
+
+        def line(rgb: Any, line_width: float, label: str) -> Any:
+            return rr.SeriesLines.columns(colors=[rgb], widths=[line_width], names=[label])
+
         for path in (regret_path(name), estimator_path(name)):
-            parts: list[Any] = [rr.SeriesLines(colors=[color], widths=[width], names=[name])]
+            parts: list[Any] = [line(color, width, name)]
             if aware:
                 parts.append(
-                    rr.SeriesPoints(
+                    rr.SeriesPoints.columns(
                         colors=[color],
                         markers=[AOI_AWARE_MARKER],
                         marker_sizes=[AOI_AWARE_MARKER_SIZE],
                         names=[name],
                     )
                 )
-            rec.log(path, *parts, static=True)
+            static(path, *parts)
         # Named like the mean curve: the legend shows one entry per policy (hiding it there
         # hides the band too) instead of three.
-        band = rr.SeriesLines(colors=[lighter(color, 0.45)], widths=[WIDTH_BAND], names=[name])
-        rec.log(f"{regret_path(name)}/lo", band, static=True)
-        rec.log(f"{regret_path(name)}/hi", band, static=True)
+        static(f"{regret_path(name)}/lo", line(lighter(color, 0.45), WIDTH_BAND, name))
+        static(f"{regret_path(name)}/hi", line(lighter(color, 0.45), WIDTH_BAND, name))
         for k, label in enumerate(self.arm_labels):
-            rec.log(
-                pulls_path(name, k + 1),
-                rr.SeriesLines(colors=[arm_color(k)], widths=[WIDTH_ARM], names=[label]),
-                static=True,
-            )
+            static(pulls_path(name, k + 1), line(arm_color(k), WIDTH_ARM, label))
 
     # ------------------------------------------------------------------ data
 

@@ -198,7 +198,7 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
         rrb.Vertical(
             rrb.Horizontal(*columns, name="runs"),
             rrb.Horizontal(overlay, summary, column_shares=[3, 2]),
-            row_shares=[3.4, 2],
+            row_shares=[3.8, 2],
         ),
         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
         rrb.BlueprintPanel(state="hidden"),
@@ -345,8 +345,7 @@ def summary_markdown(runs: Sequence[ComparedRun], warnings: Sequence[str]) -> st
     if warnings:
         lines.append("")
         lines += [f"**warning:** {w}" for w in warnings]
-    lines += ["", f"Arms numbered from 1. Regret and estimator {REGRET_UNIT}: sums over slots "
-              "of AoI in slots; pathwise regret = sum(aoi - oracle_aoi)."]  # fmt: skip
+    lines += ["", f"Arms from 1; regret = sum(aoi - oracle_aoi) {REGRET_UNIT}."]
     return "\n".join(lines)
 
 
