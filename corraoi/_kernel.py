@@ -28,6 +28,8 @@ from corraoi.policies.hooks import update_none as _update  # HOOKS
 from corraoi.rng import argmax_random, uniform
 
 CHANNEL_CDF, CHANNEL_TRACE = 0, 1
+#: Up to this many arms the candidate set tests every pair; beyond, it unions bitsets.
+SMALL_K = 16
 
 
 @njit(inline="always", cache=True)
@@ -78,6 +80,7 @@ def advance(
     fail0,  # (K, W) uint64: arms k with phi_{k,l} = 0, as bitsets per pulled arm l
     fail1,  # (K, W) uint64: arms k with phi_{k,l} = failure rate of l
     fail2,  # (K, W) uint64: arms k with phi_{k,l} = success rate of l
+    pclass,  # (K, K) int8: phi_{k,l} is 0, l's failure rate, l's success rate or 1 (0..3)
     best,  # int: index of the best arm (for the oracle)
     correlated,  # bool: restrict to the correlated candidate set
     aware,  # bool: AoI-aware override
@@ -164,27 +167,45 @@ def advance(
                 target = muhat[kemp]
                 # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
                 # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
-                # pseudo-rewards; the arms failing for l are a union of precomputed bitsets.
-                for w in range(W):
-                    fail[w] = np.uint64(0)
-                for l in range(K):
-                    if not in_s[l] or npull[l] == 0:
-                        continue
-                    drop0 = target > 0.0
-                    drop1 = has1[l] and (npull[l] - nsucc[l]) / npull[l] < target
-                    drop2 = has2[l] and muhat[l] < target  # muhat[l] = S_l / n_l
-                    if drop0 or drop1 or drop2:
-                        for w in range(W):
-                            m64 = np.uint64(0)
-                            if drop0:
-                                m64 |= fail0[l, w]
-                            if drop1:
-                                m64 |= fail1[l, w]
-                            if drop2:
-                                m64 |= fail2[l, w]
-                            fail[w] |= m64
-                for k in range(K):
-                    cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
+                # pseudo-rewards (pclass). Few arms: test each pair (K^2 cheap tests); many
+                # arms: the arms failing for l are a union of precomputed bitsets (K^2 / 64).
+                if K <= SMALL_K:
+                    for k in range(K):
+                        ok = True
+                        for l in range(K):
+                            if not in_s[l] or npull[l] == 0:
+                                continue
+                            c = pclass[k, l]
+                            if c == 0:
+                                ok = target <= 0.0
+                            elif c == 1:
+                                ok = (npull[l] - nsucc[l]) / npull[l] >= target
+                            elif c == 2:
+                                ok = muhat[l] >= target
+                            if not ok:
+                                break
+                        cand[k] = ok
+                else:
+                    for w in range(W):
+                        fail[w] = np.uint64(0)
+                    for l in range(K):
+                        if not in_s[l] or npull[l] == 0:
+                            continue
+                        drop0 = target > 0.0
+                        drop1 = has1[l] and (npull[l] - nsucc[l]) / npull[l] < target
+                        drop2 = has2[l] and muhat[l] < target  # muhat[l] = S_l / n_l
+                        if drop0 or drop1 or drop2:
+                            for w in range(W):
+                                m64 = np.uint64(0)
+                                if drop0:
+                                    m64 |= fail0[l, w]
+                                if drop1:
+                                    m64 |= fail1[l, w]
+                                if drop2:
+                                    m64 |= fail2[l, w]
+                                fail[w] |= m64
+                    for k in range(K):
+                        cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
                 cand[kemp] = True
             override = aware and maxmu > 0.0 and age * maxmu > 1.0
             if override:

@@ -145,7 +145,10 @@ class Simulation:
             self._params = policy.param_vector(self.cls)
             S = int(self.cls.state_size(K, policy.params))
             self.pstate = np.zeros((R, max(S, 1)))
-            self._fail = _bitsets(np.ascontiguousarray(policy_pseudo_rewards(instance)))
+            spol = np.ascontiguousarray(policy_pseudo_rewards(instance))
+            self._fail = _bitsets(spol)
+            # phi_{k,l}'s kind (0: 0, 1: l's failure rate, 2: l's success rate, 3: 1)
+            self._pclass = np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
             self._py: Any = None
             self._warm_up()
         else:
@@ -165,7 +168,7 @@ class Simulation:
         out = _Outputs(R, 0, K)
         empty = np.empty(0, dtype=np.int64)
         self._kernel(
-            self._cdf_rows, self._kind, self._trace, self._Y, *self._fail,
+            self._cdf_rows, self._kind, self._trace, self._Y, *self._fail, self._pclass,
             self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
             self.t, 0,
             self.lat, self.pol, self.ncache, self.pstate, self.xprev,
@@ -220,7 +223,7 @@ class Simulation:
         failure: PolicyRuntimeError | None = None
         if self._py is None:
             self._kernel(
-                self._cdf_rows, self._kind, self._trace, self._Y, *self._fail,
+                self._cdf_rows, self._kind, self._trace, self._Y, *self._fail, self._pclass,
                 self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
                 self.t, nslots,
                 self.lat, self.pol, self.ncache, self.pstate, self.xprev,

@@ -191,3 +191,15 @@ def test_runs_blocks_join_along_slots():
     joined = RunsBlock.concat(blocks)
     assert len(joined) == 250 and joined.arm.shape == (2, 250) and joined.pulls.shape == (2, 250, 4)
     assert joined.run(1).equals(one_run(I1, "ucb", 2, 250))
+
+
+@pytest.mark.parametrize("K", [5, 40])
+def test_candidate_sets_of_small_and_wide_instances_follow_the_rule(K: int):
+    # K <= 16 tests each pair, K > 16 unions bitsets: both must give the rule's sets
+    rng = np.random.default_rng(K)
+    p = rng.dirichlet(np.ones(2 * K))
+    Y = (rng.random((K, 2 * K)) < 0.4).astype(np.int64)
+    Y[0, int(np.argmax(p))] = 1
+    inst = Instance(f"random-{K}", p, Y)
+    for name in ("cucb", "aoi-aware-cts"):
+        check_run(inst, make_policy(name), one_run(inst, name, 3, 1500))

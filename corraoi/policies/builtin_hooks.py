@@ -16,7 +16,7 @@ from ..rng import beta as beta_sample
 from ..rng import gamma_dc, integer, normal, uniform
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     lt = math.log(t)
     c = params[0]
@@ -24,7 +24,7 @@ def ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
         vals[k] = muhat[k] + math.sqrt(c * lt / npull[k])
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def ts_beta_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     # Beta(S + 1, F + 1) as Gamma(S + 1) / (Gamma(S + 1) + Gamma(F + 1)), with each arm's
     # Marsaglia-Tsang constants cached in ps (d_a, c_a, d_b, c_b; 0 = to compute): the same
@@ -43,12 +43,12 @@ def ts_beta_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
             vals[k] = ga / (ga + gb)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def ts_beta_update(t, arm, reward, K, npull, nsucc, params, ps):
     ps[arm] = 0.0  # the played arm's posterior changed: recompute its constants
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def ts_gauss_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     b = params[0]
     for k in range(K):
@@ -56,7 +56,7 @@ def ts_gauss_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache
             vals[k] = muhat[k] + math.sqrt(b / (npull[k] + 1.0)) * normal(pst, cache)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def _explore(t, K, pst):
     if t < 2:
         return -1
@@ -67,7 +67,7 @@ def _explore(t, K, pst):
     return -1
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def q_ucb_forced(t, K, npull, nsucc, params, ps, pst):
     arm = _explore(t, K, pst)
     if arm >= 0:
@@ -78,19 +78,19 @@ def q_ucb_forced(t, K, npull, nsucc, params, ps, pst):
     return -1
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def q_ts_forced(t, K, npull, nsucc, params, ps, pst):
     return _explore(t, K, pst)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def q_ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     lt = math.log(t)
     for k in range(K):
         vals[k] = muhat[k] + math.sqrt(lt * lt / (2.0 * npull[k]))
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def sw_ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     window = int(params[0])
     c = params[1]
@@ -103,7 +103,7 @@ def sw_ucb_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
             vals[k] = ps[K + k] / n + math.sqrt(c * lt / n)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def sw_ucb_update(t, arm, reward, K, npull, nsucc, params, ps):
     # ps: [0, K) pulls in the window, [K, 2K) successes in the window, then a ring of the last
     # `window` slots: arm + 1 (0 = empty) and reward.
@@ -121,14 +121,14 @@ def sw_ucb_update(t, arm, reward, K, npull, nsucc, params, ps):
     ps[K + arm] += float(reward)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def d_ts_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
     for k in range(K):
         if cand[k]:
             vals[k] = beta_sample(pst, cache, ps[k] + 1.0, ps[K + k] + 1.0)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def d_ts_update(t, arm, reward, K, npull, nsucc, params, ps):
     g = params[0]
     for k in range(2 * K):
