@@ -92,6 +92,121 @@ def checkpoints_of(grid: Grid, horizon: int) -> list[int]:
     return [c for c in default_checkpoints(horizon, grid.checkpoints) if 0 < c <= horizon]
 
 
+# ---------------------------------------------------------------------------- one run
+
+
+@dataclass
+class RecordOutcome:
+    """What :func:`record_run` wrote: the log (final name, or ``.partial`` when the run
+    stopped on an error), the Rerun recording if any, the slots, and a viewer's problem."""
+
+    mcap: Path
+    rrd: Path | None
+    slots: int
+    viewer_problem: str | None = None
+
+
+def record_run(
+    config: Any,
+    mcap: str | os.PathLike[str],
+    *,
+    rrd: str | os.PathLike[str] | None = None,
+    viewer_url: str | None = None,
+    overwrite: bool = False,
+    on_block: Callable[[Any], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> RecordOutcome:
+    """Simulate one run (a ``RunConfig``) and stream every slot to the MCAP log ``mcap`` and,
+    with ``rrd`` or ``viewer_url``, to a Rerun recording (what ``corraoi record`` does for
+    each policy). ``should_stop()`` is asked after every block: the files are then finished
+    with the slots so far (status interrupted). A failed run (a plug-in's bad arm) leaves its
+    log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files."""
+    from recorder.errors import ViewerError, WriteError
+    from recorder.mcap_sink import McapSink
+
+    from .engine import simulate_run
+
+    problem: str | None = None
+    rrd_error: WriteError | None = None
+    slots = 0
+    rrd_path: Path | None = None
+    with McapSink(mcap, config, overwrite=overwrite) as log:
+        output = sink = None
+        if rrd is not None or viewer_url is not None:
+            from recorder.rerun_sink import RerunSink, RrdOutput
+
+            output = RrdOutput(config, rrd_path=None if rrd is None else Path(rrd),
+                               viewer_url=viewer_url, overwrite=overwrite)  # fmt: skip
+            sink = RerunSink(output.recording, config.label, config)
+        try:
+            for block in simulate_run(config.instance, config.policy, config.seed,
+                                      config.horizon, channel=config.channel):  # fmt: skip
+                log.write(block)
+                if sink is not None:
+                    sink.write(block)
+                slots = int(block.t[-1])
+                if on_block is not None:
+                    on_block(block)
+                if should_stop is not None and should_stop():
+                    break
+        except BaseException as exc:
+            if output is not None:
+                if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                    try:
+                        if sink is not None:
+                            sink.close()  # send the slots it still holds (up to a batch)
+                        output.close()
+                    except (ViewerError, WriteError):
+                        pass
+                else:
+                    output.abort(discard=slots == 0)
+            raise
+        if output is not None:
+            assert sink is not None
+            sink.close()
+            try:
+                rrd_path = output.close()
+            except ViewerError as exc:
+                rrd_path = output.path
+                problem = str(exc)
+            except WriteError as exc:  # the MCAP log is still finished properly
+                rrd_error = exc
+    if rrd_error is not None:
+        if log.finished:
+            raise WriteError(f"{rrd_error} (the MCAP log {log.path} is complete)")
+        raise rrd_error
+    return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
+
+
+def reproduce(
+    out: str | os.PathLike[str],
+    *,
+    runs: int = 200,
+    horizon: int = 10_000,
+    seed: int = 0,
+    force: bool = False,
+    workers: int | None = None,
+    on_slots: Callable[[int], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> SweepOutcome:
+    """The paper's simulations: I1 and I2, the twelve policies, into ``out`` (a grid sweep
+    with one folder per instance; ``corraoi reproduce`` adds ``out/summary.md``)."""
+    grid = paper_grid(runs=runs, horizon=horizon, seed=seed)
+    return sweep(grid, out=out, force=force, workers=workers, on_slots=on_slots, warn=warn)
+
+
+def paper_grid(*, runs: int = 200, horizon: int = 10_000, seed: int = 0) -> Grid:
+    """The grid of the paper's simulations (I1 and I2, the twelve policies)."""
+    from .grid import build_grid
+
+    return build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
+                      runs=runs, seed=seed)  # fmt: skip
+
+
+#: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
+PAPER_INSTANCES = ("I1", "I2")
+
+
 # ---------------------------------------------------------------------------- one chunk
 
 

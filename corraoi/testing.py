@@ -25,20 +25,16 @@ def record_run(
     overwrite: bool = False,
 ) -> Path:
     """Simulate one run and record it to the slot log ``path`` (as ``corraoi record``)."""
-    from recorder.mcap_sink import McapSink
-
     from .block import RunConfig
-    from .engine import check_instance, simulate_run
+    from .engine import check_instance
+    from .experiments import record_run
     from .instance import load_instance
     from .policies import make_policy
 
     inst = load_instance(instance)
     check_instance(inst)
     config = RunConfig(inst, make_policy(policy), seed, horizon)
-    with McapSink(path, config, overwrite=overwrite, fsync=False) as sink:
-        for block in simulate_run(inst, config.policy, seed, horizon):
-            sink.write(block)
-    return sink.path
+    return record_run(config, path, overwrite=overwrite).mcap
 
 
 def _log(run: Any) -> Any:

@@ -281,7 +281,7 @@ def _record_all(
     plans: list[_Plan], viewer_url: str | None, force: bool
 ) -> tuple[list[_Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from ..engine import set_workers, simulate_run
+    from ..engine import set_workers
     from ..progress import Progress
 
     # One run has nothing to spread over threads, and idle numba workers compete with
@@ -294,7 +294,7 @@ def _record_all(
         for plan in plans:
             result = _Result(plan)
             results.append(result)
-            problem = _record_one(plan, result, viewer_url, force, stop, bar, simulate_run)
+            problem = _record_one(plan, result, viewer_url, force, stop, bar)
             viewer_problem = viewer_problem or problem
             if stop.signal:
                 return results, stop.signal, viewer_problem
@@ -308,7 +308,6 @@ def _record_one(
     force: bool,
     stop: _Stop,
     bar: Any,
-    simulate_run: Any,
 ) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
     from .. import kernels
@@ -317,8 +316,7 @@ def _record_one(
     start = time.perf_counter()
     compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
     try:
-        return _record_into(plan, result, viewer_url, force, stop, bar, simulate_run, start,
-                            compiled_before)  # fmt: skip
+        return _record_into(plan, result, viewer_url, force, stop, bar, start, compiled_before)
     except PolicyRuntimeError as exc:
         from recorder.paths import partial_path
 
@@ -334,70 +332,31 @@ def _record_into(
     force: bool,
     stop: _Stop,
     bar: Any,
-    simulate_run: Any,
     start: float,
     compiled_before: float,
 ) -> str | None:
-    from recorder.errors import ViewerError, WriteError
-    from recorder.mcap_sink import McapSink
+    from .. import kernels
+    from ..experiments import record_run
 
     config = plan.config
-    problem: str | None = None
-    rrd_error: WriteError | None = None
-    with McapSink(plan.mcap, config, overwrite=force) as mcap:
-        output = sink = None
-        if plan.rrd is not None or viewer_url is not None:
-            from recorder.rerun_sink import RerunSink, RrdOutput
 
-            output = RrdOutput(config, rrd_path=plan.rrd, viewer_url=viewer_url, overwrite=force)
-            sink = RerunSink(output.recording, config.label, config)
-        try:
-            for block in simulate_run(
-                config.instance, config.policy, config.seed, config.horizon,
-                channel=config.channel,
-            ):  # fmt: skip
-                mcap.write(block)
-                if sink is not None:
-                    sink.write(block)
-                result.slots = int(block.t[-1])
-                result.regret = int(block.regret[-1])
-                result.estimator = float(block.estimator[-1])
-                result.pulls = [int(v) for v in block.pulls[-1]]
-                bar.update(len(block), note=f"{config.label} slot {result.slots}")
-                if stop.signal:
-                    break
-        except BaseException as exc:
-            if output is not None:
-                if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-                    try:
-                        if sink is not None:
-                            sink.close()  # send the slots it still holds (up to a batch)
-                        output.close()
-                    except (ViewerError, WriteError):
-                        pass
-                else:
-                    output.abort(discard=result.slots == 0)
-            raise
-        if output is not None:
-            assert sink is not None
-            sink.close()
-            try:
-                result.rrd = output.close()
-            except ViewerError as exc:
-                result.rrd = output.path
-                problem = str(exc)
-            except WriteError as exc:  # the MCAP log is still finished properly
-                rrd_error = exc
-    result.mcap = mcap.path if mcap.finished else mcap.partial_path
-    from .. import kernels
+    def on_block(block: Any) -> None:
+        result.slots = int(block.t[-1])
+        result.regret = int(block.regret[-1])
+        result.estimator = float(block.estimator[-1])
+        result.pulls = [int(v) for v in block.pulls[-1]]
+        bar.update(len(block), note=f"{config.label} slot {result.slots}")
 
-    result.wall = time.perf_counter() - start
-    result.compile_s = kernels.compile_seconds - compiled_before
-    if rrd_error is not None:
-        if mcap.finished:
-            raise WriteError(f"{rrd_error} (the MCAP log {mcap.path} is complete)")
-        raise rrd_error
-    return problem
+    try:
+        outcome = record_run(
+            config, plan.mcap, rrd=plan.rrd, viewer_url=viewer_url, overwrite=force,
+            on_block=on_block, should_stop=lambda: stop.signal is not None,
+        )  # fmt: skip
+    finally:
+        result.wall = time.perf_counter() - start
+        result.compile_s = kernels.compile_seconds - compiled_before
+    result.mcap, result.rrd = outcome.mcap, outcome.rrd
+    return outcome.viewer_problem
 
 
 def _report(results: list[_Result], *, as_json: bool) -> None:

@@ -300,8 +300,6 @@ def _print_paired(summary: dict[str, Any]) -> None:
             )
 
 
-#: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
-PAPER_INSTANCES = ("I1", "I2")
 
 
 @click.command()
@@ -335,13 +333,12 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from ..grid import build_grid
+    from ..experiments import PAPER_INSTANCES, paper_grid
     from ..summary import summary_markdown
 
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")
-    grid = build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
-                      runs=runs, seed=seed)  # fmt: skip
+    grid = paper_grid(runs=runs, horizon=horizon, seed=seed)
     limits.check_sweep_memory(runs, 4, policies=1, checkpoints=grid.checkpoints)
     start = time.perf_counter()
     outcome = _run(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
