@@ -168,20 +168,7 @@ class McapSink(Sink):
             return self.path if self.finished else self.partial_path
         if self._torn:  # a write was cut off half-way: keep what is surely whole
             return self.abort() or self.partial_path
-        self.closed = True
-        try:
-            self._writer.flush()
-            self._writer.add_metadata(
-                END_METADATA,
-                end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last),
-            )
-            self._writer.finish()
-            self._file.flush()
-            if self._fsync:
-                os.fsync(self._file.fileno())
-        except OSError as exc:
-            self._close_file()
-            raise self._write_error(exc) from None
+        self._write_end(error=None)
         try:  # renamed while still open: the lock on it is held until it is in place
             publish(self.path, overwrite=self.overwrite)
         finally:
@@ -197,6 +184,13 @@ class McapSink(Sink):
             return self.partial_path
         if self._torn or self.slots == 0:
             return self.abort() or self.partial_path
+        self._write_end(error=error)
+        self._close_file()
+        return self.partial_path
+
+    def _write_end(self, *, error: str | None) -> None:
+        """The last chunk, the ``corraoi.end`` record (status failed with ``error``), the
+        summary and the footer, synced (the file stays open: its lock is held)."""
         self.closed = True
         try:
             self._writer.flush()
@@ -207,11 +201,11 @@ class McapSink(Sink):
             )  # fmt: skip
             self._writer.finish()
             self._file.flush()
-            self._file.close()
+            if self._fsync:
+                os.fsync(self._file.fileno())
         except OSError as exc:
             self._close_file()
             raise self._write_error(exc) from None
-        return self.partial_path
 
     def abort(self) -> Path | None:
         """Stop without finishing: the ``.partial`` file stays (readable up to its last

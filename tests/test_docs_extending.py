@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -42,8 +43,10 @@ def test_every_command_runs_as_shown(tmp_path: Path):
             if not command:
                 continue
             if command.startswith("pip install"):
-                # the same install, into a folder of the test's (not the test environment)
-                package = ROOT / command.split()[-1]
+                # the same install, into a folder of the test's (not the test environment),
+                # from a copy (a build leaves build/ and *.egg-info beside the sources)
+                package = tmp_path / "pkg"
+                shutil.copytree(ROOT / command.split()[-1], package)
                 command = f"{sys.executable} -m pip install -q --no-deps --target {site} {package}"
             res = subprocess.run(command, shell=True, cwd=tmp_path, env=env,
                                  capture_output=True, text=True, timeout=300)  # fmt: skip
