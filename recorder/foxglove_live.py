@@ -263,9 +263,9 @@ class FoxgloveSlotSink:
         self.server.published[self.topic] += done
         return done
 
-    @property
-    def stopped(self) -> bool:
-        return self._pacer.stop()
+    def stop_when(self, stop: Callable[[], bool]) -> None:
+        """A paced ``write`` returns early once ``stop()`` is true (Ctrl-C)."""
+        self._pacer.stop = stop
 
     def close(self) -> None:
         """Nothing is buffered here: the channels stay advertised until the server stops."""
@@ -311,14 +311,17 @@ def stream_log(
     pace: float | None = None,
     stop: Callable[[], bool] | None = None,
     on_block: Callable[[int], None] | None = None,
+    sink: FoxgloveSlotSink | None = None,
 ) -> int:
-    """Publish the slots ``start..`` of a recorded log (a :class:`recorder.reader.RunLog`);
-    returns the last slot sent (``start - 1`` if none)."""
+    """Publish the slots ``start..`` of a recorded log (a :class:`recorder.reader.RunLog`),
+    through ``sink`` if given (made beforehand for the log's config); returns the last slot
+    sent (``start - 1`` if none)."""
     if not 1 <= start <= log.n_slots:
         raise UsageError(
             f"--start {start}: {log.path} holds slots 1..{log.n_slots}, expected a slot there"
         )
-    sink = server.slot_sink(log.config, pace=pace, stop=stop)
+    if sink is None:
+        sink = server.slot_sink(log.config, pace=pace, stop=stop)
     last = start - 1
     for block in log.window(start, log.n_slots):
         done = sink.write(block)

@@ -173,6 +173,7 @@ class FoxgloveChoice:
             raise UsageError("--pace: only with --foxglove")
         self.pace, self.several = pace, several
         self.server: Any = None
+        self.sinks: dict[str, Any] = {}
         self.problem: str | None = None
         self.address: Any = None
         if address is not None:
@@ -181,9 +182,11 @@ class FoxgloveChoice:
             self.address = parse_address(address)  # a bad value: one line, exit 2
             require_foxglove()  # no extra: name it before anything runs
 
-    def start(self, *, tolerant: bool = False) -> Any:
-        """Start the server and say where it is; with ``tolerant`` a server that cannot
-        start is one error line (kept in :attr:`problem`) and None."""
+    def start(self, configs: list[Any], *, tolerant: bool = False) -> Any:
+        """Start the server with a channel per run of ``configs`` and say where it is; with
+        ``tolerant`` a server that cannot start is one error line (kept in :attr:`problem`)
+        and None. The channels exist before the URL is printed: the SDK (0.30) may refuse a
+        subscription to a channel added while the client was connecting."""
         if self.address is None:
             return None
         from recorder.foxglove_live import FoxgloveError, FoxgloveServer
@@ -196,15 +199,18 @@ class FoxgloveChoice:
             self.problem = str(exc)
             click.echo(f"corraoi: error: {exc}; writing the files only", err=True)
             return None
+        for config in configs:
+            label = config.label if self.several else None
+            self.sinks[config.label] = self.server.slot_sink(config, label=label, pace=self.pace)
         click.echo(self.server.hint(), err=True)
         return self.server
 
     def sink(self, config: Any, stop: Callable[[], bool]) -> Any:
         """A slot sink for one run (None without a server)."""
-        if self.server is None:
-            return None
-        label = config.label if self.several else None
-        return self.server.slot_sink(config, label=label, pace=self.pace, stop=stop)
+        sink = self.sinks.get(config.label) if self.server is not None else None
+        if sink is not None:
+            sink.stop_when(stop)
+        return sink
 
     def stop(self) -> None:
         server, self.server = self.server, None

@@ -244,7 +244,8 @@ def record(
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
     # A viewer that cannot be reached is one error line; the files are still written.
     viewer_url = viewer.start(tolerant=True)
-    live.start(tolerant=True)  # a port in use: one error line; the files are still written
+    # a port in use: one error line; the files are still written
+    live.start([p.config for p in plans], tolerant=True)
     viewer_failed = viewer.problem is not None or live.problem is not None
     try:
         results, stopped, viewer_problem = _record_all(plans, viewer_url, force, live=live)

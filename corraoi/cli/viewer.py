@@ -156,10 +156,11 @@ def _replay_foxglove(log: Path, address: str, *, pace: float | None, start: int,
     if not 1 <= start <= run.n_slots:
         raise UsageError(f"--start {start}: {log} holds slots 1..{run.n_slots}, "
                          "expected a slot there")  # fmt: skip
-    server = live.start()
+    server = live.start([run.config])
     try:
         with _progress(run.n_slots - start + 1, "replay") as bar:
-            last = stream_log(server, run, start=start, pace=pace, on_block=bar.update)
+            last = stream_log(server, run, start=start, on_block=bar.update,
+                              sink=live.sink(run.config, lambda: False))  # fmt: skip
     finally:
         live.stop()
     if as_json:
