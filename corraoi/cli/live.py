@@ -141,3 +141,81 @@ class ViewerChoice:
         web, self.web = self.web, None
         if web is not None:
             web.stop()  # the server's whole process group
+
+
+def foxglove_options(func: F) -> F:
+    """Add --foxglove [[HOST:]PORT] and --pace SLOTS_PER_S (recorder.foxglove_live)."""
+    func = click.option(
+        "--pace",
+        type=click.FloatRange(min=0, min_open=True),
+        default=None,
+        metavar="SLOTS_PER_S",
+        help="With --foxglove: at most this many slots per second, to watch [default: as "
+        "fast as it runs; a client that cannot keep up misses the oldest slots].",
+    )(func)
+    func = click.option(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        is_flag=False,
+        flag_value="127.0.0.1:8765",
+        default=None,
+        help="Serve the slots live over the Foxglove WebSocket protocol [default "
+        "127.0.0.1:8765; loopback unless a host is given]. Needs the foxglove extra.",
+    )(func)
+    return func
+
+
+class FoxgloveChoice:
+    """The Foxglove server a command streams to (--foxglove), if any."""
+
+    def __init__(self, address: str | None, *, pace: float | None, several: bool = False):
+        if pace is not None and address is None:
+            raise UsageError("--pace: only with --foxglove")
+        self.pace, self.several = pace, several
+        self.server: Any = None
+        self.sinks: dict[str, Any] = {}
+        self.problem: str | None = None
+        self.address: Any = None
+        if address is not None:
+            from recorder.foxglove_live import parse_address, require_foxglove
+
+            self.address = parse_address(address)  # a bad value: one line, exit 2
+            require_foxglove()  # no extra: name it before anything runs
+
+    def start(self, configs: list[Any], *, tolerant: bool = False) -> Any:
+        """Start the server with a channel per run of ``configs`` and say where it is; with
+        ``tolerant`` a server that cannot start is one error line (kept in :attr:`problem`)
+        and None. The channels exist before the URL is printed: the SDK (0.30) may refuse a
+        subscription to a channel added while the client was connecting."""
+        if self.address is None:
+            return None
+        from recorder.foxglove_live import FoxgloveError, FoxgloveServer
+
+        try:
+            self.server = FoxgloveServer(self.address)
+        except FoxgloveError as exc:
+            if not tolerant:
+                raise
+            self.problem = str(exc)
+            click.echo(f"corraoi: error: {exc}; writing the files only", err=True)
+            return None
+        for config in configs:
+            label = config.label if self.several else None
+            self.sinks[config.label] = self.server.slot_sink(config, label=label, pace=self.pace)
+        click.echo(self.server.hint(), err=True)
+        return self.server
+
+    def sink(self, config: Any, stop: Callable[[], bool]) -> Any:
+        """A slot sink for one run (None without a server)."""
+        sink = self.sinks.get(config.label) if self.server is not None else None
+        if sink is not None:
+            sink.stop_when(stop)
+        return sink
+
+    def stop(self) -> None:
+        server, self.server = self.server, None
+        if server is not None:
+            server.stop()
+            sent = ", ".join(f"{n} on {topic}" for topic, n in server.published.items())
+            click.echo(f"foxglove: stopped {server.url} after publishing {sent or 'nothing'}",
+                       err=True)  # fmt: skip

@@ -29,7 +29,7 @@ from .common import (
     policy_option,
     seed_option,
 )
-from .live import ViewerChoice, viewer_options
+from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
 DEFAULT_OUT = "runs/{label}.mcap"
 _PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}")
@@ -156,6 +156,7 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @click.option("--no-rrd", is_flag=True, help="Write no Rerun recording (the MCAP log only).")
 @click.option("--force", "-f", is_flag=True, help="Overwrite existing files.")
 @viewer_options
+@foxglove_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -175,6 +176,8 @@ def record(
     connect: str | None,
     serve_web: bool,
     web_port: int,
+    foxglove: str | None,
+    pace: float | None,
     as_json: bool,
 ) -> None:
     """Simulate runs and stream every slot to an MCAP log and a Rerun recording.
@@ -191,6 +194,7 @@ def record(
       corraoi record --policy cucb
       corraoi record -p ucb,cucb -T 100000 --seed 3
       corraoi record -p cts --connect          # into a viewer started with `rerun`
+      corraoi record -p cucb --foxglove --pace 200   # live in Foxglove
     """  # noqa: D301
     from ..block import RunConfig
     from ..channels import parse_channel
@@ -198,6 +202,7 @@ def record(
     from ..policies import make_policies, parse_param_assignments
 
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    live = FoxgloveChoice(foxglove, pace=pace)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
     inst = load_instance(instance)
@@ -206,11 +211,12 @@ def record(
     chan.check(inst, horizon)
     configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
     plans = _plans(configs, output, rrd, no_rrd)
+    live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from recorder.errors import OutputError
     from recorder.paths import check_output
 
-    fresh = [p for p in plans if _up_to_date(p)] if not force and not viewer.asked else []
+    fresh = [p for p in plans if _up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
     for p in fresh:
         click.echo(
@@ -238,12 +244,16 @@ def record(
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
     # A viewer that cannot be reached is one error line; the files are still written.
     viewer_url = viewer.start(tolerant=True)
-    viewer_failed = viewer.problem is not None
+    # a port in use: one error line; the files are still written
+    live.start([p.config for p in plans], tolerant=True)
+    viewer_failed = viewer.problem is not None or live.problem is not None
     try:
-        results, stopped, viewer_problem = _record_all(plans, viewer_url, force)
+        results, stopped, viewer_problem = _record_all(plans, viewer_url, force, live=live)
     except BaseException:
         viewer.stop()
         raise
+    finally:
+        live.stop()
     if viewer_problem:
         click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
@@ -278,7 +288,7 @@ def _up_to_date(plan: _Plan) -> bool:
 
 
 def _record_all(
-    plans: list[_Plan], viewer_url: str | None, force: bool
+    plans: list[_Plan], viewer_url: str | None, force: bool, *, live: Any = None
 ) -> tuple[list[_Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
     from ..engine import set_workers
@@ -294,7 +304,7 @@ def _record_all(
         for plan in plans:
             result = _Result(plan)
             results.append(result)
-            problem = _record_one(plan, result, viewer_url, force, stop, bar)
+            problem = _record_one(plan, result, viewer_url, force, stop, bar, live=live)
             viewer_problem = viewer_problem or problem
             if stop.signal:
                 return results, stop.signal, viewer_problem
@@ -308,6 +318,8 @@ def _record_one(
     force: bool,
     stop: _Stop,
     bar: Any,
+    *,
+    live: Any = None,
 ) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
     from .. import kernels
@@ -316,7 +328,8 @@ def _record_one(
     start = time.perf_counter()
     compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
     try:
-        return _record_into(plan, result, viewer_url, force, stop, bar, start, compiled_before)
+        return _record_into(plan, result, viewer_url, force, stop, bar, start, compiled_before,
+                            live=live)  # fmt: skip
     except PolicyRuntimeError as exc:
         from recorder.paths import partial_path
 
@@ -334,13 +347,19 @@ def _record_into(
     bar: Any,
     start: float,
     compiled_before: float,
+    *,
+    live: Any = None,
 ) -> str | None:
     from .. import kernels
     from ..experiments import record_run
 
     config = plan.config
 
+    fox = live.sink(config, lambda: stop.signal is not None) if live is not None else None
+
     def on_block(block: Any) -> None:
+        if fox is not None:
+            fox.write(block)  # with --pace, this is what slows the run
         result.slots = int(block.t[-1])
         result.regret = int(block.regret[-1])
         result.estimator = float(block.estimator[-1])

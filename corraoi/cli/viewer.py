@@ -18,7 +18,7 @@ import click
 from ..errors import UsageError
 from ..text import safe_text
 from .common import errors_exit, handle_errors, output_option, say, warn
-from .live import ViewerChoice, viewer_options
+from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -58,6 +58,9 @@ def _progress(total: int, label: str) -> Any:
                help="Rerun recording to write [default: RUN.rrd beside the log, unless a viewer "
                "option is given].")  # fmt: skip
 @viewer_options
+@foxglove_options
+@click.option("--start", type=click.IntRange(min=1), default=1, metavar="SLOT",
+              help="With --foxglove: the first slot to send [default: 1].")  # fmt: skip
 @click.option("--force", "-f", is_flag=True, help="Overwrite an existing .rrd.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @handle_errors
@@ -68,6 +71,9 @@ def replay(
     connect: str | None,
     serve_web: bool,
     web_port: int,
+    foxglove: str | None,
+    pace: float | None,
+    start: int,
     force: bool,
     as_json: bool,
 ) -> None:
@@ -82,6 +88,7 @@ def replay(
     Examples:
       corraoi replay runs/cucb-I1-s0.mcap -o replay.rrd
       corraoi replay runs/cucb-I1-s0.mcap --serve-web      # then open the printed URL
+      corraoi replay runs/cucb-I1-s0.mcap --foxglove --pace 100 --start 5000
     """
     from recorder.reader import open_log
     from viewer.replay import replay as do_replay
@@ -89,6 +96,14 @@ def replay(
 
     rrd = output
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    if foxglove is not None or pace is not None or start != 1:
+        if foxglove is None:
+            raise UsageError("--pace and --start: only with --foxglove")
+        if output is not None or viewer.asked:
+            raise UsageError("--foxglove: replays to Foxglove only; leave out -o and the "
+                             "Rerun viewer options")  # fmt: skip
+        _replay_foxglove(log, foxglove, pace=pace, start=start, as_json=as_json)
+        return
     # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
     # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
     run = require_slots(open_log(log, verify=viewer.asked), "replay")
@@ -127,6 +142,33 @@ def replay(
 
         click.echo(f"open in the Rerun viewer:  {safe_text(view_command([str(done.path)]))}")
     viewer.serve_until_stopped()
+
+
+def _replay_foxglove(log: Path, address: str, *, pace: float | None, start: int,
+                     as_json: bool) -> None:  # fmt: skip
+    """``replay --foxglove``: serve the log's slots from ``start`` on, then stop."""
+    from recorder.foxglove_live import stream_log
+    from recorder.reader import open_log
+    from viewer.runs import require_slots
+
+    live = FoxgloveChoice(address, pace=pace)
+    run = require_slots(open_log(log, verify=True), "replay")
+    if not 1 <= start <= run.n_slots:
+        raise UsageError(f"--start {start}: {log} holds slots 1..{run.n_slots}, "
+                         "expected a slot there")  # fmt: skip
+    server = live.start([run.config])
+    try:
+        with _progress(run.n_slots - start + 1, "replay") as bar:
+            last = stream_log(server, run, start=start, on_block=bar.update,
+                              sink=live.sink(run.config, lambda: False))  # fmt: skip
+    finally:
+        live.stop()
+    if as_json:
+        click.echo(json.dumps({"log": str(log), "label": run.label, "first": start,
+                               "last": last, "foxglove": server.url}, indent=2))  # fmt: skip
+        return
+    click.echo(f"replayed {safe_text(run.label)}: slots {start}..{last} of "
+               f"{run.config.horizon} to Foxglove at {server.url}")  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- compare

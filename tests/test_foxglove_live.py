@@ -1,0 +1,453 @@
+"""Live in Foxglove (recorder.foxglove_live, record/replay --foxglove): a real protocol client
+over `websockets` gets the MCAP log's messages, late and slow clients, and the ways a run ends.
+
+Everything listens on 127.0.0.1, and every server is stopped by the test that started it.
+The SDK (0.30) speaks the Foxglove WebSocket protocol under its current subprotocol name
+``foxglove.sdk.v1`` (it refuses the older ``foxglove.websocket.v1`` alone); the client offers both.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("foxglove")
+pytest.importorskip("websockets")
+
+from mcap.reader import make_reader  # noqa: E402
+from websockets.sync.client import connect  # noqa: E402
+
+from corraoi.block import SlotBlock  # noqa: E402
+from recorder.format import TOPIC, schema_bytes  # noqa: E402
+from recorder.foxglove_live import (  # noqa: E402
+    BACKLOG,
+    RUN_TOPIC,
+    SWEEP_TOPIC,
+    Address,
+    FoxgloveServer,
+    FoxgloveSweepSink,
+    Pacer,
+    missed,
+    parse_address,
+    stream_log,
+)
+from recorder.mcap_sink import McapSink  # noqa: E402
+from recorder.reader import open_log  # noqa: E402
+
+CORRAOI = [sys.executable, "-m", "corraoi"]
+pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) must be used:DeprecationWarning")
+LOOPBACK = Address("127.0.0.1", 0)
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+
+
+class Client:
+    """A Foxglove WebSocket client: collects advertisements, subscribes to ``topics``
+    when they are advertised, and records every message as (topic, log_time, payload)."""
+
+    def __init__(self, url: str, topics: tuple[str, ...] = (TOPIC,), *, read: bool = True):
+        kwargs: dict[str, Any] = {"max_queue": 1} if not read else {}
+        self.ws = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=10, **kwargs)
+        self.topics = topics
+        self.channels: dict[str, dict[str, Any]] = {}
+        self.by_sub: dict[int, str] = {}
+        self.messages: list[tuple[str, int, bytes]] = []
+        self.subscribed = threading.Event()
+        self._next = 1
+
+    def handle(self, frame: str | bytes) -> None:
+        if isinstance(frame, str):
+            msg = json.loads(frame)
+            if msg["op"] == "advertise":
+                subs = []
+                for ch in msg["channels"]:
+                    self.channels[ch["topic"]] = ch
+                    if ch["topic"] in self.topics and ch["topic"] not in self.by_sub.values():
+                        self.by_sub[self._next] = ch["topic"]
+                        subs.append({"id": self._next, "channelId": ch["id"]})
+                        self._next += 1
+                if subs:
+                    self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                if set(self.topics) <= set(self.by_sub.values()):
+                    self.subscribed.set()
+            return
+        if frame[0] == 1:  # message data: opcode, subscription id u32, log time u64, payload
+            sub, log_time = struct.unpack_from("<IQ", frame, 1)
+            self.messages.append((self.by_sub[sub], log_time, bytes(frame[13:])))
+
+    def pump(self, *, until: Any = None, timeout: float = 10.0, idle: float | None = None) -> None:
+        """Read frames until ``until()`` holds, the connection closes, ``idle`` seconds pass
+        without a frame, or ``timeout``."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not (until is not None and until()):
+            try:
+                frame = self.ws.recv(timeout=idle if idle is not None else 0.2)
+            except TimeoutError:
+                if idle is not None:
+                    return
+                continue
+            except Exception:  # the server went away
+                return
+            self.handle(frame)
+
+    def pump_in_background(self, until: Any, timeout: float = 30.0) -> threading.Thread:
+        """pump() on a thread (a client that reads while the server writes)."""
+        thread = threading.Thread(target=self.pump, kwargs={"until": until, "timeout": timeout})
+        thread.start()
+        return thread
+
+    def slots(self, topic: str = TOPIC) -> list[bytes]:
+        return [p for tp, _, p in self.messages if tp == topic]
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def _mcap_messages(path: Path) -> list[tuple[int, bytes]]:
+    with open(path, "rb") as f:
+        return [(m.log_time, m.data) for _, _, m in make_reader(f).iter_messages(topics=[TOPIC])]
+
+
+def _t(payload: bytes) -> int:
+    return int(json.loads(payload)["t"])
+
+
+def _wait(cond: Any, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < end, "timed out waiting"
+        time.sleep(0.01)
+
+
+def _rss_kib() -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    raise AssertionError("no VmRSS")
+
+
+# ------------------------------------------------------------------------ in process
+
+
+def test_a_client_gets_the_mcap_logs_messages_schema_and_run_record(tmp_path, make_config, engine):
+    config = make_config("cucb", horizon=3000)
+    with FoxgloveServer(LOOPBACK) as server:
+        sink = server.slot_sink(config)
+        client = Client(server.url, (TOPIC, RUN_TOPIC))
+        client.pump(until=client.subscribed.is_set)
+        _wait(sink._slots.has_sinks)
+        reader = client.pump_in_background(lambda: len(client.slots()) >= 3000)
+        with McapSink(tmp_path / "run.mcap", config, fsync=False) as mcap:
+            for block in engine(config):
+                mcap.write(block)
+                sink.write(block)
+                time.sleep(0.01)  # a client that keeps up: 100,000 slots/s at most
+        reader.join()
+        client.close()
+    file = _mcap_messages(tmp_path / "run.mcap")
+    live = [(lt, p) for tp, lt, p in client.messages if tp == TOPIC]
+    assert live == file  # the same bytes, the same log times (t seconds), in order
+    assert len(live) == 3000 and live[-1][0] == 3000 * 10**9
+    advert = client.channels[TOPIC]
+    assert advert["encoding"] == "json" and advert["schemaEncoding"] == "jsonschema"
+    assert advert["schemaName"] == "corraoi.SlotEvent"
+    assert advert["schema"].encode() == schema_bytes(config)
+    runs = [json.loads(p) for p in client.slots(RUN_TOPIC)]
+    assert runs and runs[0]["label"] == "cucb-I1-s0" and runs[0]["horizon"] == "3000"
+    assert json.loads(runs[0]["config"]) == config.to_dict()
+    assert server.published == {TOPIC: 3000}
+
+
+def test_a_replayed_log_streams_the_same_messages_from_its_start_slot(record_mcap):
+    path, config, _ = record_mcap("ucb", horizon=2500)
+    log = open_log(path)
+    with FoxgloveServer(LOOPBACK) as server:
+        box: dict[str, int] = {}
+
+        def replay() -> None:  # paced (1,301 slots in ~0.65 s): the client joins meanwhile
+            box["last"] = stream_log(server, log, start=1200, pace=2000.0)
+
+        thread = threading.Thread(target=replay)
+        thread.start()
+        _wait(lambda: TOPIC in server.published)
+        client = Client(server.url)
+        client.pump(until=lambda: not thread.is_alive(), timeout=30)
+        client.pump(idle=0.3)
+        thread.join()
+        client.close()
+    assert box["last"] == 2500
+    file = [p for lt, p in _mcap_messages(path) if lt >= 1200 * 10**9]
+    got = client.slots()
+    # the client subscribed while the stream ran: it has a suffix of the file, in order
+    assert len(got) > 300 and got == file[len(file) - len(got) :]
+
+
+def test_a_late_client_gets_the_advertisement_and_the_messages_from_then_on(make_config, engine):
+    config = make_config("cts", horizon=5000)
+    blocks = engine(config)
+    with FoxgloveServer(LOOPBACK) as server:
+        sink = server.slot_sink(config)
+        for block in blocks[:2]:  # slots 1..2000: nobody is there
+            sink.write(block)
+        client = Client(server.url, (TOPIC, RUN_TOPIC))
+        client.pump(until=client.subscribed.is_set)
+        _wait(sink._slots.has_sinks)
+        reader = client.pump_in_background(lambda: len(client.slots()) >= 3000)
+        for block in blocks[2:]:
+            sink.write(block)
+            time.sleep(0.01)
+        reader.join()
+        client.close()
+    assert client.channels[TOPIC]["schema"].encode() == schema_bytes(config)
+    ts = [_t(p) for p in client.slots()]
+    assert ts == list(range(2001, 5001))  # from then on, every one, in order
+    assert len(client.slots(RUN_TOPIC)) >= 1  # the run record comes again with each block
+
+
+def test_a_stalled_client_neither_stalls_the_run_nor_grows_memory(make_config, engine):
+    config = make_config("cucb", horizon=1000)
+    block = engine(config)[0]
+    n_blocks = 300  # 300,000 messages, about 100 MB if they were all kept for the client
+    with FoxgloveServer(LOOPBACK) as server:
+        sink = server.slot_sink(config)
+        client = Client(server.url, read=False)
+        client.pump(until=client.subscribed.is_set)
+        _wait(sink._slots.has_sinks)
+        before = _rss_kib()
+        total_bytes = 0
+        for i in range(n_blocks):  # the client reads nothing meanwhile
+            shifted = _shift(block, i * 1000)
+            total_bytes += sink.write(shifted) * 330
+        grown = _rss_kib() - before
+        client.pump(idle=1.0, timeout=30)  # now read what reached it
+        client.close()
+    assert sink.sent == n_blocks * 1000  # the run published everything, never waiting
+    assert grown * 1024 < 40 * 2**20, f"grew {grown} KiB for ~{total_bytes >> 20} MiB sent"
+    ts = [_t(p) for p in client.slots()]
+    assert ts == sorted(ts) and len(set(ts)) == len(ts)
+    # what it got: at most the SDK's backlog plus what the sockets held; the rest it missed,
+    # and the gaps in t count them
+    assert len(ts) < n_blocks * 1000 // 4
+    assert missed(ts) > 0 and ts[-1] == n_blocks * 1000  # the newest survive
+    assert BACKLOG <= n_blocks * 1000
+
+
+def _shift(block: SlotBlock, by: int) -> SlotBlock:
+    fields = {f: getattr(block, f) for f in block.__dataclass_fields__}
+    fields["t"] = block.t + by
+    return SlotBlock(**fields)
+
+
+def test_several_runs_get_one_topic_each(make_config, engine):
+    configs = [make_config(p, horizon=1000) for p in ("ucb", "cucb")]
+    with FoxgloveServer(LOOPBACK) as server:
+        sinks = [server.slot_sink(c, label=c.label) for c in configs]
+        topics = (f"{TOPIC}/ucb-I1-s0", f"{TOPIC}/cucb-I1-s0")
+        client = Client(server.url, topics)
+        client.pump(until=client.subscribed.is_set)
+        _wait(lambda: all(s._slots.has_sinks() for s in sinks))
+        for c, s in zip(configs, sinks, strict=True):
+            s.write(engine(c)[0])
+            client.pump(until=lambda s=s: len(client.slots(s.topic)) >= 1000)
+        client.pump(until=lambda: all(len(client.slots(tp)) >= 1000 for tp in topics))
+        client.close()
+    assert set(client.channels) >= {*topics, f"{RUN_TOPIC}/ucb-I1-s0", f"{RUN_TOPIC}/cucb-I1-s0"}
+    assert TOPIC not in client.channels
+    for c, tp in zip(configs, topics, strict=True):
+        assert json.loads(client.slots(tp)[0])["t"] == 1
+        assert client.channels[tp]["schema"].encode() == schema_bytes(c)
+    a, b = client.slots(topics[0]), client.slots(topics[1])
+    assert a != b  # two policies: different messages on the two topics
+
+
+def test_the_sweep_sink_sends_each_point_on_corraoi_sweep():
+    points = [{"t": 1000, "policy": "ucb", "regret": 12.5}, {"t": 2000, "policy": "ucb",
+                                                            "regret": 20.0}]  # fmt: skip
+    with FoxgloveServer(LOOPBACK) as server:
+        sink = FoxgloveSweepSink(server)
+        client = Client(server.url, (SWEEP_TOPIC,))
+        client.pump(until=client.subscribed.is_set)
+        _wait(sink._channel.has_sinks)
+        for p in points:
+            sink.write(p)
+        client.pump(until=lambda: len(client.slots(SWEEP_TOPIC)) >= 2)
+        sink.close()
+        client.close()
+    got = [(lt, json.loads(p)) for tp, lt, p in client.messages if tp == SWEEP_TOPIC]
+    assert got == [(1000 * 10**9, points[0]), (2000 * 10**9, points[1])]
+    assert server.published == {SWEEP_TOPIC: 2}
+
+
+def test_pace_holds_the_rate_on_a_clock(monkeypatch):
+    clock = {"now": 100.0}
+    monkeypatch.setattr(time, "monotonic", lambda: clock["now"])
+    monkeypatch.setattr(time, "sleep", lambda s: clock.__setitem__("now", clock["now"] + s))
+    pacer = Pacer(50.0)
+    for n in range(1, 201):
+        assert pacer.wait(n)
+    assert clock["now"] == pytest.approx(100.0 + 200 / 50, abs=1e-9)
+    stopped = Pacer(1.0, stop=lambda: True)
+    assert stopped.wait(1) is False
+    free = Pacer(None)
+    before = clock["now"]
+    assert free.wait(10**6) and clock["now"] == before
+
+
+def test_addresses_and_missed():
+    assert parse_address("8765") == Address("127.0.0.1", 8765)
+    assert parse_address("0.0.0.0:9000") == Address("0.0.0.0", 9000)
+    assert parse_address("[::1]:9000") == Address("::1", 9000)
+    for bad in ("abc", "host:", "70000", "-1"):
+        with pytest.raises(Exception, match="not \\[HOST:\\]PORT"):
+            parse_address(bad)
+    assert missed([1, 2, 3]) == 0 and missed([1, 4, 5, 9]) == 5 and missed([]) == 0
+
+
+# ------------------------------------------------------------------------ the CLI
+
+
+def _busy_port() -> tuple[socket.socket, int]:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    return s, s.getsockname()[1]
+
+
+def _start(args: list[str], cwd: Path) -> tuple[subprocess.Popen[str], str]:
+    """Start `corraoi ...` and return it with the URL its server printed."""
+    proc = subprocess.Popen(
+        [*CORRAOI, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "RUST_LOG": "off"},
+    )  # fmt: skip
+    assert proc.stderr is not None
+    for _ in range(50):
+        line = proc.stderr.readline()
+        if line.startswith("foxglove: serving "):
+            url = line.split()[2]
+            assert url.startswith("ws://127.0.0.1:")
+            assert "Open connection -> Foxglove WebSocket -> " + url in line
+            return proc, url
+        if not line:
+            break
+    proc.kill()
+    raise AssertionError(f"no server line: {proc.communicate()}")
+
+
+def _no_traceback(err: str) -> None:
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+
+
+def test_record_streams_the_logs_messages_to_a_client_in_order(tmp_path):
+    proc, url = _start(["record", "-p", "cucb", "-T", "4000", "--no-rrd", "-o", "a.mcap",
+                        "--foxglove", "127.0.0.1:0", "--pace", "4000"], tmp_path)  # fmt: skip
+    client = Client(url)
+    client.pump(until=lambda: proc.poll() is not None, timeout=60)
+    client.pump(idle=0.5)
+    client.close()
+    out, err = proc.communicate(timeout=30)
+    _no_traceback(err)
+    assert proc.returncode == 0, err
+    assert "foxglove: stopped" in err and "after publishing 4000 on /corraoi/slot" in err
+    file = [p for _, p in _mcap_messages(tmp_path / "a.mcap")]
+    got = client.slots()
+    assert len(got) > 100  # paced at 4,000 slots/s: a client that connects in time
+    start = _t(got[0]) - 1
+    assert got == file[start : start + len(got)]  # the log's bytes, consecutive, in order
+    assert _t(got[-1]) == 4000
+
+
+def test_record_with_the_port_in_use_says_so_and_still_writes_the_log(tmp_path):
+    holder, port = _busy_port()
+    try:
+        proc = subprocess.run(
+            [*CORRAOI, "record", "-p", "cucb", "-T", "2000", "--no-rrd", "-o", "a.mcap",
+             "--foxglove", str(port)],
+            cwd=tmp_path, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    finally:
+        holder.close()
+    _no_traceback(proc.stderr)
+    assert proc.returncode == 1
+    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("corraoi: error:")]
+    assert errors == [
+        f"corraoi: error: --foxglove 127.0.0.1:{port}: cannot start the server: port {port} "
+        "is in use (another server?); pick another with --foxglove PORT; writing the files only"
+    ]
+    log = open_log(tmp_path / "a.mcap")
+    assert log.status == "complete" and log.n_slots == 2000
+
+
+def test_ctrl_c_mid_stream_finishes_the_log_and_exits_130(tmp_path):
+    proc, url = _start(["record", "-p", "cucb", "-T", "200000", "--no-rrd", "-o", "a.mcap",
+                        "--foxglove", "127.0.0.1:0", "--pace", "2000"], tmp_path)  # fmt: skip
+    client = Client(url)
+    client.pump(until=lambda: len(client.slots()) >= 200, timeout=60)
+    proc.send_signal(signal.SIGINT)
+    client.pump(until=lambda: proc.poll() is not None, timeout=30)
+    client.close()
+    out, err = proc.communicate(timeout=30)
+    _no_traceback(err)
+    assert proc.returncode == 130, err
+    assert "corraoi: interrupted (SIGINT) after slot" in err
+    assert "foxglove: stopped" in err
+    log = open_log(tmp_path / "a.mcap")
+    assert log.status == "interrupted" and 200 <= log.n_slots < 200000
+    file = [p for _, p in _mcap_messages(tmp_path / "a.mcap")]
+    got = client.slots()
+    start = _t(got[0]) - 1
+    assert got == file[start : start + len(got)]
+
+
+def test_a_client_leaving_mid_stream_does_not_disturb_the_run(tmp_path):
+    proc, url = _start(["record", "-p", "ucb", "-T", "6000", "--no-rrd", "-o", "a.mcap",
+                        "--foxglove", "127.0.0.1:0", "--pace", "6000"], tmp_path)  # fmt: skip
+    client = Client(url)
+    client.pump(until=lambda: len(client.slots()) >= 50, timeout=60)
+    client.close()  # gone mid-stream
+    out, err = proc.communicate(timeout=60)
+    _no_traceback(err)
+    assert proc.returncode == 0, err
+    assert "after publishing 6000 on /corraoi/slot" in err
+    log = open_log(tmp_path / "a.mcap")
+    assert log.status == "complete" and log.n_slots == 6000
+
+
+def test_replay_to_foxglove_and_its_bad_options(tmp_path, record_mcap):
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+
+    path, _, _ = record_mcap("cucb", horizon=1500)
+    runner = CliRunner()
+    done = runner.invoke(main, ["replay", str(path), "--foxglove", "127.0.0.1:0", "--start",
+                                "1001", "--json"])  # fmt: skip
+    assert done.exit_code == 0, done.output
+    data = json.loads(done.stdout)
+    assert (data["first"], data["last"]) == (1001, 1500)
+    bad = runner.invoke(main, ["replay", str(path), "--foxglove", "0", "--start", "1501"])
+    assert bad.exit_code == 2 and "--start 1501:" in bad.output and "1..1500" in bad.output
+    alone = runner.invoke(main, ["replay", str(path), "--pace", "10"])
+    assert alone.exit_code == 2 and "only with --foxglove" in alone.output
+
+
+def test_without_the_sdk_foxglove_names_the_extra(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+
+    monkeypatch.setitem(sys.modules, "foxglove", None)  # import foxglove -> ImportError
+    done = CliRunner().invoke(main, ["record", "-T", "100", "--no-rrd", "--foxglove"])
+    assert done.exit_code == 1
+    assert 'pip install "corraoi[foxglove]"' in done.output
+    assert not (tmp_path / "runs").exists() and not Path("runs").exists()
