@@ -128,10 +128,14 @@ def run_on_cluster(
 ) -> None:
     """Submit every chunk, and hand each result to ``on_done`` as it arrives (any order)."""
     dd = _dask()
+    import uuid
+
     from .experiments import run_chunk
 
+    token = uuid.uuid4().hex[:8]  # a sweep's own keys: a client may run the same grid twice
     futures = [
-        client.submit(run_chunk, task, key=f"corraoi-{chunk.name}", retries=RETRIES, pure=False)
+        client.submit(run_chunk, task, key=f"corraoi-{chunk.name}-{token}", retries=RETRIES,
+                      pure=False)  # fmt: skip
         for chunk, task in tasks
     ]
     try:
@@ -154,4 +158,5 @@ def run_on_cluster(
             on_done(result)
     finally:
         for f in futures:
-            f.cancel()
+            if not f.done():
+                f.cancel()
