@@ -38,8 +38,8 @@ def draw_state(cdf_rows, kind, trace, lst, xprev, t):
 
     ``kind`` CHANNEL_CDF: row 0 of ``cdf_rows`` is the law of X_1 (and of every X_t for an
     i.i.d. channel, which has that row only); rows 1..n are the transition rows, so X_t is
-    drawn from row X_{t-1} + 1. One uniform per slot, inverted by bisection (the same state
-    as a linear scan of the CDF, in log n steps). CHANNEL_TRACE: X_t = trace[t - 1].
+    drawn from row X_{t-1} + 1. One uniform per slot, inverted by a scan of the CDF (n <= 8)
+    or by bisection (the same state in log n steps). CHANNEL_TRACE: X_t = trace[t - 1].
     """
     if kind == CHANNEL_TRACE:
         return trace[t - 1]
@@ -47,8 +47,14 @@ def draw_state(cdf_rows, kind, trace, lst, xprev, t):
     if cdf_rows.shape[0] > 1 and xprev >= 0:
         row = xprev + 1
     u = uniform(lst)
+    n = cdf_rows.shape[1]
+    if n <= 8:  # a short scan beats bisection's unpredictable branches
+        for i in range(n - 1):
+            if u < cdf_rows[row, i]:
+                return i
+        return n - 1
     lo = 0
-    hi = cdf_rows.shape[1] - 1
+    hi = n - 1
     while lo < hi:
         mid = (lo + hi) >> 1
         if u < cdf_rows[row, mid]:
