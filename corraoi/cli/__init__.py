@@ -39,6 +39,8 @@ def main() -> None:
       corraoi diff A.mcap B.mcap        where two recorded runs diverge (exit 0/1/2)
       corraoi sweep --policy all        every policy over 200 paired runs, regret with 95% CI
       corraoi reproduce -o paper        the paper's simulations, figures and tables
+      corraoi policies                  every policy (and your plug-ins) with its parameters
+      corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
     """
     from .. import kernels
 
