@@ -158,27 +158,38 @@ class Simulation:
 
     def _warm_up(self) -> None:
         """Compile (or load from the cache) the kernel now, with a call of zero slots, so that
-        timings of the simulation leave it out; the time goes to ``kernels.load_seconds``."""
+        timings of the simulation leave it out (``kernels.compile_seconds``)."""
         from . import kernels
 
         if self._kernel.signatures:
             return
         start = time.perf_counter()
         R, K = self.pulls.shape
-        out = _Outputs(R, 0, K)
-        empty = np.empty(0, dtype=np.int64)
+        self._call_kernel(0, False, _Outputs(R, 0, K), np.empty(0, dtype=np.int64),
+                          np.empty((R, 0), dtype=np.int64), np.empty((R, 0), dtype=np.int64),
+                          np.empty((R, 0, K), dtype=np.int64))  # fmt: skip
+        kernels.note_warm_up(self._kernel, time.perf_counter() - start)
+
+    def _call_kernel(
+        self,
+        nslots: int,
+        record: bool,
+        out: _Outputs,
+        snap_t: np.ndarray,
+        s_regret: np.ndarray,
+        s_aoisum: np.ndarray,
+        s_pulls: np.ndarray,
+    ) -> None:
         self._kernel(
             self._cdf_rows, self._kind, self._trace, self._Y, *self._fail, self._pclass,
             self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
-            self.t, 0,
+            self.t, nslots,
             self.lat, self.pol, self.ncache, self.pstate, self.xprev,
             self.pulls, self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
-            False, out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
+            record, out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
             out.cand, out.pulls, out.muhat,
-            empty, np.empty((R, 0), dtype=np.int64), np.empty((R, 0), dtype=np.int64),
-            np.empty((R, 0, K), dtype=np.int64),
+            snap_t, s_regret, s_aoisum, s_pulls,
         )  # fmt: skip
-        kernels.note_warm_up(self._kernel, time.perf_counter() - start)
 
     @property
     def runs(self) -> int:
@@ -222,16 +233,7 @@ class Simulation:
         aoisum_before = self.aoisum.copy() if record else None
         failure: PolicyRuntimeError | None = None
         if self._py is None:
-            self._kernel(
-                self._cdf_rows, self._kind, self._trace, self._Y, *self._fail, self._pclass,
-                self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
-                self.t, nslots,
-                self.lat, self.pol, self.ncache, self.pstate, self.xprev,
-                self.pulls, self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
-                record, out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
-                out.cand, out.pulls, out.muhat,
-                snap_t, s_regret, s_aoisum, s_pulls,
-            )  # fmt: skip
+            self._call_kernel(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
         else:
             done, failure = self._advance_python(
                 nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls

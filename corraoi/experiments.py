@@ -25,7 +25,7 @@ import os
 import re
 import shutil
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -429,20 +429,13 @@ class CellRuns:
             wall_s=float(sum(p.wall_s for p in parts)),
         )  # fmt: skip
 
-    def points(self) -> Iterator[Any]:
+    def points(self) -> list[Any]:
         """The sweep log's points: mean and 95% CI over runs at each checkpoint."""
-        from .sweep import SweepPoint, mean_ci95
+        from .sweep import sweep_points
 
         n = self.regret.shape[0]
-        m, h = mean_ci95(self.regret)
-        em, eh = mean_ci95(self.estimator)
-        for i, t in enumerate(self.t):
-            yield SweepPoint(
-                policy=self.label, t=int(t), regret_mean=float(m[i]),
-                regret_ci95=_finite(float(h[i])), estimator_mean=float(em[i]),
-                estimator_ci95=_finite(float(eh[i])),
-                pull_share=self.pulls_sum[i] / (n * float(t)),
-            )  # fmt: skip
+        share = self.pulls_sum / (n * self.t.astype(np.float64))[:, None]
+        return sweep_points(self.label, self.t, self.regret, self.estimator, share)
 
     def result(self, best_arm: int) -> Any:
         from .sweep import PolicyResult
@@ -454,10 +447,6 @@ class CellRuns:
             best_pulls=self.best_pulls[:, -1], pulls_mean=self.pulls_sum[-1] / n,
             horizon=int(self.t[-1]),
         )  # fmt: skip
-
-
-def _finite(v: float) -> float | None:
-    return v if np.isfinite(v) else None
 
 
 def group_summary(
@@ -661,20 +650,16 @@ def _clear(folder: Path, old: Grid | None) -> None:
                 f"{f}: is being written by {who} right now; not touched (wait for it, stop it, "
                 "or give another output folder)"
             )
-    targets = [folder / PARTS, folder / "results.parquet", folder / MANIFEST]
-    if old is not None:
-        targets += list(group_dirs(old, folder).values())
-    for name in GROUP_FILES:
-        targets += [folder / name, folder / f"{name}.partial"]
-    targets.append(folder / "results.parquet.partial")
+    targets = [folder / PARTS, folder / "results.parquet", folder / "results.parquet.partial",
+               folder / MANIFEST]  # fmt: skip
+    targets += [folder / f for name in GROUP_FILES for f in (name, f"{name}.partial")]
+    if old is not None:  # the group folders of a grid of several groups
+        targets += [d for d in group_dirs(old, folder).values() if d != folder]
     for t in targets:
-        if t == folder:
-            for name in GROUP_FILES:
-                (folder / name).unlink(missing_ok=True)
-        elif t.is_dir():
+        if t.is_dir():
             shutil.rmtree(t)
-        elif t.exists():
-            t.unlink()
+        else:
+            t.unlink(missing_ok=True)
 
 
 def _write_results(
@@ -721,8 +706,8 @@ def _write_group(
             for point in c.points():
                 log.write(point)
                 rec.write(point)
-    _write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
-    _write_text(folder / "summary.md", summary_markdown(summary))
+    write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    write_text(folder / "summary.md", summary_markdown(summary))
     from recorder.sweep_log import read_sweep
     from viewer.figure import FigureUnavailable, draw_figure
 
@@ -733,7 +718,8 @@ def _write_group(
             warn(f"{folder / 'figure.png'} not written: {exc}")
 
 
-def _write_text(path: Path, text: str) -> None:
+def write_text(path: Path, text: str) -> None:
+    """Write ``path`` atomically: ``.partial`` first, renamed when complete."""
     tmp = path.with_name(path.name + ".partial")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)

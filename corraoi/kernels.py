@@ -43,10 +43,9 @@ _HOOK_LINES = (
     "from corraoi.policies.hooks import score_none as _score  # HOOKS",
     "from corraoi.policies.hooks import update_none as _update  # HOOKS",
 )
-#: Seconds this process spent compiling kernels, and loading them from the cache (speed
-#: figures such as record's slots/s leave the compilation out).
+#: Seconds this process spent compiling kernels (speed figures such as record's slots/s
+#: leave them out).
 compile_seconds = 0.0
-load_seconds = 0.0
 _COMPILING: set[str] = set()
 _LOADED: dict[str, Any] = {}
 _LOCK = threading.Lock()
@@ -185,11 +184,9 @@ def kernel_for(policy: type[CompiledPolicy]) -> Any:
 
 
 def note_warm_up(kernel: Any, seconds: float) -> None:
-    """Account a kernel's first call: compiling (a fresh cache) or loading from the cache."""
-    global compile_seconds, load_seconds
+    """Account a kernel's first call when it compiled (not when it loaded from the cache)."""
+    global compile_seconds
     name = getattr(getattr(kernel, "py_func", None), "__module__", "")
     if name in _COMPILING:
         _COMPILING.discard(name)
         compile_seconds += seconds
-    else:
-        load_seconds += seconds

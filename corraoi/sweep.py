@@ -126,19 +126,29 @@ class SweepPoint:
         }
 
 
+def sweep_points(
+    name: str, t: np.ndarray, regret: np.ndarray, estimator: np.ndarray, pull_share: np.ndarray
+) -> list[SweepPoint]:
+    """The :class:`SweepPoint` of each checkpoint ``t[i]`` from the runs' values there
+    (``regret``, ``estimator``: runs x checkpoints) and the mean shares ((checkpoints, K))."""
+    m, h = mean_ci95(regret)
+    em, eh = mean_ci95(estimator)
+    return [
+        SweepPoint(
+            policy=name, t=int(ts), regret_mean=float(m[i]), regret_ci95=_finite(float(h[i])),
+            estimator_mean=float(em[i]), estimator_ci95=_finite(float(eh[i])),
+            pull_share=pull_share[i],
+        )  # fmt: skip
+        for i, ts in enumerate(t)
+    ]
+
+
 def checkpoint_point(policy: PolicySpec, snap: Snapshot) -> SweepPoint:
     """The :class:`SweepPoint` of the runs' state at a checkpoint."""
-    m, h = mean_ci95(snap.regret)
-    em, eh = mean_ci95(snap.estimator)
-    return SweepPoint(
-        policy=policy.name,
-        t=snap.t,
-        regret_mean=float(m),
-        regret_ci95=_finite(float(h)),
-        estimator_mean=float(em),
-        estimator_ci95=_finite(float(eh)),
-        pull_share=(snap.pulls / snap.t).mean(axis=0),
-    )
+    share = (snap.pulls / snap.t).mean(axis=0)[None]
+    points = sweep_points(policy.name, np.array([snap.t]), snap.regret[:, None],
+                          snap.estimator[:, None], share)  # fmt: skip
+    return points[0]
 
 
 def default_checkpoints(horizon: int, points: int = 200) -> list[int]:

@@ -7,7 +7,6 @@ recorder and viewer are imported by the library only with ``-o``; Dask only with
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -35,12 +34,6 @@ from .common import (
 #: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments).
 SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
                "summary.md", "figure.png")  # fmt: skip
-
-
-def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 @click.command()
@@ -333,7 +326,7 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from ..experiments import PAPER_INSTANCES, paper_grid
+    from ..experiments import PAPER_INSTANCES, paper_grid, write_text
     from ..summary import summary_markdown
 
     out = output
@@ -357,7 +350,7 @@ def reproduce(
         + ", ".join(f"`{n}/figure.png`" for n in PAPER_INSTANCES)
         + ".\n\n"
     )
-    _write_text(
+    write_text(
         out / "summary.md",
         head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
     )
