@@ -97,6 +97,13 @@ def _bitsets(spol: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return out[0], out[1], out[2]
 
 
+def pseudo_reward_classes(instance: Instance) -> np.ndarray:
+    """(K, K) int8: what phi_hat_{k,l} is for each pair, by the 0/1 pseudo-rewards (0: 0,
+    1: l's failure rate, 2: l's success rate, 3: 1), as the candidate set tests it."""
+    spol = policy_pseudo_rewards(instance)
+    return np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
+
+
 class Simulation:
     """The state of R runs of one policy on one instance, advanced by :meth:`advance`.
 
@@ -145,10 +152,8 @@ class Simulation:
             self._params = policy.param_vector(self.cls)
             S = int(self.cls.state_size(K, policy.params))
             self.pstate = np.zeros((R, max(S, 1)))
-            spol = np.ascontiguousarray(policy_pseudo_rewards(instance))
-            self._fail = _bitsets(spol)
-            # phi_{k,l}'s kind (0: 0, 1: l's failure rate, 2: l's success rate, 3: 1)
-            self._pclass = np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
+            self._fail = _bitsets(np.ascontiguousarray(policy_pseudo_rewards(instance)))
+            self._pclass = pseudo_reward_classes(instance)
             self._py: Any = None
             self._warm_up()
         else:

@@ -36,6 +36,7 @@ from ._version import __version__
 from .errors import ConfigError
 from .grid import Cell, Chunk, Grid
 from .instance import Instance
+from .stats import Moments
 
 MANIFEST = "manifest.json"
 PARTS = "parts"
@@ -46,8 +47,66 @@ GROUP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.
 
 
 @dataclass
+class DeviceAggregates:
+    """What a device returns for a chunk instead of every run's checkpoints (the GPU backend):
+    moments over the runs at every checkpoint ``t``, and those of the run-by-run regret
+    difference against ``baseline`` (computed on the device)."""
+
+    t: np.ndarray  # (S,) every checkpoint slot
+    regret: Moments
+    estimator: Moments
+    pulls_sum: np.ndarray  # (S, K) int64
+    paired: Moments | None = None
+    baseline: str | None = None
+
+    def merge(self, other: DeviceAggregates) -> DeviceAggregates:
+        paired = None
+        if self.paired is not None and other.paired is not None and (
+            self.baseline == other.baseline
+        ):
+            paired = self.paired.merge(other.paired)
+        return DeviceAggregates(self.t, self.regret.merge(other.regret),
+                                self.estimator.merge(other.estimator),
+                                self.pulls_sum + other.pulls_sum, paired,
+                                self.baseline if paired is not None else None)  # fmt: skip
+
+    def arrays(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"agg_t": self.t, "agg_n": self.regret.n}
+        for name, m in (("regret", self.regret), ("estimator", self.estimator),
+                        ("paired", self.paired)):  # fmt: skip
+            if m is not None:
+                out[f"agg_{name}_mean"] = m.mean
+                out[f"agg_{name}_m2"] = m.m2
+        out["agg_pulls_sum"] = self.pulls_sum
+        if self.baseline is not None:
+            out["agg_baseline"] = np.array(self.baseline)
+        return out
+
+    @classmethod
+    def from_arrays(cls, z: Any) -> DeviceAggregates | None:
+        if "agg_t" not in z:
+            return None
+        n = int(z["agg_n"])
+
+        def moments(name: str) -> Moments | None:
+            if f"agg_{name}_mean" not in z:
+                return None
+            return Moments(n, z[f"agg_{name}_mean"], z[f"agg_{name}_m2"])
+
+        regret, estimator = moments("regret"), moments("estimator")
+        if regret is None or estimator is None:
+            raise KeyError("agg_regret_mean")
+        return cls(z["agg_t"], regret, estimator, z["agg_pulls_sum"], moments("paired"),
+                   str(z["agg_baseline"]) if "agg_baseline" in z else None)  # fmt: skip
+
+
+@dataclass
 class ChunkResult:
-    """The per-run values of one chunk at every checkpoint (what a part file holds)."""
+    """The per-run values of one chunk at every checkpoint (what a part file holds).
+
+    A chunk run on a device (``agg`` set) holds every run's values at the horizon only
+    (``t`` = [T]) and the aggregates over its runs at every checkpoint.
+    """
 
     chunk: Chunk
     t: np.ndarray  # (S,) checkpoint slots
@@ -56,15 +115,18 @@ class ChunkResult:
     best_pulls: np.ndarray  # (n, S) int64 pulls of the best arm
     pulls_sum: np.ndarray  # (S, K) int64 pulls per arm summed over the chunk's runs
     wall_s: float
+    agg: DeviceAggregates | None = None
 
     def save(self, path: Path) -> None:
         """Write atomically (``.partial`` then rename): a part exists only when complete."""
         tmp = path.with_name(path.name + ".partial")
+        extra = self.agg.arrays() if self.agg is not None else {}
         with open(tmp, "wb") as f:
             np.savez(
                 f, cell=np.array(self.chunk.cell), start=self.chunk.start, stop=self.chunk.stop,
                 t=self.t, regret=self.regret, estimator=self.estimator,
                 best_pulls=self.best_pulls, pulls_sum=self.pulls_sum, wall_s=self.wall_s,
+                **extra,
             )  # fmt: skip
             f.flush()
             os.fsync(f.fileno())
@@ -78,12 +140,22 @@ class ChunkResult:
                     chunk=Chunk(str(z["cell"]), int(z["start"]), int(z["stop"])),
                     t=z["t"], regret=z["regret"], estimator=z["estimator"],
                     best_pulls=z["best_pulls"], pulls_sum=z["pulls_sum"],
-                    wall_s=float(z["wall_s"]),
+                    wall_s=float(z["wall_s"]), agg=DeviceAggregates.from_arrays(z),
                 )  # fmt: skip
         except (OSError, ValueError, KeyError) as exc:
             raise ConfigError(
                 f"{path}: a damaged part file ({exc}); delete it and --resume"
             ) from None
+
+    @classmethod
+    def from_device(cls, chunk: Chunk, run: Any, baseline: str | None) -> ChunkResult:
+        """The part of a chunk run on a device (:class:`corraoi.gpu.runner.DeviceRun`)."""
+        agg = DeviceAggregates(run.t, run.regret, run.estimator, run.pulls_sum, run.paired,
+                               baseline if run.paired is not None else None)  # fmt: skip
+        return cls(chunk=chunk, t=run.t[-1:], regret=run.regret_final[:, None],
+                   estimator=run.estimator_final[:, None],
+                   best_pulls=run.best_pulls_final[:, None], pulls_sum=run.pulls_sum[-1:],
+                   wall_s=run.wall_s, agg=agg)  # fmt: skip
 
 
 def checkpoints_of(grid: Grid, horizon: int) -> list[int]:
@@ -188,19 +260,23 @@ def reproduce(
     workers: int | None = None,
     on_slots: Callable[[int], None] | None = None,
     warn: Callable[[str], None] | None = None,
+    backend: str = "cpu",
 ) -> SweepOutcome:
     """The paper's simulations: I1 and I2, the twelve policies, into ``out`` (a grid sweep
-    with one folder per instance; ``corraoi reproduce`` adds ``out/summary.md``)."""
-    grid = paper_grid(runs=runs, horizon=horizon, seed=seed)
+    with one folder per instance; ``corraoi reproduce`` adds ``out/summary.md``);
+    ``backend`` as for :func:`sweep`."""
+    grid = paper_grid(runs=runs, horizon=horizon, seed=seed, backend=backend)
     return sweep(grid, out=out, force=force, workers=workers, on_slots=on_slots, warn=warn)
 
 
-def paper_grid(*, runs: int = 200, horizon: int = 10_000, seed: int = 0) -> Grid:
+def paper_grid(
+    *, runs: int = 200, horizon: int = 10_000, seed: int = 0, backend: str = "cpu"
+) -> Grid:
     """The grid of the paper's simulations (I1 and I2, the twelve policies)."""
     from .grid import build_grid
 
     return build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
-                      runs=runs, seed=seed)  # fmt: skip
+                      runs=runs, seed=seed, backend=backend)  # fmt: skip
 
 
 #: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
@@ -351,11 +427,17 @@ def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:
         raise ConfigError(
             f"{where}: holds a sweep with {old.checkpoints} checkpoints; --resume keeps them"
         )
+    if old.backend != new.backend:  # other random streams: the runs would not pair
+        raise ConfigError(
+            f"{where}: holds a sweep run with --backend {old.backend}; --resume it with "
+            f"--backend {old.backend} (got {new.backend})"
+        )
     cells = list(old.cells)
     keys = {c.key for c in cells}
     cells += [c for c in new.cells if c.key not in keys]
     return Grid(tuple(cells), runs=max(old.runs, new.runs), seed=old.seed, chunk=old.chunk,
-                checkpoints=old.checkpoints, baseline=new.baseline or old.baseline)  # fmt: skip
+                checkpoints=old.checkpoints, baseline=new.baseline or old.baseline,
+                backend=old.backend)  # fmt: skip
 
 
 def _parts(out: Path) -> dict[str, list[ChunkResult]]:
@@ -410,6 +492,7 @@ class CellRuns:
     best_pulls: np.ndarray
     pulls_sum: np.ndarray
     wall_s: float
+    agg: DeviceAggregates | None = None
 
     @classmethod
     def join(cls, cell: Cell, label: str, parts: Sequence[ChunkResult], runs: int) -> CellRuns:
@@ -420,22 +503,51 @@ class CellRuns:
             a != b for a, b in zip(stops[:-1], starts[1:], strict=False)
         ):
             raise ConfigError(f"cell {label}: runs 0..{runs - 1} are not all done")
+        agg = None
+        if parts[0].agg is not None:
+            if any(p.agg is None for p in parts) or stops[-1] != runs:
+                raise ConfigError(f"cell {label}: its parts mix backends or run counts; "
+                                  "start the sweep over with --force")  # fmt: skip
+            agg = parts[0].agg
+            for p in parts[1:]:
+                assert p.agg is not None
+                agg = agg.merge(p.agg)
         return cls(
             cell=cell, label=label, t=parts[0].t,
             regret=np.concatenate([p.regret for p in parts])[:runs],
             estimator=np.concatenate([p.estimator for p in parts])[:runs],
             best_pulls=np.concatenate([p.best_pulls for p in parts])[:runs],
             pulls_sum=np.sum([p.pulls_sum for p in parts], axis=0),
-            wall_s=float(sum(p.wall_s for p in parts)),
+            wall_s=float(sum(p.wall_s for p in parts)), agg=agg,
         )  # fmt: skip
 
     def points(self) -> list[Any]:
         """The sweep log's points: mean and 95% CI over runs at each checkpoint."""
         from .sweep import sweep_points
 
+        if self.agg is not None:
+            a = self.agg
+            share = a.pulls_sum / (a.regret.n * a.t.astype(np.float64))[:, None]
+            return sweep_points(self.label, a.t, a.regret, a.estimator, share)
         n = self.regret.shape[0]
         share = self.pulls_sum / (n * self.t.astype(np.float64))[:, None]
-        return sweep_points(self.label, self.t, self.regret, self.estimator, share)
+        return sweep_points(self.label, self.t, Moments.of(self.regret),
+                            Moments.of(self.estimator), share)  # fmt: skip
+
+    def paired_curve(self, base: CellRuns) -> dict[str, list[Any]] | None:
+        """Mean and 95% CI of regret(this) - regret(base), run by run, at each checkpoint:
+        from the runs' values, or from the moments a device computed against ``base``."""
+        if self.agg is not None:
+            if self.agg.paired is None or self.agg.baseline != base.cell.policy.name:
+                return None
+            t, m = self.agg.t, self.agg.paired
+        else:
+            if base.regret.shape != self.regret.shape:
+                return None
+            t, m = self.t, Moments.of(self.regret - base.regret)
+        h = m.ci95()
+        return {"t": [int(v) for v in t], "mean": [float(v) for v in m.mean],
+                "ci95": [float(v) if np.isfinite(v) else None for v in h]}  # fmt: skip
 
     def result(self, best_arm: int) -> Any:
         from .sweep import PolicyResult
@@ -462,14 +574,20 @@ def group_summary(
     summary = sweep_summary(inst, results, runs=grid.runs, horizon=horizon, seed=grid.seed,
                             workers=workers)  # fmt: skip
     summary["wall_s"] = round(wall_s, 4)
+    if grid.backend != "cpu":
+        summary["backend"] = grid.backend
     if grid.baseline is not None:
         from .paired import paired_against
 
-        base = [c.label for c in cells if c.cell.policy.name == grid.baseline]
+        base = [c for c in cells if c.cell.policy.name == grid.baseline]
         if base:
-            summary["baseline"] = base[0]
-            for name, entry in paired_against(results, base[0]).items():
+            summary["baseline"] = base[0].label
+            for name, entry in paired_against(results, base[0].label).items():
                 summary["policies"][name].update(entry)
+            for c in cells:
+                curve = c.paired_curve(base[0]) if c is not base[0] else None
+                if curve is not None:
+                    summary["policies"][c.label]["paired_diff_curve"] = curve
     return summary
 
 
@@ -513,8 +631,14 @@ def sweep(
     on_chunk: Callable[[int, int], None] | None = None,
     on_slots: Callable[[int], None] | None = None,
     warn: Callable[[str], None] | None = None,
+    backend: str | None = None,
 ) -> SweepOutcome:
     """Run ``grid``; with ``out``, into a resumable folder (module docstring).
+
+    ``backend``: "cpu", "gpu" or "auto" (docs/gpu.md), else the grid's own (``cpu`` unless
+    set). "gpu" runs every cell on the GPU (:class:`corraoi.gpu.GpuUnavailable` says why
+    when it cannot); "auto" takes the GPU when it can run every cell, else the CPU with a
+    notice through ``warn``.
 
     ``client``: a ``dask.distributed.Client`` (chunks run on its workers), else this
     process (the engine's own threads, ``workers`` of them). ``resume``: continue or extend
@@ -524,7 +648,19 @@ def sweep(
     A folder is locked while the sweep writes it: a second sweep into it is refused at once.
     """
     from contextlib import ExitStack
+    from dataclasses import replace
 
+    if backend is not None and backend != grid.backend:
+        grid = replace(grid, backend=backend)
+    if grid.backend != "cpu":
+        from .gpu import choose_backend
+
+        grid = choose_backend(grid, warn=warn)
+        if grid.backend == "gpu" and client is not None:
+            raise ConfigError(
+                "--backend gpu runs in this process, on its GPU; leave out --scheduler "
+                "(or use --backend cpu on the cluster)"
+            )
     folder = Path(out) if out is not None else None
     with ExitStack() as stack:
         if folder is not None:
@@ -562,13 +698,17 @@ def _sweep(
     tasks: list[tuple[Chunk, dict[str, Any]]] = []
     skipped = 0
     threads = threads_per_worker if client is not None else None
+    by_key = {cell.key: cell for cell in grid.cells}
     for cell in grid.cells:
         done = parts.get(cell.key, [])
         skipped += len(done)
         for chunk in grid.chunks(cell, covered=_covered(done)):
-            tasks.append((chunk, chunk_task(grid, cell, chunk, threads=threads)))
+            task = chunk_task(grid, cell, chunk, threads=threads) if grid.backend == "cpu" else {}
+            tasks.append((chunk, task))
     total = len(tasks)
     finished = 0
+    if grid.backend == "gpu":
+        todo = [(by_key[ch.cell], ch) for ch, _ in tasks]
 
     def on_done(result: ChunkResult) -> None:
         nonlocal finished
@@ -579,7 +719,13 @@ def _sweep(
         if on_chunk is not None:
             on_chunk(finished, total)
 
-    _execute(tasks, client=client, on_done=on_done, on_slots=on_slots if client is None else None)
+    if grid.backend == "gpu":
+        from .gpu.runner import execute
+
+        execute(grid, todo, on_done=on_done, on_slots=on_slots)
+    else:
+        _execute(tasks, client=client, on_done=on_done,
+                 on_slots=on_slots if client is None else None)  # fmt: skip
     for p in parts.values():
         p.sort(key=lambda r: r.chunk.start)
     labels = grid.labels()

@@ -45,7 +45,9 @@ from .policies import PolicySpec, make_policy, parse_policy_names, resolve
 
 #: Keys an experiment file may hold.
 FILE_KEYS = ("instances", "policies", "horizons", "runs", "seed", "chunk", "checkpoints",
-             "channel", "baseline", "params")  # fmt: skip
+             "channel", "baseline", "backend", "params")  # fmt: skip
+#: Where a grid's cells can run (``backend``; docs/gpu.md).
+BACKENDS = ("cpu", "gpu", "auto")
 #: An experiment file larger than this is refused before it is read.
 MAX_FILE_BYTES = 4 << 20
 #: The most cells one grid may hold.
@@ -111,6 +113,9 @@ class Grid:
     chunk: int = 0  # runs per chunk; 0: all runs of a cell in one chunk
     checkpoints: int = 200
     baseline: str | None = None
+    #: Where the cells run: "cpu" (the engine), "gpu" (corraoi.gpu), or "auto" (resolved to
+    #: one of them by :func:`corraoi.gpu.choose_backend` before the sweep starts).
+    backend: str = "cpu"
 
     def __post_init__(self) -> None:
         if not self.cells:
@@ -126,6 +131,10 @@ class Grid:
             raise ConfigError(f"chunk must be an integer >= 1 (runs per chunk), got {self.chunk!r}")
         if self.checkpoints < 2:
             raise ConfigError(f"checkpoints must be >= 2, got {self.checkpoints}")
+        if self.backend not in BACKENDS:
+            raise ConfigError(
+                f"backend {self.backend!r}: expected one of {', '.join(BACKENDS)}"
+            )
 
     @property
     def chunk_runs(self) -> int:
@@ -176,6 +185,8 @@ class Grid:
             "chunk": self.chunk,
             "checkpoints": self.checkpoints,
             "baseline": self.baseline,
+            # only when not the CPU: folders swept before backends existed read the same
+            **({"backend": self.backend} if self.backend != "cpu" else {}),
         }
 
     @classmethod
@@ -191,7 +202,7 @@ class Grid:
             return cls(
                 cells=tuple(cells), runs=int(data["runs"]), seed=int(data["seed"]),
                 chunk=int(data.get("chunk", 0)), checkpoints=int(data.get("checkpoints", 200)),
-                baseline=data.get("baseline"),
+                baseline=data.get("baseline"), backend=str(data.get("backend", "cpu")),
             )  # fmt: skip
         except ConfigError:
             raise
@@ -243,6 +254,7 @@ def build_grid(
     checkpoints: int = 200,
     channel: str | None = None,
     baseline: str | None = None,
+    backend: str = "cpu",
 ) -> Grid:
     """The grid of every instance x policy x parameter combination x horizon.
 
@@ -287,7 +299,7 @@ def build_grid(
             f"({', '.join(dict.fromkeys(s.name for s in specs))}); expected one of them"
         )
     return Grid(tuple(cells), runs=int(runs), seed=int(seed), chunk=int(chunk),
-                checkpoints=int(checkpoints), baseline=baseline)  # fmt: skip
+                checkpoints=int(checkpoints), baseline=baseline, backend=backend)  # fmt: skip
 
 
 def read_experiment(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -353,11 +365,13 @@ def read_experiment(path: str | os.PathLike[str]) -> dict[str, Any]:
     out["seed"] = integer("seed", 0)
     out["chunk"] = integer("chunk", 0)
     out["checkpoints"] = integer("checkpoints", 200)
-    for key in ("channel", "baseline"):
+    for key in ("channel", "baseline", "backend"):
         v = data.get(key)
         if v is not None and not isinstance(v, str):
             raise ConfigError(f"{where}: {key} must be a string")
         out[key] = v
+    if out["backend"] is None:
+        del out["backend"]
     params = data.get("params", {})
     if not isinstance(params, dict):
         raise ConfigError(f"{where}: params must be a table of name = [values]")

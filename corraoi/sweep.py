@@ -15,34 +15,7 @@ from .engine import Simulation, Snapshot
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
-
-# Student t 0.975 quantiles for 1..30 degrees of freedom.
-_T975 = (
-    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
-    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
-    2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
-)  # fmt: skip
-
-
-def t975(df: int) -> float:
-    """Two-sided 95% Student t quantile (table to 30 df, Cornish-Fisher beyond)."""
-    if df < 1:
-        return math.nan
-    if df <= 30:
-        return _T975[df - 1]
-    z = 1.959963984540054
-    return z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
-
-
-def mean_ci95(values: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and 95% CI half-width (Student t) along ``axis``; half-width NaN for one value."""
-    values = np.asarray(values, dtype=np.float64)
-    n = values.shape[axis]
-    mean = values.mean(axis=axis)
-    if n < 2:
-        return mean, np.full_like(mean, np.nan)
-    sd = values.std(axis=axis, ddof=1)
-    return mean, t975(n - 1) * sd / math.sqrt(n)
+from .stats import Moments, mean_ci95, t975  # noqa: F401 (t975: re-exported)
 
 
 @dataclass
@@ -127,17 +100,16 @@ class SweepPoint:
 
 
 def sweep_points(
-    name: str, t: np.ndarray, regret: np.ndarray, estimator: np.ndarray, pull_share: np.ndarray
+    name: str, t: np.ndarray, regret: Moments, estimator: Moments, pull_share: np.ndarray
 ) -> list[SweepPoint]:
-    """The :class:`SweepPoint` of each checkpoint ``t[i]`` from the runs' values there
-    (``regret``, ``estimator``: runs x checkpoints) and the mean shares ((checkpoints, K))."""
-    m, h = mean_ci95(regret)
-    em, eh = mean_ci95(estimator)
+    """The :class:`SweepPoint` of each checkpoint ``t[i]`` from the moments of the runs' values
+    there (:meth:`Moments.of` of runs x checkpoints) and the mean shares ((checkpoints, K))."""
+    h, eh = regret.ci95(), estimator.ci95()
     return [
         SweepPoint(
-            policy=name, t=int(ts), regret_mean=float(m[i]), regret_ci95=_finite(float(h[i])),
-            estimator_mean=float(em[i]), estimator_ci95=_finite(float(eh[i])),
-            pull_share=pull_share[i],
+            policy=name, t=int(ts), regret_mean=float(regret.mean[i]),
+            regret_ci95=_finite(float(h[i])), estimator_mean=float(estimator.mean[i]),
+            estimator_ci95=_finite(float(eh[i])), pull_share=pull_share[i],
         )  # fmt: skip
         for i, ts in enumerate(t)
     ]
@@ -146,8 +118,8 @@ def sweep_points(
 def checkpoint_point(policy: PolicySpec, snap: Snapshot) -> SweepPoint:
     """The :class:`SweepPoint` of the runs' state at a checkpoint."""
     share = (snap.pulls / snap.t).mean(axis=0)[None]
-    points = sweep_points(policy.name, np.array([snap.t]), snap.regret[:, None],
-                          snap.estimator[:, None], share)  # fmt: skip
+    points = sweep_points(policy.name, np.array([snap.t]), Moments.of(snap.regret[:, None]),
+                          Moments.of(snap.estimator[:, None]), share)  # fmt: skip
     return points[0]
 
 

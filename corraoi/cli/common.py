@@ -197,6 +197,12 @@ def channel_option(func: F) -> F:
     )(func)
 
 
+def backend_option(help: str) -> Callable[[F], F]:
+    """``--backend cpu|gpu|auto`` (docs/gpu.md); None when not given."""
+    return click.option("--backend", type=click.Choice(["cpu", "gpu", "auto"]), default=None,
+                        help=help)  # fmt: skip
+
+
 class Bounded(click.ParamType):
     """An integer option in ``lo..hi``: anything else (a float, 1e30, a value beyond int64)
     is one line naming the option, the value and the range, before anything is allocated.

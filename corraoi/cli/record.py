@@ -17,9 +17,10 @@ from typing import Any
 
 import click
 
-from ..errors import UsageError
+from ..errors import ConfigError, UsageError
 from ..text import safe_text
 from .common import (
+    backend_option,
     channel_option,
     handle_errors,
     horizon_option,
@@ -28,6 +29,7 @@ from .common import (
     param_options,
     policy_option,
     seed_option,
+    warn,
 )
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
@@ -157,6 +159,8 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @click.option("--force", "-f", is_flag=True, help="Overwrite existing files.")
 @viewer_options
 @foxglove_options
+@backend_option("Per-slot logs are a CPU feature: cpu (and auto) record on the CPU; gpu is "
+                "refused (the GPU backend is for sweeps, docs/gpu.md) [default: cpu].")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -178,6 +182,7 @@ def record(
     web_port: int,
     foxglove: str | None,
     pace: float | None,
+    backend: str | None,
     as_json: bool,
 ) -> None:
     """Simulate runs and stream every slot to an MCAP log and a Rerun recording.
@@ -198,6 +203,14 @@ def record(
     """  # noqa: D301
     from ..block import RunConfig
     from ..channels import parse_channel
+
+    if backend == "gpu":
+        raise ConfigError(
+            "--backend gpu: record writes every slot of a run, a CPU feature; the GPU backend "
+            "runs sweeps (corraoi sweep --backend gpu), or record with --backend cpu"
+        )
+    if backend == "auto":
+        warn("--backend auto: record runs on the CPU (per-slot logs are a CPU feature)")
     from ..instance import load_instance
     from ..policies import make_policies, parse_param_assignments
 

@@ -21,6 +21,7 @@ from .common import (
     CHECKPOINTS,
     RUNS,
     WORKERS,
+    backend_option,
     channel_option,
     handle_errors,
     horizon_option,
@@ -74,6 +75,9 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--baseline", default=None, metavar="POLICY",
               help="Also report, for every other policy, the mean and 95% CI of the per-run "
               "regret difference against POLICY on the same hidden paths (paired).")  # fmt: skip
+@backend_option("Where the runs go: cpu (the engine: every policy), gpu (every built-in policy "
+                "on a CUDA GPU, one thread per run; needs the gpu extra), auto (the GPU when it "
+                "can run every cell, else the CPU with a notice) [default: cpu] (docs/gpu.md).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
 @handle_errors
 def sweep(
@@ -95,6 +99,7 @@ def sweep(
     checkpoints: int | None,
     force: bool,
     baseline: str | None,
+    backend: str | None,
     as_json: bool,
 ) -> None:
     """Run a grid of policies over paired seeds and report the AoI regret at the horizon.
@@ -110,6 +115,7 @@ def sweep(
       corraoi sweep -i I1,I2 -p ucb,cucb,sw-ucb --param window=100,1000 -o grid
       corraoi sweep experiment.toml -o grid --scheduler local:2
       corraoi sweep experiment.toml -o grid --resume        # after a crash, or to add runs
+      corraoi sweep -p ucb,cucb -n 1000000 -T 10000 --backend gpu -o big
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
     from ..grid import build_grid, parse_param_lists, read_experiment, split_list
@@ -132,6 +138,7 @@ def sweep(
         "checkpoints": checkpoints,
         "channel": channel,
         "baseline": baseline,
+        "backend": backend,
     }
     spec.update({k: v for k, v in cli.items() if v is not None})
     spec.setdefault("instances", ["I1"])
@@ -150,9 +157,12 @@ def sweep(
         from ..engine import check_instance
 
         check_instance(cell.instance)
-    # the biggest cell's runs x checkpoints are held at once when its results are joined
+    grid = _settle_backend(grid)
+    # the biggest cell's runs x checkpoints are held at once when its results are joined (a
+    # GPU sweep keeps every run's final values only)
+    per_run = out is not None and grid.backend == "cpu"
     limits.check_sweep_memory(grid.runs, max(c.instance.K for c in grid.cells), policies=1,
-                              checkpoints=grid.checkpoints if out is not None else 0)  # fmt: skip
+                              checkpoints=grid.checkpoints if per_run else 0)  # fmt: skip
     for note in _notes(grid):
         warn(note)
     outcome = _run(grid, out=out, scheduler=scheduler, resume=resume, force=force,
@@ -176,6 +186,19 @@ def sweep(
         ), err=as_json)  # fmt: skip
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
+
+
+def _settle_backend(grid: Any) -> Any:
+    """The grid with ``auto`` resolved (a notice when it falls back to the CPU) and ``gpu``
+    checked; says which device runs it."""
+    if grid.backend == "cpu":
+        return grid
+    from ..gpu import choose_backend, get_device
+
+    grid = choose_backend(grid, warn=warn)
+    if grid.backend == "gpu":
+        click.echo(f"backend gpu: {get_device().name}", err=True)
+    return grid
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
@@ -305,6 +328,7 @@ def _print_paired(summary: dict[str, Any]) -> None:
 @click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the engine [default: every core].")  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
+@backend_option("cpu, gpu or auto, as for sweep [default: cpu] (docs/gpu.md).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print both summaries as one JSON object instead of tables.")  # fmt: skip
 @handle_errors
@@ -315,6 +339,7 @@ def reproduce(
     seed: int,
     workers: int | None,
     force: bool,
+    backend: str | None,
     as_json: bool,
 ) -> None:
     """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
@@ -331,8 +356,10 @@ def reproduce(
 
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")
-    grid = paper_grid(runs=runs, horizon=horizon, seed=seed)
-    limits.check_sweep_memory(runs, 4, policies=1, checkpoints=grid.checkpoints)
+    grid = paper_grid(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu")
+    grid = _settle_backend(grid)
+    limits.check_sweep_memory(runs, 4, policies=1,
+                              checkpoints=grid.checkpoints if grid.backend == "cpu" else 0)
     start = time.perf_counter()
     outcome = _run(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
                    label="reproduce")  # fmt: skip

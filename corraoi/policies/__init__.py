@@ -18,7 +18,7 @@ Importing this package is light; the built-ins (numba) load on first use of the 
 
 from __future__ import annotations
 
-from .api import RGB, CompiledPolicy, Param, Policy, PolicyBase, PolicySpec
+from .api import RGB, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, PolicySpec, gpu_form
 from .registry import (
     ENTRY_POINT_GROUP,
     available,
@@ -38,12 +38,14 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "RGB",
     "CompiledPolicy",
+    "GpuForm",
     "Param",
     "Policy",
     "PolicyBase",
     "PolicySpec",
     "available",
     "builtins",
+    "gpu_form",
     "make_policies",
     "make_policy",
     "paper_names",

@@ -72,6 +72,29 @@ class Param:
         return None
 
 
+@dataclass(frozen=True)
+class GpuForm:
+    """The GPU form of a compiled policy family: its entry point ``advance_<kernel>`` in
+    ``corraoi/gpu/kernel.cu`` (one CUDA thread per run, the same rule as the CPU hooks), and
+    whether it keeps the CPU hooks' per-run state ``ps`` (same layout, ``state_size``)."""
+
+    kernel: str
+    uses_state: bool = False
+
+
+def gpu_form(cls: type[PolicyBase]) -> GpuForm | None:
+    """The GPU form of ``cls``, or None: a subclass that replaces a hook of the class that
+    declared the form has none (the GPU kernel would not run its rule)."""
+    form = getattr(cls, "gpu", None)
+    if form is None or not issubclass(cls, CompiledPolicy):
+        return None
+    owner = next(c for c in cls.__mro__ if "gpu" in c.__dict__)
+    for hook in ("forced", "score", "update"):
+        if getattr(cls, hook) is not getattr(owner, hook):
+            return None
+    return form
+
+
 class PolicyBase:
     """What every policy class declares (class attributes)."""
 
@@ -87,8 +110,8 @@ class PolicyBase:
     summary: ClassVar[str] = ""
     #: Where the rule comes from (shown by ``corraoi policies --json``).
     reference: ClassVar[str] = ""
-    #: Room for a GPU form of the policy (the GPU backend fills it for built-ins).
-    gpu: ClassVar[Any] = None
+    #: The policy's GPU form (:class:`GpuForm`; the built-in families have one), or None.
+    gpu: ClassVar[GpuForm | None] = None
     #: The paper's theorem bounding this policy's regret, if any ("cucb" or "cts").
     theorem: ClassVar[str | None] = None
     #: In ``--policy all``: the paper's twelve policies.

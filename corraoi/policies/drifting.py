@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .api import CompiledPolicy, Param
+from .api import CompiledPolicy, GpuForm, Param
 from .paper import C_PARAM
 from .variants import family
 
@@ -34,6 +34,7 @@ class SWUCB(CompiledPolicy):
     reference = "Garivier and Moulines (2011), ALT"
     score = "corraoi.policies.builtin_hooks:sw_ucb_score"
     update = "corraoi.policies.builtin_hooks:sw_ucb_update"
+    gpu = GpuForm("sw_ucb", uses_state=True)
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:
@@ -50,6 +51,7 @@ class DTS(CompiledPolicy):
     reference = "Raj and Kalyani (2017), arXiv:1707.09727"
     score = "corraoi.policies.builtin_hooks:d_ts_score"
     update = "corraoi.policies.builtin_hooks:d_ts_update"
+    gpu = GpuForm("d_ts", uses_state=True)
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:

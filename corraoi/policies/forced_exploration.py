@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .api import CompiledPolicy
+from .api import CompiledPolicy, GpuForm
 from .variants import family
 
 REFERENCE = "Krishnasamy, Sen, Johari, Shakkottai (2021), Operations Research 69(1)"
@@ -28,6 +28,7 @@ class QUCB(CompiledPolicy):
     reference = REFERENCE
     forced = "corraoi.policies.builtin_hooks:q_ucb_forced"
     score = "corraoi.policies.builtin_hooks:q_ucb_score"
+    gpu = GpuForm("q_ucb")
 
 
 class QTS(CompiledPolicy):
@@ -39,6 +40,7 @@ class QTS(CompiledPolicy):
     forced = "corraoi.policies.builtin_hooks:q_ts_forced"
     score = "corraoi.policies.builtin_hooks:ts_beta_score"
     update = "corraoi.policies.builtin_hooks:ts_beta_update"
+    gpu = GpuForm("q_ts")
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .api import CompiledPolicy, Param
+from .api import CompiledPolicy, GpuForm, Param
 from .variants import family
 
 C_PARAM = Param(2.0, "UCB exploration constant: index mu_hat + sqrt(c ln t / n)", low=0.0,
@@ -30,6 +30,7 @@ class UCB(CompiledPolicy):
     reference = "Auer, Cesa-Bianchi, Fischer (2002)"
     forced = "corraoi.policies.hooks:first_unpulled"
     score = "corraoi.policies.builtin_hooks:ucb_score"
+    gpu = GpuForm("ucb")
     paper = True
 
 
@@ -41,6 +42,7 @@ class TS(CompiledPolicy):
     reference = "Agrawal and Goyal (2012)"
     score = "corraoi.policies.builtin_hooks:ts_beta_score"
     update = "corraoi.policies.builtin_hooks:ts_beta_update"
+    gpu = GpuForm("ts_beta")  # no cached constants on the GPU: no state
     paper = True
 
     @classmethod
@@ -56,6 +58,7 @@ class TSGauss(CompiledPolicy):
     color = (140, 86, 75)  # brown
     reference = "Agrawal and Goyal (2013), Gaussian priors"
     score = "corraoi.policies.builtin_hooks:ts_gauss_score"
+    gpu = GpuForm("ts_gauss")
     paper = True
 
 

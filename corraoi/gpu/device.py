@@ -1,0 +1,264 @@
+"""Where the GPU kernels run: a CUDA device through CuPy, or the host CPU (emulation).
+
+Both compile ``kernel.cu`` for a number of arms K (``-DKARMS=K``) and call its entry points
+``advance_<family>`` with the same arguments (:data:`corraoi.gpu.runner` builds them):
+
+* :class:`CudaDevice` -- CuPy's NVRTC compiles the source once per K; CuPy caches the binary
+  on disk (``$CUPY_CACHE_DIR``, by default ``~/.cupy/kernel_cache``), so a new process only
+  loads it. One CUDA thread per run, 128 threads a block.
+* :class:`EmulatedDevice` -- the same source compiled by the host C++ compiler (``$CXX``, else
+  g++ or c++) into a shared library in corraoi's cache folder, its runs spread over the cores
+  with OpenMP. It runs the GPU code where no GPU is (tests, development); it is not fast.
+  ``CORRAOI_GPU_DEVICE=emulate`` makes ``--backend gpu`` use it.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import CorraoiError
+
+SOURCE_PATH = Path(__file__).with_name("kernel.cu")
+#: The entry points of kernel.cu (``advance_<name>``), one per built-in policy family.
+FAMILIES = ("ucb", "ts_beta", "ts_gauss", "q_ucb", "q_ts", "sw_ucb", "d_ts")
+#: Per-run arrays live in registers up to about this many arms; beyond, use the CPU engine.
+MAX_ARMS = 64
+#: The environment variable that picks the emulated device for ``--backend gpu``.
+DEVICE_ENV = "CORRAOI_GPU_DEVICE"
+
+#: Argument kinds of an entry point: int32, int64, uint64, float64, array.
+ArgList = Sequence[tuple[str, Any]]
+
+
+class GpuUnavailable(CorraoiError):
+    """No device can run the GPU backend here (the message says why and what to do)."""
+
+    exit_code = 2
+
+
+def source() -> str:
+    return SOURCE_PATH.read_text(encoding="utf-8")
+
+
+class Device(ABC):
+    """A place to run kernel.cu: arrays of its module ``xp`` (NumPy or CuPy) and launches."""
+
+    #: In words, for notices and benchmark tables.
+    name: str = ""
+    #: NumPy or CuPy: the array module of this device's arrays (reductions run on it).
+    xp: Any = np
+    #: Run-slots per launch: bounds each call, so that progress moves and Ctrl-C is heard.
+    launch_work: int = 1 << 24
+    #: Bytes for the per-run values captured at checkpoints between two reductions.
+    checkpoint_bytes: int = 256 << 20
+    #: Seconds spent compiling (or loading) modules in this process.
+    compile_seconds: float = 0.0
+
+    @abstractmethod
+    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
+        """Run ``advance_<family>`` of the K-arm module over ``runs`` runs."""
+
+    @abstractmethod
+    def philox(self, words: np.ndarray) -> np.ndarray:
+        """Philox4x32-10 of (count, 6) counter+key words: (count, 4) (known-answer tests)."""
+
+    def asnumpy(self, a: Any) -> np.ndarray:
+        return np.asarray(a)
+
+    def synchronize(self) -> None:  # noqa: B027 (a no-op where calls return when done)
+        """Wait for the launches in flight."""
+
+
+# ---------------------------------------------------------------------------- CUDA
+
+
+class CudaDevice(Device):
+    """The current CUDA device, through CuPy (the ``gpu`` extra)."""
+
+    launch_work = 1 << 31
+    checkpoint_bytes = 1 << 30
+    BLOCK = 128
+
+    def __init__(self) -> None:
+        try:
+            import cupy
+        except ImportError:
+            raise GpuUnavailable(
+                'CuPy is not installed (pip install "corraoi[gpu]", for CUDA 13)'
+            ) from None
+        try:
+            count = int(cupy.cuda.runtime.getDeviceCount())
+        except Exception as exc:  # CuPy raises its own runtime errors without a driver
+            first = (str(exc).strip().splitlines() or [""])[0]
+            raise GpuUnavailable(f"no CUDA device ({type(exc).__name__}: {first})") from None
+        if count < 1:
+            raise GpuUnavailable("no CUDA device found")
+        self.xp = cupy
+        props = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)
+        raw = props.get("name", b"CUDA device")
+        self.name = raw.decode() if isinstance(raw, bytes) else str(raw)
+        self._modules: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    def _module(self, K: int) -> Any:
+        with self._lock:
+            mod = self._modules.get(K)
+            if mod is None:
+                import cupy
+
+                start = time.perf_counter()
+                mod = cupy.RawModule(code=source(), options=("-std=c++17", f"-DKARMS={K}"))
+                mod.compile()  # NVRTC, or CuPy's on-disk cache
+                self.compile_seconds += time.perf_counter() - start
+                self._modules[K] = mod
+            return mod
+
+    def _args(self, args: ArgList) -> tuple[Any, ...]:
+        conv = {"i": np.int32, "q": np.int64, "Q": np.uint64, "d": np.float64}
+        return tuple(v if kind == "p" else conv[kind](v) for kind, v in args)
+
+    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
+        func = self._module(K).get_function(f"advance_{family}")
+        blocks = (runs + self.BLOCK - 1) // self.BLOCK
+        func((blocks,), (self.BLOCK,), self._args(args))
+
+    def philox(self, words: np.ndarray) -> np.ndarray:
+        import cupy
+
+        count = int(words.shape[0])
+        inp = cupy.asarray(np.ascontiguousarray(words, dtype=np.uint32))
+        out = cupy.zeros((count, 4), dtype=cupy.uint32)
+        func = self._module(1).get_function("philox_kat")
+        func(((count + 127) // 128,), (128,), (inp, out, np.int32(count)))
+        return cupy.asnumpy(out)
+
+    def asnumpy(self, a: Any) -> np.ndarray:
+        return self.xp.asnumpy(a)
+
+    def synchronize(self) -> None:
+        self.xp.cuda.Device().synchronize()
+
+
+# ---------------------------------------------------------------------------- emulation
+
+
+def host_compiler() -> str | None:
+    """The host C++ compiler the emulated device uses, or None."""
+    for name in (os.environ.get("CXX"), "g++", "c++", "clang++"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+class EmulatedDevice(Device):
+    """kernel.cu compiled for the host CPU: the GPU backend's code where no GPU is."""
+
+    name = "emulated on the CPU"
+    FLAGS = ("-O2", "-std=c++17", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
+
+    def __init__(self) -> None:
+        cxx = host_compiler()
+        if cxx is None:
+            raise GpuUnavailable(f"{DEVICE_ENV}=emulate needs a C++ compiler (g++ or $CXX)")
+        self._cxx = cxx
+        self._libs: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    def _library(self, K: int) -> Any:
+        with self._lock:
+            lib = self._libs.get(K)
+            if lib is None:
+                start = time.perf_counter()
+                lib = ctypes.CDLL(str(self._build(K)))
+                self.compile_seconds += time.perf_counter() - start
+                self._libs[K] = lib
+            return lib
+
+    def _build(self, K: int) -> Path:
+        from ..kernels import cache_dir
+
+        text = source()
+        flags = (*self.FLAGS, f"-DKARMS={K}")
+        digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
+        folder = cache_dir() / "gpu-emulation"
+        folder.mkdir(parents=True, exist_ok=True)
+        lib = folder / f"kernel-K{K}-{digest}.so"
+        if lib.exists():
+            return lib
+        fd, tmp = tempfile.mkstemp(prefix=lib.name, suffix=".partial", dir=folder)
+        os.close(fd)
+        try:
+            done = subprocess.run([self._cxx, *flags, str(SOURCE_PATH), "-o", tmp],
+                                  capture_output=True, text=True)  # fmt: skip
+            if done.returncode != 0:
+                first = (done.stderr.strip().splitlines() or ["(no output)"])[0]
+                raise GpuUnavailable(f"{self._cxx} could not compile {SOURCE_PATH}: {first}")
+            os.replace(tmp, lib)  # atomic: a library exists only when complete
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return lib
+
+    @staticmethod
+    def _args(args: ArgList) -> list[Any]:
+        out: list[Any] = []
+        for kind, v in args:
+            if kind == "p":
+                if not v.flags.c_contiguous:
+                    raise ValueError("kernel arrays must be C-contiguous")
+                out.append(ctypes.c_void_p(v.ctypes.data))
+            else:
+                conv = {"i": ctypes.c_int32, "q": ctypes.c_int64, "Q": ctypes.c_uint64,
+                        "d": ctypes.c_double}  # fmt: skip
+                out.append(conv[kind](v))
+        return out
+
+    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
+        func = getattr(self._library(K), f"advance_{family}")
+        func.restype = None
+        func(*self._args(args))
+
+    def philox(self, words: np.ndarray) -> np.ndarray:
+        inp = np.ascontiguousarray(words, dtype=np.uint32)
+        out = np.zeros((inp.shape[0], 4), dtype=np.uint32)
+        func = self._library(1).philox_kat
+        func.restype = None
+        func(*self._args([("p", inp), ("p", out), ("i", inp.shape[0])]))
+        return out
+
+
+# ---------------------------------------------------------------------------- choosing
+
+
+_DEVICES: dict[str, Device] = {}
+_DEVICE_LOCK = threading.Lock()
+
+
+def get_device() -> Device:
+    """The device of this process (made once): ``$CORRAOI_GPU_DEVICE`` ``cuda`` (default) or
+    ``emulate``. Raises :class:`GpuUnavailable` with the reason when there is none."""
+    kind = os.environ.get(DEVICE_ENV, "cuda").strip().lower() or "cuda"
+    with _DEVICE_LOCK:
+        device = _DEVICES.get(kind)
+        if device is None:
+            if kind == "emulate":
+                device = EmulatedDevice()
+            elif kind == "cuda":
+                device = CudaDevice()
+            else:
+                raise GpuUnavailable(f"{DEVICE_ENV}={kind!r}: expected 'cuda' or 'emulate'")
+            _DEVICES[kind] = device
+        return device

@@ -1,0 +1,263 @@
+"""Simulating runs on a device (:mod:`corraoi.gpu.device`) and running a grid's chunks there.
+
+A policy's runs advance launch by launch; each launch captures every run's regret,
+estimator and pulls at the checkpoints it passes into device buffers, which are reduced on
+the device to :class:`corraoi.sweep.Moments` (count, mean, sum of squared deviations) and,
+with a baseline, to the moments of the run-by-run difference against it. What comes back to
+the host: those aggregates per checkpoint and every run's final values -- never every run's
+checkpoints (a million runs x 200 checkpoints would be gigabytes).
+"""
+
+from __future__ import annotations
+
+import bisect
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..block import check_horizon
+from ..channels import Channel, default_channel
+from ..engine import check_instance, pseudo_reward_classes
+from ..errors import ConfigError
+from ..instance import Instance
+from ..policies import PolicySpec, gpu_form
+from ..stats import Moments
+from .device import MAX_ARMS, Device, GpuUnavailable, get_device
+
+if TYPE_CHECKING:
+    from ..experiments import ChunkResult
+    from ..grid import Cell, Chunk, Grid
+
+
+@dataclass
+class DeviceRun:
+    """What a device returns for the runs of one policy."""
+
+    t: np.ndarray  # (S,) checkpoint slots, ascending, the last = horizon
+    regret: Moments  # of the pathwise regret at each checkpoint
+    estimator: Moments  # of the paper's estimator sum(aoi) - t / mu*
+    pulls_sum: np.ndarray  # (S, K) int64: pulls per arm summed over the runs
+    paired: Moments | None  # of regret - the baseline's regret, run by run
+    regret_final: np.ndarray  # (R,) float64 at the horizon
+    estimator_final: np.ndarray  # (R,) float64
+    best_pulls_final: np.ndarray  # (R,) int64
+    kept: Any  # (S, R) device array of the regret at every checkpoint (keep=True), else None
+    wall_s: float
+
+
+def gpu_problem(policy: PolicySpec, K: int) -> str | None:
+    """Why ``policy`` cannot run on the GPU backend with K arms, or None when it can."""
+    cls = policy.resolve()
+    if gpu_form(cls) is None:
+        kind = "a plain-Python policy" if cls.tier == "python" else "no GPU form"
+        return f"policy {policy.name} has {kind} (the GPU backend runs the built-ins)"
+    if K > MAX_ARMS:
+        return f"K = {K} arms: the GPU backend holds at most {MAX_ARMS} arms per run"
+    return None
+
+
+def _ckpt_bytes(R: int, K: int) -> int:
+    return R * (2 + K) * 8
+
+
+def simulate(
+    instance: Instance,
+    policy: PolicySpec,
+    *,
+    seed0: int,
+    runs: int,
+    horizon: int,
+    checkpoints: Sequence[int] = (),
+    channel: Channel | None = None,
+    baseline: Any = None,
+    keep: bool = False,
+    on_slots: Callable[[int], None] | None = None,
+    device: Device | None = None,
+) -> DeviceRun:
+    """Runs ``seed0 .. seed0 + runs - 1`` of ``policy`` to ``horizon`` on the device.
+
+    ``baseline``: the ``kept`` array of another policy's runs on the same seeds and
+    checkpoints (the paired moments are computed against it); ``keep``: keep this policy's
+    regret at every checkpoint on the device (to be a baseline).
+    """
+    start = time.perf_counter()
+    dev = device if device is not None else get_device()
+    xp = dev.xp
+    check_horizon(horizon)
+    if runs < 1:
+        raise ConfigError(f"runs must be >= 1, got {runs}")
+    K = instance.K
+    problem = gpu_problem(policy, K)
+    if problem is not None:
+        raise GpuUnavailable(f"--backend gpu: {problem}; run it with --backend cpu")
+    cls: Any = policy.resolve()
+    form = gpu_form(cls)
+    assert form is not None
+    theory = check_instance(instance)
+    channel = channel if channel is not None else default_channel(instance)
+    channel.check(instance, horizon)
+    cdf, kind, trace = channel.kernel_arrays(instance)
+    params = policy.param_vector(cls)
+    S_state = int(cls.state_size(K, policy.params)) if form.uses_state else 0
+    R = int(runs)
+    stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {int(horizon)})
+    S = len(stops)
+    cmax = max(1, min(S, dev.checkpoint_bytes // _ckpt_bytes(R, K)))
+    if baseline is not None and tuple(baseline.shape) != (S, R):
+        raise ConfigError(f"baseline of shape {tuple(baseline.shape)}, expected {(S, R)}")
+
+    def arr(a: np.ndarray) -> Any:
+        return xp.asarray(np.ascontiguousarray(a))
+
+    try:
+        consts = {
+            "cdf": arr(cdf.astype(np.float64)), "trace": arr(trace.astype(np.int64)),
+            "Y": arr(np.asarray(instance.Y, dtype=np.int8)),
+            "pclass": arr(pseudo_reward_classes(instance)),
+            "prm": arr(params if params.size else np.zeros(1)), "ck_t": arr(np.array(stops)),
+        }  # fmt: skip
+        st = {
+            "pulls": xp.zeros((K, R), dtype=np.int64), "succ": xp.zeros((K, R), dtype=np.int64),
+            "pstate": xp.zeros((max(S_state, 1), R)), "rpos": xp.zeros(R, dtype=np.uint64),
+            "nspare": xp.zeros(R), "nhas": xp.zeros(R, dtype=np.int32),
+            "xprev": xp.full(R, -1, dtype=np.int32), "age": xp.ones(R, dtype=np.int64),
+            "oage": xp.ones(R, dtype=np.int64), "reg": xp.zeros(R, dtype=np.int64),
+            "asum": xp.zeros(R, dtype=np.int64),
+        }  # fmt: skip
+        ck_reg = xp.zeros((cmax, R))
+        ck_est = xp.zeros((cmax, R))
+        ck_pulls = xp.zeros((cmax, K, R), dtype=np.int64)
+        kept = xp.zeros((S, R)) if keep else None
+    except Exception as exc:  # CuPy's OutOfMemoryError (no CuPy import needed here)
+        raise _memory_error(exc, R, policy) from None
+    regret_parts: list[Moments] = []
+    est_parts: list[Moments] = []
+    paired_parts: list[Moments] = []
+    pulls_sum = np.zeros((S, K), dtype=np.int64)
+    n_states = int(cdf.shape[1])
+    per_launch = max(1, dev.launch_work // R)
+    t = 0
+    ci = 0
+    while t < horizon:
+        end = min(horizon, t + per_launch, stops[min(ci + cmax, S) - 1])
+        nck = bisect.bisect_right(stops, end) - ci
+        args = [
+            ("i", R), ("Q", int(seed0)), ("q", t), ("q", end - t), ("i", n_states),
+            ("i", int(cdf.shape[0])), ("i", int(kind)), ("p", consts["cdf"]),
+            ("p", consts["trace"]), ("p", consts["Y"]), ("p", consts["pclass"]),
+            ("i", int(theory.best_arm)), ("d", float(theory.mu_star)),
+            ("i", int(bool(cls.correlated))), ("i", int(bool(cls.aoi_aware))),
+            ("p", consts["prm"]), ("i", S_state),
+            *(("p", st[k]) for k in ("pulls", "succ", "pstate", "rpos", "nspare", "nhas",
+                                     "xprev", "age", "oage", "reg", "asum")),
+            ("i", nck), ("p", consts["ck_t"][ci:]), ("p", ck_reg), ("p", ck_est),
+            ("p", ck_pulls),
+        ]  # fmt: skip
+        try:
+            dev.launch(K, form.kernel, R, args)
+        except Exception as exc:
+            raise _memory_error(exc, R, policy) from None
+        if nck:
+            reg = ck_reg[:nck]
+            regret_parts.append(Moments.of(reg, axis=1, host=dev.asnumpy))
+            est_parts.append(Moments.of(ck_est[:nck], axis=1, host=dev.asnumpy))
+            pulls_sum[ci : ci + nck] = dev.asnumpy(ck_pulls[:nck].sum(axis=2))
+            if baseline is not None:
+                diff = reg - baseline[ci : ci + nck]
+                paired_parts.append(Moments.of(diff, axis=1, host=dev.asnumpy))
+            if kept is not None:
+                kept[ci : ci + nck] = reg
+        if on_slots is not None:
+            on_slots(end - t)
+        ci += nck
+        t = end
+    dev.synchronize()
+    best = int(theory.best_arm)
+    regret_final = dev.asnumpy(st["reg"]).astype(np.float64)
+    est_final = dev.asnumpy(st["asum"]).astype(np.float64) - horizon / float(theory.mu_star)
+    return DeviceRun(
+        t=np.asarray(stops, dtype=np.int64), regret=_concat(regret_parts),
+        estimator=_concat(est_parts), pulls_sum=pulls_sum,
+        paired=_concat(paired_parts) if paired_parts else None,
+        regret_final=regret_final, estimator_final=est_final,
+        best_pulls_final=dev.asnumpy(st["pulls"][best]).astype(np.int64), kept=kept,
+        wall_s=time.perf_counter() - start,
+    )  # fmt: skip
+
+
+def _concat(parts: list[Moments]) -> Moments:
+    """Moments of consecutive checkpoint groups (same runs) as one."""
+    return Moments(parts[0].n, np.concatenate([p.mean for p in parts]),
+                   np.concatenate([p.m2 for p in parts]))  # fmt: skip
+
+
+def _memory_error(exc: Exception, R: int, policy: PolicySpec) -> Exception:
+    if "OutOfMemory" in type(exc).__name__:
+        return ConfigError(
+            f"{policy.name}: {R} runs do not fit in the GPU's memory ({exc}); "
+            "split them with --chunk"
+        )
+    return exc
+
+
+# ---------------------------------------------------------------------------- a grid
+
+
+def execute(
+    grid: Grid,
+    todo: Sequence[tuple[Cell, Chunk]],
+    *,
+    on_done: Callable[[ChunkResult], None],
+    on_slots: Callable[[int], None] | None = None,
+    device: Device | None = None,
+) -> None:
+    """Run the chunks ``todo`` of ``grid`` on the device, group by group. With a baseline,
+    its runs of each chunk's range run first and stay on the device, so that every other
+    policy's paired moments are computed there."""
+    from ..experiments import ChunkResult
+
+    dev = device if device is not None else get_device()
+    for cells in grid.groups().values():
+        keys = {c.key for c in cells}
+        work = [(c, ch) for c, ch in todo if c.key in keys]
+        if not work:
+            continue
+        base = next((c for c in cells if c.policy.name == grid.baseline), None)
+        work.sort(key=lambda item: base is None or item[0].key != base.key)
+        kept: dict[tuple[int, int], Any] = {}
+        for cell, chunk in work:
+            span = (chunk.start, chunk.stop)
+            is_base = base is not None and cell.key == base.key
+            against = None
+            if base is not None and not is_base:
+                if span not in kept:  # the baseline's runs were saved earlier (--resume)
+                    kept[span] = _run_cell(grid, base, chunk, dev, keep=True).kept
+                against = kept[span]
+            result = _run_cell(grid, cell, chunk, dev, baseline=against, keep=is_base,
+                               on_slots=on_slots)  # fmt: skip
+            if is_base:
+                kept[span] = result.kept
+            on_done(ChunkResult.from_device(chunk, result, grid.baseline))
+
+
+def _run_cell(
+    grid: Grid,
+    cell: Cell,
+    chunk: Chunk,
+    dev: Device,
+    *,
+    baseline: Any = None,
+    keep: bool = False,
+    on_slots: Callable[[int], None] | None = None,
+) -> DeviceRun:
+    """The runs of ``chunk``'s range of ``cell`` (seeds from the grid's)."""
+    from ..experiments import checkpoints_of
+
+    return simulate(
+        cell.instance, cell.policy, seed0=grid.seed + chunk.start, runs=chunk.stop - chunk.start,
+        horizon=cell.horizon, checkpoints=checkpoints_of(grid, cell.horizon),
+        channel=cell.channel, baseline=baseline, keep=keep, on_slots=on_slots, device=dev,
+    )  # fmt: skip
