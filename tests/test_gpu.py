@@ -1,0 +1,484 @@
+"""The GPU backend (corraoi.gpu, docs/gpu.md).
+
+Most tests run the GPU kernels' source on the CPU (the emulated device: kernel.cu compiled by
+the host C++ compiler), so the policy logic, the random streams, the device-side moments and
+the sweep outputs are checked on machines without a GPU. Tests marked ``cuda`` run the same
+checks on a real device through CuPy and are skipped, with the reason, where there is none.
+Backend selection, ``auto`` and every error are tested without a GPU.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from corraoi.cli import main
+from corraoi.errors import ConfigError
+from corraoi.gpu import GpuUnavailable, choose_backend
+from corraoi.gpu.device import (
+    DEVICE_ENV,
+    MAX_ARMS,
+    SOURCE_PATH,
+    CudaDevice,
+    Device,
+    EmulatedDevice,
+    host_compiler,
+)
+from corraoi.gpu.runner import gpu_problem, simulate
+from corraoi.grid import build_grid
+from corraoi.instance import load_instance
+from corraoi.policies import builtins, gpu_form, make_policy
+from corraoi.stats import Moments
+from corraoi.sweep import run_policy
+
+PLUGINS = Path(__file__).parent / "plugins"
+I1 = load_instance("I1")
+
+needs_cxx = pytest.mark.skipif(
+    host_compiler() is None, reason="no C++ compiler: the emulated GPU device cannot be built"
+)
+
+
+def _cuda_device() -> Device | None:
+    try:
+        return CudaDevice()
+    except GpuUnavailable:
+        return None
+
+
+CUDA = _cuda_device()
+cuda = pytest.mark.skipif(CUDA is None, reason="no CUDA GPU with CuPy here (docs/gpu.md)")
+
+
+@pytest.fixture(scope="module")
+def emulated() -> Device:
+    if host_compiler() is None:
+        pytest.skip("no C++ compiler: the emulated GPU device cannot be built")
+    return EmulatedDevice()
+
+
+@pytest.fixture
+def emulate_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    if host_compiler() is None:
+        pytest.skip("no C++ compiler: the emulated GPU device cannot be built")
+    monkeypatch.setenv(DEVICE_ENV, "emulate")
+
+
+@pytest.fixture
+def no_cupy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CuPy cannot be imported (as on a machine without the gpu extra)."""
+    monkeypatch.setitem(sys.modules, "cupy", None)
+    monkeypatch.delenv(DEVICE_ENV, raising=False)
+    import corraoi.gpu.device as device
+
+    monkeypatch.setattr(device, "_DEVICES", {})
+
+
+def run(*args: object):  # type: ignore[no-untyped-def]
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+# ---------------------------------------------------------------------------- the generator
+
+#: Random123's known-answer vectors for Philox4x32-10 (tests/kat_vectors): counter, key, out.
+KAT = [
+    ([0, 0, 0, 0], [0, 0], [0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8]),
+    ([0xFFFFFFFF] * 4, [0xFFFFFFFF] * 2, [0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD]),
+    ([0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344], [0xA4093822, 0x299F31D0],
+     [0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1]),
+]  # fmt: skip
+
+
+def _kat(device: Device) -> None:
+    words = np.array([c + k for c, k, _ in KAT], dtype=np.uint32)
+    out = device.philox(words)
+    assert out.tolist() == [o for _, _, o in KAT]
+
+
+def test_philox_matches_random123_known_answers(emulated: Device):
+    _kat(emulated)
+
+
+@cuda
+def test_philox_matches_random123_known_answers_on_the_gpu():
+    assert CUDA is not None
+    _kat(CUDA)
+
+
+# ---------------------------------------------------------------------------- agreement
+
+GROUPS = {
+    "ucb": ["ucb", "cucb", "aoi-aware-ucb", "aoi-aware-cucb"],
+    "ts": ["ts", "cts", "aoi-aware-ts", "aoi-aware-cts"],
+    "ts-gauss": ["ts-gauss", "cts-gauss", "aoi-aware-ts-gauss", "aoi-aware-cts-gauss"],
+    "q-ucb": ["q-ucb", "cq-ucb", "aoi-aware-q-ucb", "aoi-aware-cq-ucb"],
+    "q-ts": ["q-ts", "cq-ts", "aoi-aware-q-ts", "aoi-aware-cq-ts"],
+    "drifting": ["sw-ucb", "aoi-aware-sw-ucb", "d-ts", "aoi-aware-d-ts"],
+}
+
+
+def test_the_agreement_tests_cover_every_built_in():
+    covered = {name for names in GROUPS.values() for name in names}
+    assert covered == set(builtins())
+    assert all(gpu_form(cls) is not None for cls in builtins().values())
+
+
+def _agree(device: Device, names: list[str], *, instance: str = "I1", runs: int = 800,
+           horizon: int = 2000, z: float = 4.0) -> None:  # fmt: skip
+    """GPU and CPU means of the regret at T within z standard errors of their difference,
+    for every policy (independent streams: the CPU's SFC64, the GPU's Philox)."""
+    inst = load_instance(instance)
+    for name in names:
+        spec = make_policy(name)
+        gpu = simulate(inst, spec, seed0=0, runs=runs, horizon=horizon, device=device)
+        cpu = Moments.of(run_policy(inst, spec, seeds=range(runs), horizon=horizon).regret)
+        se = math.sqrt((float(gpu.regret.m2[-1]) + float(cpu.m2)) / (runs - 1) / runs)
+        diff = float(gpu.regret.mean[-1]) - float(cpu.mean)
+        assert abs(diff) <= z * max(se, 1e-9), (
+            f"{instance} {name}: GPU {float(gpu.regret.mean[-1]):.1f} vs CPU "
+            f"{float(cpu.mean):.1f} (difference {diff:.1f}, standard error {se:.2f})"
+        )
+        assert gpu.regret.n == runs and gpu.t[-1] == horizon
+
+
+@pytest.mark.parametrize("family", sorted(GROUPS))
+def test_every_built_in_agrees_with_the_cpu_engine(emulated: Device, family: str):
+    _agree(emulated, GROUPS[family])
+
+
+def test_markov_channel_agrees_with_the_cpu_engine(emulated: Device):
+    _agree(emulated, ["ucb", "cts", "aoi-aware-q-ts", "d-ts"], instance="GE")
+
+
+@cuda
+@pytest.mark.parametrize("family", sorted(GROUPS))
+def test_every_built_in_agrees_with_the_cpu_engine_on_the_gpu(family: str):
+    assert CUDA is not None
+    _agree(CUDA, GROUPS[family], runs=4000)
+    _agree(CUDA, GROUPS[family][:2], instance="GE", runs=4000)
+
+
+#: The published implementation's means on I1 at T = 10,000 (mean +- one standard error over
+#: its runs, as issue 13 quotes them): UCB 643 +- 7, TS 108 +- 4.
+PUBLISHED_I1 = {"ucb": (643.0, 7.0), "ts": (108.0, 4.0)}
+#: corraoi's CPU engine on I2 at T = 10,000 (docs/reproducing-the-paper.md, 200 runs):
+#: mean and 95% half-width.
+ENGINE_I2 = {"ucb": (213.4, 3.4), "ts": (30.2, 2.7), "cucb": (11.4, 2.0), "cts": (10.4, 2.8)}
+
+
+def _anchors(device: Device, runs: int) -> None:
+    for name, (mean, se_pub) in PUBLISHED_I1.items():
+        r = simulate(I1, make_policy(name), seed0=0, runs=runs, horizon=10_000, device=device)
+        se = math.sqrt(float(r.regret.m2[-1]) / (runs - 1) / runs)
+        assert abs(float(r.regret.mean[-1]) - mean) <= 3 * math.hypot(se, se_pub), name
+    inst = load_instance("I2")
+    for name, (mean, half) in ENGINE_I2.items():
+        r = simulate(inst, make_policy(name), seed0=0, runs=runs, horizon=10_000, device=device)
+        se = math.sqrt(float(r.regret.m2[-1]) / (runs - 1) / runs)
+        assert abs(float(r.regret.mean[-1]) - mean) <= 3 * math.hypot(se, half / 1.97), name
+
+
+def test_published_anchors_on_i1_and_i2(emulated: Device):
+    _anchors(emulated, runs=600)
+
+
+@cuda
+def test_published_anchors_on_i1_and_i2_on_the_gpu():
+    assert CUDA is not None
+    _anchors(CUDA, runs=100_000)
+
+
+# ---------------------------------------------------------------------------- streams
+
+
+def _oracle_sums(run) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Each run's sum of the oracle's ages: sum(aoi) - regret (the oracle plays the best arm
+    on the run's hidden path, so this depends on the path alone)."""
+    T = int(run.t[-1])
+    mu_star = 0.6  # I1's best arm
+    return np.round(run.estimator_final + T / mu_star - run.regret_final).astype(np.int64)
+
+
+def test_every_policy_sees_the_same_hidden_path_for_a_seed(emulated: Device):
+    sums = [
+        _oracle_sums(simulate(I1, make_policy(n), seed0=100, runs=64, horizon=500,
+                              device=emulated))  # fmt: skip
+        for n in ("ucb", "cts", "aoi-aware-q-ts", "d-ts", "sw-ucb")
+    ]
+    for other in sums[1:]:
+        assert np.array_equal(sums[0], other)
+    assert len(set(sums[0].tolist())) > 10  # the paths differ from run to run
+
+
+def test_the_hidden_path_is_philox_of_seed_slot_and_purpose(emulated: Device):
+    """Slot t of the run with seed s draws X_t from the uniform of Philox(counter = (t, 0,
+    HIDDEN, 0), key = s) (docs/gpu.md): recomputed here from the generator alone."""
+    T, seeds = 300, [5, 6, 2**40 + 3]
+    cdf = np.cumsum(I1.p)
+    Y = np.asarray(I1.Y)
+    for s in seeds:
+        words = np.array([[t & 0xFFFFFFFF, t >> 32, 0x48494444, 0, s & 0xFFFFFFFF, s >> 32]
+                          for t in range(1, T + 1)], dtype=np.uint32)  # fmt: skip
+        w = emulated.philox(words).astype(np.uint64)
+        u = ((w[:, 0] << np.uint64(32)) | w[:, 1]) >> np.uint64(11)
+        x = np.searchsorted(cdf, u.astype(np.float64) / 2.0**53, side="right")
+        x = np.minimum(x, I1.n_states - 1)
+        age, total = 1, 0
+        for xt in x:
+            age = 1 if Y[1, xt] == 1 else age + 1  # arm 2 (index 1) is I1's best
+            total += age
+        r = simulate(I1, make_policy("ts"), seed0=s, runs=1, horizon=T, device=emulated)
+        assert _oracle_sums(r)[0] == total
+
+
+class _Tiny(EmulatedDevice):
+    """Launches of 7 slots and a checkpoint buffer of one checkpoint: many launches."""
+
+    def __init__(self, base: EmulatedDevice, runs: int) -> None:
+        self.__dict__.update(base.__dict__)
+        self.launch_work = 7 * runs
+        self.checkpoint_bytes = 1
+
+
+def test_results_do_not_depend_on_the_launch_shape_or_chunking(emulated: Device):
+    assert isinstance(emulated, EmulatedDevice)
+    spec, marks = make_policy("cts"), [50, 333, 1000]
+    whole = simulate(I1, spec, seed0=0, runs=200, horizon=1000, checkpoints=marks,
+                     device=emulated)  # fmt: skip
+    tiny = simulate(I1, spec, seed0=0, runs=200, horizon=1000, checkpoints=marks,
+                    device=_Tiny(emulated, 200))  # fmt: skip
+    assert np.array_equal(whole.regret_final, tiny.regret_final)
+    assert np.array_equal(whole.regret.mean, tiny.regret.mean)
+    assert np.array_equal(whole.pulls_sum, tiny.pulls_sum)
+    a = simulate(I1, spec, seed0=0, runs=120, horizon=1000, checkpoints=marks, device=emulated)
+    b = simulate(I1, spec, seed0=120, runs=80, horizon=1000, checkpoints=marks, device=emulated)
+    assert np.array_equal(np.concatenate([a.regret_final, b.regret_final]), whole.regret_final)
+    merged = a.regret.merge(b.regret)
+    assert np.allclose(merged.mean, whole.regret.mean, rtol=1e-12)
+    assert np.allclose(merged.m2, whole.regret.m2, rtol=1e-9)
+    assert whole.t.tolist() == marks
+
+
+def test_device_moments_and_paired_moments_match_the_runs(emulated: Device):
+    base = simulate(I1, make_policy("ucb"), seed0=0, runs=300, horizon=800, checkpoints=[400],
+                    keep=True, device=emulated)  # fmt: skip
+    other = simulate(I1, make_policy("cucb"), seed0=0, runs=300, horizon=800, checkpoints=[400],
+                     baseline=base.kept, device=emulated)  # fmt: skip
+    assert base.kept.shape == (2, 300) and np.array_equal(base.kept[-1], base.regret_final)
+    exact = Moments.of(other.regret_final - base.regret_final)
+    assert other.paired is not None
+    assert math.isclose(other.paired.mean[-1], exact.mean, rel_tol=1e-12)
+    assert math.isclose(other.paired.m2[-1], exact.m2, rel_tol=1e-9)
+    assert math.isclose(other.regret.mean[-1], other.regret_final.mean(), rel_tol=1e-12)
+    assert other.pulls_sum[-1].sum() == 300 * 800
+    est = other.estimator_final
+    assert math.isclose(other.estimator.mean[-1], est.mean(), rel_tol=1e-12)
+
+
+def test_a_trace_channel_replays_one_path_in_every_run(emulated: Device, tmp_path: Path):
+    from corraoi.channels import parse_channel
+
+    path = tmp_path / "states.txt"
+    rng = np.random.default_rng(3)
+    path.write_text("\n".join(str(v) for v in rng.integers(1, 5, 600)) + "\n")
+    chan = parse_channel(f"trace:{path}", I1)
+    r = simulate(I1, make_policy("cucb"), seed0=0, runs=50, horizon=600, channel=chan,
+                 device=emulated)  # fmt: skip
+    assert len(set(_oracle_sums(r).tolist())) == 1
+    assert len(set(r.regret_final.tolist())) > 1  # the policy's draws still differ
+
+
+def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
+    """AoI sums pass 2^31 near T = 1.3e9 on good instances; on this one (mu* = 1e-6, the age
+    grows by one a slot) they pass it within 80,000 slots."""
+    from corraoi.instance import Instance
+
+    inst = Instance(name="slow", Y=np.array([[1, 0], [0, 0]], dtype=np.int8),
+                    p=np.array([1e-6, 1 - 1e-6]))  # fmt: skip
+    T = 80_000
+    r = simulate(inst, make_policy("ucb"), seed0=1, runs=4, horizon=T, device=emulated)
+    sums = r.estimator_final + T / 1e-6
+    assert np.all(sums > 2**31)
+    assert np.all(sums == T * (T + 1) // 2 + T)  # no success: age t + 1 at slot t
+
+
+# ---------------------------------------------------------------------------- compiling
+
+
+@pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not installed here")
+def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
+    out = tmp_path / "kernel.ptx"
+    done = subprocess.run(["nvcc", "-arch=sm_90", "-std=c++17", "-ptx", "-DKARMS=4", "-x", "cu",
+                           str(SOURCE_PATH), "-o", str(out)], capture_output=True, text=True)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
+               if ".entry" in ln}  # fmt: skip
+    assert {f"advance_{k}" for k in ("ucb", "ts_beta", "d_ts")} <= entries
+
+
+def test_a_plug_in_that_replaces_a_hook_has_no_gpu_form():
+    from corraoi.policies.paper import UCB
+
+    class Mine(UCB):
+        name = "mine"
+        score = "corraoi.policies.builtin_hooks:q_ucb_score"
+
+    class Same(UCB):
+        name = "same"
+
+    assert gpu_form(Mine) is None
+    assert gpu_form(Same) is not None
+
+
+def test_gpu_problems_name_the_policy_or_the_arms():
+    assert gpu_problem(make_policy("cts"), 4) is None
+    assert "eps-greedy" in str(gpu_problem(make_policy(f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy"), 4))
+    assert "bonus-ucb" in str(gpu_problem(make_policy(f"{PLUGINS / 'compiled_greedy.py'}:BonusUCB"), 4))
+    assert f"at most {MAX_ARMS} arms" in str(gpu_problem(make_policy("ucb"), MAX_ARMS + 1))
+
+
+# ---------------------------------------------------------------------------- choosing
+
+
+def _grid(policies: list[str], backend: str):  # type: ignore[no-untyped-def]
+    return build_grid(instances=["I1"], policies=policies, horizons=[100], runs=3,
+                      backend=backend)  # fmt: skip
+
+
+def test_auto_falls_back_to_the_cpu_with_a_notice_without_cupy(no_cupy: None):
+    notes: list[str] = []
+    grid = choose_backend(_grid(["ucb"], "auto"), warn=notes.append)
+    assert grid.backend == "cpu"
+    assert notes == ['--backend auto: running on the CPU (CuPy is not installed '
+                     '(pip install "corraoi[gpu]", for CUDA 13))']  # fmt: skip
+
+
+def test_gpu_without_cupy_is_one_clear_line(no_cupy: None):
+    with pytest.raises(GpuUnavailable, match=r"^--backend gpu: CuPy is not installed .*; run "
+                       r"with --backend cpu$"):  # fmt: skip
+        choose_backend(_grid(["ucb"], "gpu"))
+    res = run("sweep", "-p", "ucb", "-n", "3", "-T", "100", "--backend", "gpu")
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert lines[-1].startswith("corraoi: error: --backend gpu: CuPy is not installed")
+    assert "Traceback" not in res.output
+
+
+def test_auto_picks_the_gpu_when_it_can_and_the_cpu_for_a_plug_in(emulate_env: None):
+    assert choose_backend(_grid(["ucb", "cts"], "auto")).backend == "gpu"
+    notes: list[str] = []
+    plug = f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy"
+    assert choose_backend(_grid(["ucb", plug], "auto"), warn=notes.append).backend == "cpu"
+    assert "policy eps-greedy has a plain-Python policy" in notes[0]
+    with pytest.raises(GpuUnavailable, match="eps-greedy"):
+        choose_backend(_grid([plug], "gpu"))
+
+
+def test_a_bad_device_setting_is_refused(monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setenv(DEVICE_ENV, "tpu")
+    res = run("sweep", "-p", "ucb", "-n", "3", "-T", "100", "--backend", "gpu")
+    assert res.exit_code == 2
+    assert "CORRAOI_GPU_DEVICE='tpu': expected 'cuda' or 'emulate'" in res.output
+
+
+def test_record_says_per_slot_logs_are_a_cpu_feature():
+    res = run("record", "-p", "ucb", "-T", "50", "--no-rrd", "--backend", "gpu", "-o", "x.mcap")
+    assert res.exit_code == 2
+    assert "record writes every slot of a run, a CPU feature" in res.output
+    assert not Path("x.mcap").exists()
+    res = run("record", "-p", "ucb", "-T", "50", "--no-rrd", "--backend", "auto", "-o", "x.mcap")
+    assert res.exit_code == 0, res.output
+    assert "record runs on the CPU" in res.output and Path("x.mcap").exists()
+
+
+def test_a_gpu_sweep_cannot_go_to_a_cluster(emulate_env: None):
+    from corraoi.experiments import sweep
+
+    with pytest.raises(ConfigError, match="leave out --scheduler"):
+        sweep(_grid(["ucb"], "gpu"), client=object())
+
+
+def test_the_backend_is_an_experiment_file_key(tmp_path: Path):
+    from corraoi.grid import grid_from_file
+
+    f = tmp_path / "e.toml"
+    f.write_text('instances = ["I1"]\npolicies = ["ucb"]\nruns = 2\nbackend = "gpu"\n')
+    assert grid_from_file(f).backend == "gpu"
+    f.write_text('instances = ["I1"]\npolicies = ["ucb"]\nruns = 2\nbackend = "tpu"\n')
+    with pytest.raises(ConfigError, match="backend 'tpu': expected one of cpu, gpu, auto"):
+        grid_from_file(f)
+
+
+# ---------------------------------------------------------------------------- sweeps
+
+
+def test_a_gpu_sweep_writes_the_same_outputs_as_a_cpu_sweep(emulate_env: None, tmp_path: Path):
+    out = tmp_path / "g"
+    res = run("sweep", "-p", "ucb,cucb,cts", "-n", "300", "-T", "1500", "--backend", "gpu",
+              "--baseline", "ucb", "-o", out, "--json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "backend gpu: emulated on the CPU" in res.output
+    for name in ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
+                 "summary.md", "figure.png"):  # fmt: skip
+        assert (out / name).exists(), name
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["backend"] == "gpu"
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["grid"]["backend"] == "gpu"
+    import corraoi
+
+    data = corraoi.load(out)
+    runs = data.runs
+    assert len(runs) == 3 * 300 and set(runs["t"]) == {1500}  # per-run values at T only
+    for name, entry in summary["policies"].items():
+        at_T = runs[runs["policy"] == name]["regret"].to_numpy()
+        m = Moments.of(at_T)
+        assert math.isclose(entry["regret_mean"], float(m.mean), rel_tol=1e-12)
+        assert math.isclose(entry["regret_ci95"], float(m.ci95()), rel_tol=1e-9)
+    curve = summary["policies"]["cts"]["paired_diff_curve"]
+    assert curve["t"][-1] == 1500
+    assert math.isclose(curve["mean"][-1], summary["policies"]["cts"]["paired_diff_mean"],
+                        rel_tol=1e-12)  # fmt: skip
+    assert math.isclose(curve["ci95"][-1], summary["policies"]["cts"]["paired_diff_ci95"],
+                        rel_tol=1e-9)  # fmt: skip
+    curves = data.curves
+    last = curves[(curves["policy"] == "cucb") & (curves["t"] == 1500)]
+    assert math.isclose(float(last["regret_mean"].iloc[0]),
+                        summary["policies"]["cucb"]["regret_mean"], rel_tol=1e-12)  # fmt: skip
+    assert len(curves[curves["policy"] == "cucb"]) > 100  # every checkpoint, from the device
+
+
+def test_a_gpu_sweep_resumes_and_grows_like_one_sweep(emulate_env: None, tmp_path: Path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    common = ["-p", "ucb,cts", "-T", "800", "--backend", "gpu", "--baseline", "ucb"]
+    assert run("sweep", *common, "-n", "100", "-o", a).exit_code == 0
+    res = run("sweep", *common, "-n", "250", "-o", a, "--resume")
+    assert res.exit_code == 0, res.output
+    assert run("sweep", *common, "-n", "250", "-o", b).exit_code == 0
+    sa = json.loads((a / "summary.json").read_text())
+    sb = json.loads((b / "summary.json").read_text())
+    for name in ("ucb", "cts"):
+        for key in ("regret_mean", "regret_ci95", "estimator_mean"):
+            assert math.isclose(sa["policies"][name][key], sb["policies"][name][key],
+                                rel_tol=1e-9), (name, key)  # fmt: skip
+    ca, cb = (s["policies"]["cts"]["paired_diff_curve"] for s in (sa, sb))
+    assert np.allclose(ca["mean"], cb["mean"], rtol=1e-9)
+    res = run("sweep", "-p", "ucb,cts", "-T", "800", "-n", "300", "-o", a, "--resume")
+    assert res.exit_code == 2
+    assert "holds a sweep run with --backend gpu; --resume it with --backend gpu" in res.output
+
+
+def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
+    res = run("reproduce", "-o", tmp_path / "p", "-n", "40", "-T", "600", "--backend", "gpu")
+    assert res.exit_code == 0, res.output
+    for inst in ("I1", "I2"):
+        s = json.loads((tmp_path / "p" / inst / "summary.json").read_text())
+        assert s["backend"] == "gpu" and len(s["policies"]) == 12
