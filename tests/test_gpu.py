@@ -324,6 +324,25 @@ def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     assert {f"advance_{k}" for k in ("ucb", "ts_beta", "d_ts")} <= entries
 
 
+def _nvrtc():  # type: ignore[no-untyped-def]
+    try:
+        from cupy_backends.cuda.libs import nvrtc
+
+        nvrtc.getVersion()
+        return nvrtc
+    except Exception:
+        return None
+
+
+@pytest.mark.skipif(_nvrtc() is None, reason="CuPy with the NVRTC library is not installed here")
+def test_the_kernels_compile_with_nvrtc_as_cupy_compiles_them():
+    """CuPy's RawModule compiles with NVRTC, which has no host headers (unlike nvcc)."""
+    nvrtc = _nvrtc()
+    prog = nvrtc.createProgram(SOURCE_PATH.read_text(), "kernel.cu", [], [])
+    nvrtc.compileProgram(prog, ["-std=c++17", "-DKARMS=64", "-arch=compute_90"])
+    assert b".entry advance_sw_ucb" in nvrtc.getPTX(prog)
+
+
 def test_a_plug_in_that_replaces_a_hook_has_no_gpu_form():
     from corraoi.policies.paper import UCB
 
@@ -482,3 +501,41 @@ def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
     for inst in ("I1", "I2"):
         s = json.loads((tmp_path / "p" / inst / "summary.json").read_text())
         assert s["backend"] == "gpu" and len(s["policies"]) == 12
+
+
+def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """docs/gpu.md's commands and Python example, on the emulated device."""
+    import os
+    import re
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "gpu.md").read_text()
+    bindir = Path(sys.executable).parent
+    env = {**os.environ, "PATH": f"{bindir}{os.pathsep}{os.environ['PATH']}"}
+    for block in re.findall(r"```bash\n(.*?)```", doc, flags=re.S):
+        done = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=tmp_path, env=env,
+                              capture_output=True, text=True)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+    assert (tmp_path / "gpu-I1" / "summary.json").exists()
+    assert json.loads((tmp_path / "paper-gpu" / "I2" / "summary.json").read_text())["backend"] == "gpu"
+    monkeypatch.chdir(tmp_path)
+    (example,) = re.findall(r"```python\n(.*?)```", doc, flags=re.S)
+    exec(compile(example, "gpu.md", "exec"), {})
+
+
+def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):
+    pytest.importorskip("pyarrow")
+    out = tmp_path / "c"
+    res = run("sweep", "-p", "ucb,cucb", "-n", "30", "-T", "400", "--baseline", "ucb", "-o", out)
+    assert res.exit_code == 0, res.output
+    import corraoi
+
+    data = corraoi.load(out)
+    curve = data.summary["policies"]["cucb"]["paired_diff_curve"]
+    runs = data.runs
+    for i in (0, len(curve["t"]) // 2, len(curve["t"]) - 1):
+        t = curve["t"][i]
+        at = runs[runs["t"] == t]
+        diff = (at[at["policy"] == "cucb"]["regret"].to_numpy()
+                - at[at["policy"] == "ucb"]["regret"].to_numpy())  # fmt: skip
+        m = Moments.of(diff)
+        assert math.isclose(curve["mean"][i], float(m.mean), rel_tol=1e-12, abs_tol=1e-12)
