@@ -316,8 +316,9 @@ def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not installed here")
 def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     out = tmp_path / "kernel.ptx"
-    done = subprocess.run(["nvcc", "-arch=sm_90", "-std=c++17", "-ptx", "-DKARMS=4", "-x", "cu",
-                           str(SOURCE_PATH), "-o", str(out)], capture_output=True, text=True)  # fmt: skip
+    cmd = ["nvcc", "-arch=sm_90", "-std=c++17", "-ptx", "-DKARMS=4", "-x", "cu",
+           str(SOURCE_PATH), "-o", str(out)]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
                if ".entry" in ln}  # fmt: skip
@@ -359,8 +360,10 @@ def test_a_plug_in_that_replaces_a_hook_has_no_gpu_form():
 
 def test_gpu_problems_name_the_policy_or_the_arms():
     assert gpu_problem(make_policy("cts"), 4) is None
-    assert "eps-greedy" in str(gpu_problem(make_policy(f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy"), 4))
-    assert "bonus-ucb" in str(gpu_problem(make_policy(f"{PLUGINS / 'compiled_greedy.py'}:BonusUCB"), 4))
+    eps = make_policy(f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy")
+    bonus = make_policy(f"{PLUGINS / 'compiled_greedy.py'}:BonusUCB")
+    assert "eps-greedy has a plain-Python policy" in str(gpu_problem(eps, 4))
+    assert "bonus-ucb has no GPU form" in str(gpu_problem(bonus, 4))
     assert f"at most {MAX_ARMS} arms" in str(gpu_problem(make_policy("ucb"), MAX_ARMS + 1))
 
 
@@ -516,7 +519,8 @@ def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: py
                               capture_output=True, text=True)  # fmt: skip
         assert done.returncode == 0, done.stderr
     assert (tmp_path / "gpu-I1" / "summary.json").exists()
-    assert json.loads((tmp_path / "paper-gpu" / "I2" / "summary.json").read_text())["backend"] == "gpu"
+    paper = json.loads((tmp_path / "paper-gpu" / "I2" / "summary.json").read_text())
+    assert paper["backend"] == "gpu"
     monkeypatch.chdir(tmp_path)
     (example,) = re.findall(r"```python\n(.*?)```", doc, flags=re.S)
     exec(compile(example, "gpu.md", "exec"), {})
