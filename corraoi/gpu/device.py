@@ -188,13 +188,12 @@ class EmulatedDevice(Device):
             return lib
 
     def _build(self, K: int) -> Path:
-        from ..kernels import cache_dir
+        from ..kernels import _writable, cache_dir
 
         text = source()
         flags = (*self.FLAGS, f"-DKARMS={K}")
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
-        folder = cache_dir() / "gpu-emulation"
-        folder.mkdir(parents=True, exist_ok=True)
+        folder = _writable(cache_dir() / "gpu-emulation")  # else the system's temp folder
         lib = folder / f"kernel-K{K}-{digest}.so"
         if lib.exists():
             return lib
