@@ -42,6 +42,9 @@ MANIFEST = "manifest.json"
 PARTS = "parts"
 MANIFEST_FORMAT = "corraoi.sweep-folder"
 MANIFEST_VERSION = 1
+#: Why a GPU sweep and a Dask client do not go together.
+GPU_NOT_ON_CLUSTER = ("--backend gpu runs in this process, on its GPU; leave out --scheduler "
+                      "(or use --backend cpu on the cluster)")  # fmt: skip
 #: What a group folder holds (written from the parts when the sweep finishes).
 GROUP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
 
@@ -657,10 +660,7 @@ def sweep(
 
         grid = choose_backend(grid, warn=warn)
         if grid.backend == "gpu" and client is not None:
-            raise ConfigError(
-                "--backend gpu runs in this process, on its GPU; leave out --scheduler "
-                "(or use --backend cpu on the cluster)"
-            )
+            raise ConfigError(GPU_NOT_ON_CLUSTER)
     folder = Path(out) if out is not None else None
     with ExitStack() as stack:
         if folder is not None:

@@ -426,6 +426,9 @@ def test_a_gpu_sweep_cannot_go_to_a_cluster(emulate_env: None):
 
     with pytest.raises(ConfigError, match="leave out --scheduler"):
         sweep(_grid(["ucb"], "gpu"), client=object())
+    res = run("sweep", "-p", "ucb", "-n", "3", "-T", "50", "--backend", "gpu", "--scheduler",
+              "local:2")  # fmt: skip
+    assert res.exit_code == 2 and "leave out --scheduler" in res.output
 
 
 def test_the_backend_is_an_experiment_file_key(tmp_path: Path):

@@ -241,9 +241,12 @@ def _run(
     """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
     from contextlib import ExitStack
 
+    from ..experiments import GPU_NOT_ON_CLUSTER
     from ..experiments import sweep as run_sweep
     from ..progress import Progress
 
+    if scheduler is not None and grid.backend == "gpu":  # before a cluster is started
+        raise ConfigError(GPU_NOT_ON_CLUSTER)
     with ExitStack() as stack:
         client = None
         if scheduler is not None:
