@@ -28,8 +28,8 @@ from ..stats import Moments
 from .device import MAX_ARMS, Device, GpuUnavailable, get_device
 
 if TYPE_CHECKING:
-    from ..experiments import ChunkResult
     from ..grid import Cell, Chunk, Grid
+    from ..sweep_folder import ChunkResult
 
 
 @dataclass
@@ -217,7 +217,7 @@ def execute(
     """Run the chunks ``todo`` of ``grid`` on the device, group by group. With a baseline,
     its runs of each chunk's range run first and stay on the device, so that every other
     policy's paired moments are computed there."""
-    from ..experiments import ChunkResult
+    from ..sweep_folder import ChunkResult
 
     dev = device if device is not None else get_device()
     for cells in grid.groups().values():
