@@ -318,17 +318,30 @@ def group_summary(
 
 def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
     """The sweep log's configuration of a group (``sweep_config`` with cell labels)."""
+    from recorder.style import spec_color, variant_colors
+
     from .sweep import sweep_config
 
     c0 = cells[0].cell
     config = sweep_config(c0.instance, [c.cell.policy for c in cells], runs=grid.runs,
                           horizon=c0.horizon, seed=grid.seed,
-                          checkpoints=[int(t) for t in cells[0].t],
+                          checkpoints=[int(t) for t in cells[0].checkpoints],
                           channel=c0.channel)  # fmt: skip
+    # every view draws a policy in its own colour; the parameter values of one policy in
+    # shades of it
+    same: dict[str, list[CellRuns]] = {}
+    for c in cells:
+        same.setdefault(c.cell.policy.name, []).append(c)
+    shade = {
+        id(c): rgb
+        for group in same.values()
+        for c, rgb in zip(group, variant_colors(spec_color(group[0].cell.policy), len(group)),
+                          strict=True)  # fmt: skip
+    }
     for entry, c in zip(config["policies"], cells, strict=True):
         entry["name"] = c.label
-        if c.cell.policy.color is not None:  # every view draws the policy in its own colour
-            entry["color"] = list(c.cell.policy.color)
+        if c.cell.policy.color is not None or len(same[c.cell.policy.name]) > 1:
+            entry["color"] = list(shade[id(c)])
     return config
 
 

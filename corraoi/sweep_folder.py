@@ -278,6 +278,11 @@ class CellRuns:
             wall_s=float(sum(p.wall_s for p in parts)), agg=agg,
         )  # fmt: skip
 
+    @property
+    def checkpoints(self) -> np.ndarray:
+        """Every checkpoint slot of the cell's curves (``t`` holds only T for a device's runs)."""
+        return self.agg.t if self.agg is not None else self.t
+
     def points(self) -> list[Any]:
         """The sweep log's points: mean and 95% CI over runs at each checkpoint."""
         from .sweep import sweep_points

@@ -107,6 +107,20 @@ def policy_color(name: str, color: Sequence[int] | None = None) -> RGB:
     return _EXTRA_COLORS[sum(base.encode()) % len(_EXTRA_COLORS)]
 
 
+def variant_colors(rgb: Sequence[int], n: int) -> list[RGB]:
+    """``n`` shades of one policy's colour, darker to lighter, for the parameter values a
+    sweep runs it with (one curve each, told apart; a single value keeps the colour)."""
+    base = tuple(int(c) for c in rgb)
+    if n <= 1:
+        return [(base[0], base[1], base[2])]
+    out: list[RGB] = []
+    for i in range(n):
+        f = -0.45 + 0.9 * i / (n - 1)  # -0.45: 45% toward black .. +0.45: toward white
+        r, g, b = (round(c + f * (255 - c)) if f > 0 else round(c * (1 + f)) for c in base)
+        out.append((r, g, b))
+    return out
+
+
 def spec_color(spec: Any) -> RGB:
     """The colour of a policy spec (``.name`` and, where it has one, ``.color``)."""
     return policy_color(spec.name, getattr(spec, "color", None))

@@ -136,6 +136,13 @@ def test_appending_runs_policies_and_values_equals_running_them_all_at_once(tmp_
         assert (tmp_path / "grow" / inst / "sweep.mcap").read_bytes() == (
             tmp_path / "once" / inst / "sweep.mcap"
         ).read_bytes()
+    from recorder.style import config_colors, policy_color
+    from recorder.sweep_log import read_sweep
+
+    colors = config_colors(read_sweep(tmp_path / "once" / "I1" / "sweep.mcap").config)
+    shades = [rgb for name, rgb in colors.items() if name.startswith("sw-ucb(")]
+    assert len(shades) == 2 and shades[0] != shades[1]  # one policy's values told apart
+    assert colors["ucb"] == policy_color("ucb")
 
 
 def test_a_sweep_killed_at_a_random_moment_then_resumed_equals_an_uninterrupted_one(
