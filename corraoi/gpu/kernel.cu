@@ -367,6 +367,7 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
     for (int k = 0; k < KARMS; ++k) {
         np[k] = pulls[(i64)k * R + r];
         ns[k] = succ[(i64)k * R + r];
+        mu[k] = np[k] > 0 ? (double)ns[k] / (double)np[k] : 0.0;
     }
     i64 age = age_a[r], oage = oage_a[r], reg = reg_a[r], asum = asum_a[r];
     int xp = xprev[r];
@@ -376,11 +377,9 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
         i64 t = t0 + j + 1;
         int x = cai_hidden(kind, cdf, trace, n, nrows, xp, t, k0, k1);
         xp = x;
-        double maxmu = 0.0;
+        double maxmu = 0.0;  // mu[] holds the empirical means (only the played arm's changes)
         for (int k = 0; k < KARMS; ++k) {
-            double m = np[k] > 0 ? (double)ns[k] / (double)np[k] : 0.0;
-            mu[k] = m;
-            if (m > maxmu) maxmu = m;
+            if (mu[k] > maxmu) maxmu = mu[k];
             cand[k] = true;
         }
         int forced = P::forced(t, np, ns, prm, ps, g);
@@ -419,6 +418,7 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
         int rew = Y[arm * n + x];
         np[arm] += 1;
         ns[arm] += rew;
+        mu[arm] = (double)ns[arm] / (double)np[arm];
         P::update(t, arm, rew, np, ns, prm, ps);
         age = rew == 1 ? 1 : age + 1;
         oage = Y[best * n + x] == 1 ? 1 : oage + 1;
