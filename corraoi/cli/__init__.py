@@ -41,6 +41,7 @@ def main() -> None:
       corraoi reproduce -o paper        the paper's simulations, figures and tables
       corraoi policies                  every policy (and your plug-ins) with its parameters
       corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
+      corraoi sweep ... --backend gpu   built-in policies on a CUDA GPU (docs/gpu.md)
     """
     from .. import kernels
 
