@@ -75,18 +75,27 @@ def check_instance(instance: Instance) -> InstanceTheory:
     return theory
 
 
-def _bitsets(spol: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The correlated candidate set's bitsets: for each arm l (rows), the arms k (bits) whose
-    pseudo-reward phi_{k,l} is 0, l's failure rate, or l's success rate.
+def pseudo_reward_classes(instance: Instance) -> np.ndarray:
+    """(K, K) int8: what phi_hat_{k,l} is for each pair, by the 0/1 pseudo-rewards (0: 0,
+    1: l's failure rate, 2: l's success rate, 3: 1), as the candidate set tests it.
 
     Pseudo-rewards are 0/1, so phi_hat_{k,l} = (S_l s_{k,l}(1) + F_l s_{k,l}(0)) / n_l is one of
-    0, F_l / n_l, S_l / n_l or 1, and the arms that fall below a target are a union of these
-    sets: K/64 words a test instead of K comparisons (18-26x faster at K = 256).
+    0, F_l / n_l, S_l / n_l or 1.
     """
-    K = spol.shape[0]
+    spol = policy_pseudo_rewards(instance)
     if not np.all((spol == 0) | (spol == 1)):
         raise ConfigError("pseudo-rewards must be 0 or 1 (Y is a 0/1 table)")
-    kind = (2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int64).T  # [l, k]
+    return np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
+
+
+def _bitsets(pclass: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The correlated candidate set's bitsets from :func:`pseudo_reward_classes`: for each arm
+    l (rows), the arms k (bits) whose phi_{k,l} is 0, l's failure rate, or l's success rate.
+    The arms that fall below a target are a union of these sets: K/64 words a test instead of
+    K comparisons (18-26x faster at K = 256).
+    """
+    K = pclass.shape[0]
+    kind = pclass.T  # [l, k]
     W = (K + 63) // 64
     out = []
     for c in (0, 1, 2):
@@ -95,13 +104,6 @@ def _bitsets(spol: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         packed = np.packbits(bits, axis=1, bitorder="little").view("<u8")
         out.append(np.ascontiguousarray(packed.astype(np.uint64)))
     return out[0], out[1], out[2]
-
-
-def pseudo_reward_classes(instance: Instance) -> np.ndarray:
-    """(K, K) int8: what phi_hat_{k,l} is for each pair, by the 0/1 pseudo-rewards (0: 0,
-    1: l's failure rate, 2: l's success rate, 3: 1), as the candidate set tests it."""
-    spol = policy_pseudo_rewards(instance)
-    return np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
 
 
 class Simulation:
@@ -152,8 +154,8 @@ class Simulation:
             self._params = policy.param_vector(self.cls)
             S = int(self.cls.state_size(K, policy.params))
             self.pstate = np.zeros((R, max(S, 1)))
-            self._fail = _bitsets(np.ascontiguousarray(policy_pseudo_rewards(instance)))
             self._pclass = pseudo_reward_classes(instance)
+            self._fail = _bitsets(self._pclass)
             self._py: Any = None
             self._warm_up()
         else:

@@ -289,12 +289,12 @@ class CellRuns:
 
         if self.agg is not None:
             a = self.agg
-            share = a.pulls_sum / (a.regret.n * a.t.astype(np.float64))[:, None]
-            return sweep_points(self.label, a.t, a.regret, a.estimator, share)
-        n = self.regret.shape[0]
-        share = self.pulls_sum / (n * self.t.astype(np.float64))[:, None]
-        return sweep_points(self.label, self.t, Moments.of(self.regret),
-                            Moments.of(self.estimator), share)  # fmt: skip
+            t, n, pulls, regret, estimator = a.t, a.regret.n, a.pulls_sum, a.regret, a.estimator
+        else:
+            t, n, pulls = self.t, self.regret.shape[0], self.pulls_sum
+            regret, estimator = Moments.of(self.regret), Moments.of(self.estimator)
+        share = pulls / (n * t.astype(np.float64))[:, None]
+        return sweep_points(self.label, t, regret, estimator, share)
 
     def paired_curve(self, base: CellRuns) -> dict[str, list[Any]] | None:
         """Mean and 95% CI of regret(this) - regret(base), run by run, at each checkpoint:
