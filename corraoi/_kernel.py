@@ -83,9 +83,8 @@ def advance(
     kind,  # int: CHANNEL_CDF / CHANNEL_TRACE
     trace,  # (T,) int64 hidden path for CHANNEL_TRACE (else unused)
     Y,  # (K, n) int8 rewards
-    fail0,  # (K, W) uint64: arms k with phi_{k,l} = 0, as bitsets per pulled arm l
-    fail1,  # (K, W) uint64: arms k with phi_{k,l} = failure rate of l
-    fail2,  # (K, W) uint64: arms k with phi_{k,l} = success rate of l
+    comb,  # (K, 8, W) uint64: per pulled arm l, the arms k that fall below the target when
+    # it exceeds 0 (bit 0 of the code), l's failure rate (bit 1), l's success rate (bit 2)
     pclass,  # (K, K) int8: phi_{k,l} is 0, l's failure rate, l's success rate or 1 (0..3)
     best,  # int: index of the best arm (for the oracle)
     correlated,  # bool: restrict to the correlated candidate set
@@ -122,15 +121,15 @@ def advance(
 ):
     R = pulls.shape[0]
     K = pulls.shape[1]
-    W = fail0.shape[1]
+    W = comb.shape[2]
     # which pulled arms can remove candidates through their failure or success rate at all
     has1 = np.zeros(K, dtype=np.bool_)
     has2 = np.zeros(K, dtype=np.bool_)
     for l in range(K):
         for w in range(W):
-            if fail1[l, w] != np.uint64(0):
+            if comb[l, 2, w] != np.uint64(0):
                 has1[l] = True
-            if fail2[l, w] != np.uint64(0):
+            if comb[l, 4, w] != np.uint64(0):
                 has2[l] = True
     for r in prange(R):
         lst = lat[r]
@@ -194,22 +193,18 @@ def advance(
                 else:
                     for w in range(W):
                         fail[w] = np.uint64(0)
+                    drop0 = 1 if target > 0.0 else 0
                     for l in range(K):
                         if not in_s[l] or npull[l] == 0:
                             continue
-                        drop0 = target > 0.0
-                        drop1 = has1[l] and (npull[l] - nsucc[l]) / npull[l] < target
-                        drop2 = has2[l] and muhat[l] < target  # muhat[l] = S_l / n_l
-                        if drop0 or drop1 or drop2:
+                        code = drop0
+                        if has1[l] and (npull[l] - nsucc[l]) / npull[l] < target:
+                            code |= 2
+                        if has2[l] and muhat[l] < target:  # muhat[l] = S_l / n_l
+                            code |= 4
+                        if code != 0:
                             for w in range(W):
-                                m64 = np.uint64(0)
-                                if drop0:
-                                    m64 |= fail0[l, w]
-                                if drop1:
-                                    m64 |= fail1[l, w]
-                                if drop2:
-                                    m64 |= fail2[l, w]
-                                fail[w] |= m64
+                                fail[w] |= comb[l, code, w]
                     for k in range(K):
                         cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
                 cand[kemp] = True

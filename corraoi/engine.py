@@ -88,22 +88,29 @@ def pseudo_reward_classes(instance: Instance) -> np.ndarray:
     return np.ascontiguousarray((2 * spol[:, :, 1] + spol[:, :, 0]).astype(np.int8))
 
 
-def _bitsets(pclass: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The correlated candidate set's bitsets from :func:`pseudo_reward_classes`: for each arm
-    l (rows), the arms k (bits) whose phi_{k,l} is 0, l's failure rate, or l's success rate.
-    The arms that fall below a target are a union of these sets: K/64 words a test instead of
-    K comparisons (18-26x faster at K = 256).
+def _bitsets(pclass: np.ndarray) -> np.ndarray:
+    """The correlated candidate set's bitsets from :func:`pseudo_reward_classes`, (K, 8, W)
+    uint64: for each pulled arm l and each code (bit 0: the target exceeds 0, bit 1: it
+    exceeds l's failure rate, bit 2: l's success rate), the arms k (bits) that these
+    comparisons remove, i.e. whose phi_{k,l} is 0, l's failure rate or l's success rate.
+    The arms that fall below a target are a union of one row per pulled arm: K/64 words a
+    test instead of K comparisons (18-26x faster at K = 256); one row per code instead of
+    three conditional unions cut the wide instance's CUCB time by a quarter.
     """
     K = pclass.shape[0]
     kind = pclass.T  # [l, k]
     W = (K + 63) // 64
-    out = []
+    sets = []
     for c in (0, 1, 2):
         bits = np.zeros((K, W * 64), dtype=np.bool_)
         bits[:, :K] = kind == c
-        packed = np.packbits(bits, axis=1, bitorder="little").view("<u8")
-        out.append(np.ascontiguousarray(packed.astype(np.uint64)))
-    return out[0], out[1], out[2]
+        sets.append(np.packbits(bits, axis=1, bitorder="little").view("<u8").astype(np.uint64))
+    comb = np.zeros((K, 8, W), dtype=np.uint64)
+    for code in range(8):
+        for c in (0, 1, 2):
+            if code >> c & 1:
+                comb[:, code] |= sets[c]
+    return comb
 
 
 class Simulation:
@@ -188,7 +195,7 @@ class Simulation:
         s_pulls: np.ndarray,
     ) -> None:
         self._kernel(
-            self._cdf_rows, self._kind, self._trace, self._Y, *self._fail, self._pclass,
+            self._cdf_rows, self._kind, self._trace, self._Y, self._fail, self._pclass,
             self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
             self.t, nslots,
             self.lat, self.pol, self.ncache, self.pstate, self.xprev,
