@@ -53,7 +53,7 @@ def integer(st, high):
     return k if k < high else high - 1
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def normal(st, cache):
     """Standard normal by the polar method; the spare value waits in ``cache[1]``."""
     if cache[0] != 0.0:
@@ -78,7 +78,7 @@ def gamma(st, cache, shape):
     return gamma_dc(st, cache, d, 1.0 / math.sqrt(9.0 * d))
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def gamma_dc(st, cache, d, c):
     """Gamma(d + 1/3, 1) given Marsaglia and Tsang's constants d = shape - 1/3 and
     c = 1 / sqrt(9 d): a policy that samples the same shape many times caches them (the
