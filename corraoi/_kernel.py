@@ -94,7 +94,7 @@ def advance(
     nslots,  # int: slots to simulate now
     lat,  # (R, 4) uint64 latent streams
     pol,  # (R, 4) uint64 policy streams
-    ncache,  # (R, 2) float64 spare normal per run
+    ncache,  # (R, 2) float64 scratch pair per run (the `cache` argument of corraoi.rng)
     pstate,  # (R, S) float64 the policy's own state per run
     xprev,  # (R,) int64 previous hidden state (-1 before slot 1)
     pulls,  # (R, K) int64

@@ -6,8 +6,8 @@ hidden path, the policy stream everything a policy randomises. The SFC64 step is
 ``numpy.random.Generator(SFC64(seed_sequence)).random()``, which the tests check.
 
 These functions are the public toolbox of compiled policies (``docs/extending.md``): call them
-from your own ``@njit`` hooks with the ``pst`` (policy stream) and ``cache`` (spare normal)
-arrays the kernel hands you.
+from your own ``@njit`` hooks with the ``pst`` (policy stream) and ``cache`` arrays the kernel
+hands you (``cache`` held the polar method's spare normal; the ziggurat needs none).
 """
 
 from __future__ import annotations
@@ -53,22 +53,63 @@ def integer(st, high):
     return k if k < high else high - 1
 
 
+def _ziggurat() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Tables of a 256-layer ziggurat for exp(-x^2 / 2) (Marsaglia and Tsang, "The Ziggurat
+    Method for Generating Random Variables", J. Stat. Software 5(8), 2000).
+
+    Layer i >= 1 spans [0, x_i] horizontally and [f(x_i), f(x_{i+1})] vertically, with
+    x_1 = R, x_256 = 0 and equal areas V; layer 0 is the base [0, R] x [0, f(R)] plus the
+    tail beyond R, of width x_0 = V / f(R). Returns (k, w, f, R): a 52-bit magnitude m of
+    layer i gives x = m w_i, accepted at once when m < k_i (x < x_{i+1}); f_i = f(x_i).
+    """
+    r, v = 3.6541528853610088, 4.92867323399e-3
+
+    def f(x: float) -> float:
+        return math.exp(-0.5 * x * x)
+
+    x = np.zeros(257)
+    x[0], x[1] = v / f(r), r
+    for i in range(1, 255):
+        x[i + 1] = math.sqrt(-2.0 * math.log(v / x[i] + f(x[i])))
+    scale = float(1 << 52)
+    k = np.array([int(x[i + 1] / x[i] * scale) for i in range(256)], dtype=np.uint64)
+    w = x[:256] / scale
+    return k, w, np.array([f(xi) for xi in x]), r
+
+
+_ZK, _ZW, _ZF, _ZR = _ziggurat()
+_ZINV_R = 1.0 / _ZR
+_M8 = np.uint64(0xFF)
+_M52 = np.uint64((1 << 52) - 1)
+_S8 = np.uint64(8)
+_S9 = np.uint64(9)
+
+
 @njit(inline="always", cache=True)
 def normal(st, cache):
-    """Standard normal by the polar method; the spare value waits in ``cache[1]``."""
-    if cache[0] != 0.0:
-        cache[0] = 0.0
-        return cache[1]
+    """Standard normal by a 256-layer ziggurat (:func:`_ziggurat`): one 64-bit draw for 99%
+    of values (8 bits pick the layer, 1 the sign, 52 the magnitude), a wedge test or
+    Marsaglia's tail algorithm for the rest: about 3x faster than the polar method it
+    replaced (docs/changelog.md). ``cache`` is unused; hooks written against the polar
+    method's spare value still compile."""
     while True:
-        u = 2.0 * uniform(st) - 1.0
-        v = 2.0 * uniform(st) - 1.0
-        s = u * u + v * v
-        if 0.0 < s < 1.0:
-            break
-    f = math.sqrt(-2.0 * math.log(s) / s)
-    cache[0] = 1.0
-    cache[1] = v * f
-    return u * f
+        bits = next_u64(st)
+        i = bits & _M8
+        neg = (bits >> _S8) & _ONE
+        mag = (bits >> _S9) & _M52
+        x = mag * _ZW[i]
+        if neg:
+            x = -x
+        if mag < _ZK[i]:
+            return x
+        if i == 0:  # the tail beyond R
+            while True:
+                a = -math.log1p(-uniform(st)) * _ZINV_R
+                b = -math.log1p(-uniform(st))
+                if b + b > a * a:
+                    return -(_ZR + a) if neg else _ZR + a
+        elif _ZF[i] + uniform(st) * (_ZF[i + 1] - _ZF[i]) < math.exp(-0.5 * x * x):
+            return x
 
 
 @njit(cache=True)

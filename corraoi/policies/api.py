@@ -145,7 +145,7 @@ class CompiledPolicy(PolicyBase):
     ``t`` is the 1-based slot; ``npull``/``nsucc`` (K,) int64 pulls and successes; ``muhat``
     (K,) empirical means (0 for unpulled arms); ``params`` (P,) float64 in declared order;
     ``ps`` (S,) float64 per-run state of :meth:`state_size` entries, zero at the start;
-    ``pst`` the run's policy stream and ``cache`` its spare normal, for :mod:`corraoi.rng`.
+    ``pst`` the run's policy stream and ``cache`` a scratch pair, for :mod:`corraoi.rng`.
     """
 
     tier: ClassVar[str] = "compiled"
