@@ -12,7 +12,6 @@ import math
 
 from numba import njit
 
-from ..rng import beta as beta_sample
 from ..rng import gamma_dc, integer, normal, uniform
 
 
@@ -130,9 +129,18 @@ def sw_ucb_update(t, arm, reward, K, npull, nsucc, params, ps):
 
 @njit(inline="always", cache=True)
 def d_ts_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
+    # Beta(S~ + 1, F~ + 1) of the discounted counts as rng.beta draws it (Gamma(a) /
+    # (Gamma(a) + Gamma(b)), the same draws), through one inlined call site
     for k in range(K):
         if cand[k]:
-            vals[k] = beta_sample(pst, cache, ps[k] + 1.0, ps[K + k] + 1.0)
+            ga = 0.0
+            for h in range(2):
+                d = ps[h * K + k] + 1.0 - 1.0 / 3.0
+                g = gamma_dc(pst, cache, d, 1.0 / math.sqrt(9.0 * d))
+                if h == 0:
+                    ga = g
+                else:
+                    vals[k] = ga / (ga + g)
 
 
 @njit(inline="always", cache=True)
