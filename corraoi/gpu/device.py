@@ -67,6 +67,25 @@ class Device(ABC):
     #: Seconds spent compiling (or loading) modules in this process.
     compile_seconds: float = 0.0
 
+    def __init__(self) -> None:
+        self._compiled: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    @abstractmethod
+    def _compile(self, K: int) -> Any:
+        """Build (or load from a cache) kernel.cu for K arms: a CuPy module or a library."""
+
+    def module(self, K: int) -> Any:
+        """The K-arm module, compiled once per process (the time goes to compile_seconds)."""
+        with self._lock:
+            mod = self._compiled.get(K)
+            if mod is None:
+                start = time.perf_counter()
+                mod = self._compile(K)
+                self.compile_seconds += time.perf_counter() - start
+                self._compiled[K] = mod
+            return mod
+
     @abstractmethod
     def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
         """Run ``advance_<family>`` of the K-arm module over ``runs`` runs."""
@@ -93,6 +112,7 @@ class CudaDevice(Device):
     BLOCK = 128
 
     def __init__(self) -> None:
+        super().__init__()
         try:
             import cupy
         except ImportError:
@@ -110,28 +130,20 @@ class CudaDevice(Device):
         props = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)
         raw = props.get("name", b"CUDA device")
         self.name = raw.decode() if isinstance(raw, bytes) else str(raw)
-        self._modules: dict[int, Any] = {}
-        self._lock = threading.Lock()
 
-    def _module(self, K: int) -> Any:
-        with self._lock:
-            mod = self._modules.get(K)
-            if mod is None:
-                import cupy
+    def _compile(self, K: int) -> Any:
+        import cupy
 
-                start = time.perf_counter()
-                mod = cupy.RawModule(code=source(), options=("-std=c++17", f"-DKARMS={K}"))
-                mod.compile()  # NVRTC, or CuPy's on-disk cache
-                self.compile_seconds += time.perf_counter() - start
-                self._modules[K] = mod
-            return mod
+        mod = cupy.RawModule(code=source(), options=("-std=c++17", f"-DKARMS={K}"))
+        mod.compile()  # NVRTC, or CuPy's on-disk cache
+        return mod
 
     def _args(self, args: ArgList) -> tuple[Any, ...]:
         conv = {"i": np.int32, "q": np.int64, "Q": np.uint64, "d": np.float64}
         return tuple(v if kind == "p" else conv[kind](v) for kind, v in args)
 
     def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
-        func = self._module(K).get_function(f"advance_{family}")
+        func = self.module(K).get_function(f"advance_{family}")
         blocks = (runs + self.BLOCK - 1) // self.BLOCK
         func((blocks,), (self.BLOCK,), self._args(args))
 
@@ -141,7 +153,7 @@ class CudaDevice(Device):
         count = int(words.shape[0])
         inp = cupy.asarray(np.ascontiguousarray(words, dtype=np.uint32))
         out = cupy.zeros((count, 4), dtype=cupy.uint32)
-        func = self._module(1).get_function("philox_kat")
+        func = self.module(1).get_function("philox_kat")
         func(((count + 127) // 128,), (128,), (inp, out, np.int32(count)))
         return cupy.asnumpy(out)
 
@@ -170,22 +182,14 @@ class EmulatedDevice(Device):
     FLAGS = ("-O2", "-std=c++17", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
     def __init__(self) -> None:
+        super().__init__()
         cxx = host_compiler()
         if cxx is None:
             raise GpuUnavailable(f"{DEVICE_ENV}=emulate needs a C++ compiler (g++ or $CXX)")
         self._cxx = cxx
-        self._libs: dict[int, Any] = {}
-        self._lock = threading.Lock()
 
-    def _library(self, K: int) -> Any:
-        with self._lock:
-            lib = self._libs.get(K)
-            if lib is None:
-                start = time.perf_counter()
-                lib = ctypes.CDLL(str(self._build(K)))
-                self.compile_seconds += time.perf_counter() - start
-                self._libs[K] = lib
-            return lib
+    def _compile(self, K: int) -> Any:
+        return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
         from ..kernels import _writable, cache_dir
@@ -226,14 +230,14 @@ class EmulatedDevice(Device):
         return out
 
     def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
-        func = getattr(self._library(K), f"advance_{family}")
+        func = getattr(self.module(K), f"advance_{family}")
         func.restype = None
         func(*self._args(args))
 
     def philox(self, words: np.ndarray) -> np.ndarray:
         inp = np.ascontiguousarray(words, dtype=np.uint32)
         out = np.zeros((inp.shape[0], 4), dtype=np.uint32)
-        func = self._library(1).philox_kat
+        func = self.module(1).philox_kat
         func.restype = None
         func(*self._args([("p", inp), ("p", out), ("i", inp.shape[0])]))
         return out
