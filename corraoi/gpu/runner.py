@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..block import check_horizon
+from ..candidates import pseudo_reward_classes
 from ..channels import Channel, default_channel
-from ..engine import check_instance, pseudo_reward_classes
+from ..engine import check_instance
 from ..errors import ConfigError
 from ..instance import Instance
 from ..policies import PolicySpec, gpu_form
