@@ -1,14 +1,31 @@
-"""The compiled simulation kernel: one policy family, every run, block by block.
+"""The compiled simulation kernel: one policy family, R runs, block by block.
 
-This file is a template as well as a module. :mod:`corraoi.kernels` writes a copy of it per
-policy family into the kernel cache, with the ``HOOKS`` import line below pointing at that
-family's compiled hooks (``forced``, ``score``, ``update``), and imports the copy: numba then
-inlines the hooks and caches the compiled kernel on disk beside the copy, so a new process
+This file is a template as well as a module. :mod:`corraoi.kernels` writes two copies of it
+per policy family into the kernel cache, with the ``HOOKS`` import lines below pointing at that
+family's compiled hooks (``forced``, ``score``, ``update``), and imports them: numba then
+inlines the hooks and caches each compiled kernel on disk beside its copy, so a new process
 loads it instead of compiling (closures would miss numba's cache).
 
-One call advances R independent runs by ``nslots`` slots. Runs are spread over the cores
-with ``prange``; each run owns two SFC64 streams (latent path, policy), so results do not
-depend on the number of threads or on which other runs share the batch.
+The two copies are shaped by their job (docs/performance.md has the measurements):
+
+- the **record kernel** (``corraoi record``, ``simulate``): this file's ``advance`` as it is,
+  serial, with the per-slot recording path; it compiles in about 3 s;
+- the **sweep kernel** (``corraoi sweep``): the ``KERNEL`` decorator line swapped for
+  ``SWEEP_DECORATOR`` and the lines between ``RECORD-BEGIN`` and ``RECORD-END`` dropped. It
+  is still serial (``range``, not ``prange``: numba's parfor lowering made every family
+  compile for 9-17 s), but ``parallel=True`` keeps numba's parfor IR simplification, which
+  makes it as fast as the old ``prange`` kernel; no loop becomes a parfor, so no numba
+  thread team starts. The engine spreads runs over cores with Python threads instead (both
+  kernels release the GIL).
+
+Both kernels use numpy's error model (as numba's parfor bodies always did) and promise LLVM
+that their array arguments never overlap (:class:`NoAliasCompiler`; the engine passes
+distinct arrays), so the record kernel, the sweep kernel and the earlier ``prange`` kernel
+take the same decisions slot for slot (``tests/golden/``).
+
+One call advances R independent runs by ``nslots`` slots. Each run owns two SFC64 streams
+(latent path, policy), so results do not depend on the number of threads or on which other
+runs share the batch.
 
 Per slot: draw the hidden state (channel), compute the empirical means, let the policy force
 an arm (``forced``), compute the correlated candidate set (bitsets, when ``correlated``), apply
@@ -16,11 +33,11 @@ the AoI-aware override (when ``aware``), otherwise play the argmax of the policy
 over the candidates (ties uniformly at random), then update counts, ages and the policy's own
 state (``update``).
 """
-
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+from numba.core.compiler import Compiler
 
 from corraoi.policies.hooks import forced_none as _forced  # HOOKS
 from corraoi.policies.hooks import score_none as _score  # HOOKS
@@ -28,6 +45,26 @@ from corraoi.policies.hooks import update_none as _update  # HOOKS
 from corraoi.rng import argmax_random, uniform
 
 CHANNEL_CDF, CHANNEL_TRACE = 0, 1
+#: The sweep kernel's decorator (see the module's docstring).
+SWEEP_DECORATOR = (
+    '@njit(cache=True, nogil=True, parallel=True, error_model="numpy", '
+    "pipeline_class=NoAliasCompiler)"
+)
+
+
+class NoAliasCompiler(Compiler):
+    """numba's default pipeline, compiling with ``noalias`` on the array arguments.
+
+    The engine never passes overlapping arrays to ``advance``; saying so lets LLVM keep
+    counts in registers across the hooks' stores (about 13% on the correlated policies,
+    measured in docs/performance.md).
+    """
+
+    def __init__(self, typingctx, targetctx, library, args, return_type, flags, locals):  # noqa: A002
+        flags = flags.copy()
+        flags.noalias = True
+        super().__init__(typingctx, targetctx, library, args, return_type, flags, locals)
+
 #: Up to this many arms the candidate set tests every pair; beyond, it unions bitsets.
 SMALL_K = 16
 
@@ -77,7 +114,7 @@ def draw_states(cdf_rows, kind, trace, lat, xprev, t0, nslots, out):
         xprev[r] = xp
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True, error_model="numpy", pipeline_class=NoAliasCompiler)  # KERNEL
 def advance(
     cdf_rows,  # (1 or n + 1, n) float64 CDFs: law of X_1, then transition rows
     kind,  # int: CHANNEL_CDF / CHANNEL_TRACE
@@ -123,15 +160,17 @@ def advance(
     K = pulls.shape[1]
     W = comb.shape[2]
     # which pulled arms can remove candidates through their failure or success rate at all
-    has1 = np.zeros(K, dtype=np.bool_)
-    has2 = np.zeros(K, dtype=np.bool_)
+    has1 = np.empty(K, dtype=np.bool_)  # np.zeros would become a parfor in the sweep kernel
+    has2 = np.empty(K, dtype=np.bool_)
     for l in range(K):
+        has1[l] = False
+        has2[l] = False
         for w in range(W):
             if comb[l, 2, w] != np.uint64(0):
                 has1[l] = True
             if comb[l, 4, w] != np.uint64(0):
                 has2[l] = True
-    for r in prange(R):
+    for r in range(R):
         lst = lat[r]
         pst = pol[r]
         cache = ncache[r]
@@ -227,6 +266,7 @@ def advance(
             oage = 1 if Y[best, x] == 1 else oage + 1
             reg += age - oage
             asum += age
+            # RECORD-BEGIN
             if record:
                 o_x[r, j] = x
                 o_arm[r, j] = arm
@@ -239,6 +279,7 @@ def advance(
                     o_cand[r, j, k] = cand[k]
                     o_pulls[r, j, k] = npull[k]
                     o_muhat[r, j, k] = nsucc[k] / npull[k] if npull[k] > 0 else 0.0
+            # RECORD-END
             if si < nsnap and snap_t[si] == t:
                 s_regret[r, si] = reg
                 s_aoisum[r, si] = asum

@@ -48,14 +48,10 @@ def _worker_version() -> str:
 
 
 def _worker_setup(threads: int) -> str:
-    """Run on every worker: limit numba's threads so workers do not oversubscribe cores."""
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)
-    try:
-        import numba
+    """Run on every worker: limit the engine's threads so workers do not oversubscribe cores."""
+    from .engine import set_workers
 
-        numba.set_num_threads(min(threads, int(numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]
-    except Exception:  # noqa: BLE001 - numba not imported yet: the environment variable holds
-        pass
+    set_workers(threads)
     return _worker_version()
 
 

@@ -9,8 +9,9 @@ X path (common random numbers) -- and run ``i`` of a sweep is exactly the run th
 
 from __future__ import annotations
 
-import time
+import os
 from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -105,8 +106,11 @@ class Simulation:
         self.mu_star = theory.mu_star
         self.cls: Any = policy.resolve()
         R, K = seed_arr.size, instance.K
-        self._cdf_rows, self._kind, self._trace = self.channel.kernel_arrays(instance)
-        self._Y = np.ascontiguousarray(instance.Y, dtype=np.int8)
+        cdf_rows, self._kind, trace = self.channel.kernel_arrays(instance)
+        # writable C arrays: the types the cached kernels were compiled for (kernels.warm_args)
+        self._cdf_rows = np.require(cdf_rows, np.float64, ["C", "W"])
+        self._trace = np.require(trace, np.int64, ["C", "W"])
+        self._Y = np.require(instance.Y, np.int8, ["C", "W"])
         self.lat, self.pol = streams_for_seeds(seed_arr)
         self.ncache = np.zeros((R, 2))
         self.xprev = np.full(R, -1, dtype=np.int64)
@@ -118,34 +122,28 @@ class Simulation:
         self.aoisum = np.zeros(R, dtype=np.int64)
         self.t = 0
         if issubclass(self.cls, CompiledPolicy):
-            from .kernels import kernel_for
-
-            self._kernel = kernel_for(self.cls)
-            self._params = policy.param_vector(self.cls)
+            self._kernels: dict[bool, Any] = {}
+            self._params = np.require(policy.param_vector(self.cls), np.float64, ["C", "W"])
             S = int(self.cls.state_size(K, policy.params))
             self.pstate = np.zeros((R, max(S, 1)))
-            self._pclass = pseudo_reward_classes(instance)
-            self._comb = candidate_bitsets(self._pclass)
+            self._pclass = np.require(pseudo_reward_classes(instance), np.int8, ["C", "W"])
+            self._comb = np.require(candidate_bitsets(self._pclass), np.uint64, ["C", "W"])
             self._py: Any = None
-            self._warm_up()
         else:
             self._py = self.cls(**policy.params)
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 
-    def _warm_up(self) -> None:
-        """Compile (or load from the cache) the kernel now, with a call of zero slots, so that
-        timings of the simulation leave it out (``kernels.compile_seconds``)."""
-        from . import kernels
+    def kernel(self, record: bool) -> Any:
+        """The compiled kernel this simulation uses: the record kernel (per-slot columns) or
+        the sweep kernel. Compiled or loaded from the cache on first use; the time it takes
+        goes to ``kernels.compile_seconds`` when it compiles, so rates leave it out."""
+        kernel = self._kernels.get(record)
+        if kernel is None:
+            from .kernels import kernel_for
 
-        if self._kernel.signatures:
-            return
-        start = time.perf_counter()
-        R, K = self.pulls.shape
-        self._call_kernel(0, False, _Outputs(R, 0, K), np.empty(0, dtype=np.int64),
-                          np.empty((R, 0), dtype=np.int64), np.empty((R, 0), dtype=np.int64),
-                          np.empty((R, 0, K), dtype=np.int64))  # fmt: skip
-        kernels.note_warm_up(self._kernel, time.perf_counter() - start)
+            kernel = self._kernels[record] = kernel_for(self.cls, record=record)
+        return kernel
 
     def _call_kernel(
         self,
@@ -157,16 +155,33 @@ class Simulation:
         s_aoisum: np.ndarray,
         s_pulls: np.ndarray,
     ) -> None:
-        self._kernel(
-            self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
-            self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware), self._params,
-            self.t, nslots,
-            self.lat, self.pol, self.ncache, self.pstate, self.xprev,
-            self.pulls, self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
-            record, out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
-            out.cand, out.pulls, out.muhat,
-            snap_t, s_regret, s_aoisum, s_pulls,
-        )  # fmt: skip
+        kernel = self.kernel(record)
+        R = self.pulls.shape[0]
+        per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
+                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum)  # fmt: skip
+        outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
+                   out.cand, out.pulls, out.muhat)  # fmt: skip
+        snaps = (s_regret, s_aoisum, s_pulls)
+        common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
+                  self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
+                  self._params, self.t, nslots)  # fmt: skip
+
+        def run(a: int, b: int) -> None:
+            # row slices of C arrays are C arrays: the same compiled signature
+            kernel(*common, *(x[a:b] for x in per_run), record, *(x[a:b] for x in outputs),
+                   snap_t, *(x[a:b] for x in snaps))  # fmt: skip
+
+        threads = min(_workers, R)
+        if threads <= 1 or R * max(nslots, 1) < _THREAD_MIN_WORK:
+            run(0, R)
+            return
+        # Runs are independent: cut them into slices, one per thread (both kernels release
+        # the GIL). More slices than threads even out runs that end at different speeds.
+        cuts = np.linspace(0, R, min(R, threads * 4) + 1).astype(int)
+        with ThreadPoolExecutor(threads) as pool:
+            slices = zip(cuts[:-1], cuts[1:], strict=True)
+            for f in [pool.submit(run, int(a), int(b)) for a, b in slices]:
+                f.result()
 
     @property
     def runs(self) -> int:
@@ -408,15 +423,19 @@ def simulate_run(
         yield b.run(0)
 
 
-def set_workers(workers: int | None) -> int:
-    """Use ``workers`` threads in the kernel (default: every core). Returns the count used."""
-    import numba
+#: Threads that share a kernel call's runs (set_workers); every core by default.
+_workers = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+#: Below this many run-slots a call stays on the calling thread (a thread's start costs more).
+_THREAD_MIN_WORK = 200_000
 
-    top = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+
+def set_workers(workers: int | None) -> int:
+    """Use ``workers`` threads per kernel call (default: every core). Returns the count used."""
+    global _workers
+    top = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
     if workers is None:
         workers = top
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
-    workers = min(int(workers), top)
-    numba.set_num_threads(workers)
-    return workers
+    _workers = min(int(workers), top)
+    return _workers

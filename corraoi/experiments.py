@@ -283,6 +283,19 @@ def _execute(
     run_on_cluster(client, tasks, on_done=on_done)
 
 
+def _prepare_kernels(cells: Sequence[Cell]) -> None:
+    """Compile the sweep kernels the cells need and the cache lacks, concurrently."""
+    from .kernels import prepare
+    from .policies.api import CompiledPolicy
+
+    classes = {}
+    for cell in cells:
+        cls = cell.policy.resolve()
+        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+            classes[cls.name] = cls
+    prepare(classes.values(), record=False)
+
+
 # ---------------------------------------------------------------------------- summaries
 
 
@@ -459,6 +472,8 @@ def _sweep(
 
         execute(grid, todo, on_done=on_done, on_slots=on_slots)
     else:
+        if client is None and tasks:
+            _prepare_kernels([by_key[ch.cell] for ch, _ in tasks])
         _execute(tasks, client=client, on_done=on_done,
                  on_slots=on_slots if client is None else None)  # fmt: skip
     for p in parts.values():

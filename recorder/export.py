@@ -53,7 +53,7 @@ def export(
 
     out_p = Path(out)
     fmt = export_format(out_p)
-    require_analysis()
+    require_analysis(("pyarrow",))
     from .frames import RunData
     from .results import SweepData, is_sweep_path, read_results_table
 

@@ -15,6 +15,28 @@ from corraoi.policies import make_policy
 Recorded = tuple[Path, RunConfig, SlotBlock]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Before any test, compile every built-in family's record and sweep kernels that the
+    kernel cache lacks, a worker process per core (kernels.prepare): on a fresh machine the
+    tests then load them instead of compiling one by one inside the first tests that need
+    them. Done once, by the main process (not by each pytest-xdist worker)."""
+    if hasattr(config, "workerinput"):
+        return
+    from corraoi import kernels
+    from corraoi.policies import builtins
+
+    classes = [make_policy(name).resolve() for name in builtins()]
+    notes: list[str] = []
+    previous, kernels.on_compile = kernels.on_compile, notes.append
+    try:
+        for record in (True, False):
+            kernels.prepare(classes, record=record)
+    finally:
+        kernels.on_compile = previous
+    if notes:
+        print(f"corraoi: {notes[0]}")
+
+
 @pytest.fixture(autouse=True)
 def _own_working_directory(tmp_path_factory: pytest.TempPathFactory, monkeypatch) -> None:
     """Every test runs in a fresh empty directory, never the checkout: a `runs/` left there

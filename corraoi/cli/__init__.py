@@ -46,7 +46,9 @@ def main() -> None:
     from .. import kernels
 
     # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
-    kernels.on_compile = lambda message: click.echo(f"corraoi: {message} ...", err=True)
+    kernels.on_compile = lambda message: click.echo(
+        f"corraoi: {message}" + ("" if message.startswith(" ") else " ..."), err=True
+    )
 
 
 # ---------------------------------------------------------------------------- instances

@@ -20,6 +20,29 @@ from ..text import safe_text
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def keep_pandas_out() -> None:
+    """Stop pyarrow from importing pandas (0.3 s) in a command that makes no DataFrame.
+
+    pyarrow imports pandas on its first array conversion (``pa.array``, Rerun's logging,
+    our Arrow batches) only to ask whether the values are pandas objects; they never are
+    here. So, when pandas is not imported yet, let that one probe find it absent. pyarrow
+    then treats pandas as not installed for the rest of this process (nothing here hands it
+    a DataFrame); ``import pandas`` itself still works. Costs pyarrow's import, which these
+    commands pay anyway.
+    """
+    if "pandas" in sys.modules:
+        return
+    sys.modules["pandas"] = None  # type: ignore[assignment]  # import pandas -> ImportError
+    try:
+        import pyarrow.lib
+
+        _ = pyarrow.lib._pandas_api.have_pandas  # the probe, answered "no" and remembered
+    except (ImportError, AttributeError):
+        pass
+    finally:
+        del sys.modules["pandas"]
+
+
 def fail(message: str, code: int = 1) -> None:
     """Print ``corraoi: error: <message>`` on stderr and exit with ``code``."""
     click.echo(f"corraoi: error: {safe_text(message)}", err=True)

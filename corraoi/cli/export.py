@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import handle_errors
+from .common import handle_errors, keep_pandas_out
 
 
 @click.command()
@@ -31,6 +31,8 @@ def export(log: Path, out: Path, force: bool) -> None:
       corraoi export sweeps/I1 -o I1-runs.csv
     """
     from recorder.export import export as run_export
+
+    keep_pandas_out()
 
     done = run_export(log, out, overwrite=force)
     click.echo(f"wrote {done.path}: {done.rows} rows ({done.kind}, {done.format})")

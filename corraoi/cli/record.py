@@ -25,6 +25,7 @@ from .common import (
     handle_errors,
     horizon_option,
     instance_option,
+    keep_pandas_out,
     output_option,
     param_options,
     policy_option,
@@ -310,6 +311,9 @@ def _record_all(
     # One run has nothing to spread over threads, and idle numba workers compete with
     # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
     set_workers(1)
+    if viewer_url is not None or any(p.rrd is not None for p in plans):
+        keep_pandas_out()  # Rerun's logging goes through pyarrow
+    _prepare_kernels(plans)
     results: list[_Result] = []
     viewer_problem: str | None = None
     total = sum(p.config.horizon for p in plans)
@@ -322,6 +326,20 @@ def _record_all(
             if stop.signal:
                 return results, stop.signal, viewer_problem
     return results, None, viewer_problem
+
+
+def _prepare_kernels(plans: list[_Plan]) -> None:
+    """Several policy families to record for the first time: compile their record kernels
+    at once, one worker process per core, before the first run starts."""
+    from .. import kernels
+    from ..policies.api import CompiledPolicy
+
+    classes = {}
+    for plan in plans:
+        cls = plan.config.policy.resolve()
+        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+            classes[cls.name] = cls
+    kernels.prepare(classes.values(), record=True)
 
 
 def _record_one(

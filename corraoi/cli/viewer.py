@@ -17,7 +17,7 @@ import click
 
 from ..errors import UsageError
 from ..text import safe_text
-from .common import errors_exit, handle_errors, output_option, say, warn
+from .common import errors_exit, handle_errors, keep_pandas_out, output_option, say, warn
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -93,6 +93,8 @@ def replay(
     from recorder.reader import open_log
     from viewer.replay import replay as do_replay
     from viewer.runs import require_slots
+
+    keep_pandas_out()
 
     rrd = output
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
@@ -213,6 +215,8 @@ def compare(
     """
     from viewer.compare import compare as do_compare
     from viewer.compare import prepare
+
+    keep_pandas_out()
 
     out = output
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)

@@ -1,0 +1,128 @@
+"""Start-up benchmark: what a person waits for, as whole processes (issue 22).
+
+Times each command as a user types it, best of --repeat (and the median), warm kernel cache
+unless the row says "empty cache". With ``--baseline DIR`` (another checkout, for example
+``git worktree add /tmp/base <commit>``) every command is also timed with that checkout on
+PYTHONPATH, alternating the two so that both see the same machine; the table then has a
+column for each.
+
+    python benchmarks/bench_start.py [--repeat 5] [--baseline /tmp/base] [--skip-cold]
+
+Python's bytecode is compiled first (``compileall``) for both checkouts, as an installed
+package has it: a sandbox with PYTHONDONTWRITEBYTECODE would otherwise pay for parsing
+every module in every process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import compileall
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ["sweep", "-i", "I1", "-p", "all", "--runs", "200", "-T", "10000", "--json"]
+BUILTINS = ("ucb,ts,ts-gauss,cucb,cts,cts-gauss,q-ucb,cq-ucb,q-ts,cq-ts,sw-ucb,d-ts,aoi-aware-ucb,"
+            "aoi-aware-ts,aoi-aware-ts-gauss,aoi-aware-cucb,aoi-aware-cts,aoi-aware-cts-gauss,"
+            "aoi-aware-q-ucb,aoi-aware-cq-ucb,aoi-aware-q-ts,aoi-aware-cq-ts,aoi-aware-sw-ucb,"
+            "aoi-aware-d-ts")  # fmt: skip
+ALL24 = ["sweep", "-i", "I1", "-p", BUILTINS, "--runs", "20", "-T", "1000", "--json"]
+
+
+def corraoi(
+    root: Path, args: list[str], cache: Path, cwd: Path, ok: tuple[int, ...] = (0,)
+) -> float:
+    env = {**os.environ, "PYTHONPATH": str(root), "CORRAOI_CACHE_DIR": str(cache)}
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "corraoi.cli", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True)  # fmt: skip
+    took = time.perf_counter() - start
+    if proc.returncode not in ok:
+        raise SystemExit(f"{root}: corraoi {' '.join(args)} failed:\n{proc.stderr}")
+    return took
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
+    ap.add_argument("--skip-cold", action="store_true", help="leave out the empty-cache rows")
+    args = ap.parse_args()
+    roots = {"now": ROOT}
+    if args.baseline is not None:
+        roots = {"before": args.baseline.resolve(), "now": ROOT}
+    for root in roots.values():
+        for pkg in ("corraoi", "recorder", "viewer"):
+            compileall.compile_dir(str(root / pkg), quiet=1)
+    work = Path(tempfile.mkdtemp(prefix="corraoi-bench-start-"))
+    caches = {k: work / f"cache-{k}" for k in roots}
+    rows: dict[str, dict[str, list[float]]] = {}
+
+    def add(row: str, key: str, seconds: float) -> None:
+        rows.setdefault(row, {}).setdefault(key, []).append(seconds)
+
+    try:
+        if not args.skip_cold:
+            for _ in range(max(1, args.repeat // 2)):
+                for key, root in roots.items():
+                    cold = work / f"cold-{key}"
+                    shutil.rmtree(cold, ignore_errors=True)
+                    add("first record --policy cucb (empty cache)", key,
+                        corraoi(root, ["record", "--policy", "cucb", "-o", "c.mcap", "--force"],
+                                cold, work))  # fmt: skip
+                    add("then the paper workload (same cache)", key,
+                        corraoi(root, PAPER, cold, work))  # fmt: skip
+                    shutil.rmtree(cold, ignore_errors=True)
+                    add("paper workload (empty cache)", key, corraoi(root, PAPER, cold, work))
+                    shutil.rmtree(cold, ignore_errors=True)
+                    add("all 24 built-ins (empty cache)", key, corraoi(root, ALL24, cold, work))
+                    shutil.rmtree(cold, ignore_errors=True)
+        for key, root in roots.items():  # warm each cache and make the logs
+            corraoi(root, ALL24, caches[key], work)
+            for pol in ("ucb", "cucb"):
+                corraoi(root, ["record", "--policy", pol, "-T", "3000", "-o", f"{pol}-{key}.mcap",
+                               "--no-rrd", "--force"], caches[key], work)  # fmt: skip
+        commands = {
+            "record --policy cucb (10,000 slots, MCAP + .rrd)":
+                lambda k: ["record", "--policy", "cucb", "-o", f"q-{k}.mcap", "--force"],
+            "record -T 10 --no-rrd":
+                lambda k: ["record", "--policy", "cucb", "-T", "10", "--no-rrd",
+                           "-o", f"n-{k}.mcap", "--force"],
+            "info (3,000-slot log)": lambda k: ["info", f"cucb-{k}.mcap"],
+            "diff (two 3,000-slot logs)":
+                lambda k: ["diff", f"ucb-{k}.mcap", f"cucb-{k}.mcap"],
+            "replay to .rrd": lambda k: ["replay", f"cucb-{k}.mcap", "-o", f"r-{k}.rrd",
+                                         "--force"],
+            "compare to .rrd": lambda k: ["compare", f"ucb-{k}.mcap", f"cucb-{k}.mcap",
+                                          "-o", f"c-{k}.rrd", "--force"],
+            "paper workload": lambda k: PAPER,
+            "--help": lambda k: ["--help"],
+        }  # fmt: skip
+        for _ in range(args.repeat):
+            for row, make in commands.items():
+                for key, root in roots.items():
+                    ok = (0, 1) if row.startswith("diff") else (0,)  # diff: 1 = they differ
+                    add(row, key, corraoi(root, make(key), caches[key], work, ok=ok))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    print(f"\nwhole processes, {cores} cores, best of {args.repeat} (median in brackets); "
+          "empty-cache rows best of " + str(max(1, args.repeat // 2)))  # fmt: skip
+    head = f"{'what the user does':50s}" + "".join(f" {k:>17s}" for k in roots)
+    print(head)
+    print("-" * len(head))
+    for row, per in rows.items():
+        cells = "".join(
+            f" {min(per[k]):7.2f} s ({statistics.median(per[k]):5.2f})" for k in roots
+        )
+        print(f"{row:50s}{cells}")
+
+
+if __name__ == "__main__":
+    main()

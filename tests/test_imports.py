@@ -1,0 +1,88 @@
+"""Each command imports only what it uses (issue 22): a light command never pays for numba,
+Rerun, pandas or pyarrow. Each case runs the real command in a fresh interpreter and lists
+the heavy modules left in ``sys.modules``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HEAVY = ("numba", "rerun", "pandas", "pyarrow", "matplotlib", "dask", "foxglove")
+
+_PROBE = f"""
+import json, sys
+from corraoi.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+else:
+    code = 0
+heavy = sorted(m for m in {HEAVY!r} if m in sys.modules)
+print("\\nIMPORTS " + json.dumps({{"code": code, "heavy": heavy}}))
+"""
+
+
+def _heavy(args: list[str], cwd: Path) -> list[str]:
+    proc = subprocess.run([sys.executable, "-c", _PROBE, *args], cwd=cwd, capture_output=True,
+                          text=True, env=dict(os.environ), timeout=300)  # fmt: skip
+    line = [x for x in proc.stdout.splitlines() if x.startswith("IMPORTS ")]
+    assert line, proc.stdout + proc.stderr
+    out = json.loads(line[-1][len("IMPORTS ") :])
+    assert out["code"] in (0, 1, None), proc.stderr  # diff exits 1 when the runs differ
+    return list(out["heavy"])
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    where = tmp_path_factory.mktemp("imports")
+    for pol in ("ucb", "cucb"):
+        subprocess.run([sys.executable, "-m", "corraoi.cli", "record", "--policy", pol, "-T",
+                        "300", "--no-rrd", "-o", f"{pol}.mcap"], cwd=where, check=True,
+                       capture_output=True)  # fmt: skip
+    return where
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--help"],
+        ["info", "cucb.mcap"],
+        ["diff", "ucb.mcap", "cucb.mcap"],
+        ["instance", "list"],
+        ["instance", "show", "I1"],
+        ["policies"],
+    ],
+    ids=lambda a: " ".join(a),
+)
+def test_light_commands_import_nothing_heavy(logs: Path, args: list[str]):
+    assert _heavy(args, logs) == []
+
+
+def test_export_to_csv_leaves_numba_rerun_and_pandas_out(logs: Path):
+    assert _heavy(["export", "cucb.mcap", "-o", "cucb.csv", "--force"], logs) == ["pyarrow"]
+
+
+def test_record_without_rrd_never_imports_rerun(logs: Path):
+    args = ["record", "--policy", "ucb", "-T", "20", "--no-rrd", "-o", "n.mcap", "--force"]
+    assert _heavy(args, logs) == ["numba"]
+
+
+def test_record_with_rrd_never_imports_pandas(logs: Path):
+    args = ["record", "--policy", "ucb", "-T", "20", "-o", "r.mcap", "--force"]
+    assert _heavy(args, logs) == ["numba", "pyarrow", "rerun"]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["replay", "cucb.mcap", "-o", "r.rrd", "--force"],
+     ["compare", "ucb.mcap", "cucb.mcap", "-o", "c.rrd", "--force"]],
+    ids=["replay", "compare"],
+)  # fmt: skip
+def test_replay_and_compare_need_rerun_only(logs: Path, args: list[str]):
+    assert _heavy(args, logs) == ["pyarrow", "rerun"]

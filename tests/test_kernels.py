@@ -1,0 +1,183 @@
+"""The record and sweep kernels (issue 22): the same decisions as the golden runs, compiled
+once per cache even by two processes at once, rebuilt when a cache entry is damaged, and
+built concurrently for several families."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from corraoi import kernels
+from corraoi.engine import Simulation, set_workers
+from corraoi.instance import load_instance
+from corraoi.policies import builtins, make_policy
+
+GOLDEN = Path(__file__).parent / "golden"
+PLUGINS = Path(__file__).parent / "plugins"
+sys.path.insert(0, str(GOLDEN))
+from regenerate import HORIZON, SEEDS, instances  # noqa: E402
+
+WANT = json.loads((GOLDEN / "builtins.json").read_text())["runs"]
+
+
+def _arms_by_sweep_kernel(inst, name: str) -> tuple[list[str], list[int]]:
+    """Every slot's arm, read back from the sweep kernel's pulls at every slot."""
+    sim = Simulation(inst, make_policy(name), SEEDS, HORIZON)
+    snaps = sim.advance_to(HORIZON, snapshots=range(1, HORIZON + 1))
+    pulls = np.stack([s.pulls for s in snaps], axis=1)  # (R, T, K)
+    before = np.concatenate([np.zeros_like(pulls[:, :1]), pulls[:, :-1]], axis=1)
+    arms = np.argmax(pulls - before, axis=2)
+    letters = ["".join(chr(ord("a") + int(a)) for a in row) for row in arms]
+    return letters, [int(r) for r in snaps[-1].regret]
+
+
+@pytest.mark.parametrize("name", builtins())
+def test_sweep_kernel_takes_the_golden_decisions(name: str):
+    for inst in instances():
+        arms, regret = _arms_by_sweep_kernel(inst, name)
+        want = WANT[f"{inst.name}/{name}"]
+        assert arms == want["arms"], f"{inst.name}/{name}: the sweep kernel's arms changed"
+        assert regret == want["regret"]
+
+
+def test_record_and_sweep_kernels_agree_on_a_compiled_plugin():
+    spec = make_policy(f"{PLUGINS / 'compiled_greedy.py'}:BonusUCB", a=0.7)
+    inst = load_instance("I2")
+    rec = Simulation(inst, spec, [5, 6, 7], 600).advance(600)
+    assert rec is not None
+    sim = Simulation(inst, spec, [5, 6, 7], 600)
+    snaps = sim.advance_to(600, snapshots=range(1, 601))
+    pulls = np.stack([s.pulls for s in snaps], axis=1)
+    assert np.array_equal(pulls, rec.pulls)
+    assert np.array_equal(np.stack([s.regret for s in snaps], axis=1), rec.regret)
+    assert len(set(map(tuple, rec.arm))) == 3  # three different runs, not one copied
+
+
+def test_threads_do_not_change_any_run():
+    inst = load_instance("I1")
+    finals = []
+    for workers in (1, 2):
+        set_workers(workers)
+        try:
+            sim = Simulation(inst, make_policy("cts"), range(64), 5000)  # above the threshold
+            sim.advance_to(5000)
+            finals.append((sim.regret.copy(), sim.pulls.copy()))
+        finally:
+            set_workers(None)
+    assert np.array_equal(finals[0][0], finals[1][0])
+    assert np.array_equal(finals[0][1], finals[1][1])
+
+
+def test_set_workers_rejects_zero():
+    from corraoi.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="workers must be >= 1"):
+        set_workers(0)
+
+
+# ---------------------------------------------------------------- the cache, across processes
+
+_RUN = """
+import sys, json
+from corraoi import kernels
+from corraoi.engine import Simulation
+from corraoi.instance import load_instance
+from corraoi.policies import make_policy
+notes = []
+kernels.on_compile = notes.append
+sim = Simulation(load_instance('I1'), make_policy(sys.argv[1]), [0, 1], 300)
+sim.advance_to(300)
+stats = sim.kernel(False).stats
+print(json.dumps({"notes": notes, "regret": sim.regret.tolist(),
+                  "misses": sum(stats.cache_misses.values())}))
+"""
+
+
+def _python(code: str, cache: Path, *args: str) -> subprocess.Popen[str]:
+    env = {**os.environ, "CORRAOI_CACHE_DIR": str(cache)}
+    return subprocess.Popen([sys.executable, "-c", code, *args], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+
+
+def _result(proc: subprocess.Popen[str]) -> dict:
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def _expected(policy: str) -> list[int]:
+    sim = Simulation(load_instance("I1"), make_policy(policy), [0, 1], 300)
+    sim.advance_to(300)
+    return sim.regret.tolist()
+
+
+def test_two_processes_sharing_a_fresh_cache_compile_once(tmp_path: Path):
+    cache = tmp_path / "cache"
+    first = _python(_RUN, cache, "ucb")
+    second = _python(_RUN, cache, "ucb")
+    a, b = _result(first), _result(second)
+    compiled = [r for r in (a, b) if any("compiling" in n for n in r["notes"])]
+    assert len(compiled) == 1, (a["notes"], b["notes"])  # one compiled, one waited and loaded
+    assert a["regret"] == b["regret"] == _expected("ucb")
+    assert len(list(cache.glob("kernels-*/corraoi_sweep_*.py"))) == 1
+
+
+@pytest.mark.parametrize("which", ["index", "data", "source"])
+def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which: str):
+    cache = tmp_path / "cache"
+    assert _result(_python(_RUN, cache, "ucb"))["regret"] == _expected("ucb")
+    folder = next(cache.glob("kernels-*"))
+    if which == "source":
+        victim = next(folder.glob("corraoi_sweep_*.py"))
+    else:
+        suffix = ".nbi" if which == "index" else ".nbc"
+        victim = next(p for p in (folder / "__pycache__").iterdir() if p.suffix == suffix)
+    data = victim.read_bytes()
+    victim.write_bytes(data[: len(data) // 3])  # truncated, as by a full disk or a kill
+    again = _result(_python(_RUN, cache, "ucb"))
+    assert again["regret"] == _expected("ucb")
+    if which != "source":  # a damaged source is simply rewritten (its text is compared)
+        assert len([n for n in again["notes"] if "damaged" in n]) == 1, again["notes"]
+    fine = _result(_python(_RUN, cache, "ucb"))  # and the rebuilt entry loads cleanly
+    assert fine["notes"] == [] and fine["misses"] == 0
+
+
+_PREPARE = """
+import sys, json
+from corraoi import kernels
+from corraoi.policies import make_policy
+notes = []
+kernels.on_compile = notes.append
+classes = [make_policy(n).resolve() for n in sys.argv[1:]]
+kernels.prepare(classes, record=False)
+print(json.dumps({"notes": notes}))
+"""
+
+
+def test_prepare_compiles_families_concurrently_into_the_cache(tmp_path: Path):
+    cache = tmp_path / "cache"
+    out = _result(_python(_PREPARE, cache, "ucb", "cucb", "ts", "cts-gauss"))
+    # ucb/cucb share a family, ts, and ts-gauss: three kernels, one notice, a line each
+    assert out["notes"][0].startswith("compiling the engine for 3 policy families")
+    assert [n.split()[0] for n in out["notes"][1:]] == ["1/3", "2/3", "3/3"]
+    for name in ("cucb", "ts", "cts-gauss"):  # then a run loads each without compiling
+        got = _result(_python(_RUN, cache, name))
+        assert got["notes"] == [] and got["misses"] == 0, got
+        assert got["regret"] == _expected(name)
+
+
+def test_kernel_source_variants_differ_only_where_they_should():
+    cls = make_policy("cucb").resolve()
+    rec_name, rec = kernels.kernel_source(cls, record=True)
+    sw_name, sw = kernels.kernel_source(cls, record=False)
+    assert rec_name != sw_name
+    assert "o_x[r, j] = x" in rec and "o_x[r, j] = x" not in sw  # no recording path
+    assert "parallel=True" in sw and "parallel=True" not in rec.split("def advance(")[0][-300:]
+    # no parfor, so no numba thread team under the engine's threads
+    assert "prange(" not in sw and "import prange" not in sw
