@@ -1,10 +1,10 @@
-"""Ctrl-C and SIGTERM in the command line: exit 130 with one line, never a traceback.
+"""Ctrl-C, SIGTERM and SIGHUP in the command line: exit 130 with one line, no traceback.
 
 Installed by the CLI only (a library user's signal handling is left alone): from the
 import of ``corraoi`` on when the process is the ``corraoi`` command, and again when the
-command group starts. SIGTERM raises KeyboardInterrupt like Ctrl-C, so both take the same
-way out: the commands finish what they wrote (a record's log is finished and marked
-interrupted) and exit 130. A KeyboardInterrupt that reaches the top (start-up, before any
+command group starts. SIGTERM and SIGHUP (a closed terminal) raise KeyboardInterrupt like
+Ctrl-C, so all take the same way out: the commands finish what they wrote (a record's log
+is finished and marked interrupted) and exit 130, whichever the signal. A KeyboardInterrupt that reaches the top (start-up, before any
 handler) prints ``corraoi: interrupted`` and exits 130.
 """
 
@@ -60,8 +60,9 @@ def install() -> None:
     if _installed:
         return
     try:
-        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
-            signal.signal(signal.SIGTERM, _terminate)
+        for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+            if sig is not None and signal.getsignal(sig) in (signal.SIG_DFL, None):
+                signal.signal(sig, _terminate)
         if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
             pass  # started in the background with SIGINT ignored: keep it so
     except ValueError:  # not the main thread

@@ -10,8 +10,9 @@ X path (common random numbers) -- and run ``i`` of a sweep is exactly the run th
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,6 +130,7 @@ class Simulation:
             self._pclass = np.require(pseudo_reward_classes(instance), np.int8, ["C", "W"])
             self._comb = np.require(candidate_bitsets(self._pclass), np.uint64, ["C", "W"])
             self._py: Any = None
+            self._rate: float | None = None  # run-slots per second per thread, measured
         else:
             self._py = self.cls(**policy.params)
             rng = Streams(self.pol, self.ncache)
@@ -145,7 +147,7 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
-    def _call_kernel(
+    def _run_compiled(
         self,
         nslots: int,
         record: bool,
@@ -155,33 +157,93 @@ class Simulation:
         s_aoisum: np.ndarray,
         s_pulls: np.ndarray,
     ) -> None:
+        """Advance every run ``nslots`` slots in kernel calls of at most about
+        ``PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
+        signal is handled between two calls within that time, however large the work."""
         kernel = self.kernel(record)
-        R = self.pulls.shape[0]
+        R, K = self.pulls.shape
+        done = 0
+        while done < nslots:
+            t0 = self.t + done
+            n, slices = self._piece(R, nslots - done)
+            i0, i1 = (int(i) for i in np.searchsorted(snap_t, [t0 + 1, t0 + n + 1]))
+            if n == nslots:  # one piece: straight into the caller's arrays
+                piece, st, snaps = out, snap_t, (s_regret, s_aoisum, s_pulls)
+            else:  # column slices are not C arrays: separate arrays, copied back
+                piece = _Outputs(R, n if record else 0, K)
+                st = np.ascontiguousarray(snap_t[i0:i1])
+                snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
+                         np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
+            start = time.perf_counter()
+            self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            self._note_rate(R * n, time.perf_counter() - start, len(slices))
+            if piece is not out:
+                if record:
+                    for name, value in vars(piece).items():
+                        getattr(out, name)[:, done : done + n] = value
+                for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
+                    full[:, i0:i1] = part
+            done += n
+
+    def _piece(self, R: int, left: int) -> tuple[int, list[tuple[int, int]]]:
+        """(slots, run slices) of the next kernel call: one slice per thread, each about
+        PIECE_SECONDS of work at the measured rate (more slices only when one slot of a
+        thread's share of the runs takes longer), at least one slot."""
+        rate = self._rate if self._rate is not None else _FIRST_RATE
+        budget = max(1.0, rate * PIECE_SECONDS)  # run-slots one slice may take
+        threads = max(1, min(_workers, R)) if R * left >= _THREAD_MIN_WORK else 1
+        n = int(min(left, max(1, budget * threads // R)))
+        count = max(threads, -(-R * n // int(budget)))
+        if count == 1:
+            return n, [(0, R)]
+        cuts = np.linspace(0, R, count + 1).astype(int)
+        return n, [(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+    def _note_rate(self, work: int, seconds: float, slices: int) -> None:
+        if seconds > 1e-3:  # too short to time
+            threads = max(1, min(_workers, slices))
+            self._rate = work / seconds / threads
+
+    def _call_kernel(
+        self,
+        kernel: Any,
+        t0: int,
+        nslots: int,
+        record: bool,
+        out: _Outputs,
+        snap_t: np.ndarray,
+        snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
+        slices: list[tuple[int, int]],
+    ) -> None:
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
                    self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum)  # fmt: skip
         outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
                    out.cand, out.pulls, out.muhat)  # fmt: skip
-        snaps = (s_regret, s_aoisum, s_pulls)
         common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
                   self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
-                  self._params, self.t, nslots)  # fmt: skip
+                  self._params, t0, nslots)  # fmt: skip
 
         def run(a: int, b: int) -> None:
             # row slices of C arrays are C arrays: the same compiled signature
             kernel(*common, *(x[a:b] for x in per_run), record, *(x[a:b] for x in outputs),
                    snap_t, *(x[a:b] for x in snaps))  # fmt: skip
 
-        threads = min(_workers, R)
-        if threads <= 1 or R * max(nslots, 1) < _THREAD_MIN_WORK:
-            run(0, R)
+        if _workers <= 1 or len(slices) == 1:
+            for a, b in slices:  # in this thread: a signal is handled between slices
+                run(a, b)
             return
-        # Runs are independent: cut them into slices, one per thread (both kernels release
-        # the GIL). More slices than threads even out runs that end at different speeds.
-        cuts = np.linspace(0, R, min(R, threads * 4) + 1).astype(int)
-        with ThreadPoolExecutor(threads) as pool:
-            slices = zip(cuts[:-1], cuts[1:], strict=True)
-            for f in [pool.submit(run, int(a), int(b)) for a, b in slices]:
+        # Runs are independent: slices go to the engine's threads (both kernels release the
+        # GIL). On an interrupt, the slices not started are cancelled and the running ones
+        # (each about PIECE_SECONDS) finish before the KeyboardInterrupt goes on.
+        futures = [_pool().submit(run, a, b) for a, b in slices[1:]]
+        try:
+            run(*slices[0])  # this thread takes a slice too: one hand-over fewer per call
+            for f in futures:
                 f.result()
+        finally:
+            for f in futures:
+                f.cancel()
+            wait(futures)
 
     @property
     def runs(self) -> int:
@@ -225,7 +287,7 @@ class Simulation:
         aoisum_before = self.aoisum.copy() if record else None
         failure: PolicyRuntimeError | None = None
         if self._py is None:
-            self._call_kernel(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
+            self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
         else:
             done, failure = self._advance_python(
                 nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
@@ -337,9 +399,9 @@ def _call(name: str, t: int, func: Any, *args: Any) -> Any:
     """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
     try:
         return func(*args)
-    except CorraoiError:
+    except (CorraoiError, KeyboardInterrupt):
         raise
-    except Exception as exc:
+    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
         what = getattr(func, "__name__", "policy")
         detail = " ".join(str(exc).split())
         raise PolicyRuntimeError(
@@ -427,6 +489,26 @@ def simulate_run(
 _workers = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
 #: Below this many run-slots a call stays on the calling thread (a thread's start costs more).
 _THREAD_MIN_WORK = 200_000
+#: A kernel call (one slice of runs, some slots) takes about this long at most, so that
+#: Ctrl-C, SIGTERM and SIGHUP are handled within it (issue 19). Measured on the previous call.
+PIECE_SECONDS = 0.1
+#: The rate assumed before the first call is timed: the slowest built-in's, halved.
+_FIRST_RATE = 1e6
+
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (workers, the other threads)
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The engine's threads, started once (starting them per call cost 30% of the paper
+    workload's time: a sweep makes hundreds of short calls)."""
+    global _POOL
+    if _POOL is None or _POOL[0] != _workers:
+        if _POOL is not None:
+            _POOL[1].shutdown(wait=False)
+        others = max(1, _workers - 1)  # the calling thread is the first worker
+        _POOL = (_workers, ThreadPoolExecutor(others, thread_name_prefix="corraoi-engine"))
+    return _POOL[1]
 
 
 def set_workers(workers: int | None) -> int:

@@ -42,6 +42,7 @@ from .sweep_folder import (
     PARTS,
     CellRuns,
     ChunkResult,
+    DamagedPart,
     covered,
     group_dirs,
     merge_grids,
@@ -442,7 +443,14 @@ def _sweep(
     parts: dict[str, list[ChunkResult]] = {}
     if folder is not None:
         grid = _prepare_folder(folder, grid, resume=resume, force=force)
-        parts = read_parts(folder)
+
+        def damaged(exc: DamagedPart) -> None:
+            aside = exc.path.with_name(exc.path.name + ".damaged")
+            os.replace(exc.path, aside)  # kept for a look, never read again
+            if warn is not None:
+                warn(f"{exc}; its runs are run again (the file is now {aside.name})")
+
+        parts = read_parts(folder, grid, on_damaged=damaged)
     tasks: list[tuple[Chunk, dict[str, Any]]] = []
     skipped = 0
     threads = threads_per_worker if client is not None else None

@@ -129,6 +129,24 @@ def check_sweep_memory(
     return need
 
 
+#: A sweep of more run-slots than this (about a month of one core at 5e6 run-slots/s) is
+#: refused unless --allow-huge says it is meant.
+MAX_RUN_SLOTS = 10**13
+
+
+def check_sweep_size(cells: int, runs: int, run_slots: int, *, allow: bool) -> str:
+    """The sweep's size in one line; a ConfigError with the numbers and the overriding
+    option when it exceeds :data:`MAX_RUN_SLOTS` and ``allow`` is not given."""
+    size = f"{cells:,} cell(s) x {runs:,} runs = {run_slots:.3g} run-slots"
+    if run_slots > MAX_RUN_SLOTS and not allow:
+        raise ConfigError(
+            f"this sweep is {size}, more than the {MAX_RUN_SLOTS:.0e} accepted without "
+            "--allow-huge (about a month of one core at 5e6 run-slots/s); expected fewer "
+            "cells, runs or slots, or --allow-huge if it is meant"
+        )
+    return size
+
+
 def _size(n: int) -> str:
     value = float(n)
     for unit in ("B", "KiB", "MiB", "GiB", "TiB"):

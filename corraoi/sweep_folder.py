@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -122,18 +122,39 @@ class ChunkResult:
 
     @classmethod
     def load(cls, path: Path) -> ChunkResult:
+        """Read and check a part file; :class:`DamagedPart` (one line, with the path) for a
+        file that is not a whole part of the chunk its name says: truncated, zeroed, not a
+        zip, arrays missing or of the wrong shape, or another chunk's part under this name."""
         try:
             with np.load(path) as z:
-                return cls(
+                part = cls(
                     chunk=Chunk(str(z["cell"]), int(z["start"]), int(z["stop"])),
                     t=z["t"], regret=z["regret"], estimator=z["estimator"],
                     best_pulls=z["best_pulls"], pulls_sum=z["pulls_sum"],
                     wall_s=float(z["wall_s"]), agg=DeviceAggregates.from_arrays(z),
                 )  # fmt: skip
-        except (OSError, ValueError, KeyError) as exc:
-            raise ConfigError(
-                f"{path}: a damaged part file ({exc}); delete it and --resume"
-            ) from None
+        except Exception as exc:  # noqa: BLE001 - zip, zlib, pickle, numpy: all "damaged"
+            detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+            raise DamagedPart(path, f"{type(exc).__name__}: {detail}") from None
+        part.check(path)
+        return part
+
+    def check(self, path: Path) -> None:
+        """DamagedPart unless the arrays agree with each other and with the file's name."""
+        c = self.chunk
+        if path.stem != c.name:
+            raise DamagedPart(path, f"it holds chunk {c.name}, not the chunk its name says")
+        n, S = c.stop - c.start, self.t.shape[0] if self.t.ndim == 1 else -1
+        if n < 1 or S < 1 or np.any(np.diff(self.t) <= 0) or self.t[0] < 1:
+            raise DamagedPart(path, "its checkpoints or run range are not valid")
+        for name in ("regret", "estimator", "best_pulls"):
+            if getattr(self, name).shape != (n, S):
+                raise DamagedPart(path, f"{name} has shape {getattr(self, name).shape}, "
+                                        f"expected ({n}, {S})")  # fmt: skip
+        if self.pulls_sum.ndim != 2 or self.pulls_sum.shape[0] != S:
+            raise DamagedPart(path, f"pulls_sum has shape {self.pulls_sum.shape}")
+        if not (np.all(np.isfinite(self.regret)) and np.all(np.isfinite(self.estimator))):
+            raise DamagedPart(path, "it holds values that are not finite")
 
     @classmethod
     def from_device(cls, chunk: Chunk, run: Any, baseline: str | None) -> ChunkResult:
@@ -219,18 +240,63 @@ def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:
                 backend=old.backend)  # fmt: skip
 
 
-def read_parts(out: Path) -> dict[str, list[ChunkResult]]:
-    """The finished chunks of a folder by cell key (each run range once, sorted)."""
+class DamagedPart(ConfigError):
+    """A part file that cannot be counted (its chunk is not finished)."""
+
+    def __init__(self, path: Path, why: str) -> None:
+        super().__init__(f"{path}: a damaged part file ({why})")
+        self.path = path
+
+
+def read_parts(
+    out: Path,
+    grid: Grid | None = None,
+    on_damaged: Callable[[DamagedPart], None] | None = None,
+) -> dict[str, list[ChunkResult]]:
+    """The finished chunks of a folder by cell key (each run range once, sorted).
+
+    Every part is checked (:meth:`ChunkResult.load`); with ``grid``, also against the
+    folder's grid (a cell it has, runs within its range, its checkpoints). A damaged part
+    raises :class:`DamagedPart`, or with ``on_damaged`` is reported there and left out, so
+    that its chunk runs again (``--resume``): never counted, never a traceback.
+    """
     found: dict[str, list[ChunkResult]] = {}
     folder = out / PARTS
     if not folder.is_dir():
         return found
+    cells = {c.key: c for c in grid.cells} if grid is not None else None
     for f in sorted(folder.glob("*.npz")):
-        part = ChunkResult.load(f)
+        try:
+            part = ChunkResult.load(f)
+            if cells is not None and grid is not None:
+                _check_against(part, f, cells, grid)
+            taken = found.get(part.chunk.cell, [])
+            if any(p.chunk.start < part.chunk.stop and part.chunk.start < p.chunk.stop
+                   for p in taken):  # fmt: skip
+                raise DamagedPart(f, "its runs overlap another part's")
+        except DamagedPart as exc:
+            if on_damaged is None:
+                raise
+            on_damaged(exc)
+            continue
         found.setdefault(part.chunk.cell, []).append(part)
     for parts in found.values():
         parts.sort(key=lambda p: p.chunk.start)
     return found
+
+
+def _check_against(part: ChunkResult, path: Path, cells: dict[str, Cell], grid: Grid) -> None:
+    cell = cells.get(part.chunk.cell)
+    if cell is None:
+        raise DamagedPart(path, "its cell is not in this folder's manifest")
+    if part.chunk.stop > grid.runs:
+        raise DamagedPart(path, f"its runs end at {part.chunk.stop}, the sweep has {grid.runs}")
+    if part.agg is None and int(part.t[-1]) != int(cell.horizon):
+        raise DamagedPart(path, f"its last checkpoint is {int(part.t[-1])}, the horizon is "
+                                f"{cell.horizon}")  # fmt: skip
+    if part.pulls_sum.shape[1] != cell.instance.K:
+        raise DamagedPart(path, f"it has {part.pulls_sum.shape[1]} arms, the instance "
+                                f"{cell.instance.K}")  # fmt: skip
 
 
 def covered(parts: Sequence[ChunkResult]) -> list[tuple[int, int]]:

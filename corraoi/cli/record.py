@@ -60,7 +60,7 @@ class _Result:
 
 
 class _Stop:
-    """SIGINT/SIGTERM while recording: the first asks the loop to stop at the next block
+    """SIGINT/SIGTERM/SIGHUP while recording: the first asks the loop to stop at the next block
     (the files are then finished with every slot simulated so far); a second one raises
     KeyboardInterrupt at once."""
 
@@ -74,7 +74,7 @@ class _Stop:
         self.signal = signal.Signals(signum).name
 
     def __enter__(self) -> _Stop:
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             try:
                 self._old[sig] = signal.signal(sig, self._handle)
             except ValueError:  # not the main thread: keep the defaults

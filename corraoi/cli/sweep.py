@@ -32,6 +32,9 @@ from .common import (
     warn,
 )
 
+#: From this many run-slots (about a minute here) a sweep states its size before it starts.
+SAY_SIZE_FROM = 10**9
+
 #: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments).
 SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
                "summary.md", "figure.png")  # fmt: skip
@@ -78,6 +81,9 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @backend_option("Where the runs go: cpu (the engine: every policy), gpu (every built-in policy "
                 "on a CUDA GPU, one thread per run; needs the gpu extra), auto (the GPU when it "
                 "can run every cell, else the CPU with a notice) [default: cpu] (docs/gpu.md).")
+@click.option("--allow-huge", is_flag=True,
+              help=f"Run a sweep of more than {limits.MAX_RUN_SLOTS:.0e} run-slots (refused "
+              "otherwise: months of CPU time).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of a table.")
 @handle_errors
 def sweep(
@@ -100,6 +106,7 @@ def sweep(
     force: bool,
     baseline: str | None,
     backend: str | None,
+    allow_huge: bool,
     as_json: bool,
 ) -> None:
     """Run a grid of policies over paired seeds and report the AoI regret at the horizon.
@@ -163,6 +170,10 @@ def sweep(
     per_run = out is not None and grid.backend == "cpu"
     limits.check_sweep_memory(grid.runs, max(c.instance.K for c in grid.cells), policies=1,
                               checkpoints=grid.checkpoints if per_run else 0)  # fmt: skip
+    run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
+    size = limits.check_sweep_size(len(grid.cells), grid.runs, run_slots, allow=allow_huge)
+    if run_slots >= SAY_SIZE_FROM:
+        click.echo(f"corraoi: sweep of {size}; the progress bar shows the time left", err=True)
     for note in _notes(grid):
         warn(note)
     outcome = _run(grid, out=out, scheduler=scheduler, resume=resume, force=force,

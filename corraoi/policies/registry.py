@@ -8,6 +8,7 @@ twelve. A broken entry point is reported (``corraoi policies``) and does not sto
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import hashlib
 import importlib
@@ -15,7 +16,8 @@ import importlib.metadata
 import importlib.util
 import os
 import sys
-from collections.abc import Iterable, Mapping
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -66,8 +68,10 @@ def available() -> list[Available]:
     for ep in _entry_points():
         dist = ep.dist.name if ep.dist is not None else "?"
         try:
-            cls = _check_class(ep.load(), f"entry point {ep.name} ({ep.value})")
-        except Exception as exc:  # a broken plug-in must not break the listing
+            with _guarded_load(f"entry point {ep.name}", ep.value):
+                loaded = ep.load()
+            cls = _check_class(loaded, f"entry point {ep.name} ({ep.value})")
+        except PolicyError as exc:  # a broken plug-in must not break the listing
             out.append(Available(ep.name, f"entry point of {dist}", None, _one_line(exc)))
             continue
         out.append(Available(ep.name, f"entry point of {dist}", cls))
@@ -92,6 +96,84 @@ def _check_class(obj: Any, where: str) -> type[PolicyBase]:
     if issubclass(obj, Policy) and obj.select is Policy.select:
         raise PolicyError(f"{where}: a Python policy must define select(t, state)")
     return obj
+
+
+#: A plug-in's output while it loads is passed on up to this many bytes; beyond, one line.
+_LOAD_OUTPUT_LIMIT = 4096
+
+
+@contextlib.contextmanager
+def _guarded_load(where: str, what: str, failed: str = "") -> Iterator[None]:
+    """Run a plug-in's import so that whatever it does there ends as one PolicyError line:
+    an exception, ``sys.exit``, ``os._exit`` (Python's, replaced while it loads) or
+    megabytes of output (the process's stdout and stderr go to a temporary file meanwhile;
+    up to a few KiB are passed on). Ctrl-C during a hang still interrupts (exit 130)."""
+    real_exit = os._exit
+
+    def no_exit(code: int = 0) -> None:
+        raise _PluginExit(code)
+
+    for stream in (sys.stdout, sys.stderr):
+        _flush(stream)
+    saved = [os.dup(1), os.dup(2)]
+    sink = tempfile.TemporaryFile()
+    os.dup2(sink.fileno(), 1)
+    os.dup2(sink.fileno(), 2)
+    os._exit = no_exit  # type: ignore[assignment]
+    problem: str | None = None
+    try:
+        yield
+    except _PluginExit as exc:
+        problem = f"{where}: {what} called os._exit({exc.code}) while loading"
+    except SystemExit as exc:
+        problem = f"{where}: {what} called sys.exit({exc.code!r}) while loading"
+    except KeyboardInterrupt:
+        raise
+    except PolicyError:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - anything a plug-in raises at import
+        problem = f"{where}: {failed or f'importing {what} failed'}: {_one_line(exc)}"
+    finally:
+        os._exit = real_exit
+        for stream in (sys.stdout, sys.stderr):
+            _flush(stream)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+        size = sink.seek(0, os.SEEK_END)
+        if 0 < size <= _LOAD_OUTPUT_LIMIT:
+            sink.seek(0)
+            _write_err(sink.read())
+        elif size > _LOAD_OUTPUT_LIMIT:
+            _write_err(
+                f"corraoi: {what} printed {size:,} bytes while loading (not shown)\n".encode()
+            )
+        sink.close()
+    if problem is not None:
+        raise PolicyError(problem)
+
+
+class _PluginExit(Exception):
+    """``os._exit`` called by a plug-in while it loads (raised instead of ending us)."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
+def _flush(stream: Any) -> None:
+    try:
+        stream.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _write_err(data: bytes) -> None:
+    try:
+        os.write(2, data)
+    except OSError:
+        pass
 
 
 #: Plug-in sources handed over as data (a Dask worker that lacks the client's files).
@@ -125,15 +207,14 @@ def _file_module(path: Path, where: str) -> tuple[ModuleType, str]:
     module.__corraoi_digest__ = digest  # type: ignore[attr-defined]
     sys.modules[modname] = module
     try:
-        if installed is not None:
-            exec(compile(source, str(path), "exec"), module.__dict__)
-        else:
-            spec.loader.exec_module(module)
-    except BaseException as exc:
+        with _guarded_load(where, str(path)):
+            if installed is not None:
+                exec(compile(source, str(path), "exec"), module.__dict__)
+            else:
+                spec.loader.exec_module(module)
+    except BaseException:
         sys.modules.pop(modname, None)
-        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-            raise
-        raise PolicyError(f"{where}: importing {path} failed: {_one_line(exc)}") from None
+        raise
     return module, f"sha256:{digest[:16]}"
 
 
@@ -182,12 +263,8 @@ def resolve(token: str) -> Resolved:
             module, version = _file_module(path, f"policy {raw!r}")
             qual = f"file:{path.resolve()}:{attr}"
         else:
-            try:
+            with _guarded_load(f"policy {raw!r}", f"module {left}", f"cannot import module {left}"):
                 module = importlib.import_module(left)
-            except Exception as exc:
-                raise PolicyError(
-                    f"policy {raw!r}: cannot import module {left}: {_one_line(exc)}"
-                ) from None
             version = _module_version(left)
             qual = f"{left}:{attr}"
         if not hasattr(module, attr):
@@ -195,14 +272,10 @@ def resolve(token: str) -> Resolved:
         return Resolved(_check_class(getattr(module, attr), f"policy {raw!r}"), qual, version)
     for ep in _entry_points():
         if ep.name == raw or ep.name.lower() == name:
-            try:
-                cls = _check_class(ep.load(), f"policy {raw!r} (entry point {ep.value})")
-            except PolicyError:
-                raise
-            except Exception as exc:
-                raise PolicyError(
-                    f"policy {raw!r}: its entry point {ep.value} is broken: {_one_line(exc)}"
-                ) from None
+            broken = f"its entry point {ep.value} is broken"
+            with _guarded_load(f"policy {raw!r}", f"entry point {ep.value}", broken):
+                loaded = ep.load()
+            cls = _check_class(loaded, f"policy {raw!r} (entry point {ep.value})")
             modname = ep.value.split(":")[0]
             return Resolved(cls, f"{modname}:{cls.__name__}", _module_version(modname))
     raise PolicyError(unknown_policy_message(raw))
