@@ -4,8 +4,9 @@ Installed by the CLI only (a library user's signal handling is left alone): from
 import of ``corraoi`` on when the process is the ``corraoi`` command, and again when the
 command group starts. SIGTERM and SIGHUP (a closed terminal) raise KeyboardInterrupt like
 Ctrl-C, so all take the same way out: the commands finish what they wrote (a record's log
-is finished and marked interrupted) and exit 130, whichever the signal. A KeyboardInterrupt that reaches the top (start-up, before any
-handler) prints ``corraoi: interrupted`` and exits 130.
+is finished and marked interrupted) and exit 130, whichever the signal. A KeyboardInterrupt
+that reaches the top (start-up, before any handler) prints ``corraoi: interrupted`` and
+exits 130.
 """
 
 from __future__ import annotations

@@ -119,12 +119,20 @@ def test_a_hang_at_import_ends_cleanly_on_a_signal(tmp_path: Path, sig: int):
     ).exists()
 
 
+def test_a_failure_before_the_first_slot_leaves_no_file_and_says_so(tmp_path: Path):
+    res = _record(tmp_path, _plugin(tmp_path, select="raise SystemExit(5)"))
+    assert res.returncode == 1
+    line = _one_line(res)
+    assert "slot 1: select raised SystemExit: 5" in line and "no log written" in line, line
+    assert sorted(set(os.listdir(tmp_path)) - {"__pycache__"}) == ["bad_plugin.py"]
+
+
 @pytest.mark.parametrize(
     ("select", "update", "says"),
     [
-        ("import sys; sys.exit(5)", "pass", "select raised SystemExit: 5"),
-        ("pass", "raise SystemExit('stop')", "update raised SystemExit: stop"),
-        ("raise GeneratorExit()", "pass", "select raised GeneratorExit"),
+        ("if t >= 3: __import__('sys').exit(5)", "pass", "slot 3: select raised SystemExit: 5"),
+        ("pass", "raise SystemExit('stop')", "slot 1: update raised SystemExit: stop"),
+        ("if t >= 3: raise GeneratorExit()", "pass", "slot 3: select raised GeneratorExit"),
     ],
     ids=["sys.exit-in-select", "SystemExit-in-update", "GeneratorExit-in-select"],
 )

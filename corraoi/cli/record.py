@@ -365,7 +365,8 @@ def _record_one(
         from recorder.paths import partial_path
 
         where = partial_path(plan.mcap)
-        left = f"; the log is left as {where}, marked failed" if where.exists() else ""
+        left = (f"; the log is left as {where}, marked failed" if where.exists()
+                else f"; no log written ({plan.mcap} would have held no slot)")
         raise PolicyRuntimeError(f"{exc}{left}") from None
 
 
