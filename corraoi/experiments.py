@@ -85,35 +85,46 @@ def record_run(
     overwrite: bool = False,
     on_block: Callable[[Any], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    rerun: Any = None,
 ) -> RecordOutcome:
     """Simulate one run (a ``RunConfig``) and stream every slot to the MCAP log ``mcap`` and,
     with ``rrd`` or ``viewer_url``, to a Rerun recording (what ``corraoi record`` does for
     each policy). ``should_stop()`` is asked after every block: the files are then finished
     with the slots so far (status interrupted). A failed run (a plug-in's bad arm) leaves its
-    log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files."""
+    log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files.
+    ``rerun``, a :class:`recorder.rerun_worker.RerunWorker`, writes the Rerun recording in
+    its process (the same file), else it is written in this one."""
     from recorder.errors import ViewerError, WriteError
     from recorder.mcap_sink import McapSink
-
-    from .engine import simulate_run
 
     problem: str | None = None
     rrd_error: WriteError | None = None
     slots = 0
     rrd_path: Path | None = None
     with McapSink(mcap, config, overwrite=overwrite) as log:
-        output = sink = None
+        output: Any = None
+        sink: Any = None  # in this process: the RerunSink in front of ``output``
         if rrd is not None or viewer_url is not None:
-            from recorder.rerun_sink import RerunSink, RrdOutput
+            where = None if rrd is None else Path(rrd)
+            if rerun is not None:
+                output = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
+                                    overwrite=overwrite)  # fmt: skip
+            else:
+                from recorder.rerun_sink import RerunSink, RrdOutput
 
-            output = RrdOutput(config, rrd_path=None if rrd is None else Path(rrd),
-                               viewer_url=viewer_url, overwrite=overwrite)  # fmt: skip
-            sink = RerunSink(output.recording, config.label, config)
+                output = RrdOutput(config, rrd_path=where, viewer_url=viewer_url,
+                                   overwrite=overwrite)  # fmt: skip
+                sink = RerunSink(output.recording, config.label, config)
+        from .engine import simulate_run
+
         try:
             for block in simulate_run(config.instance, config.policy, config.seed,
                                       config.horizon, channel=config.channel):  # fmt: skip
                 log.write(block)
                 if sink is not None:
                     sink.write(block)
+                elif output is not None:
+                    output.write(block)
                 slots = int(block.t[-1])
                 if on_block is not None:
                     on_block(block)
@@ -132,8 +143,8 @@ def record_run(
                     output.abort(discard=slots == 0)
             raise
         if output is not None:
-            assert sink is not None
-            sink.close()
+            if sink is not None:
+                sink.close()
             try:
                 rrd_path = output.close()
             except ViewerError as exc:

@@ -240,3 +240,44 @@ main.add_command(recover)
 main.add_command(figure)
 main.add_command(record)
 main.add_command(__import__("corraoi.cli.export", fromlist=["export"]).export)
+
+
+def run() -> None:
+    """The ``corraoi`` program (console script, ``python -m corraoi``): :func:`main`, then
+    leave without the interpreter's teardown.
+
+    Tearing down the modules of a process that loaded numba and a kernel takes 0.2-0.4 s
+    on the 2-core benchmark machine (freeing LLVM's objects one by one), more than a
+    ``record --no-rrd`` of 10 slots does (benchmarks/bench_start.py). Once the command is
+    done, the exit handlers run (``atexit``: temporary folders, loggers, worker pools) and
+    the output is flushed as a normal exit does, and the process ends; every file the
+    command wrote is closed by then. Threads still running (a viewer's server, a Dask
+    client) get the normal exit that waits for them. ``main`` itself (tests, CliRunner)
+    exits normally.
+    """
+    import os
+    import sys
+    import threading
+
+    try:
+        main(prog_name="corraoi")
+        code: Any = 0
+    except SystemExit as exc:
+        code = exc.code
+    import atexit
+
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since 3.0
+    if threading.active_count() > 1 or run_exit_handlers is None:
+        sys.exit(code)
+    if code is None:
+        code = 0
+    elif not isinstance(code, int):
+        print(code, file=sys.stderr)
+        code = 1
+    run_exit_handlers()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (| head) or stream: nothing to save
+            pass
+    os._exit(code)

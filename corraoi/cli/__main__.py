@@ -1,5 +1,5 @@
 """``python -m corraoi.cli``: the command line."""
 
-from . import main
+from . import run
 
-main(prog_name="corraoi")
+run()

@@ -254,20 +254,30 @@ def record(
         if plan.rrd is not None:
             check_output(plan.rrd, overwrite=force, what="Rerun recording")
 
+    worker = None
     if any(p.rrd for p in plans):
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
+        if not viewer.asked:
+            # the .rrd files are written by a process that imports Rerun now, while this
+            # one imports numba and loads the kernel (recorder/rerun_worker.py says why)
+            from recorder.rerun_worker import RerunWorker
+
+            worker = RerunWorker.start(before_import=keep_pandas_out)
     # A viewer that cannot be reached is one error line; the files are still written.
     viewer_url = viewer.start(tolerant=True)
     # a port in use: one error line; the files are still written
     live.start([p.config for p in plans], tolerant=True)
     viewer_failed = viewer.problem is not None or live.problem is not None
     try:
-        results, stopped, viewer_problem = _record_all(plans, viewer_url, force, live=live)
+        results, stopped, viewer_problem = _record_all(plans, viewer_url, force, live=live,
+                                                       rerun=worker)  # fmt: skip
     except BaseException:
         viewer.stop()
         raise
     finally:
         live.stop()
+        if worker is not None:
+            worker.stop()
     if viewer_problem:
         click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
@@ -302,7 +312,8 @@ def _up_to_date(plan: _Plan) -> bool:
 
 
 def _record_all(
-    plans: list[_Plan], viewer_url: str | None, force: bool, *, live: Any = None
+    plans: list[_Plan], viewer_url: str | None, force: bool, *, live: Any = None,
+    rerun: Any = None,
 ) -> tuple[list[_Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
     from ..engine import set_workers
@@ -311,7 +322,7 @@ def _record_all(
     # One run has nothing to spread over threads, and idle numba workers compete with
     # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
     set_workers(1)
-    if viewer_url is not None or any(p.rrd is not None for p in plans):
+    if rerun is None and (viewer_url is not None or any(p.rrd is not None for p in plans)):
         keep_pandas_out()  # Rerun's logging goes through pyarrow
     _prepare_kernels(plans)
     results: list[_Result] = []
@@ -321,7 +332,8 @@ def _record_all(
         for plan in plans:
             result = _Result(plan)
             results.append(result)
-            problem = _record_one(plan, result, viewer_url, force, stop, bar, live=live)
+            problem = _record_one(plan, result, viewer_url, force, stop, bar, live=live,
+                                  rerun=rerun)  # fmt: skip
             viewer_problem = viewer_problem or problem
             if stop.signal:
                 return results, stop.signal, viewer_problem
@@ -351,6 +363,7 @@ def _record_one(
     bar: Any,
     *,
     live: Any = None,
+    rerun: Any = None,
 ) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
     from .. import kernels
@@ -360,7 +373,7 @@ def _record_one(
     compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
     try:
         return _record_into(plan, result, viewer_url, force, stop, bar, start, compiled_before,
-                            live=live)  # fmt: skip
+                            live=live, rerun=rerun)  # fmt: skip
     except PolicyRuntimeError as exc:
         from recorder.paths import partial_path
 
@@ -381,6 +394,7 @@ def _record_into(
     compiled_before: float,
     *,
     live: Any = None,
+    rerun: Any = None,
 ) -> str | None:
     from .. import kernels
     from ..experiments import record_run
@@ -401,7 +415,7 @@ def _record_into(
     try:
         outcome = record_run(
             config, plan.mcap, rrd=plan.rrd, viewer_url=viewer_url, overwrite=force,
-            on_block=on_block, should_stop=lambda: stop.signal is not None,
+            on_block=on_block, should_stop=lambda: stop.signal is not None, rerun=rerun,
         )  # fmt: skip
     finally:
         result.wall = time.perf_counter() - start
