@@ -29,7 +29,8 @@ from .pyengine import PolicyRuntimeError, RunState, Streams, apply_slot, check_a
 from .rng import streams_for_seed, streams_for_seeds
 from .theory import InstanceTheory, analyse
 
-__all__ = ["RunsBlock", "Simulation", "Snapshot", "simulate", "simulate_run", "streams_for_seed"]
+__all__ = ["RunsBlock", "Simulation", "Snapshot", "shutdown", "simulate", "simulate_run",
+           "streams_for_seed"]
 
 DEFAULT_BLOCK = 1000
 
@@ -509,6 +510,14 @@ def _pool() -> ThreadPoolExecutor:
         others = max(1, _workers - 1)  # the calling thread is the first worker
         _POOL = (_workers, ThreadPoolExecutor(others, thread_name_prefix="corraoi-engine"))
     return _POOL[1]
+
+
+def shutdown() -> None:
+    """Stop the engine's threads (idle between calls; started again when needed)."""
+    global _POOL
+    pool, _POOL = _POOL, None
+    if pool is not None:
+        pool[1].shutdown(wait=True, cancel_futures=True)
 
 
 def set_workers(workers: int | None) -> int:

@@ -101,6 +101,22 @@ def _num(v: float) -> float | None:
 
 
 def analyse(inst: Instance) -> InstanceTheory:
+    """The theory of ``inst``, computed once per instance object and kept on it.
+
+    A recorded run asks for it from the engine, both sinks and the summary; the instance's
+    arrays are read-only, and so are the theory's, so the kept value cannot go stale.
+    """
+    kept = inst.__dict__.get("_theory")
+    if kept is None:
+        kept = _analyse(inst)
+        for value in vars(kept).values():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+        object.__setattr__(inst, "_theory", kept)  # Instance is frozen: a cache, not state
+    return kept
+
+
+def _analyse(inst: Instance) -> InstanceTheory:
     mu = inst.mu
     top = float(mu.max())
     tied = tuple(int(k) for k in np.flatnonzero(mu >= top - TIE_TOL))

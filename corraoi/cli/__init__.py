@@ -266,6 +266,9 @@ def run() -> None:
         code = exc.code
     import atexit
 
+    engine = sys.modules.get("corraoi.engine")
+    if engine is not None:
+        engine.shutdown()  # its idle threads: the command is done with them
     run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since 3.0
     if threading.active_count() > 1 or run_exit_handlers is None:
         sys.exit(code)
