@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,6 +14,13 @@ from corraoi.instance import load_instance
 from corraoi.policies import make_policy
 
 Recorded = tuple[Path, RunConfig, SlotBlock]
+
+# A suite started in the background by a non-interactive shell (`.ci/run &`, a CI runner)
+# inherits SIGINT ignored, and so would every command the tests start: Python keeps an
+# ignored SIGINT ignored, so the Ctrl-C tests would wait in vain. Take it back here; the
+# commands then start with SIGINT at its default, as from a terminal.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_configure(config: pytest.Config) -> None:
