@@ -130,3 +130,20 @@ def test_the_read_ahead_child_dies_with_replay(tmp_path, long_log, sig):
         assert proc.returncode == 130 and err.strip().endswith("corraoi: interrupted"), err
         _check_stderr(err)
         assert not (tmp_path / "r.rrd").exists()  # nothing presented as complete
+
+
+def test_a_ctrl_c_that_no_command_caught_is_one_line_without_a_blank_one(tmp_path):
+    """A Ctrl-C during start-up (the group's imports) reaches click, which printed an empty
+    line before our one line; the group now turns it into the same single line and 130."""
+    probe = (
+        "import sys\n"
+        "from corraoi.cli import main, run\n"
+        "@main.command('boom')\n"
+        "def boom():\n"
+        "    raise KeyboardInterrupt\n"
+        "sys.argv = ['corraoi', 'boom']\n"
+        "run()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)  # fmt: skip
+    assert (proc.returncode, proc.stderr) == (130, "corraoi: interrupted\n")

@@ -25,6 +25,7 @@ from recorder.reader import open_log
 from recorder.rerun_worker import RerunWorker
 
 from .rrd_util import RERUN, read_rrd
+from .test_cli_record import _wait_for
 
 PYTHON = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,22 +117,12 @@ def _children(pid: int) -> list[int]:
     return found
 
 
-def _wait_for(path: Path, size: int, proc: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        assert proc.poll() is None, proc.communicate()
-        if path.exists() and path.stat().st_size >= size:
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"{path} did not reach {size} bytes")
-
-
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
 def test_ctrl_c_to_the_process_group_finishes_both_files(tmp_path):
     """A terminal's Ctrl-C reaches the worker too: it ignores it and finishes the .rrd on
     the parent's word, with every slot the log holds."""
     proc = _record(["-T", "50000000", "-o", "g.mcap"], tmp_path, start_new_session=True)
-    _wait_for(partial_path(tmp_path / "g.rrd"), 300_000, proc)
+    _wait_for(partial_path(tmp_path / "g.rrd"), size=300_000, proc=proc)
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -144,7 +135,7 @@ def test_ctrl_c_to_the_process_group_finishes_both_files(tmp_path):
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
 def test_a_killed_record_leaves_no_worker_behind(tmp_path):
     proc = _record(["-T", "50000000", "-o", "k.mcap"], tmp_path)
-    _wait_for(partial_path(tmp_path / "k.rrd"), 300_000, proc)
+    _wait_for(partial_path(tmp_path / "k.rrd"), size=300_000, proc=proc)
     kids = _children(proc.pid)
     assert len(kids) == 1  # the worker
     proc.kill()

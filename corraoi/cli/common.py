@@ -134,6 +134,15 @@ class OneLineGroup(click.Group):
             sys.exit(130)
         sys.exit(code if isinstance(code, int) else 0)
 
+    def invoke(self, ctx: click.Context) -> Any:
+        """The group's callback and the command, with a Ctrl-C that no command caught (the
+        start-up imports) turned into click's Abort here: click would first print an
+        empty line on stderr for a KeyboardInterrupt, before our one line."""
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise click.Abort() from None
+
     def command_path_of(self, args: Any) -> str:
         """``corraoi record`` for ``["record", "-p", ...]``: the (sub)commands named."""
         words = list(sys.argv[1:] if args is None else args)
