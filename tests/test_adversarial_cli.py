@@ -464,3 +464,29 @@ def test_reproduce_and_figure_print_json(tmp_path):
         "policies": ["ucb", "cucb"], "instance": "I1", "runs": 2, "horizon": 100,
         "complete": True,
     }  # fmt: skip
+
+
+@pytest.mark.parametrize("args", [["policies"], ["instance", "show", "I1"],
+                                  ["record", "-T", "100", "--no-rrd", "-o", "p.mcap"]],
+                         ids=["policies", "instance", "record"])  # fmt: skip
+def test_a_reader_that_stops_reading_is_not_an_error(tmp_path, args):
+    """`corraoi policies | head -1`: the reader goes away; no error line, exit 141 (as a
+    tool that SIGPIPE ended), and what was being written is still finished."""
+    proc = subprocess.Popen([sys.executable, "-m", "corraoi.cli", *args], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # before the command writes its first line
+    err = proc.stderr.read().decode()
+    assert (proc.wait(timeout=120), err) == (141, "")
+    if args[0] == "record":
+        from recorder.reader import open_log
+
+        assert open_log(tmp_path / "p.mcap").status == "complete"
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_on_stdout_is_still_an_error(tmp_path):
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "corraoi.cli", "policies"], stdout=full,
+                              stderr=subprocess.PIPE, text=True, timeout=60)  # fmt: skip
+    assert proc.returncode == 1 and proc.stderr.startswith("corraoi: error: No space left")

@@ -74,6 +74,8 @@ def errors_exit(code: int | None = None) -> Callable[[F], F]:
             except CorraoiError as exc:
                 fail(str(exc), code if code is not None else exc.exit_code)
             except OSError as exc:
+                if isinstance(exc, BrokenPipeError) and _stdout_is_gone():
+                    _leave_quietly()
                 where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
                 fail(f"{where}{exc.strerror or exc}", code if code is not None else 1)
             except KeyboardInterrupt:
@@ -83,6 +85,35 @@ def errors_exit(code: int | None = None) -> Callable[[F], F]:
         return wrapper  # type: ignore[return-value]
 
     return deco
+
+
+def _stdout_is_gone() -> bool:
+    """Whether stdout's reader has gone (``corraoi policies | head -1``), rather than some
+    other pipe or socket breaking: the write end of a pipe without a reader polls as an
+    error (POSIX; elsewhere this says no and the error is reported as any other)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        events = poller.poll(0)
+    except (AttributeError, OSError, ValueError):  # no poll(), no file descriptor
+        return False
+    return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in events)
+
+
+def _leave_quietly() -> None:
+    """The reader of our output stopped reading: not an error to report. Exit 141 (128 +
+    SIGPIPE, what a shell shows for a tool that SIGPIPE ended), with stdout pointed at
+    /dev/null so that the exit's flush does not fail again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    sys.exit(141)
 
 
 #: The usual error handling of a command: each error's own exit status.
