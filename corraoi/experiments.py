@@ -140,7 +140,10 @@ def record_run(
                     except (ViewerError, WriteError):
                         pass
                 else:
-                    output.abort(discard=slots == 0)
+                    try:  # the run's own error is the one to report, not the abort's
+                        output.abort(discard=slots == 0)
+                    except (ViewerError, WriteError):
+                        pass
             raise
         if output is not None:
             if sink is not None:
@@ -324,6 +327,7 @@ def group_summary(
     summary = sweep_summary(inst, results, runs=grid.runs, horizon=horizon, seed=grid.seed,
                             workers=workers)  # fmt: skip
     summary["wall_s"] = round(wall_s, 4)
+    summary["notable"] = group_notable(grid, cells)
     if grid.backend != "cpu":
         summary["backend"] = grid.backend
     if grid.baseline is not None:
@@ -339,6 +343,16 @@ def group_summary(
                 if curve is not None:
                     summary["policies"][c.label]["paired_diff_curve"] = curve
     return summary
+
+
+def group_notable(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
+    """The group's notable runs (:mod:`corraoi.notable`) from the per-run finals."""
+    from .notable import notable_runs
+
+    base = [c.label for c in cells if c.cell.policy.name == grid.baseline]
+    return notable_runs([c.label for c in cells], [c.regret[:, -1] for c in cells],
+                        [c.cell.channel.to_dict() for c in cells], seed=grid.seed,
+                        baseline=base[0] if base else None)  # fmt: skip
 
 
 def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
@@ -613,6 +627,7 @@ def _write_group(
 
     folder.mkdir(parents=True, exist_ok=True)
     config = group_config(grid, cells)
+    config["notable"] = summary["notable"]  # read back by SweepLog.notable
     with (
         SweepMcapSink(folder / "sweep.mcap", config) as log,
         open_sweep_recording(folder / "sweep.rrd", config) as rec,
@@ -621,6 +636,11 @@ def _write_group(
             for point in c.points():
                 log.write(point)
                 rec.write(point)
+        for c in cells:  # the runs worth watching, over the mean (CPU: every checkpoint)
+            if c.agg is not None or c.regret.shape[1] < 2:
+                continue
+            for kind, e in summary["notable"]["cells"][c.label].items():
+                rec.mark(c.label, kind, e["run"], e["seed"], c.t, c.regret[e["run"]])
     write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
     write_text(folder / "summary.md", summary_markdown(summary))
     from recorder.sweep_log import read_sweep

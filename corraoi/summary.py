@@ -172,4 +172,32 @@ def summary_markdown(summary: dict[str, Any]) -> str:
             lines.append(f"- {b['theorem']}: {b['value']:.6g} at T = {b['horizon']} ({b['note']})")
     for note in th["notes"]:
         lines.append(f"- Note: {note}")
+    lines += notable_markdown(summary.get("notable"))
     return "\n".join(lines) + "\n"
+
+
+def notable_markdown(notable: dict[str, Any] | None, pairs: int = 5) -> list[str]:
+    """The "runs worth watching" section of ``summary.md`` (none for older summaries)."""
+    if not notable:
+        return []
+    lines = [
+        "",
+        "## Runs worth watching",
+        "",
+        "Final regret (run index, seed); `corraoi record --from <this folder> --run worst` "
+        "records one slot by slot.",
+        "",
+        "| policy | worst | median | best |",
+        "|---|---:|---:|---:|",
+    ]
+    for name, c in notable["cells"].items():
+        cols = [f"{c[k]['regret']:g} (run {c[k]['run']}, seed {c[k]['seed']})"
+                for k in ("worst", "median", "best")]  # fmt: skip
+        lines.append(f"| {name} | " + " | ".join(cols) + " |")
+    if notable["pairs"]:
+        lines += ["", "Widest paired gaps, regret(a) - regret(b) on one run (same hidden "
+                  "path):", ""]  # fmt: skip
+        for g in notable["pairs"][:pairs]:
+            a, b = g["policies"]
+            lines.append(f"- {a} - {b}: {g['difference']:+g} at run {g['run']} (seed {g['seed']})")
+    return lines

@@ -379,6 +379,12 @@ class SweepLog:
     metadata: dict[str, str] = field(default_factory=dict)
 
     @property
+    def notable(self) -> dict[str, Any] | None:
+        """The runs worth watching (corraoi.notable), None in logs from before they were named."""
+        value = self.config.get("notable")
+        return value if isinstance(value, dict) else None
+
+    @property
     def complete(self) -> bool:
         return self.status == "complete"
 

@@ -63,6 +63,8 @@ SMALL_MULTIPLES_FROM = 6
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
 AOI_AWARE_MARKER_SIZE = MARKER_AOI_AWARE
+#: The named runs of a cell drawn over its mean (corraoi.notable).
+NOTABLE_KINDS = ("worst", "median", "best")
 
 
 def _part(name: str) -> str:
@@ -121,9 +123,14 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
     )
     legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
     names = _policy_names(config)
+    # the runs worth watching (SweepRerunSink.mark) have a tab of their own: one worst run
+    # of 1,400 would flatten means of 20 in the overlay
+    notable = [p for p in names if p in ((config.get("notable") or {}).get("cells") or {})]
+    hidden = [f"- {regret_path(p)}/{k}" for p in notable for k in NOTABLE_KINDS]
     overlay = rrb.TimeSeriesView(
-        origin=f"{ROOT}/regret", name=title, plot_legend=legend, axis_x=axis
-    )
+        origin=f"{ROOT}/regret", contents=[f"+ {ROOT}/regret/**", *hidden], name=title,
+        plot_legend=legend, axis_x=axis,
+    )  # fmt: skip
     first: list[rrb.Container | rrb.View] = [overlay]
     base = [p for p in names if not is_aoi_aware(p)]
     aware = [p for p in names if is_aoi_aware(p)]
@@ -133,7 +140,7 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
         def group(members: list[str], what: str) -> rrb.TimeSeriesView:
             return rrb.TimeSeriesView(
                 origin=f"{ROOT}/regret",
-                contents=[f"{regret_path(p)}/**" for p in members],
+                contents=[*(f"+ {regret_path(p)}/**" for p in members), *hidden],
                 name=f"AoI regret {REGRET_UNIT}, {what}",
                 plot_legend=legend,
                 axis_x=axis,
@@ -152,8 +159,11 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
             plot_legend=legend,
             axis_x=axis,
         ),
+        *([rrb.Grid(*(rrb.TimeSeriesView(origin=regret_path(p), axis_x=axis, plot_legend=legend,
+                                         name=f"{p}: mean, worst, median, best run")
+                      for p in notable), name="runs worth watching")] if notable else []),
         active_tab=0,
-    )
+    )  # fmt: skip
     pulls = [
         rrb.TimeSeriesView(
             origin=pulls_path(p),
@@ -341,6 +351,24 @@ class SweepRerunSink(Sink):
         send(estimator_path(name), t, est)
         for k in range(self.K):
             send(pulls_path(name, k + 1), t, np.ascontiguousarray(share[:, k]))
+
+    def mark(self, policy: str, kind: str, run: int, seed: int, t: np.ndarray,
+             regret: np.ndarray) -> None:  # fmt: skip
+        """One notable run's regret path (``kind``: worst, median, best) drawn over the mean
+        and band of ``policy``, thin, labelled with its run and seed (corraoi.notable)."""
+        self.flush()
+        path = f"{regret_path(policy)}/{_part(kind)}"
+        color = self._colors.get(policy) or policy_color(policy)
+        label = f"{policy} {kind}: run {run}, seed {seed}"
+        self.recording.send_columns(path, indexes=[], columns=[
+            c for g in (rr.SeriesLines.columns(colors=[lighter(color, 0.25)], widths=[WIDTH_BAND],
+                                               names=[label]),) for c in g.partition([1])
+        ])  # fmt: skip
+        self.recording.send_columns(
+            path,
+            indexes=[rr.TimeColumn(TIMELINE, sequence=np.asarray(t, dtype=np.int64))],
+            columns=rr.Scalars.columns(scalars=np.asarray(regret, dtype=np.float64)),
+        )
 
     def close(self) -> None:
         """Send what is buffered and flush the recording (an owned one is also

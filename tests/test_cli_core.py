@@ -102,7 +102,8 @@ def test_sweep_text_table():
     res = run("sweep", "-p", "ucb,cucb", "-n", "4", "-T", "200")
     assert res.exit_code == 0
     d = json.loads(run("sweep", "-p", "ucb,cucb", "-n", "4", "-T", "200", "--json").stdout)
-    rows = {line.split()[0]: line.split() for line in res.stdout.splitlines()[2:]}
+    table = res.stdout.split("runs worth watching", 1)[0]  # the notable runs follow
+    rows = {line.split()[0]: line.split() for line in table.splitlines()[2:]}
     for name in ("ucb", "cucb"):
         s = d["policies"][name]
         regret, ci, estimator, share = (float(v) for v in rows[name][1:5])

@@ -64,6 +64,14 @@ def test_light_commands_import_nothing_heavy(logs: Path, args: list[str]):
     assert _heavy(args, logs) == []
 
 
+def test_info_of_a_sweep_folder_imports_nothing_heavy(logs: Path):
+    folder = logs / "sweep"
+    subprocess.run([sys.executable, "-m", "corraoi.cli", "sweep", "-p", "ucb,cucb", "-T", "200",
+                    "--runs", "5", "-o", str(folder), "--force"], cwd=logs, check=True,
+                   capture_output=True)  # fmt: skip
+    assert _heavy(["info", str(folder)], logs) == []
+
+
 def test_export_to_csv_leaves_numba_rerun_and_pandas_out(logs: Path):
     assert _heavy(["export", "cucb.mcap", "-o", "cucb.csv", "--force"], logs) == ["pyarrow"]
 

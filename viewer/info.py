@@ -1,7 +1,11 @@
-"""``corraoi info``: what a log holds -- configuration, slot count, how it ended, figures."""
+"""``corraoi info``: what a log holds -- configuration, slot count, how it ended, figures --
+and what a sweep folder holds, with its runs worth watching and the command that records each."""
 
 from __future__ import annotations
 
+import json
+import shlex
+from pathlib import Path
 from typing import Any
 
 from corraoi.text import safe_text
@@ -101,3 +105,87 @@ def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:
         ("AoI override slots", str(d["overrides"])),
         ("on best arm from slot", opt(d["settled_at"])),
     ]
+
+
+def sweep_info(folder: Path) -> dict[str, Any]:
+    """``corraoi info DIR`` of a sweep folder (or one group's folder in it): its grid, status
+    and, per group, the runs worth watching with the ``corraoi record --from`` line of each.
+    Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
+    from corraoi.drill import sweep_root
+
+    root, grid, only = sweep_root(folder, option="")
+    manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    groups = []
+    several = len(manifest.get("groups", {})) > 1
+    for sub, entry in sorted(manifest.get("groups", {}).items()):
+        if only is not None and entry.get("instance") != only:
+            continue
+        where = root / sub
+        summary_path = where / "summary.json"
+        notable = None
+        if summary_path.is_file():
+            try:
+                notable = json.loads(summary_path.read_text(encoding="utf-8")).get("notable")
+            except (OSError, ValueError, AttributeError):
+                notable = None
+        named = _with_commands(notable, root, entry.get("instance"), several)
+        groups.append({"folder": str(where), "instance": entry.get("instance"),
+                       "horizon": entry.get("horizon"), "notable": named})  # fmt: skip
+    return {
+        "path": str(root),
+        "status": manifest.get("status"),
+        "corraoi_version": manifest.get("corraoi_version"),
+        "backend": grid.backend,
+        "cells": len(grid.cells),
+        "runs": grid.runs,
+        "seeds": [grid.seed, grid.seed + grid.runs - 1],
+        "groups": groups,
+    }
+
+
+def _with_commands(
+    notable: Any, root: Path, instance: Any, several: bool
+) -> dict[str, Any] | None:
+    if not isinstance(notable, dict) or not isinstance(notable.get("cells"), dict):
+        return None
+    base = ["corraoi", "record", "--from", str(root)]
+    out: dict[str, Any] = {"cells": {}, "pairs": []}
+    for label, runs in notable["cells"].items():
+        cell = f"{instance}/{label}" if several else str(label)
+        out["cells"][label] = {
+            k: {**v, "command": shlex.join([*base, "--cell", cell, "--run", k])}
+            for k, v in runs.items() if isinstance(v, dict)
+        }
+    for gap in notable.get("pairs", [])[:5]:
+        cells = [c for name in gap["policies"]
+                 for c in ("--cell", f"{instance}/{name}" if several else str(name))]  # fmt: skip
+        out["pairs"].append({**gap, "command": shlex.join([*base, *cells, "--run", "widest-gap"])})
+    return out
+
+
+def sweep_info_text(info: dict[str, Any]) -> str:
+    """The lines ``corraoi info DIR`` prints from :func:`sweep_info`'s dict."""
+    lo, hi = info["seeds"]
+    lines = [
+        f"{safe_text(info['path'])}: corraoi sweep folder ({info['status']}), {info['cells']} "
+        f"cells x {info['runs']} runs (seeds {lo}..{hi}), backend {info['backend']}",
+    ]
+    for g in info["groups"]:
+        lines.append(f"  {safe_text(g['instance'])}, T = {g['horizon']}: {safe_text(g['folder'])}")
+        notable = g["notable"]
+        if notable is None:
+            lines.append("    no runs named (a sweep from before they were; `corraoi record "
+                         "--from` still finds them)")  # fmt: skip
+            continue
+        if info["backend"] == "gpu":
+            lines.append("    (a GPU sweep: its runs cannot be recorded again on the CPU)")
+        lines.append("    runs worth watching (final regret), and the command that records each:")
+        for label, runs in notable["cells"].items():
+            for k, v in runs.items():
+                lines.append(f"    {safe_text(label):<20} {k:<7} {v['regret']:>9g}  run "
+                             f"{v['run']:<6} {safe_text(v['command'])}")  # fmt: skip
+        for gap in notable["pairs"]:
+            a, b = (safe_text(n) for n in gap["policies"])
+            lines.append(f"    {a} - {b}: {gap['difference']:+g} at run {gap['run']}  "
+                         f"{safe_text(gap['command'])}")  # fmt: skip
+    return "\n".join(lines)

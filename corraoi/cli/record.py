@@ -35,7 +35,9 @@ from .common import (
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
 DEFAULT_OUT = "runs/{label}.mcap"
-_PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}")
+_PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}", "{run}", "{from}")
+#: The default name of a run recorded from a sweep (--from): where it came from.
+FROM_OUT = "runs/{from}.mcap"
 
 
 @dataclass
@@ -87,7 +89,7 @@ class _Stop:
         self._old.clear()
 
 
-def _expand(template: str, config: Any) -> Path:
+def _expand(template: str, config: Any, drill: Any = None) -> Path:
     """The path ``template`` names for ``config``. The names filled in are data (from an
     instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
     climb out of one (``../``) or carry control codes into the file name."""
@@ -98,6 +100,8 @@ def _expand(template: str, config: Any) -> Path:
         "{policy}": config.policy.name,
         "{instance}": config.instance.name,
         "{seed}": str(config.seed),
+        "{run}": str(drill.run) if drill is not None else str(config.seed),
+        "{from}": drill.name if drill is not None else config.label,
     }
     out = template
     for key, value in values.items():
@@ -109,7 +113,9 @@ def _rrd_beside(mcap: Path) -> Path:
     return mcap.with_suffix(".rrd") if mcap.suffix == ".mcap" else Path(f"{mcap}.rrd")
 
 
-def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -> list[_Plan]:
+def _plans(
+    configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool, drills: Any = None
+) -> list[_Plan]:
     several = len(configs) > 1
     for option, value in (("-o/--output", out), ("--rrd", rrd)):
         if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
@@ -120,9 +126,10 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
         if value is not None and value.strip() == "":
             raise UsageError(f"{option}: empty path")
     plans = []
-    for config in configs:
-        mcap = _expand(out or DEFAULT_OUT, config)
-        path = None if no_rrd else (_expand(rrd, config) if rrd else _rrd_beside(mcap))
+    for i, config in enumerate(configs):
+        drill = drills[i] if drills else None
+        mcap = _expand(out or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
+        path = None if no_rrd else (_expand(rrd, config, drill) if rrd else _rrd_beside(mcap))
         plans.append(_Plan(config, mcap, path))
     seen: dict[str, str] = {}
     for plan in plans:
@@ -146,10 +153,21 @@ def _plans(configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool) -
 @output_option(
     metavar="PATH",
     path=False,
-    help="MCAP log to write [default: runs/{label}.mcap]. {label}, {policy}, "
-    "{instance} and {seed} are filled in (needed with several policies), each made a "
-    "safe file name.",
+    help="MCAP log to write [default: runs/{label}.mcap; with --from, runs/{from}.mcap]. "
+    "{label}, {policy}, {instance}, {seed}, {run} and {from} (the sweep folder, instance, "
+    "label and run) are filled in (needed with several runs), each made a safe file name.",
 )
+@click.option("--from", "from_", metavar="SWEEP", default=None,
+              help="Record runs of the sweep folder SWEEP (a `sweep -o` or `reproduce -o` "
+                   "folder): instance, policy, parameters, channel, horizon and seed come "
+                   "from it; --run says which.")  # fmt: skip
+@click.option("--run", "run", metavar="N|worst|best|median|widest-gap", default=None,
+              help="With --from: run index N (seed = the sweep's seed + N) or a named run of "
+                   "each cell (final regret largest, smallest, median); widest-gap records "
+                   "both policies of the widest paired gap [default: worst].")  # fmt: skip
+@click.option("--cell", "cell", metavar="LABEL", multiple=True,
+              help="With --from: only these cells (a label such as cucb or cucb(c=2), an "
+                   "instance name, or INSTANCE/LABEL); repeat for several.")  # fmt: skip
 @click.option(
     "--rrd",
     metavar="PATH",
@@ -185,6 +203,9 @@ def record(
     pace: float | None,
     backend: str | None,
     as_json: bool,
+    from_: str | None,
+    run: str | None,
+    cell: tuple[str, ...],
 ) -> None:
     """Simulate runs and stream every slot to an MCAP log and a Rerun recording.
 
@@ -201,6 +222,7 @@ def record(
       corraoi record -p ucb,cucb -T 100000 --seed 3
       corraoi record -p cts --connect          # into a viewer started with `rerun`
       corraoi record -p cucb --foxglove --pace 200   # live in Foxglove
+      corraoi record --from sweeps/I2 --run worst -p cts   # a sweep's worst run
     """  # noqa: D301
     from ..block import RunConfig
     from ..channels import parse_channel
@@ -219,12 +241,19 @@ def record(
     live = FoxgloveChoice(foxglove, pace=pace)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
-    inst = load_instance(instance)
-    specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
-    chan = parse_channel(channel, inst)
-    chan.check(inst, horizon)
-    configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
-    plans = _plans(configs, output, rrd, no_rrd)
+    drills = None
+    if from_ is not None:
+        drills = _from_sweep(from_, run or "worst", cell, policy, param, c=c, beta=beta)
+        configs = [d.config for d in drills]
+    else:
+        if run is not None or cell:
+            raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
+        inst = load_instance(instance)
+        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+        chan = parse_channel(channel, inst)
+        chan.check(inst, horizon)
+        configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
+    plans = _plans(configs, output, rrd, no_rrd, drills)
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from recorder.errors import OutputError
@@ -294,6 +323,45 @@ def record(
     viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
+
+
+def _from_sweep(
+    folder: str,
+    run: str,
+    cells: tuple[str, ...],
+    policy: tuple[str, ...],
+    param: tuple[str, ...],
+    *,
+    c: float | None,
+    beta: float | None,
+) -> list[Any]:
+    """The runs ``--from`` names (corraoi.drill); what the sweep fixed cannot be given too."""
+    from click.core import ParameterSource
+
+    from ..drill import choose
+    from ..policies import make_policies, parse_param_assignments
+
+    ctx = click.get_current_context()
+    fixed = [("instance", "--instance"), ("horizon", "--horizon"), ("seed", "--seed"),
+             ("channel", "--channel")]  # fmt: skip
+    for name, option in fixed:
+        if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None):
+            raise UsageError(f"{option} and --from: the sweep fixes the {name} of its runs; "
+                             "leave out " + option)  # fmt: skip
+    given = ctx.get_parameter_source("policy") not in (ParameterSource.DEFAULT, None)
+    if not given and (param or c is not None or beta is not None):
+        raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
+                         "parameters (with --policy they set those of a policy added)")
+    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+             if given else [])  # fmt: skip
+    drills = choose(folder, run, cells=cells, policies=specs, warn=warn)
+    for d in drills:
+        what = "" if d.cell is not None else ", added"
+        label = d.cell if d.cell is not None else d.config.policy.label
+        click.echo(f"from {safe_text(d.folder)}: {safe_text(d.config.instance.name)} "
+                   f"{safe_text(label)}, run {d.run} (seed {d.config.seed}, {d.choice}{what})",
+                   err=True)  # fmt: skip
+    return drills
 
 
 def _up_to_date(plan: _Plan) -> bool:

@@ -187,7 +187,7 @@ def sweep(
         for i, summary in enumerate(outcome.summaries):
             if i:
                 click.echo("")
-            print_table(summary)
+            print_table(summary, out)
     if out is not None:
         done = f"{outcome.chunks_run} chunk(s) run"
         if outcome.chunks_skipped:
@@ -287,7 +287,7 @@ def _run(
             sys.exit(130)
 
 
-def print_table(summary: dict[str, Any]) -> None:
+def print_table(summary: dict[str, Any], folder: Path | None = None) -> None:
     name = safe_text(summary["instance"]["name"])
     runs, seed = summary["runs"], summary["seed"]
     click.echo(
@@ -312,6 +312,29 @@ def print_table(summary: dict[str, Any]) -> None:
         )
     if summary.get("baseline") is not None:
         _print_paired(summary)
+    _print_notable(summary, folder)
+
+
+def _print_notable(summary: dict[str, Any], folder: Path | None) -> None:
+    """The runs worth watching: per policy its worst, median and best run, and the widest
+    paired gap; with a folder, the command that records one slot by slot."""
+    notable = summary.get("notable")
+    if not notable:
+        return
+    click.echo("runs worth watching: final regret (run index)")
+    click.echo(f"{'policy':22s} {'worst':>16} {'median':>16} {'best':>16}")
+    for pname, c in notable["cells"].items():
+        cols = "".join(f" {c[k]['regret']:g} (run {c[k]['run']})".rjust(17)
+                       for k in ("worst", "median", "best"))  # fmt: skip
+        say(f"{safe_text(pname):22s}{cols}")
+    if notable["pairs"]:
+        g = notable["pairs"][0]
+        a, b = (safe_text(n) for n in g["policies"])
+        say(f"widest paired gap: {a} - {b} = {g['difference']:+g} at run {g['run']} "
+            f"(seed {g['seed']})")  # fmt: skip
+    if folder is not None:
+        say(f"record one slot by slot: corraoi record --from {safe_text(folder)} "
+            "--run worst|median|best|widest-gap|N [-p POLICY]")  # fmt: skip
 
 
 def _print_paired(summary: dict[str, Any]) -> None:
@@ -382,7 +405,7 @@ def reproduce(
     for summary in outcome.summaries:
         summaries[summary["instance"]["name"]] = summary
         if not as_json:
-            print_table(summary)
+            print_table(summary, output)
             click.echo("")
         parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
     head = (

@@ -177,7 +177,14 @@ def _replay_foxglove(log: Path, address: str, *, pace: float | None, start: int,
 
 
 @click.command("compare")
-@click.argument("logs", nargs=-1, required=True, type=_LOG, metavar="A.mcap B.mcap ...")
+@click.argument("logs", nargs=-1, type=_LOG, metavar="A.mcap B.mcap ...")
+@click.option("--from", "from_", metavar="SWEEP", default=None,
+              help="Instead of logs: record the chosen run of every policy of the sweep folder "
+                   "SWEEP into runs/ (as `record --from`) and compare those.")  # fmt: skip
+@click.option("--run", "run", metavar="N|worst|best|median|widest-gap", default=None,
+              help="With --from: which run of each policy (as for record) [default: worst].")
+@click.option("--cell", "cell", metavar="LABEL", multiple=True,
+              help="With --from: only these cells (as for record); repeat for several.")
 @output_option(metavar="OUT.rrd", aliases=("--out", "--rrd"),
                help="Rerun recording to write [default: compare.rrd, unless a viewer option "
                "is given].")  # fmt: skip
@@ -196,6 +203,9 @@ def compare(
     web_port: int,
     force: bool,
     as_json: bool,
+    from_: str | None,
+    run: str | None,
+    cell: tuple[str, ...],
 ) -> None:
     """Put recorded runs side by side in one Rerun recording, and print their summary.
 
@@ -212,10 +222,19 @@ def compare(
     Examples:
       corraoi compare runs/ucb-I1-s0.mcap runs/cucb-I1-s0.mcap -o ucb-vs-cucb.rrd
       corraoi compare runs/*.mcap --serve-web
+      corraoi compare --from sweeps/I2 --run worst    # each policy's worst run of a sweep
     """
     from viewer.compare import compare as do_compare
     from viewer.compare import prepare
 
+    if from_ is not None:
+        if logs:
+            raise UsageError("A.mcap ... and --from: compare logs or a sweep's runs, not both")
+        logs = _record_from(from_, run or "worst", cell, force)
+    elif run is not None or cell:
+        raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
+    elif not logs:
+        raise UsageError("nothing to compare: give logs (A.mcap B.mcap ...) or --from SWEEP")
     keep_pandas_out()
 
     out = output
@@ -297,26 +316,73 @@ def diff(
     sys.exit(0 if report.identical else 1)
 
 
+def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> tuple[Path, ...]:
+    """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
+    a log already there with the same run and complete is used as it is)."""
+    from corraoi.drill import choose
+    from corraoi.engine import set_workers
+    from corraoi.experiments import record_run
+    from corraoi.text import safe_name
+    from recorder.errors import LogError, OutputError
+    from recorder.reader import open_log
+
+    drills = choose(folder, run, cells=cells, warn=warn)
+    plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
+    todo = []
+    for d, path in plans:
+        if path.is_file():
+            try:
+                log = open_log(path, verify=False)
+                same = log.status == "complete" and log.config.to_dict() == d.config.to_dict()
+            except LogError:
+                same = False
+            if same:
+                continue
+            if not force:
+                raise OutputError(f"{path}: already exists and holds another run; use --force "
+                                  "to overwrite it")  # fmt: skip
+        todo.append((d, path))
+    set_workers(1)  # one run has nothing to spread over threads
+    for d, path in todo:
+        click.echo(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
+                   f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
+                   f"{d.config.seed}, {d.choice})", err=True)  # fmt: skip
+        record_run(d.config, path, overwrite=True)
+    return tuple(path for _, path in plans)
+
+
 # ---------------------------------------------------------------------------- info
 
 
 @click.command("info")
-@click.argument("log", type=_LOG, metavar="RUN.mcap")
+@click.argument("log", type=_LOG, metavar="RUN.mcap|SWEEP")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @handle_errors
 def info(log: Path, as_json: bool) -> None:
     """Show what a log holds: configuration, slots, how it ended, summary figures.
 
+    For a sweep folder (SWEEP, as `sweep -o` or `reproduce -o` wrote it): its grid and
+    status and, per instance, the runs worth watching (worst, median and best per policy,
+    the widest paired gaps), each with the `corraoi record --from` command that records it.
+
     A log whose writer was killed (RUN.mcap.partial, or a file without footer) is
     reported as cut short, with the last slot it holds; `corraoi recover` finishes it.
     """
-    from viewer.info import info_text, log_info
+    if log.is_dir() and any((d / "manifest.json").is_file() for d in (log, log.parent)):
+        # a sweep folder (or one group's folder in it): its runs worth watching
+        from viewer.info import sweep_info, sweep_info_text
 
-    data = log_info(log)
+        data = sweep_info(log)
+        text = sweep_info_text
+    else:
+        from viewer.info import info_text, log_info
+
+        data = log_info(log)
+        text = info_text
     if as_json:
         click.echo(json.dumps(data, indent=2))
     else:
-        say(info_text(data))
+        say(text(data))
 
 
 # ---------------------------------------------------------------------------- recover
