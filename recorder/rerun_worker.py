@@ -41,6 +41,8 @@ from .paths import check_output
 #: worker that does not answer is killed and the recording reported as not written (its
 #: .partial file left).
 _ANSWER = 60.0
+#: Seconds an abort (after the run failed) may take before the worker is killed.
+_ABORT_WAIT = 10.0
 
 
 class RerunWorker:
@@ -95,12 +97,13 @@ class RerunWorker:
         except (BrokenPipeError, ConnectionError, EOFError) as exc:
             raise WriteError(self._gone(exc)) from None
 
-    def _ask(self, message: tuple[Any, ...], path: Path | None) -> Any:
+    def _ask(self, message: tuple[Any, ...], path: Path | None, wait: float = 0.0) -> Any:
         self._send(message)
+        wait = wait or _ANSWER
         try:
-            if not self._conn.poll(_ANSWER):
+            if not self._conn.poll(wait):
                 self._proc.kill()
-                raise WriteError(f"the Rerun writer process did not answer in {_ANSWER:.0f} s"
+                raise WriteError(f"the Rerun writer process did not answer in {wait:.0f} s"
                                  + _left(path))  # fmt: skip
             return self._conn.recv()
         except (ConnectionError, EOFError) as exc:
@@ -185,7 +188,9 @@ class RemoteRecording:
         self.closed = True
         if self._lost is not None:
             return None
-        answer = self._worker._ask(("abort", discard), self.path)
+        # an abort follows a failure (often a full disk, where Rerun's writer can block for
+        # good): the .partial is all it leaves, so it is not worth the full wait
+        answer = self._worker._ask(("abort", discard), self.path, wait=_ABORT_WAIT)
         return None if isinstance(answer, BaseException) else answer
 
 
