@@ -639,7 +639,7 @@ def _write_group(
         for c in cells:  # the runs worth watching, over the mean (CPU: every checkpoint)
             if c.agg is not None or c.regret.shape[1] < 2:
                 continue
-            for kind, e in summary["notable"]["cells"][c.label].items():
+            for kind, e in summary["notable"]["cells"].get(c.label, {}).items():
                 rec.mark(c.label, kind, e["run"], e["seed"], c.t, c.regret[e["run"]])
     write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
     write_text(folder / "summary.md", summary_markdown(summary))
