@@ -2,7 +2,7 @@
 
 ``--scheduler tcp://HOST:PORT`` connects to a running scheduler; ``--scheduler local:N``
 starts a LocalCluster of N single-threaded worker processes on 127.0.0.1 (stopped when the
-sweep ends). Chunks go out as plain data (:func:`corraoi.experiments.chunk_task`: the
+sweep ends). Chunks go out as plain data (:func:`corraoi.chunks.chunk_task`: the
 instance, the policy and a file plug-in's source travel with them) and come back as arrays;
 only this process writes files. A chunk whose worker dies is retried on another (Dask's
 ``retries``); a chunk that fails for its own reasons stops the sweep with one line.
@@ -42,9 +42,9 @@ def _dask() -> Any:
 
 
 def _worker_version() -> str:
-    import corraoi
+    from ._version import __version__ as installed  # the worker's own corraoi
 
-    return corraoi.__version__
+    return installed
 
 
 def _worker_setup(threads: int) -> str:
@@ -126,7 +126,7 @@ def run_on_cluster(
     dd = _dask()
     import uuid
 
-    from .experiments import run_chunk
+    from .chunks import run_chunk
 
     token = uuid.uuid4().hex[:8]  # a sweep's own keys: a client may run the same grid twice
     futures = [

@@ -30,12 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ._version import __version__
+from . import chunks
+from .chunks import chunk_task, prepare_kernels
 from .errors import ConfigError
-from .grid import Cell, Chunk, Grid
-from .instance import Instance
+from .grid import Chunk, Grid
 from .sweep_folder import (
     GROUP_FILES,
     MANIFEST,
@@ -54,12 +52,6 @@ from .sweep_folder import (
 #: Why a GPU sweep and a Dask client do not go together.
 GPU_NOT_ON_CLUSTER = ("--backend gpu runs in this process, on its GPU; leave out --scheduler "
                       "(or use --backend cpu on the cluster)")  # fmt: skip
-
-
-def checkpoints_of(grid: Grid, horizon: int) -> list[int]:
-    from .sweep import default_checkpoints
-
-    return [c for c in default_checkpoints(horizon, grid.checkpoints) if 0 < c <= horizon]
 
 
 # ---------------------------------------------------------------------------- one run
@@ -195,87 +187,6 @@ def paper_grid(
 PAPER_INSTANCES = ("I1", "I2")
 
 
-# ---------------------------------------------------------------------------- one chunk
-
-
-def chunk_task(
-    grid: Grid, cell: Cell, chunk: Chunk, *, threads: int | None = None
-) -> dict[str, Any]:
-    """Everything a worker needs to run ``chunk``, as plain data: the cell (instance, policy,
-    channel with its trace), the seeds, the checkpoints, and a file plug-in's source."""
-    task: dict[str, Any] = {
-        "version": __version__,
-        "cell": cell.to_dict(),
-        "key": cell.key,
-        "start": chunk.start,
-        "stop": chunk.stop,
-        "seed": grid.seed,
-        "checkpoints": checkpoints_of(grid, cell.horizon),
-        "threads": threads,
-    }
-    if cell.channel.kind == "trace" and cell.channel.trace is not None:
-        task["trace"] = [int(v) for v in cell.channel.trace]
-    qual = cell.policy.qualname
-    if qual.startswith("file:"):
-        path = qual[len("file:") :].rpartition(":")[0]
-        task["plugin_source"] = {"path": path, "source": Path(path).read_text(encoding="utf-8")}
-    return task
-
-
-def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = None) -> ChunkResult:
-    """Run one chunk from its :func:`chunk_task` data (in this process or on a worker)."""
-    from .block import RunConfig
-    from .channels import Channel
-    from .engine import set_workers
-    from .sweep import run_policy
-    from .theory import analyse
-
-    if task.get("version") != __version__:
-        raise ConfigError(
-            f"this worker runs corraoi {__version__}, the client {task.get('version')}: "
-            "install the same version on both"
-        )
-    if task.get("plugin_source"):
-        from .policies.registry import install_plugin_source
-
-        install_plugin_source(task["plugin_source"]["path"], task["plugin_source"]["source"])
-    if task.get("threads"):
-        set_workers(int(task["threads"]))
-    cfg = RunConfig.from_dict({**task["cell"], "seed": 0})
-    channel = cfg.channel
-    if "trace" in task and channel is not None:
-        states = np.asarray(task["trace"], dtype=np.int64)
-        channel = Channel("trace", source=channel.source, trace=states, digest=channel.digest)
-    inst: Instance = cfg.instance
-    best = analyse(inst).best_arm
-    stops = [int(c) for c in task["checkpoints"]]
-    S, K = len(stops), inst.K
-    n = int(task["stop"]) - int(task["start"])
-    regret = np.empty((n, S))
-    estimator = np.empty((n, S))
-    best_pulls = np.empty((n, S), dtype=np.int64)
-    pulls_sum = np.empty((S, K), dtype=np.int64)
-    index = {t: i for i, t in enumerate(stops)}
-
-    def keep(policy: Any, snap: Any) -> None:
-        i = index[snap.t]
-        regret[:, i] = snap.regret
-        estimator[:, i] = snap.estimator
-        best_pulls[:, i] = snap.pulls[:, best]
-        pulls_sum[i] = snap.pulls.sum(axis=0)
-
-    start = time.perf_counter()
-    seed0 = int(task["seed"]) + int(task["start"])
-    run_policy(inst, cfg.policy, seeds=range(seed0, seed0 + n), horizon=cfg.horizon,
-               checkpoints=stops, on_checkpoint=keep, on_slots=on_slots,
-               channel=channel)  # fmt: skip
-    return ChunkResult(
-        chunk=Chunk(str(task["key"]), int(task["start"]), int(task["stop"])),
-        t=np.asarray(stops, dtype=np.int64), regret=regret, estimator=estimator,
-        best_pulls=best_pulls, pulls_sum=pulls_sum, wall_s=time.perf_counter() - start,
-    )  # fmt: skip
-
-
 # ---------------------------------------------------------------------------- the folder
 
 
@@ -291,24 +202,11 @@ def _execute(
 ) -> None:
     if client is None:
         for _, task in tasks:
-            on_done(run_chunk(task, on_slots=on_slots))
+            on_done(chunks.run_chunk(task, on_slots=on_slots))
         return
     from .cluster import run_on_cluster
 
     run_on_cluster(client, tasks, on_done=on_done)
-
-
-def _prepare_kernels(cells: Sequence[Cell]) -> None:
-    """Compile the sweep kernels the cells need and the cache lacks, concurrently."""
-    from .kernels import prepare
-    from .policies.api import CompiledPolicy
-
-    classes = {}
-    for cell in cells:
-        cls = cell.policy.resolve()
-        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            classes[cls.name] = cls
-    prepare(classes.values(), record=False)
 
 
 # ---------------------------------------------------------------------------- summaries
@@ -506,7 +404,7 @@ def _sweep(
         execute(grid, todo, on_done=on_done, on_slots=on_slots)
     else:
         if client is None and tasks:
-            _prepare_kernels([by_key[ch.cell] for ch, _ in tasks])
+            prepare_kernels([by_key[ch.cell] for ch, _ in tasks])
         _execute(tasks, client=client, on_done=on_done,
                  on_slots=on_slots if client is None else None)  # fmt: skip
     for p in parts.values():

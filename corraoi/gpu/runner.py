@@ -255,7 +255,7 @@ def _run_cell(
     on_slots: Callable[[int], None] | None = None,
 ) -> DeviceRun:
     """The runs of ``chunk``'s range of ``cell`` (seeds from the grid's)."""
-    from ..experiments import checkpoints_of
+    from ..chunks import checkpoints_of
 
     return simulate(
         cell.instance, cell.policy, seed0=grid.seed + chunk.start, runs=chunk.stop - chunk.start,
