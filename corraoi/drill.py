@@ -19,7 +19,7 @@ from typing import Any
 from .block import RunConfig
 from .errors import ConfigError
 from .grid import Cell, Grid
-from .notable import CHOICES, notable_runs, pick_pair
+from .notable import CHOICES, notable_runs, pick_pair, well_formed
 from .policies.api import PolicySpec
 from .sweep_folder import MANIFEST, CellRuns, DamagedPart, group_dirs, read_manifest, read_parts
 
@@ -207,10 +207,9 @@ def _notable(
         except (OSError, ValueError) as exc:
             raise ConfigError(f"{path}: unreadable ({exc}); sweep again with --resume") from None
         notable = data.get("notable") if isinstance(data, dict) else None
-        if isinstance(notable, dict) and isinstance(notable.get("cells"), dict):
-            if all(isinstance(notable["cells"].get(w), dict) for w in want):
-                return notable
-    try:  # an older folder (no notable runs in its summary): from the per-run finals
+        if well_formed(notable, want):
+            return notable  # type: ignore[return-value]
+    try:  # an older folder (none named in its summary, or damaged): from the per-run finals
         parts = read_parts(root, grid)
         runs = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in group]
     except DamagedPart as exc:

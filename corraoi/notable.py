@@ -87,3 +87,25 @@ def pick_pair(
         if among is None or (gap["policies"][0] in among and gap["policies"][1] in among):
             return gap
     return None
+
+
+def well_formed(notable: Any, want: Sequence[str] = ()) -> bool:
+    """A summary's runs worth watching (as read back from JSON) hold an entry for every cell
+    in ``want`` and well-formed pairs: a hand-edited or damaged summary is not trusted."""
+    if not isinstance(notable, dict):
+        return False
+    cells, pairs = notable.get("cells"), notable.get("pairs", [])
+    if not isinstance(cells, dict) or not isinstance(pairs, list):
+        return False
+    def run(e: Any, value: str) -> bool:
+        return (isinstance(e, dict) and all(type(e.get(k)) is int for k in ("run", "seed"))
+                and isinstance(e.get(value), (int, float)) and not isinstance(e[value], bool))
+
+    for w in want:
+        entry = cells.get(w)
+        if not isinstance(entry, dict) or not all(run(entry.get(k), "regret")
+                                                  for k in ("worst", "best", "median")):
+            return False  # fmt: skip
+    return all(run(g, "difference") and isinstance(g.get("policies"), list)
+               and len(g["policies"]) == 2 and all(isinstance(n, str) for n in g["policies"])
+               for g in pairs)  # fmt: skip

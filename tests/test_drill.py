@@ -159,6 +159,29 @@ def test_a_policy_added_on_a_run_is_paired(folder: Path, tmp_path: Path) -> None
     assert _regret(logs["cucb"])[-1] == row["regret"].item()
 
 
+@pytest.mark.parametrize("damage", [{"pairs": "cucb"}, {"cells": []}, {"pairs": [{"x": 1}]},
+                                    {"cells": {"ucb": {"worst": 3}}}], ids=str)  # fmt: skip
+def test_a_malformed_summary_is_not_trusted(
+    folder: Path, tmp_path: Path, damage: dict[str, object]
+) -> None:
+    """Named again from the parts, the same runs as the undamaged folder's."""
+    import shutil
+
+    copy = tmp_path / "sw"
+    shutil.copytree(folder, copy)
+    summary = json.loads((copy / "summary.json").read_text())
+    named = summary["notable"]
+    summary["notable"] = {**named, **damage}
+    (copy / "summary.json").write_text(json.dumps(summary))
+    for choice in ("worst", "widest-gap"):
+        out = _corraoi("record", "--from", copy, "--run", choice, "--no-rrd", "-p", "ucb,cucb",
+                       cwd=tmp_path)  # fmt: skip
+        assert out.returncode == 0, out.stderr
+    worst = {open_log(p).config.policy.name: open_log(p).config.seed
+             for p in (tmp_path / "runs").glob("*-worst.mcap")}  # fmt: skip
+    assert worst == {p: named["cells"][p]["worst"]["seed"] for p in ("ucb", "cucb")}
+
+
 def test_a_folder_without_named_runs_still_drills(folder: Path, tmp_path: Path) -> None:
     """A sweep folder from before runs were named: by index, and by name from its parts."""
     import shutil
@@ -320,3 +343,20 @@ def test_the_sweeps_recording_draws_each_named_run_over_its_mean(folder: Path) -
             assert values[path] == dict(zip(rows["t"], rows["regret"], strict=True))
             assert static[path]["SeriesLines:names"] == [
                 [f"{label} {kind}: run {e['run']}, seed {e['seed']}"]]  # fmt: skip
+
+
+def test_info_of_a_folder_with_a_damaged_summary_names_no_runs(folder: Path, tmp_path: Path):
+    import shutil
+
+    from corraoi.notable import well_formed
+
+    copy = tmp_path / "sw"
+    shutil.copytree(folder, copy)
+    summary = json.loads((copy / "summary.json").read_text())
+    assert well_formed(summary["notable"], POLICIES)
+    summary["notable"]["cells"]["ucb"]["worst"]["regret"] = "a lot"
+    assert not well_formed(summary["notable"], POLICIES)
+    (copy / "summary.json").write_text(json.dumps(summary))
+    out = _corraoi("info", copy, cwd=tmp_path)
+    assert out.returncode == 0 and out.stderr == ""
+    assert "no runs named in its summary.json (an older sweep, or a damaged summary)" in out.stdout

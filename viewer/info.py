@@ -8,6 +8,7 @@ import shlex
 from pathlib import Path
 from typing import Any
 
+from corraoi.notable import well_formed
 from corraoi.text import safe_text
 from corraoi.theory import analyse
 
@@ -146,7 +147,8 @@ def sweep_info(folder: Path) -> dict[str, Any]:
 def _with_commands(
     notable: Any, root: Path, instance: Any, several: bool
 ) -> dict[str, Any] | None:
-    if not isinstance(notable, dict) or not isinstance(notable.get("cells"), dict):
+    if not well_formed(notable, list(notable["cells"]) if isinstance(notable, dict)
+                       and isinstance(notable.get("cells"), dict) else ()):  # fmt: skip
         return None
     base = ["corraoi", "record", "--from", str(root)]
     out: dict[str, Any] = {"cells": {}, "pairs": []}
@@ -174,8 +176,8 @@ def sweep_info_text(info: dict[str, Any]) -> str:
         lines.append(f"  {safe_text(g['instance'])}, T = {g['horizon']}: {safe_text(g['folder'])}")
         notable = g["notable"]
         if notable is None:
-            lines.append("    no runs named (a sweep from before they were; `corraoi record "
-                         "--from` still finds them)")  # fmt: skip
+            lines.append("    no runs named in its summary.json (an older sweep, or a damaged "
+                         "summary); `corraoi record --from` names them from the parts")  # fmt: skip
             continue
         if info["backend"] == "gpu":
             lines.append("    (a GPU sweep: its runs cannot be recorded again on the CPU)")
