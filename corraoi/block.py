@@ -23,6 +23,10 @@ ARM_FIELDS = ("mu_hat", "pulls", "candidates")
 FIELDS = ("t",) + SCALAR_FIELDS + ARM_FIELDS
 
 
+#: The values of :attr:`RunConfig.streams`.
+STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """Everything that determines a run: with it, a log replays with nothing else."""
@@ -33,10 +37,16 @@ class RunConfig:
     horizon: int
     version: str = __version__
     channel: Channel | None = None
+    #: whose random streams and rule decide the slots: "cpu" (the engine's), "gpu-cuda" or
+    #: "gpu-emulated" (the GPU kernel's, captured on a CUDA device or on the host compiler:
+    #: a run of a GPU sweep recorded again, corraoi.gpu.runner.capture_run)
+    streams: str = "cpu"
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
+        if self.streams not in STREAMS:
+            raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
         if self.channel is None:
             object.__setattr__(self, "channel", default_channel(self.instance))
 
@@ -46,11 +56,12 @@ class RunConfig:
         i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
         non-i.i.d. channel (older readers refuse it instead of misreading it)."""
         assert self.channel is not None
-        return 1 if self.policy.builtin and self.channel.iid else 2
+        return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
 
     @property
     def label(self) -> str:
-        return f"{self.policy.name}-{self.instance.name}-s{self.seed}"
+        gpu = "" if self.streams == "cpu" else "-gpu"
+        return f"{self.policy.name}-{self.instance.name}-s{self.seed}{gpu}"
 
     def to_dict(self) -> dict[str, Any]:
         out = {
@@ -63,6 +74,8 @@ class RunConfig:
         assert self.channel is not None
         if not self.channel.iid:
             out["channel"] = self.channel.to_dict()
+        if self.streams != "cpu":  # logs of the CPU engine read as before
+            out["streams"] = self.streams
         return out
 
     @classmethod
@@ -74,6 +87,7 @@ class RunConfig:
             horizon=int(data["horizon"]),
             version=str(data.get("version", "unknown")),
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
+            streams=str(data.get("streams", "cpu")),
         )
 
 

@@ -97,11 +97,7 @@ def choose(
     said through ``warn``.
     """
     root, grid, group = sweep_root(path)
-    if grid.backend == "gpu":
-        raise ConfigError(
-            f"--from {path}: this sweep ran on the GPU, whose random streams differ from the "
-            "CPU engine's, so its runs cannot be recorded again on the CPU (docs/analysis.md)"
-        )
+    streams = _streams(grid, warn)
     what = parse_run(run)
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
@@ -126,13 +122,14 @@ def choose(
     for key, members in chosen.items():
         picks = _picks(root, grid, key, groups[key], members, labels, what) if members else []
         for cell, r in picks:
-            drills.append(_drill(root, grid, cell, labels[cell.key], r, what))
+            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams))
         runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])
         base = (members or groups[key])[0]
         for spec in extra:
             for r in runs:
                 drills.append(_drill(root, grid, Cell(base.instance, spec, base.horizon,
-                                                      base.channel), None, r, what))  # fmt: skip
+                                                      base.channel), None, r, what,
+                                     streams))  # fmt: skip
     return drills
 
 
@@ -223,12 +220,42 @@ def _notable(
                         baseline=base[0] if base else None)  # fmt: skip
 
 
+def _streams(grid: Grid, warn: Any) -> str:
+    """Whose streams re-record the sweep's runs: the CPU engine's for a CPU sweep; for a GPU
+    sweep the GPU kernel's, on this machine's CUDA device, else emulated on the host."""
+    if grid.backend != "gpu":
+        return "cpu"
+    import os
+
+    from .gpu.device import DEVICE_ENV, GpuUnavailable, device_of
+
+    if os.environ.get(DEVICE_ENV, "").strip().lower() != "emulate":
+        try:
+            device_of("cuda")
+            return "gpu-cuda"
+        except GpuUnavailable as exc:
+            why = str(exc)
+    else:
+        why = f"{DEVICE_ENV}=emulate"
+    try:
+        device_of("emulate")
+    except GpuUnavailable as exc:
+        raise ConfigError(f"this sweep ran on the GPU; its runs are recorded again with the GPU "
+                          f"kernel, which needs a CUDA device ({why}) or {exc}") from None
+    if warn is not None:
+        warn(f"a GPU sweep's runs are captured from the GPU kernel compiled for this CPU ({why}): "
+             "the same streams and rule; a transcendental that rounds differently from CUDA's "
+             "can flip a near-tie (the log says streams gpu-emulated)")  # fmt: skip
+    return "gpu-emulated"
+
+
 def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
-           what: str | int) -> Drill:  # fmt: skip
+           what: str | int, streams: str = "cpu") -> Drill:  # fmt: skip
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
         channel = _reload_trace(cell, root)
-    config = RunConfig(cell.instance, cell.policy, grid.seed + run, cell.horizon, channel=channel)
+    config = RunConfig(cell.instance, cell.policy, grid.seed + run, cell.horizon, channel=channel,
+                       streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
     return Drill(config, run, choice, label, root)
 

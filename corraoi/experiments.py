@@ -107,11 +107,8 @@ def record_run(
                 output = RrdOutput(config, rrd_path=where, viewer_url=viewer_url,
                                    overwrite=overwrite)  # fmt: skip
                 sink = RerunSink(output.recording, config.label, config)
-        from .engine import simulate_run
-
         try:
-            for block in simulate_run(config.instance, config.policy, config.seed,
-                                      config.horizon, channel=config.channel):  # fmt: skip
+            for block in slots_of(config):
                 log.write(block)
                 if sink is not None:
                     sink.write(block)
@@ -152,6 +149,22 @@ def record_run(
             raise WriteError(f"{rrd_error} (the MCAP log {log.path} is complete)")
         raise rrd_error
     return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
+
+
+def slots_of(config: Any) -> Any:
+    """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
+    (``config.streams``) the GPU kernel's own, captured slot by slot."""
+    if config.streams == "cpu":
+        from .engine import simulate_run
+
+        return simulate_run(config.instance, config.policy, config.seed, config.horizon,
+                            channel=config.channel)  # fmt: skip
+    from .gpu.device import device_of
+    from .gpu.runner import capture_run
+
+    device = device_of("emulate" if config.streams == "gpu-emulated" else "cuda")
+    return capture_run(config.instance, config.policy, seed=config.seed,
+                       horizon=config.horizon, channel=config.channel, device=device)  # fmt: skip
 
 
 def reproduce(

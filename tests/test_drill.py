@@ -264,7 +264,7 @@ def test_bad_drill_requests_get_one_line(
     assert not (tmp_path / "runs").exists()
 
 
-def test_foreign_damaged_and_gpu_folders_get_one_line(folder: Path, tmp_path: Path) -> None:
+def test_foreign_and_damaged_folders_get_one_line(folder: Path, tmp_path: Path) -> None:
     import shutil
 
     foreign = tmp_path / "foreign"
@@ -273,11 +273,6 @@ def test_foreign_damaged_and_gpu_folders_get_one_line(folder: Path, tmp_path: Pa
     damaged = tmp_path / "damaged"
     shutil.copytree(folder, damaged)
     (damaged / "manifest.json").write_text("{ not json")
-    gpu = tmp_path / "gpu"
-    shutil.copytree(folder, gpu)
-    manifest = json.loads((gpu / "manifest.json").read_text())
-    manifest["grid"]["backend"] = "gpu"
-    (gpu / "manifest.json").write_text(json.dumps(manifest))
     bad_summary = tmp_path / "bad-summary"
     shutil.copytree(folder, bad_summary)
     summary = json.loads((bad_summary / "summary.json").read_text())
@@ -288,7 +283,6 @@ def test_foreign_damaged_and_gpu_folders_get_one_line(folder: Path, tmp_path: Pa
         (tmp_path / "missing", "no such folder"),
         (foreign / "notes.txt", "not a folder"),
         (damaged, "unreadable manifest"),
-        (gpu, "this sweep ran on the GPU"),
         (bad_summary, "names run 10000, not one of the sweep's 0..39"),
     ]
     for path, says in cases:

@@ -60,6 +60,8 @@ def info_text(info: dict[str, Any]) -> str:
         + (f" (written by {info['library']})" if info["library"] else ""),
         f"  {'status':<22} {info['description']}",
         f"  {'run':<22} {info['label']}",
+        *([f"  {'streams':<22} {cfg['streams']}: a GPU sweep's run, its slots captured from the "
+           "GPU kernel"] if cfg.get("streams", "cpu") != "cpu" else []),
         f"  {'instance':<22} {inst['name']}: K={len(inst['Y'])} arms, {len(inst['p'])} states,"
         f" p = [{p}]",
         f"  {'theory':<22} mu = [{mu}], best arm {th['best_arm']}, competitive arms: {comp}"

@@ -416,6 +416,8 @@ def _prepare_kernels(plans: list[_Plan]) -> None:
 
     classes = {}
     for plan in plans:
+        if plan.config.streams != "cpu":  # a GPU sweep's run: the GPU kernel decides it
+            continue
         cls = plan.config.policy.resolve()
         if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
             classes[cls.name] = cls

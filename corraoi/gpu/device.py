@@ -253,7 +253,11 @@ _DEVICE_LOCK = threading.Lock()
 def get_device() -> Device:
     """The device of this process (made once): ``$CORRAOI_GPU_DEVICE`` ``cuda`` (default) or
     ``emulate``. Raises :class:`GpuUnavailable` with the reason when there is none."""
-    kind = os.environ.get(DEVICE_ENV, "cuda").strip().lower() or "cuda"
+    return device_of(os.environ.get(DEVICE_ENV, "cuda").strip().lower() or "cuda")
+
+
+def device_of(kind: str) -> Device:
+    """The device ``kind`` ("cuda" or "emulate") of this process, made once."""
     with _DEVICE_LOCK:
         device = _DEVICES.get(kind)
         if device is None:

@@ -324,11 +324,17 @@ struct DTsForm {
         int correlated, int aware, const double *prm, int S, i64 *pulls, i64 *succ,           \
         double *pstate, u64 *rpos, double *nspare, int *nhas, int *xprev, i64 *age_a,          \
         i64 *oage_a, i64 *reg_a, i64 *asum_a, int nck, const i64 *ck_t, double *ck_reg,        \
-        double *ck_est, i64 *ck_pulls
+        double *ck_est, i64 *ck_pulls, int cap_run, i64 *cap
 #define CAI_NAMES                                                                             \
     R, seed0, t0, nslots, n, nrows, kind, cdf, trace, Y, pclass, best, mu_star, correlated,   \
         aware, prm, S, pulls, succ, pstate, rpos, nspare, nhas, xprev, age_a, oage_a, reg_a,   \
-        asum_a, nck, ck_t, ck_reg, ck_est, ck_pulls
+        asum_a, nck, ck_t, ck_reg, ck_est, ck_pulls, cap_run, cap
+
+// The per-slot capture of run `cap_run` (-1: none), CAI_CAPW values a slot of this launch into
+// `cap`: the hidden state, the arm, the reward, the ages (own, oracle's), the regret and the
+// AoI sum after the slot, the override flag and the candidate set as a bit mask (K <= 64).
+// What `corraoi record --from` of a GPU sweep turns into the slots of one run.
+#define CAI_CAPW 9
 
 // The hidden state of slot t: one uniform from the (t, HIDDEN) block, inverted through the
 // CDF of row 0 (X_1 and every X_t of an i.i.d. channel) or of row X_{t-1} + 1 (Markov).
@@ -424,6 +430,20 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
         oage = Y[best * n + x] == 1 ? 1 : oage + 1;
         reg += age - oage;
         asum += age;
+        if (r == cap_run) {
+            i64* row = cap + j * CAI_CAPW;
+            u64 mask = 0;
+            for (int k = 0; k < KARMS; ++k) mask |= (u64)cand[k] << k;
+            row[0] = x;
+            row[1] = arm;
+            row[2] = rew;
+            row[3] = age;
+            row[4] = oage;
+            row[5] = reg;
+            row[6] = asum;
+            row[7] = override_ ? 1 : 0;
+            row[8] = (i64)mask;
+        }
         if (ci < nck && ck_t[ci] == t) {
             ck_reg[(i64)ci * R + r] = (double)reg;
             ck_est[(i64)ci * R + r] = (double)asum - (double)t / mu_star;

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import bisect
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..block import check_horizon
+from ..block import SlotBlock, check_horizon
 from ..candidates import pseudo_reward_classes
 from ..channels import Channel, default_channel
 from ..engine import check_instance
@@ -64,6 +64,81 @@ def _ckpt_bytes(R: int, K: int) -> int:
     return R * (2 + K) * 8
 
 
+class _Problem:
+    """A policy's runs on a device, ready to launch: the constants and the per-run state
+    (laid out [field][run]) that carries from one launch to the next."""
+
+    def __init__(self, instance: Instance, policy: PolicySpec, horizon: int,
+                 channel: Channel | None, runs: int, dev: Device) -> None:  # fmt: skip
+        check_horizon(horizon)
+        if runs < 1:
+            raise ConfigError(f"runs must be >= 1, got {runs}")
+        K = instance.K
+        problem = gpu_problem(policy, K)
+        if problem is not None:
+            raise GpuUnavailable(f"--backend gpu: {problem}; run it with --backend cpu")
+        cls: Any = policy.resolve()
+        self.cls = cls
+        form = gpu_form(cls)
+        assert form is not None
+        self.kernel = form.kernel
+        self.theory = check_instance(instance)
+        channel = channel if channel is not None else default_channel(instance)
+        channel.check(instance, horizon)
+        self.cdf, self.kind, trace = channel.kernel_arrays(instance)
+        params = policy.param_vector(cls)
+        self.S_state = int(cls.state_size(K, policy.params)) if form.uses_state else 0
+        self.K, self.R, self.dev = K, int(runs), dev
+        xp, R = dev.xp, self.R
+
+        def arr(a: np.ndarray) -> Any:
+            return xp.asarray(np.ascontiguousarray(a))
+
+        self.arr = arr
+        try:
+            self.consts = {
+                "cdf": arr(self.cdf.astype(np.float64)), "trace": arr(trace.astype(np.int64)),
+                "Y": arr(np.asarray(instance.Y, dtype=np.int8)),
+                "pclass": arr(pseudo_reward_classes(instance)),
+                "prm": arr(params if params.size else np.zeros(1)),
+                "none": xp.zeros(1, dtype=np.int64), "none_d": xp.zeros(1),
+            }  # fmt: skip
+            self.st = {
+                "pulls": xp.zeros((K, R), dtype=np.int64),
+                "succ": xp.zeros((K, R), dtype=np.int64),
+                "pstate": xp.zeros((max(self.S_state, 1), R)),
+                "rpos": xp.zeros(R, dtype=np.uint64), "nspare": xp.zeros(R),
+                "nhas": xp.zeros(R, dtype=np.int32), "xprev": xp.full(R, -1, dtype=np.int32),
+                "age": xp.ones(R, dtype=np.int64), "oage": xp.ones(R, dtype=np.int64),
+                "reg": xp.zeros(R, dtype=np.int64), "asum": xp.zeros(R, dtype=np.int64),
+            }  # fmt: skip
+        except Exception as exc:  # CuPy's OutOfMemoryError (no CuPy import needed here)
+            raise _memory_error(exc, R, policy) from None
+
+    def launch(self, seed0: int, t: int, nslots: int, *, nck: int = 0, ck_t: Any = None,
+               ck_reg: Any = None, ck_est: Any = None, ck_pulls: Any = None,
+               cap_run: int = -1, cap: Any = None) -> None:  # fmt: skip
+        """Advance every run from slot ``t`` by ``nslots`` (capturing the checkpoints in
+        ``ck_t`` it passes, and every slot of run ``cap_run`` into ``cap``)."""
+        c, st, none = self.consts, self.st, self.consts["none"]
+        args = [
+            ("i", self.R), ("Q", int(seed0)), ("q", t), ("q", nslots),
+            ("i", int(self.cdf.shape[1])), ("i", int(self.cdf.shape[0])), ("i", int(self.kind)),
+            ("p", c["cdf"]), ("p", c["trace"]), ("p", c["Y"]), ("p", c["pclass"]),
+            ("i", int(self.theory.best_arm)), ("d", float(self.theory.mu_star)),
+            ("i", int(bool(self.cls.correlated))), ("i", int(bool(self.cls.aoi_aware))),
+            ("p", c["prm"]), ("i", self.S_state),
+            *(("p", st[k]) for k in ("pulls", "succ", "pstate", "rpos", "nspare", "nhas",
+                                     "xprev", "age", "oage", "reg", "asum")),
+            ("i", nck), ("p", none if ck_t is None else ck_t),
+            ("p", c["none_d"] if ck_reg is None else ck_reg),
+            ("p", c["none_d"] if ck_est is None else ck_est),
+            ("p", none if ck_pulls is None else ck_pulls),
+            ("i", int(cap_run)), ("p", none if cap is None else cap),
+        ]  # fmt: skip
+        self.dev.launch(self.K, self.kernel, self.R, args)
+
+
 def simulate(
     instance: Instance,
     policy: PolicySpec,
@@ -87,47 +162,15 @@ def simulate(
     start = time.perf_counter()
     dev = device if device is not None else get_device()
     xp = dev.xp
-    check_horizon(horizon)
-    if runs < 1:
-        raise ConfigError(f"runs must be >= 1, got {runs}")
-    K = instance.K
-    problem = gpu_problem(policy, K)
-    if problem is not None:
-        raise GpuUnavailable(f"--backend gpu: {problem}; run it with --backend cpu")
-    cls: Any = policy.resolve()
-    form = gpu_form(cls)
-    assert form is not None
-    theory = check_instance(instance)
-    channel = channel if channel is not None else default_channel(instance)
-    channel.check(instance, horizon)
-    cdf, kind, trace = channel.kernel_arrays(instance)
-    params = policy.param_vector(cls)
-    S_state = int(cls.state_size(K, policy.params)) if form.uses_state else 0
-    R = int(runs)
+    prob = _Problem(instance, policy, horizon, channel, runs, dev)
+    K, R, theory = prob.K, prob.R, prob.theory
     stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {int(horizon)})
     S = len(stops)
     cmax = max(1, min(S, dev.checkpoint_bytes // _ckpt_bytes(R, K)))
     if baseline is not None and tuple(baseline.shape) != (S, R):
         raise ConfigError(f"baseline of shape {tuple(baseline.shape)}, expected {(S, R)}")
-
-    def arr(a: np.ndarray) -> Any:
-        return xp.asarray(np.ascontiguousarray(a))
-
     try:
-        consts = {
-            "cdf": arr(cdf.astype(np.float64)), "trace": arr(trace.astype(np.int64)),
-            "Y": arr(np.asarray(instance.Y, dtype=np.int8)),
-            "pclass": arr(pseudo_reward_classes(instance)),
-            "prm": arr(params if params.size else np.zeros(1)), "ck_t": arr(np.array(stops)),
-        }  # fmt: skip
-        st = {
-            "pulls": xp.zeros((K, R), dtype=np.int64), "succ": xp.zeros((K, R), dtype=np.int64),
-            "pstate": xp.zeros((max(S_state, 1), R)), "rpos": xp.zeros(R, dtype=np.uint64),
-            "nspare": xp.zeros(R), "nhas": xp.zeros(R, dtype=np.int32),
-            "xprev": xp.full(R, -1, dtype=np.int32), "age": xp.ones(R, dtype=np.int64),
-            "oage": xp.ones(R, dtype=np.int64), "reg": xp.zeros(R, dtype=np.int64),
-            "asum": xp.zeros(R, dtype=np.int64),
-        }  # fmt: skip
+        ck_t = prob.arr(np.array(stops))
         ck_reg = xp.zeros((cmax, R))
         ck_est = xp.zeros((cmax, R))
         ck_pulls = xp.zeros((cmax, K, R), dtype=np.int64)
@@ -138,27 +181,15 @@ def simulate(
     est_parts: list[Moments] = []
     paired_parts: list[Moments] = []
     pulls_sum = np.zeros((S, K), dtype=np.int64)
-    n_states = int(cdf.shape[1])
     per_launch = max(1, dev.launch_work // R)
     t = 0
     ci = 0
     while t < horizon:
         end = min(horizon, t + per_launch, stops[min(ci + cmax, S) - 1])
         nck = bisect.bisect_right(stops, end) - ci
-        args = [
-            ("i", R), ("Q", int(seed0)), ("q", t), ("q", end - t), ("i", n_states),
-            ("i", int(cdf.shape[0])), ("i", int(kind)), ("p", consts["cdf"]),
-            ("p", consts["trace"]), ("p", consts["Y"]), ("p", consts["pclass"]),
-            ("i", int(theory.best_arm)), ("d", float(theory.mu_star)),
-            ("i", int(bool(cls.correlated))), ("i", int(bool(cls.aoi_aware))),
-            ("p", consts["prm"]), ("i", S_state),
-            *(("p", st[k]) for k in ("pulls", "succ", "pstate", "rpos", "nspare", "nhas",
-                                     "xprev", "age", "oage", "reg", "asum")),
-            ("i", nck), ("p", consts["ck_t"][ci:]), ("p", ck_reg), ("p", ck_est),
-            ("p", ck_pulls),
-        ]  # fmt: skip
         try:
-            dev.launch(K, form.kernel, R, args)
+            prob.launch(seed0, t, end - t, nck=nck, ck_t=ck_t[ci:], ck_reg=ck_reg,
+                        ck_est=ck_est, ck_pulls=ck_pulls)  # fmt: skip
         except Exception as exc:
             raise _memory_error(exc, R, policy) from None
         if nck:
@@ -176,6 +207,7 @@ def simulate(
         ci += nck
         t = end
     dev.synchronize()
+    st = prob.st
     best = int(theory.best_arm)
     regret_final = dev.asnumpy(st["reg"]).astype(np.float64)
     est_final = dev.asnumpy(st["asum"]).astype(np.float64) - horizon / float(theory.mu_star)
@@ -187,6 +219,56 @@ def simulate(
         best_pulls_final=dev.asnumpy(st["pulls"][best]).astype(np.int64), kept=kept,
         wall_s=time.perf_counter() - start,
     )  # fmt: skip
+
+
+#: Values the kernel captures per slot (kernel.cu, CAI_CAPW).
+CAPTURE_WIDTH = 9
+
+
+def capture_run(
+    instance: Instance,
+    policy: PolicySpec,
+    *,
+    seed: int,
+    horizon: int,
+    channel: Channel | None = None,
+    block: int = 1000,
+    device: Device | None = None,
+) -> Iterator[SlotBlock]:
+    """The slots of the device's run with seed ``seed`` (run ``seed - grid seed`` of a GPU
+    sweep), captured by the kernel as it decides them, as the :class:`SlotBlock` a CPU
+    record yields: the GPU's own random streams and rule, slot for slot (on the emulated
+    device, the host compiler's arithmetic)."""
+    dev = device if device is not None else get_device()
+    prob = _Problem(instance, policy, horizon, channel, 1, dev)
+    K, mu_star = prob.K, float(prob.theory.mu_star)
+    cap = dev.xp.zeros(block * CAPTURE_WIDTH, dtype=np.int64)
+    pulls = np.zeros(K, dtype=np.int64)
+    succ = np.zeros(K, dtype=np.int64)
+    bits = np.uint64(1) << np.arange(K, dtype=np.uint64)
+    t = 0
+    while t < horizon:
+        n = min(block, horizon - t)
+        prob.launch(seed, t, n, cap_run=0, cap=cap)
+        rows = dev.asnumpy(cap)[: n * CAPTURE_WIDTH].reshape(n, CAPTURE_WIDTH)
+        arm = rows[:, 1]
+        success = rows[:, 2] == 1
+        hit = np.zeros((n, K), dtype=np.int64)
+        hit[np.arange(n), arm] = 1
+        p = pulls + np.cumsum(hit, axis=0)
+        s = succ + np.cumsum(hit * success[:, None], axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mu_hat = np.where(p > 0, s / np.maximum(p, 1), 0.0)
+        ts = np.arange(t + 1, t + n + 1, dtype=np.int64)
+        yield SlotBlock(
+            t=ts, x=rows[:, 0].copy(), arm=arm.copy(), success=success, aoi=rows[:, 3].copy(),
+            oracle_aoi=rows[:, 4].copy(), regret=rows[:, 5].copy(),
+            estimator=rows[:, 6] - ts / mu_star, override=rows[:, 7] == 1,
+            mu_hat=mu_hat, pulls=p,
+            candidates=(rows[:, 8:9].astype(np.uint64) & bits[None, :]) != 0,
+        )  # fmt: skip
+        pulls, succ = p[-1].copy(), s[-1].copy()
+        t += n
 
 
 def _concat(parts: list[Moments]) -> Moments:
