@@ -3,7 +3,10 @@
 ``assert_runs_equal(a, b)`` compares two slot logs with :func:`viewer.diff` and raises an
 AssertionError that names the first differing slot, the field and both values, and how
 far the divergence goes. :func:`record_run` records one run into an MCAP slot log (what
-the ``corraoi_run`` pytest fixture calls). Everything heavy is imported inside the
+the ``corraoi_run`` pytest fixture calls). :func:`check_policy` is a policy's conformance
+check: the named ``check_*`` functions of :data:`CHECKS` on the cases of
+:func:`policy_cases`, or one test per check with :func:`parametrize_with_checks` (as
+scikit-learn's ``parametrize_with_checks``). Everything heavy is imported inside the
 functions, so importing this module costs nothing.
 """
 
@@ -11,6 +14,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +86,180 @@ def assert_runs_equal(a: Any, b: Any, *, fields: Sequence[str] | None = None) ->
     raise AssertionError("\n".join(lines))
 
 
-__all__ = ["assert_runs_equal", "record_run"]
+__all__ = [
+    "CHECKS",
+    "PolicyCase",
+    "assert_runs_equal",
+    "check_arms_in_range",
+    "check_counts_follow_the_arms",
+    "check_deterministic",
+    "check_hidden_path",
+    "check_log_round_trip",
+    "check_policy",
+    "check_runs_use_their_own_streams",
+    "parametrize_with_checks",
+    "policy_cases",
+    "record_run",
+]
+
+
+# ---------------------------------------------------------------------------- conformance
+
+
+@dataclass
+class PolicyCase:
+    """One policy on one random instance: what each ``check_*`` function examines. The batch
+    of runs is simulated once, on first use, and shared by the checks of the case."""
+
+    policy: str
+    spec: Any
+    instance: Any
+    seeds: list[int]
+    horizon: int
+
+    def __str__(self) -> str:  # the pytest id: eps-greedy-K3
+        return f"{self.spec.name}-K{self.instance.K}"
+
+    @cached_property
+    def batch(self) -> Any:
+        """Every run of the case in one block (``RunsBlock``)."""
+        from .engine import simulate
+
+        return next(simulate(self.instance, self.spec, self.seeds, self.horizon,
+                             block=self.horizon))  # fmt: skip
+
+    def where(self) -> str:
+        return f"{self.policy} (K={self.instance.K})"
+
+
+def policy_cases(
+    policy: str,
+    *,
+    params: dict[str, float] | None = None,
+    arms: Sequence[int] = (2, 3, 8, 64),
+    horizon: int = 300,
+    runs: int = 4,
+    seed: int = 0,
+) -> list[PolicyCase]:
+    """``policy`` (what ``--policy`` takes) on one random instance per number of ``arms``
+    (some arm always has a positive mean)."""
+    import numpy as np
+
+    from .instance import Instance
+    from .policies import make_policies
+
+    spec = make_policies([policy], params or {})[0]
+    cases = []
+    for K in arms:
+        rng = np.random.default_rng([seed, K])
+        n = max(2, K)
+        p = rng.dirichlet(np.ones(n))
+        Y = (rng.random((K, n)) < 0.5).astype(np.int64)
+        Y[int(rng.integers(K)), int(np.argmax(p))] = 1
+        inst = Instance(f"check-K{K}", p, Y)
+        cases.append(PolicyCase(policy, spec, inst, list(range(seed, seed + runs)), horizon))
+    return cases
+
+
+def check_deterministic(case: PolicyCase, tmp_path: Any = None) -> None:
+    """Two simulations of the same seeds are equal slot by slot, whatever the block size."""
+    import numpy as np
+
+    from .engine import RunsBlock, simulate
+
+    again = RunsBlock.concat(list(simulate(case.instance, case.spec, case.seeds, case.horizon,
+                                           block=max(1, case.horizon // 3))))  # fmt: skip
+    for f in ("x", "arm", "success", "aoi", "regret", "pulls", "candidates", "override"):
+        assert np.array_equal(case.batch.column(f), again.column(f)), (
+            f"{case.where()}: not deterministic for seed {case.seeds[0]}: field {f} differs "
+            "between two simulations (or between block sizes)"
+        )
+
+
+def check_arms_in_range(case: PolicyCase, tmp_path: Any = None) -> None:
+    """Every arm played is one of the instance's."""
+    a = case.batch
+    assert a.arm.min() >= 0 and a.arm.max() < case.instance.K, f"{case.where()}: arm out of range"
+
+
+def check_counts_follow_the_arms(case: PolicyCase, tmp_path: Any = None) -> None:
+    """Successes follow the table Y on the hidden state; pulls add up to the slots."""
+    import numpy as np
+
+    a, inst = case.batch, case.instance
+    assert np.array_equal(a.success, inst.Y[a.arm, a.x] == 1), f"{case.where()}: wrong successes"
+    assert np.array_equal(a.pulls[:, -1].sum(axis=1), np.full(len(case.seeds), case.horizon)), (
+        f"{case.where()}: pulls do not add up to the horizon"
+    )
+
+
+def check_runs_use_their_own_streams(case: PolicyCase, tmp_path: Any = None) -> None:
+    """Run i of a batch equals the single run with seed ``seeds[i]`` (vectorised code that
+    mixes runs fails here)."""
+    import numpy as np
+
+    from .engine import simulate
+
+    last = case.seeds[-1]
+    single = next(simulate(case.instance, case.spec, [last], case.horizon, block=case.horizon))
+    assert np.array_equal(single.arm[0], case.batch.arm[-1]), (
+        f"{case.where()}: run {len(case.seeds) - 1} of a batch differs from the single run "
+        f"with seed {last}: decisions must use each run's own stream (state.rng) only"
+    )
+
+
+def check_hidden_path(case: PolicyCase, tmp_path: Any = None) -> None:
+    """The policy sees the hidden path the built-ins see on the same seeds."""
+    import numpy as np
+
+    from .engine import simulate
+    from .policies import make_policies
+
+    ref = next(simulate(case.instance, make_policies(["ucb"])[0], case.seeds, case.horizon,
+                        block=case.horizon))  # fmt: skip
+    assert np.array_equal(ref.x, case.batch.x), f"{case.where()}: not the built-ins' hidden path"
+
+
+def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
+    """A run written to a slot log in ``tmp_path`` reads back equal and names the policy
+    (nothing to do without ``tmp_path``)."""
+    if tmp_path is None:
+        return
+    from recorder.mcap_sink import McapSink
+    from recorder.reader import open_log
+
+    from .block import RunConfig
+
+    path = Path(tmp_path) / f"check-{case.spec.name}-K{case.instance.K}.mcap"
+    config = RunConfig(case.instance, case.spec, case.seeds[0], case.horizon)
+    run = case.batch.run(0)
+    with McapSink(path, config, overwrite=True, fsync=False) as sink:
+        sink.write(run)
+    log = open_log(path)
+    assert log.config.policy == case.spec, f"{case.policy}: the log does not describe the policy"
+    assert log.read_all().equals(run), f"{case.where()}: log round-trip differs"
+
+
+#: Every conformance check, in the order :func:`check_policy` runs them.
+CHECKS = (check_deterministic, check_arms_in_range, check_counts_follow_the_arms,
+          check_runs_use_their_own_streams, check_hidden_path, check_log_round_trip)  # fmt: skip
+
+
+def parametrize_with_checks(policies: Sequence[str], **options: Any) -> Any:
+    """A ``pytest.mark.parametrize`` over every check of every case of ``policies`` (the
+    ``options`` of :func:`policy_cases`), one test each with a readable id
+    (``eps-greedy-K3-runs_use_their_own_streams``)::
+
+        @parametrize_with_checks(["eps_greedy.py:EpsilonGreedy"])
+        def test_my_policy(case, check, tmp_path):
+            check(case, tmp_path)
+    """
+    import pytest
+
+    items = [(case, check) for p in policies for case in policy_cases(p, **options)
+             for check in CHECKS]  # fmt: skip
+    ids = [f"{case}-{check.__name__.removeprefix('check_')}" for case, check in items]
+    return pytest.mark.parametrize(("case", "check"), items, ids=ids)
 
 
 def check_policy(
@@ -94,64 +272,18 @@ def check_policy(
     seed: int = 0,
     tmp_path: str | os.PathLike[str] | None = None,
 ) -> None:
-    """The conformance check a plug-in author runs in their own tests (raises AssertionError).
+    """The conformance check a plug-in author runs in their own tests (raises AssertionError):
+    every check of :data:`CHECKS` on every case of :func:`policy_cases`.
 
     ``policy`` is what ``--policy`` takes (``"my_policy.py:MyPolicy"``, ``"pkg.mod:Cls"``, a
     built-in name). On random instances with each number of ``arms`` it checks that the
-    policy
-
-    * is deterministic for a seed (two simulations are equal slot by slot),
-    * plays arms in range, with pulls, successes, ages and regret consistent with them,
-    * decides each run from that run's own stream (run i of a batch equals the single run
-      with seed ``seed + i``: vectorised code that mixes runs fails here),
-    * sees the hidden path built-ins see on the same seed,
-    * round-trips through a slot log (written and read back equal), when ``tmp_path`` is given.
+    policy is deterministic for a seed; plays arms in range, with successes and pulls
+    consistent with them; decides each run from that run's own stream (run i of a batch
+    equals the single run with seed ``seed + i``); sees the hidden path built-ins see on the
+    same seed; and round-trips through a slot log, when ``tmp_path`` is given. One test per
+    check, with readable ids: :func:`parametrize_with_checks`.
     """
-    import numpy as np
-
-    from .block import RunConfig
-    from .engine import simulate
-    from .instance import Instance
-    from .policies import make_policies
-
-    spec = make_policies([policy], params or {})[0]
-    reference = make_policies(["ucb"])[0]
-    for K in arms:
-        rng = np.random.default_rng([seed, K])
-        n = max(2, K)
-        p = rng.dirichlet(np.ones(n))
-        Y = (rng.random((K, n)) < 0.5).astype(np.int64)
-        Y[int(rng.integers(K)), int(np.argmax(p))] = 1  # some arm has a positive mean
-        inst = Instance(f"check-K{K}", p, Y)
-        seeds = list(range(seed, seed + runs))
-        blocks = list(simulate(inst, spec, seeds, horizon, block=horizon))
-        again = list(simulate(inst, spec, seeds, horizon, block=max(1, horizon // 3)))
-        a, b = blocks[0], type(blocks[0]).concat(again)
-        for f in ("x", "arm", "success", "aoi", "regret", "pulls", "candidates", "override"):
-            assert np.array_equal(a.column(f), b.column(f)), (
-                f"{policy} (K={K}): not deterministic for seed {seed}: field {f} differs "
-                "between two simulations (or between block sizes)"
-            )
-        assert a.arm.min() >= 0 and a.arm.max() < K, f"{policy} (K={K}): arm out of range"
-        assert np.array_equal(a.success, inst.Y[a.arm, a.x] == 1), f"{policy}: wrong successes"
-        assert np.array_equal(a.pulls[:, -1].sum(axis=1), np.full(runs, horizon)), (
-            f"{policy} (K={K}): pulls do not add up to the horizon"
-        )
-        single = next(simulate(inst, spec, [seeds[-1]], horizon, block=horizon))
-        assert np.array_equal(single.arm[0], a.arm[-1]), (
-            f"{policy} (K={K}): run {runs - 1} of a batch differs from the single run with "
-            f"seed {seeds[-1]}: decisions must use each run's own stream (state.rng) only"
-        )
-        ref = next(simulate(inst, reference, seeds, horizon, block=horizon))
-        assert np.array_equal(ref.x, a.x), f"{policy} (K={K}): not the built-ins' hidden path"
-        if tmp_path is not None:
-            from recorder.mcap_sink import McapSink
-            from recorder.reader import open_log
-
-            path = Path(tmp_path) / f"check-{spec.name}-K{K}.mcap"
-            config = RunConfig(inst, spec, seeds[0], horizon)
-            with McapSink(path, config, overwrite=True, fsync=False) as sink:
-                sink.write(a.run(0))
-            log = open_log(path)
-            assert log.config.policy == spec, f"{policy}: the log does not describe the policy"
-            assert log.read_all().equals(a.run(0)), f"{policy} (K={K}): log round-trip differs"
+    for case in policy_cases(policy, params=params, arms=arms, horizon=horizon, runs=runs,
+                             seed=seed):  # fmt: skip
+        for check in CHECKS:
+            check(case, tmp_path)

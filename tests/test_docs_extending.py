@@ -66,3 +66,15 @@ def test_the_doc_test_example_passes(tmp_path: Path, monkeypatch: pytest.MonkeyP
     test = namespace["test_my_policy_conforms"]
     assert callable(test)
     test(tmp_path)
+
+
+def test_the_doc_parametrized_example_runs_one_test_per_check(tmp_path: Path):
+    example = next(b for b in blocks("python") if "parametrize_with_checks" in b)
+    (tmp_path / "eps_greedy.py").write_text(blocks("python")[0])
+    (tmp_path / "test_mine.py").write_text(example)
+    res = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
+                          "-p", "no:xdist", "test_mine.py", "-v"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-2000:]
+    assert "12 passed" in res.stdout  # 2 instances x 6 checks
+    assert "test_my_policy[eps-greedy-K8-runs_use_their_own_streams] PASSED" in res.stdout
