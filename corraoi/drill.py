@@ -97,7 +97,6 @@ def choose(
     said through ``warn``.
     """
     root, grid, group = sweep_root(path)
-    streams = _streams(grid, warn)
     what = parse_run(run)
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
@@ -114,13 +113,26 @@ def choose(
             f"policies: {', '.join(sorted(swept))}); a {what} run is chosen among the sweep's "
             "policies: name one of them too, or give --run N"
         )
+    picked = {key: _picks(root, grid, key, groups[key], members, labels, what) if members else []
+              for key, members in chosen.items()}  # fmt: skip
+    if grid.backend == "gpu":  # every run is recorded with the GPU kernel: each needs its form
+        from .gpu.runner import gpu_problem
+
+        for key, members in chosen.items():
+            K = groups[key][0].instance.K
+            problem = next((p for spec in [*(c.policy for c in members), *extra]
+                            if (p := gpu_problem(spec, K)) is not None), None)  # fmt: skip
+            if problem is not None:
+                raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
+                                  "kernel; leave it out of --policy")  # fmt: skip
+    streams = _streams(grid, warn)  # after every check: a refusal stays one line
     if extra and warn is not None:
         added = ", ".join(s.label for s in extra)
         warn(f"{added}: not in the sweep; recorded on the chosen run too (paired: the same "
              "seed, so the same hidden path)")  # fmt: skip
     drills: list[Drill] = []
     for key, members in chosen.items():
-        picks = _picks(root, grid, key, groups[key], members, labels, what) if members else []
+        picks = picked[key]
         for cell, r in picks:
             drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams))
         runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])

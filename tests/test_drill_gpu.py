@@ -128,3 +128,20 @@ def test_record_from_a_gpu_sweep_is_the_run_it_counted(tmp_path: Path) -> None:
     assert np.array_equal(x[0], x[1])
     info = _corraoi("info", next(iter(logs.values())), cwd=tmp_path)
     assert "streams                gpu-emulated: a GPU sweep's run" in info.stdout
+
+
+def test_bad_requests_on_a_gpu_sweep_are_one_line(tmp_path: Path) -> None:
+    sweep = _corraoi("sweep", "-i", "I1", "-p", "ucb", "--runs", "20", "-T", "100", "--backend",
+                     "gpu", "-o", "g", cwd=tmp_path)  # fmt: skip
+    assert sweep.returncode == 0, sweep.stderr
+    plugin = str(Path(__file__).parent / "plugins" / "eps_greedy.py") + ":EpsilonGreedy"
+    for args, says in (
+        (["--run", "20"], "--run 20: out of range; the sweep in g has runs 0..19"),
+        (["--run", "3", "-p", f"ucb,{plugin}"], "policy eps-greedy has a plain-Python policy "
+         "(the GPU backend runs the built-ins): a GPU sweep's runs are recorded with the GPU "
+         "kernel"),
+    ):  # fmt: skip
+        out = _corraoi("record", "--from", "g", "--no-rrd", *args, cwd=tmp_path)
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode != 0 and len(lines) == 1 and says in lines[0], out.stderr
+    assert not (tmp_path / "runs").exists()
