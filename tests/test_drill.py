@@ -252,6 +252,9 @@ def test_compare_from_a_sweep_puts_each_policys_chosen_run_side_by_side(
         (["-T", "100"], "--horizon and --from: the sweep fixes the horizon"),
         (["--seed", "3"], "--seed and --from"),
         (["--c", "3"], "--c/--beta/--param and --from"),
+        (["--run", ""], "--run '': expected a run index"),
+        (["-o", "x.mcap"], "-o/--output x.mcap: names one file but 3 runs are recorded; put "
+         "{label} or {from} in it"),
     ],
 )
 def test_bad_drill_requests_get_one_line(

@@ -120,8 +120,10 @@ def _plans(
     for option, value in (("-o/--output", out), ("--rrd", rrd)):
         if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
             raise UsageError(
-                f"{option} {value}: names one file but {len(configs)} policies are recorded; "
-                "put {label} or {policy} in it (e.g. -o 'runs/{label}.mcap')"
+                f"{option} {value}: names one file but {len(configs)} "
+                f"{'runs' if drills else 'policies'} are recorded; put {{label}} or "
+                f"{'{from}' if drills else '{policy}'} in it (e.g. -o "
+                f"'runs/{'{from}' if drills else '{label}'}.mcap')"
             )
         if value is not None and value.strip() == "":
             raise UsageError(f"{option}: empty path")
@@ -243,7 +245,8 @@ def record(
         raise UsageError("--rrd and --no-rrd: choose one")
     drills = None
     if from_ is not None:
-        drills = _from_sweep(from_, run or "worst", cell, policy, param, c=c, beta=beta)
+        which = run if run is not None else "worst"
+        drills = _from_sweep(from_, which, cell, policy, param, c=c, beta=beta)
         configs = [d.config for d in drills]
     else:
         if run is not None or cell:
@@ -254,6 +257,8 @@ def record(
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
     plans = _plans(configs, output, rrd, no_rrd, drills)
+    if drills:
+        _say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from recorder.errors import OutputError
@@ -354,14 +359,16 @@ def _from_sweep(
                          "parameters (with --policy they set those of a policy added)")
     specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
              if given else [])  # fmt: skip
-    drills = choose(folder, run, cells=cells, policies=specs, warn=warn)
+    return choose(folder, run, cells=cells, policies=specs, warn=warn)
+
+
+def _say_where_from(drills: list[Any]) -> None:
     for d in drills:
         what = "" if d.cell is not None else ", added"
         label = d.cell if d.cell is not None else d.config.policy.label
         click.echo(f"from {safe_text(d.folder)}: {safe_text(d.config.instance.name)} "
                    f"{safe_text(label)}, run {d.run} (seed {d.config.seed}, {d.choice}{what})",
                    err=True)  # fmt: skip
-    return drills
 
 
 def _up_to_date(plan: _Plan) -> bool:

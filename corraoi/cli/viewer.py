@@ -230,7 +230,7 @@ def compare(
     if from_ is not None:
         if logs:
             raise UsageError("A.mcap ... and --from: compare logs or a sweep's runs, not both")
-        logs = _record_from(from_, run or "worst", cell, force)
+        logs = _record_from(from_, run if run is not None else "worst", cell, force)
     elif run is not None or cell:
         raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
     elif not logs:
