@@ -15,7 +15,7 @@ from ._version import __version__
 from .channels import Channel, default_channel
 from .errors import ConfigError
 from .instance import Instance
-from .policies.api import PolicySpec
+from .policies.spec import PolicySpec
 
 #: Per-slot columns of a block, in log order.
 SCALAR_FIELDS = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "override")

@@ -62,7 +62,7 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
             "install the same version on both"
         )
     if task.get("plugin_source"):
-        from .policies.registry import install_plugin_source
+        from .policies.loading import install_plugin_source
 
         install_plugin_source(task["plugin_source"]["path"], task["plugin_source"]["source"])
     if task.get("threads"):

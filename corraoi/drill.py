@@ -20,7 +20,7 @@ from .block import RunConfig
 from .errors import ConfigError
 from .grid import Cell, Grid
 from .notable import CHOICES, notable_runs, pick_pair, well_formed
-from .policies.api import PolicySpec
+from .policies.spec import PolicySpec
 from .sweep_folder import MANIFEST, CellRuns, DamagedPart, group_dirs, read_manifest, read_parts
 
 

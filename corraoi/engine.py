@@ -24,7 +24,8 @@ from .candidates import candidate_bitsets, pseudo_reward_classes
 from .channels import Channel, default_channel
 from .errors import ConfigError, CorraoiError
 from .instance import Instance
-from .policies.api import CompiledPolicy, PolicySpec
+from .policies.api import CompiledPolicy
+from .policies.spec import PolicySpec
 from .pyengine import PolicyRuntimeError, RunState, Streams, apply_slot, check_arms
 from .rng import streams_for_seed, streams_for_seeds
 from .theory import InstanceTheory, analyse

@@ -12,7 +12,7 @@ from typing import Any
 
 from .bounds import DEFAULT_BOUND_BETA, Bound, cts_bound, cucb_bound
 from .instance import Instance
-from .policies.api import PolicySpec
+from .policies.spec import PolicySpec
 from .sweep import PolicyResult
 from .theory import analyse
 

@@ -78,3 +78,15 @@ def test_the_doc_parametrized_example_runs_one_test_per_check(tmp_path: Path):
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-2000:]
     assert "12 passed" in res.stdout  # 2 instances x 6 checks
     assert "test_my_policy[eps-greedy-K8-runs_use_their_own_streams] PASSED" in res.stdout
+
+
+def test_the_register_example_runs_as_a_script(tmp_path: Path):
+    example = next(b for b in blocks("python") if "@register" in b)
+    (tmp_path / "rr.py").write_text(
+        example + "\nfrom corraoi.testing import check_policy\n"
+        "check_policy('round-robin', arms=(3,), horizon=30)\n"
+    )
+    res = subprocess.run([sys.executable, "rr.py"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.splitlines() == ["__main__:RoundRobin"]

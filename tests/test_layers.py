@@ -20,14 +20,10 @@ MAY_CLIMB = ("corraoi.cli", "corraoi.testing", "corraoi.analysis")
 #: (the caller should hand it its sinks); a trace channel reads its states from a slot log
 #: (it should take an array of states, read by the recorder)
 OWED_CLIMBS = {"corraoi.experiments", "corraoi.channels"}
-#: owed circles: the two climbs above close these, and the policy API resolves names through
-#: the registry that imports the built-ins written against the API
+#: owed circles: the two climbs above close these
 OWED_CIRCLES = {
     frozenset({"corraoi.block", "corraoi.channels", "recorder.format", "recorder.reader"}),
     frozenset({"corraoi.experiments", "recorder.results"}),
-    frozenset({"corraoi.policies.api", "corraoi.policies.registry", "corraoi.policies.paper",
-               "corraoi.policies.drifting", "corraoi.policies.forced_exploration",
-               "corraoi.policies.variants"}),  # fmt: skip
 }
 
 

@@ -11,27 +11,39 @@ Write your own (``docs/extending.md``)::
         def select(self, t, state):
             ...
 
-and run it with ``corraoi record --policy eps_greedy.py:EpsilonGreedy``.
+and run it with ``corraoi record --policy eps_greedy.py:EpsilonGreedy``, or call
+``corraoi.policies.register(EpsilonGreedy)`` (it works as a class decorator) and use
+``--policy eps-greedy`` wherever the registering module is imported.
 
-Importing this package is light; the built-ins (numba) load on first use of the registry.
+Importing this package is light: the built-in families below register their classes (as a
+user's do) and their numba hooks load only when a kernel is built.
 """
 
 from __future__ import annotations
 
-from .api import RGB, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, PolicySpec, gpu_form
+from .api import RGB, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, gpu_form
 from .registry import (
     ENTRY_POINT_GROUP,
     available,
     builtins,
-    make_policies,
-    make_policy,
     paper_names,
-    parse_param_assignments,
-    parse_policy_names,
+    register,
+    registered,
     resolve,
     unknown_policy_message,
 )
+from .spec import (
+    PolicySpec,
+    make_policies,
+    make_policy,
+    parse_param_assignments,
+    parse_policy_names,
+)
 from .variants import AOI_PREFIX
+
+# The built-in families, in the order `corraoi policies` lists them (the paper's twelve first):
+# importing one registers its classes.
+from . import paper, forced_exploration, drifting  # noqa: E402, F401, I001  isort: skip
 
 __all__ = [
     "AOI_PREFIX",
@@ -51,6 +63,8 @@ __all__ = [
     "paper_names",
     "parse_param_assignments",
     "parse_policy_names",
+    "register",
+    "registered",
     "resolve",
     "unknown_policy_message",
 ]

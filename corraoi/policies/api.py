@@ -8,20 +8,19 @@ A policy is ONE class. Built-ins and plug-ins subclass the same two bases:
 * :class:`Policy` -- plain Python: ``select(t, state)`` returns one arm per run, vectorised
   over runs (arrays of shape runs x K), for quick experiments.
 
-A :class:`PolicySpec` is what a run is made and logged with: the name, the parameter values,
-and where the class came from (qualified name, version), so a log reads without the plug-in.
+What a run is made and logged with (the name, parameter values and where the class came
+from) is a :class:`~corraoi.policies.spec.PolicySpec`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from .._version import __version__
 from ..errors import PolicyError
 
 if TYPE_CHECKING:
@@ -188,92 +187,3 @@ class Policy(PolicyBase):
 
     def update(self, t: int, arms: np.ndarray, rewards: np.ndarray, state: RunState) -> None:
         """Called after slot ``t`` with the arms played and their 0/1 rewards."""
-
-
-@dataclass(frozen=True)
-class PolicySpec:
-    """A policy with its parameter values, and where it came from: what a log records.
-
-    Built-ins are logged as ``{"name", "params"}`` (as in every earlier version); plug-ins add
-    a ``plugin`` entry with the qualified name, version and tier, so that info, replay,
-    compare and diff read their logs without the plug-in installed.
-    """
-
-    name: str
-    params: Mapping[str, float] = field(default_factory=dict)
-    qualname: str = ""
-    version: str = ""
-    tier: str = field(default="compiled", compare=False)
-    label: str = field(default="", compare=False)
-    color: RGB | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "params", dict(self.params))
-        if not self.qualname:
-            object.__setattr__(self, "qualname", BUILTIN_PREFIX + self.name)
-        if not self.label:
-            object.__setattr__(self, "label", self.name)
-
-    def __hash__(self) -> int:
-        return hash((self.name, tuple(sorted(self.params.items())), self.qualname))
-
-    @property
-    def builtin(self) -> bool:
-        return self.qualname.startswith(BUILTIN_PREFIX)
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"name": self.name, "params": dict(self.params)}
-        if not self.builtin:
-            out["plugin"] = {
-                "qualname": self.qualname,
-                "version": self.version,
-                "tier": self.tier,
-                "label": self.label,
-                "color": list(self.color) if self.color is not None else None,
-            }
-        return out
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> PolicySpec:
-        """The spec of a log, without importing anything (the plug-in may be absent)."""
-        if not isinstance(data, Mapping) or not isinstance(data.get("name"), str):
-            raise PolicyError("policy: expected an object with a string 'name'")
-        params = data.get("params", {}) or {}
-        if not isinstance(params, Mapping) or not all(
-            isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
-            for k, v in params.items()
-        ):
-            raise PolicyError(f"policy {data['name']}: params must map names to numbers")
-        plugin = data.get("plugin")
-        if plugin is None:  # a built-in: its display colour and label from this registry
-            from .registry import builtins
-
-            known = builtins().get(data["name"])
-            return cls(name=data["name"], params={k: float(v) for k, v in params.items()},
-                       version=__version__, label=known.label if known else "",
-                       color=known.color if known else None)  # fmt: skip
-        if not isinstance(plugin, Mapping):
-            raise PolicyError(f"policy {data['name']}: 'plugin' must be an object")
-        color = plugin.get("color")
-        rgb: RGB | None = None
-        if isinstance(color, list) and len(color) == 3 and all(isinstance(c, int) for c in color):
-            rgb = (int(color[0]), int(color[1]), int(color[2]))
-        return cls(
-            name=data["name"],
-            params={k: float(v) for k, v in params.items()},
-            qualname=str(plugin.get("qualname", "")) or f"plugin:{data['name']}",
-            version=str(plugin.get("version", "")),
-            tier=str(plugin.get("tier", "compiled")),
-            label=str(plugin.get("label", "") or data["name"]),
-            color=rgb,
-        )
-
-    def resolve(self) -> type[PolicyBase]:
-        """The policy class (importing the plug-in); PolicyError when it cannot be had."""
-        from .registry import resolve_spec
-
-        return resolve_spec(self)
-
-    def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
-        """The parameters in the class's declared order (what compiled hooks receive)."""
-        return np.array([float(self.params[p]) for p in cls.params], dtype=np.float64)

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 
 from .api import CompiledPolicy, GpuForm, Param
 from .paper import C_PARAM
+from .registry import register
 from .variants import family
 
 
@@ -63,3 +64,6 @@ POLICIES = {
     for fam in (family(SWUCB, correlated_name=None), family(DTS, correlated_name=None))
     for cls in fam
 }
+
+for _cls in POLICIES.values():
+    register(_cls)

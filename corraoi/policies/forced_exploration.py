@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .api import CompiledPolicy, GpuForm
+from .registry import register
 from .variants import family
 
 REFERENCE = "Krishnasamy, Sen, Johari, Shakkottai (2021), Operations Research 69(1)"
@@ -55,3 +56,6 @@ POLICIES = {
     )
     for cls in fam
 }
+
+for _cls in POLICIES.values():
+    register(_cls)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .api import CompiledPolicy, GpuForm, Param
+from .registry import register
 from .variants import family
 
 C_PARAM = Param(2.0, "UCB exploration constant: index mu_hat + sqrt(c ln t / n)", low=0.0,
@@ -76,3 +77,6 @@ _FAMILIES = [
 #: The paper's twelve, in the order its tables list them: the plain policies, their
 #: correlated forms, then the AoI-aware form of each.
 POLICIES = {cls.name: cls for i in range(4) for fam in _FAMILIES for cls in [fam[i]]}
+
+for _cls in POLICIES.values():
+    register(_cls)

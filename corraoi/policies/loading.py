@@ -1,0 +1,189 @@
+"""Loading plug-in code safely: a ``FILE.py`` or module imported so that whatever it does
+while loading (an exception, ``sys.exit``, ``os._exit``, megabytes of output) ends as one
+:class:`~corraoi.errors.PolicyError` line, and the check that what it gave is a policy class.
+
+The registry (``registry.py``) decides *which* class a ``--policy`` word names; this module
+only loads code and checks classes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import importlib.metadata
+import importlib.util
+import os
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from ..errors import PolicyError
+from .api import CompiledPolicy, Policy, PolicyBase
+
+PLUGIN_MODULE_PREFIX = "corraoi_plugin_"
+
+
+def one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return f"{type(exc).__name__}: {text}" if not isinstance(exc, PolicyError) else text
+
+
+def check_class(obj: Any, where: str) -> type[PolicyBase]:
+    if not (isinstance(obj, type) and issubclass(obj, (CompiledPolicy, Policy))):
+        raise PolicyError(
+            f"{where}: {obj!r} is not a policy class (expected a subclass of "
+            "corraoi.policies.Policy or corraoi.policies.CompiledPolicy)"
+        )
+    if not isinstance(obj.params, Mapping):
+        raise PolicyError(f"{where}: params must be a dict of name -> Param")
+    if issubclass(obj, CompiledPolicy) and obj.score is None and obj.forced is None:
+        raise PolicyError(f"{where}: a compiled policy needs a score (or forced) hook")
+    if issubclass(obj, Policy) and obj.select is Policy.select:
+        raise PolicyError(f"{where}: a Python policy must define select(t, state)")
+    return obj
+
+
+#: A plug-in's output while it loads is passed on up to this many bytes; beyond, one line.
+_LOAD_OUTPUT_LIMIT = 4096
+
+
+@contextlib.contextmanager
+def guarded_load(where: str, what: str, failed: str = "") -> Iterator[None]:
+    """Run a plug-in's import so that whatever it does there ends as one PolicyError line:
+    an exception, ``sys.exit``, ``os._exit`` (Python's, replaced while it loads) or
+    megabytes of output (the process's stdout and stderr go to a temporary file meanwhile;
+    up to a few KiB are passed on). Ctrl-C during a hang still interrupts (exit 130)."""
+    real_exit = os._exit
+
+    def no_exit(code: int = 0) -> None:
+        raise _PluginExit(code)
+
+    for stream in (sys.stdout, sys.stderr):
+        _flush(stream)
+    saved = [os.dup(1), os.dup(2)]
+    sink = tempfile.TemporaryFile()
+    os.dup2(sink.fileno(), 1)
+    os.dup2(sink.fileno(), 2)
+    os._exit = no_exit  # type: ignore[assignment]
+    problem: str | None = None
+    try:
+        yield
+    except _PluginExit as exc:
+        problem = f"{where}: {what} called os._exit({exc.code}) while loading"
+    except SystemExit as exc:
+        problem = f"{where}: {what} called sys.exit({exc.code!r}) while loading"
+    except KeyboardInterrupt:
+        raise
+    except PolicyError:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - anything a plug-in raises at import
+        problem = f"{where}: {failed or f'importing {what} failed'}: {one_line(exc)}"
+    finally:
+        os._exit = real_exit
+        for stream in (sys.stdout, sys.stderr):
+            _flush(stream)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+        size = sink.seek(0, os.SEEK_END)
+        if 0 < size <= _LOAD_OUTPUT_LIMIT:
+            sink.seek(0)
+            _write_err(sink.read())
+        elif size > _LOAD_OUTPUT_LIMIT:
+            _write_err(
+                f"corraoi: {what} printed {size:,} bytes while loading (not shown)\n".encode()
+            )
+        sink.close()
+    if problem is not None:
+        raise PolicyError(problem)
+
+
+class _PluginExit(Exception):
+    """``os._exit`` called by a plug-in while it loads (raised instead of ending us)."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
+def _flush(stream: Any) -> None:
+    try:
+        stream.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _write_err(data: bytes) -> None:
+    try:
+        os.write(2, data)
+    except OSError:
+        pass
+
+
+#: Plug-in sources handed over as data (a Dask worker that lacks the client's files).
+_SOURCES: dict[str, bytes] = {}
+
+
+def has_source(path: Path) -> bool:
+    """Whether a plug-in file's source was handed over as data (it need not exist here)."""
+    return str(path.resolve()) in _SOURCES
+
+
+def install_plugin_source(path: str, source: str) -> None:
+    """Make ``FILE.py:Class`` plug-ins at ``path`` importable from ``source`` (on a worker
+    that does not have the file: plug-ins travel with the chunks as data)."""
+    _SOURCES[str(Path(path).resolve())] = source.encode("utf-8")
+
+
+def file_module(path: Path, where: str) -> tuple[ModuleType, str]:
+    """Import a plug-in file once per process under a name derived from its path; returns
+    the module and its version (a hash of the source)."""
+    installed = _SOURCES.get(str(path.resolve()))
+    try:
+        source = installed if installed is not None else path.read_bytes()
+    except OSError as exc:
+        raise PolicyError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
+    digest = hashlib.sha256(source).hexdigest()
+    key = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:16]
+    modname = f"{PLUGIN_MODULE_PREFIX}{key}"
+    module = sys.modules.get(modname)
+    if module is not None and getattr(module, "__corraoi_digest__", None) == digest:
+        return module, f"sha256:{digest[:16]}"
+    spec = importlib.util.spec_from_file_location(modname, path)
+    if spec is None or spec.loader is None:
+        raise PolicyError(f"{where}: {path} is not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    module.__corraoi_digest__ = digest  # type: ignore[attr-defined]
+    sys.modules[modname] = module
+    try:
+        with guarded_load(where, str(path)):
+            if installed is not None:
+                exec(compile(source, str(path), "exec"), module.__dict__)
+            else:
+                spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(modname, None)
+        raise
+    return module, f"sha256:{digest[:16]}"
+
+
+def module_version(modname: str) -> str:
+    top = modname.split(".")[0]
+    for dist in importlib.metadata.packages_distributions().get(top, []):
+        try:
+            return importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    mod = sys.modules.get(modname)
+    file = getattr(mod, "__file__", None)
+    if file:
+        return "sha256:" + hashlib.sha256(Path(file).read_bytes()).hexdigest()[:16]
+    return ""
+
+
+def is_file_ref(left: str) -> bool:
+    return left.endswith(".py") or os.sep in left or "/" in left

@@ -1,0 +1,199 @@
+"""A policy with its parameter values, as a run is made and logged with, and the words of
+``--policy``/``--param`` turned into such specs.
+
+A spec names its class (built-in name, ``FILE.py:Class``, ``module:Class``) and does not hold
+it, so that a log reads without the plug-in installed; :meth:`PolicySpec.resolve` finds the
+class through the registry when it is needed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._version import __version__
+from ..errors import PolicyError
+from .api import BUILTIN_PREFIX, RGB, PolicyBase
+from .registry import builtins, paper_names, policy_name, resolve, resolve_spec
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """A policy with its parameter values, and where it came from: what a log records.
+
+    Built-ins are logged as ``{"name", "params"}`` (as in every earlier version); plug-ins add
+    a ``plugin`` entry with the qualified name, version and tier, so that info, replay,
+    compare and diff read their logs without the plug-in installed.
+    """
+
+    name: str
+    params: Mapping[str, float] = field(default_factory=dict)
+    qualname: str = ""
+    version: str = ""
+    tier: str = field(default="compiled", compare=False)
+    label: str = field(default="", compare=False)
+    color: RGB | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "params", dict(self.params))
+        if not self.qualname:
+            object.__setattr__(self, "qualname", BUILTIN_PREFIX + self.name)
+        if not self.label:
+            object.__setattr__(self, "label", self.name)
+
+    def __hash__(self) -> int:
+        return hash((self.name, tuple(sorted(self.params.items())), self.qualname))
+
+    @property
+    def builtin(self) -> bool:
+        return self.qualname.startswith(BUILTIN_PREFIX)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "params": dict(self.params)}
+        if not self.builtin:
+            out["plugin"] = {
+                "qualname": self.qualname,
+                "version": self.version,
+                "tier": self.tier,
+                "label": self.label,
+                "color": list(self.color) if self.color is not None else None,
+            }
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> PolicySpec:
+        """The spec of a log, without importing anything (the plug-in may be absent)."""
+        if not isinstance(data, Mapping) or not isinstance(data.get("name"), str):
+            raise PolicyError("policy: expected an object with a string 'name'")
+        params = data.get("params", {}) or {}
+        if not isinstance(params, Mapping) or not all(
+            isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
+            for k, v in params.items()
+        ):
+            raise PolicyError(f"policy {data['name']}: params must map names to numbers")
+        plugin = data.get("plugin")
+        if plugin is None:  # a built-in: its display colour and label from this registry
+            known = builtins().get(data["name"])
+            return cls(name=data["name"], params={k: float(v) for k, v in params.items()},
+                       version=__version__, label=known.label if known else "",
+                       color=known.color if known else None)  # fmt: skip
+        if not isinstance(plugin, Mapping):
+            raise PolicyError(f"policy {data['name']}: 'plugin' must be an object")
+        color = plugin.get("color")
+        rgb: RGB | None = None
+        if isinstance(color, list) and len(color) == 3 and all(isinstance(c, int) for c in color):
+            rgb = (int(color[0]), int(color[1]), int(color[2]))
+        return cls(
+            name=data["name"],
+            params={k: float(v) for k, v in params.items()},
+            qualname=str(plugin.get("qualname", "")) or f"plugin:{data['name']}",
+            version=str(plugin.get("version", "")),
+            tier=str(plugin.get("tier", "compiled")),
+            label=str(plugin.get("label", "") or data["name"]),
+            color=rgb,
+        )
+
+    def resolve(self) -> type[PolicyBase]:
+        """The policy class (importing the plug-in); PolicyError when it cannot be had."""
+        return resolve_spec(self)
+
+    def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
+        """The parameters in the class's declared order (what compiled hooks receive)."""
+        return np.array([float(self.params[p]) for p in cls.params], dtype=np.float64)
+
+
+def make_policy(token: str, **params: float | None) -> PolicySpec:
+    """A validated spec for one ``--policy`` word; ``None`` values take defaults."""
+    res = resolve(token)
+    cls = res.cls
+    unknown = sorted(set(k for k, v in params.items() if v is not None) - set(cls.params))
+    if unknown:
+        known = ", ".join(cls.params) or "none"
+        raise PolicyError(
+            f"policy {policy_name(cls)}: unknown parameter {unknown[0]!r} (it declares: {known})"
+        )
+    values: dict[str, float] = {}
+    for pname, decl in cls.params.items():
+        given = params.get(pname)
+        value = float(decl.default if given is None else given)
+        problem = decl.check(value)
+        if problem is not None:
+            raise PolicyError(f"policy {policy_name(cls)}: parameter {pname}={value:g} {problem}")
+        values[pname] = value
+    return PolicySpec(
+        name=policy_name(cls),
+        params=values,
+        qualname=res.qualname,
+        version=res.version,
+        tier=cls.tier,
+        label=cls.label or policy_name(cls),
+        color=cls.color,
+    )
+
+
+def parse_policy_names(values: Iterable[str]) -> list[str]:
+    """Words from ``--policy`` given as a name, a comma list, repeated, or ``all`` (the
+    paper's twelve). Keeps first-seen order and drops repeats; checks each one resolves."""
+    names: list[str] = []
+    for value in values:
+        for part in value.split(","):
+            token = part.strip()
+            if not token:
+                continue
+            expanded = paper_names() if token.lower() == "all" else [token]
+            for n in expanded:
+                key = n.lower() if n.lower() in builtins() else n
+                resolve(key)
+                if key not in names:
+                    names.append(key)
+    if not names:
+        raise PolicyError("no policy given (expected a name, a comma list or all)")
+    return names
+
+
+def parse_param_assignments(items: Iterable[str]) -> dict[str, float]:
+    """``--param NAME=VALUE`` words into a dict (later ones win); one clear line if malformed."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name.isidentifier():
+            raise PolicyError(f"--param {item!r}: expected NAME=VALUE (e.g. --param c=1.5)")
+        try:
+            value = float(text)
+        except ValueError:
+            raise PolicyError(f"--param {item!r}: {text.strip()!r} is not a number") from None
+        out[name] = value
+    return out
+
+
+def make_policies(
+    values: Iterable[str],
+    params: Mapping[str, float] | None = None,
+    *,
+    c: float | None = None,
+    beta: float | None = None,
+) -> list[PolicySpec]:
+    """Specs for ``--policy`` values; each parameter goes to every listed policy that declares
+    it, and is an error if none does (so that a typo is never silently ignored). ``c`` and
+    ``beta`` are the shorthands ``--c`` and ``--beta``."""
+    given = dict(params or {})
+    for key, value in (("c", c), ("beta", beta)):
+        if value is not None:
+            given[key] = float(value)
+    tokens = parse_policy_names(values)
+    classes = {t: resolve(t).cls for t in tokens}
+    for pname in given:
+        if not any(pname in cls.params for cls in classes.values()):
+            users = sorted(n for n, cls in builtins().items() if pname in cls.params)
+            read_by = f" (it is read by {', '.join(users)})" if users else ""
+            raise PolicyError(
+                f"parameter {pname} does not apply to "
+                f"{', '.join(policy_name(c) for c in classes.values())}{read_by}"
+            )
+    return [
+        make_policy(t, **{k: v for k, v in given.items() if k in classes[t].params}) for t in tokens
+    ]
