@@ -5,11 +5,14 @@
 * ``markov``: X_1 ~ p, then X_t from row X_{t-1} of the instance's ``transition`` matrix, by
   one uniform per slot through the row's inverse CDF -- so a chain whose rows all equal ``p``
   draws exactly the i.i.d. path (the default for instances with a ``transition``).
-* ``trace``: the states of a recorded hidden path, from a corraoi slot log (``.mcap``) or a
-  text file of 1-based states (whitespace-separated, ``#`` comments); every run of a batch
-  replays the same path.
+* ``trace``: the states of a recorded hidden path (an array: :func:`trace_channel`), read from
+  a text file of 1-based states (whitespace-separated, ``#`` comments) or a corraoi slot log
+  (``.mcap``); every run of a batch replays the same path.
 
 A channel is data (logged with the run); :meth:`Channel.kernel_arrays` is what the engine needs.
+The core reads no log format: a slot log's states are read by the recorder
+(``recorder/trace.py``), named in :data:`TRACE_READERS` and imported only when such a trace is
+asked for.
 """
 
 from __future__ import annotations
@@ -31,6 +34,11 @@ KINDS = ("iid", "markov", "trace")
 _CDF, _TRACE = 0, 1
 #: A text trace larger than this is refused before reading.
 MAX_TRACE_BYTES = 1 << 30
+#: Readers of trace files that are not text, by suffix: ``"module:function"`` names imported on
+#: first use (as fsspec names its file systems), each ``(path, instance, where) -> states``
+#: (0-based int64) raising ConfigError. The slot log is the recorder's format to read; the
+#: core names its reader here instead of importing the layer above it.
+TRACE_READERS = {".mcap": "recorder.trace:states_of_log"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,8 +153,29 @@ def parse_channel(spec: str | None, instance: Instance) -> Channel:
     )
 
 
+def trace_channel(states: Any, source: str, instance: Instance) -> Channel:
+    """A trace channel replaying ``states`` (0-based), checked against ``instance``;
+    ``source`` says where they came from (logged with the run)."""
+    arr = np.asarray(states)
+    if arr.size == 0:
+        raise ConfigError(f"channel trace:{source}: the trace holds no state")
+    if arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer):
+        raise ConfigError(f"channel trace:{source}: expected a 1-D array of integer states")
+    arr = arr.astype(np.int64)
+    ch = Channel(kind="trace", source=str(source), trace=arr, digest=_digest(arr))
+    ch.check(instance, 1)
+    return ch
+
+
+def _reader(suffix: str) -> Any:
+    import importlib
+
+    module, _, function = TRACE_READERS[suffix].partition(":")
+    return getattr(importlib.import_module(module), function)
+
+
 def load_trace(path_text: str, instance: Instance) -> Channel:
-    """A trace channel from a corraoi slot log or a text file of 1-based states."""
+    """A trace channel from a text file of 1-based states or a corraoi slot log."""
     path = Path(path_text).expanduser()
     where = f"channel trace:{path_text}"
     if not path_text:
@@ -155,34 +184,28 @@ def load_trace(path_text: str, instance: Instance) -> Channel:
         raise ConfigError(f"{where}: no such file")
     if not path.is_file():
         raise ConfigError(f"{where}: not a regular file")
-    if path.suffix == ".mcap" or path.name.endswith(".mcap.partial"):
-        from recorder.reader import open_log  # the one reader of slot logs
-
-        log = open_log(path)
-        if log.config.instance.n_states != instance.n_states:
-            raise ConfigError(
-                f"{where}: the log's instance {log.config.instance.name} has "
-                f"{log.config.instance.n_states} states, instance {instance.name} has "
-                f"{instance.n_states}"
-            )
-        states = np.concatenate([b.x for b in log.blocks()]).astype(np.int64)
+    suffix = ".mcap" if path.name.endswith(".mcap.partial") else path.suffix
+    if suffix in TRACE_READERS:
+        states = _reader(suffix)(path, instance, where)
     else:
-        if os.path.getsize(path) > MAX_TRACE_BYTES:
-            raise ConfigError(f"{where}: larger than {MAX_TRACE_BYTES} bytes")
-        values: list[int] = []
-        with open(path, encoding="utf-8") as f:
-            for lineno, line in enumerate(f, start=1):
-                for tok in line.split("#", 1)[0].replace(",", " ").split():
-                    try:
-                        values.append(int(tok) - 1)
-                    except ValueError:
-                        raise ConfigError(
-                            f"{where}:{lineno}: state {tok!r} is not an integer "
-                            f"(expected 1..{instance.n_states})"
-                        ) from None
-        states = np.asarray(values, dtype=np.int64)
-    if states.size == 0:
+        states = _text_states(path, instance, where)
+    if len(states) == 0:
         raise ConfigError(f"{where}: the trace holds no state")
-    ch = Channel(kind="trace", source=str(path_text), trace=states, digest=_digest(states))
-    ch.check(instance, 1)
-    return ch
+    return trace_channel(states, str(path_text), instance)
+
+
+def _text_states(path: Path, instance: Instance, where: str) -> np.ndarray:
+    if os.path.getsize(path) > MAX_TRACE_BYTES:
+        raise ConfigError(f"{where}: larger than {MAX_TRACE_BYTES} bytes")
+    values: list[int] = []
+    with open(path, encoding="utf-8") as f:
+        for lineno, line in enumerate(f, start=1):
+            for tok in line.split("#", 1)[0].replace(",", " ").split():
+                try:
+                    values.append(int(tok) - 1)
+                except ValueError:
+                    raise ConfigError(
+                        f"{where}:{lineno}: state {tok!r} is not an integer "
+                        f"(expected 1..{instance.n_states})"
+                    ) from None
+    return np.asarray(values, dtype=np.int64)

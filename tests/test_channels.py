@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from corraoi.channels import Channel, parse_channel
+from corraoi.channels import Channel, parse_channel, trace_channel
 from corraoi.cli import main
 from corraoi.engine import simulate
 from corraoi.errors import ConfigError
@@ -51,6 +51,19 @@ def test_a_text_trace(tmp_path: Path):
     chan = parse_channel(f"trace:{trace}", I1)
     blk = next(simulate(I1, make_policy("ucb"), [0], 8, block=8, channel=chan))
     assert blk.x[0].tolist() == [0, 1, 2, 3, 3, 2, 1, 0]
+
+
+def test_a_trace_channel_from_an_array_of_states():
+    chan = trace_channel(np.array([0, 3, 1, 2]), "by hand", I1)
+    assert chan.kind == "trace" and chan.source == "by hand" and chan.trace.dtype == np.int64
+    assert chan == trace_channel([0, 3, 1, 2], "by hand", I1)  # same path, same digest
+    blk = next(simulate(I1, make_policy("ucb"), [0, 1], 4, block=4, channel=chan))
+    assert blk.x[1].tolist() == [0, 3, 1, 2]
+    for bad, needle in [([], "holds no state"), ([[0, 1]], "1-D array of integer states"),
+                        ([0.5, 1.0], "1-D array of integer states"),
+                        ([0, 4], "state 5, but instance I1 has states 1..4")]:  # fmt: skip
+        with pytest.raises(ConfigError, match=needle):
+            trace_channel(np.asarray(bad), "by hand", I1)
 
 
 @pytest.mark.parametrize(
