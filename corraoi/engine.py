@@ -9,29 +9,28 @@ X path (common random numbers) -- and run ``i`` of a sweep is exactly the run th
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ._kernel import draw_states
+from . import threads
 from .block import FIELDS, Columns, SlotBlock, check_horizon, check_seed
 from .candidates import candidate_bitsets, pseudo_reward_classes
 from .channels import Channel, default_channel
-from .errors import ConfigError, CorraoiError
+from .errors import ConfigError
 from .instance import Instance
 from .policies.api import CompiledPolicy
 from .policies.spec import PolicySpec
-from .pyengine import PolicyRuntimeError, RunState, Streams, apply_slot, check_arms
+from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python
 from .rng import streams_for_seed, streams_for_seeds
 from .theory import InstanceTheory, analyse
+from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
-__all__ = ["RunsBlock", "Simulation", "Snapshot", "shutdown", "simulate", "simulate_run",
-           "streams_for_seed"]
+__all__ = ["RunsBlock", "Simulation", "Snapshot", "set_workers", "shutdown", "simulate",
+           "simulate_run", "streams_for_seed"]
 
 DEFAULT_BLOCK = 1000
 
@@ -160,14 +159,14 @@ class Simulation:
         s_pulls: np.ndarray,
     ) -> None:
         """Advance every run ``nslots`` slots in kernel calls of at most about
-        ``PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
+        ``threads.PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
         signal is handled between two calls within that time, however large the work."""
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
         while done < nslots:
             t0 = self.t + done
-            n, slices = self._piece(R, nslots - done)
+            n, slices = threads.plan(self._rate, R, nslots - done)
             i0, i1 = (int(i) for i in np.searchsorted(snap_t, [t0 + 1, t0 + n + 1]))
             if n == nslots:  # one piece: straight into the caller's arrays
                 piece, st, snaps = out, snap_t, (s_regret, s_aoisum, s_pulls)
@@ -178,7 +177,8 @@ class Simulation:
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
             start = time.perf_counter()
             self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
-            self._note_rate(R * n, time.perf_counter() - start, len(slices))
+            self._rate = threads.rate(R * n, time.perf_counter() - start, len(slices),
+                                      self._rate)  # fmt: skip
             if piece is not out:
                 if record:
                     for name, value in vars(piece).items():
@@ -186,25 +186,6 @@ class Simulation:
                 for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
                     full[:, i0:i1] = part
             done += n
-
-    def _piece(self, R: int, left: int) -> tuple[int, list[tuple[int, int]]]:
-        """(slots, run slices) of the next kernel call: one slice per thread, each about
-        PIECE_SECONDS of work at the measured rate (more slices only when one slot of a
-        thread's share of the runs takes longer), at least one slot."""
-        rate = self._rate if self._rate is not None else _FIRST_RATE
-        budget = max(1.0, rate * PIECE_SECONDS)  # run-slots one slice may take
-        threads = max(1, min(_workers, R)) if R * left >= _THREAD_MIN_WORK else 1
-        n = int(min(left, max(1, budget * threads // R)))
-        count = max(threads, -(-R * n // int(budget)))
-        if count == 1:
-            return n, [(0, R)]
-        cuts = np.linspace(0, R, count + 1).astype(int)
-        return n, [(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-
-    def _note_rate(self, work: int, seconds: float, slices: int) -> None:
-        if seconds > 1e-3:  # too short to time
-            threads = max(1, min(_workers, slices))
-            self._rate = work / seconds / threads
 
     def _call_kernel(
         self,
@@ -230,22 +211,7 @@ class Simulation:
             kernel(*common, *(x[a:b] for x in per_run), record, *(x[a:b] for x in outputs),
                    snap_t, *(x[a:b] for x in snaps))  # fmt: skip
 
-        if _workers <= 1 or len(slices) == 1:
-            for a, b in slices:  # in this thread: a signal is handled between slices
-                run(a, b)
-            return
-        # Runs are independent: slices go to the engine's threads (both kernels release the
-        # GIL). On an interrupt, the slices not started are cancelled and the running ones
-        # (each about PIECE_SECONDS) finish before the KeyboardInterrupt goes on.
-        futures = [_pool().submit(run, a, b) for a, b in slices[1:]]
-        try:
-            run(*slices[0])  # this thread takes a slice too: one hand-over fewer per call
-            for f in futures:
-                f.result()
-        finally:
-            for f in futures:
-                f.cancel()
-            wait(futures)
+        threads.run_slices(run, slices)
 
     @property
     def runs(self) -> int:
@@ -291,8 +257,8 @@ class Simulation:
         if self._py is None:
             self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
         else:
-            done, failure = self._advance_python(
-                nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
+            done, failure = advance_python(
+                self, nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
             )
             if failure is not None:  # keep the slots before the failing one
                 nslots = done
@@ -335,81 +301,6 @@ class Simulation:
             failure.partial = block if nslots > 0 else None
             raise failure
         return block, snaps
-
-    def _advance_python(
-        self,
-        nslots: int,
-        record: bool,
-        out: _Outputs,
-        snap_t: np.ndarray,
-        s_regret: np.ndarray,
-        s_aoisum: np.ndarray,
-        s_pulls: np.ndarray,
-    ) -> tuple[int, PolicyRuntimeError | None]:
-        """Advance slot by slot; returns (slots done, the plug-in's failure or None)."""
-        policy, state = self._py, self._state
-        name = self.policy.name
-        R, K = self.pulls.shape
-        xs = np.empty((R, nslots), dtype=np.int64)
-        draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
-                    nslots, xs)  # fmt: skip
-        Y = self._Y
-        mu = state.mu_hat
-        rew = np.empty(R, dtype=np.int8)
-        state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
-        if self.t == 0:
-            try:
-                _call(name, 0, policy.reset, state)
-            except PolicyRuntimeError as exc:
-                return 0, exc
-        si = 0
-        for j in range(nslots):
-            t = self.t + j + 1
-            state.t = t
-            try:
-                picked = _call(name, t, policy.select, t, state)
-                arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t)
-            except PolicyRuntimeError as exc:
-                return j, exc
-            x = xs[:, j]
-            apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
-                       self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
-            if record:
-                out.x[:, j] = x
-                out.arm[:, j] = arms
-                out.succ[:, j] = rew == 1
-                out.aoi[:, j] = self.aoi
-                out.oaoi[:, j] = self.oracle_aoi
-                out.regret[:, j] = self.regret
-                out.override[:, j] = False
-                out.cand[:, j] = True if cand is None else cand
-                out.pulls[:, j] = self.pulls
-                out.muhat[:, j] = mu
-            if si < snap_t.size and snap_t[si] == t:
-                s_regret[:, si] = self.regret
-                s_aoisum[:, si] = self.aoisum
-                s_pulls[:, si] = self.pulls
-                si += 1
-            try:
-                _call(name, t, policy.update, t, arms, rew, state)
-            except PolicyRuntimeError as exc:
-                return j + 1, exc  # the slot itself happened
-        return nslots, None
-
-
-def _call(name: str, t: int, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
-    try:
-        return func(*args)
-    except (CorraoiError, KeyboardInterrupt):
-        raise
-    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        what = getattr(func, "__name__", "policy")
-        detail = " ".join(str(exc).split())
-        raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
-            + (f": {detail}" if detail else "")
-        ) from exc
 
 
 class _Outputs:
@@ -485,49 +376,3 @@ def simulate_run(
     """One run, block by block (what ``corraoi record`` streams to its sinks)."""
     for b in simulate(instance, policy, [seed], horizon, block=block, channel=channel):
         yield b.run(0)
-
-
-#: Threads that share a kernel call's runs (set_workers); every core by default.
-_workers = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-#: Below this many run-slots a call stays on the calling thread (a thread's start costs more).
-_THREAD_MIN_WORK = 200_000
-#: A kernel call (one slice of runs, some slots) takes about this long at most, so that
-#: Ctrl-C, SIGTERM and SIGHUP are handled within it (issue 19). Measured on the previous call.
-PIECE_SECONDS = 0.1
-#: The rate assumed before the first call is timed: the slowest built-in's, halved.
-_FIRST_RATE = 1e6
-
-
-_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (workers, the other threads)
-
-
-def _pool() -> ThreadPoolExecutor:
-    """The engine's threads, started once (starting them per call cost 30% of the paper
-    workload's time: a sweep makes hundreds of short calls)."""
-    global _POOL
-    if _POOL is None or _POOL[0] != _workers:
-        if _POOL is not None:
-            _POOL[1].shutdown(wait=False)
-        others = max(1, _workers - 1)  # the calling thread is the first worker
-        _POOL = (_workers, ThreadPoolExecutor(others, thread_name_prefix="corraoi-engine"))
-    return _POOL[1]
-
-
-def shutdown() -> None:
-    """Stop the engine's threads (idle between calls; started again when needed)."""
-    global _POOL
-    pool, _POOL = _POOL, None
-    if pool is not None:
-        pool[1].shutdown(wait=True, cancel_futures=True)
-
-
-def set_workers(workers: int | None) -> int:
-    """Use ``workers`` threads per kernel call (default: every core). Returns the count used."""
-    global _workers
-    top = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-    if workers is None:
-        workers = top
-    if workers < 1:
-        raise ConfigError(f"workers must be >= 1, got {workers}")
-    _workers = min(int(workers), top)
-    return _workers
