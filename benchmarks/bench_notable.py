@@ -26,27 +26,28 @@ import numpy as np
 
 def _sweep_once(out: Path, named: bool) -> float:
     import corraoi.experiments as ex
+    import corraoi.sweep_outputs as so
     from corraoi.grid import build_grid
 
     grid = build_grid(instances=["I1"], policies=["all"], horizons=[10_000], runs=200)
-    real = ex.group_notable
+    real = so.group_notable
     if not named:
-        ex.group_notable = lambda grid, cells: {"cells": {}, "pairs": []}  # type: ignore[assignment]
+        so.group_notable = lambda grid, cells: {"cells": {}, "pairs": []}  # type: ignore[assignment]
     try:
         start = time.perf_counter()
         ex.sweep(grid, out=out, force=True)
         return time.perf_counter() - start
     finally:
-        ex.group_notable = real  # type: ignore[assignment]
+        so.group_notable = real  # type: ignore[assignment]
 
 
 def _parts(tmp: Path) -> dict[str, float]:
     """The two costs inside one named sweep: computing the runs, drawing them in sweep.rrd."""
-    import corraoi.experiments as ex
+    import corraoi.sweep_outputs as so
     from recorder.sweep_rerun import SweepRerunSink
 
     took = {"naming (corraoi.notable)": 0.0, "drawing 36 runs into sweep.rrd": 0.0}
-    real_name, real_mark = ex.group_notable, SweepRerunSink.mark
+    real_name, real_mark = so.group_notable, SweepRerunSink.mark
 
     def timed(key: str, fn: Any) -> Any:
         def wrapper(*a: Any, **k: Any) -> Any:
@@ -58,12 +59,12 @@ def _parts(tmp: Path) -> dict[str, float]:
 
         return wrapper
 
-    ex.group_notable = timed("naming (corraoi.notable)", real_name)  # type: ignore[assignment]
+    so.group_notable = timed("naming (corraoi.notable)", real_name)  # type: ignore[assignment]
     SweepRerunSink.mark = timed("drawing 36 runs into sweep.rrd", real_mark)  # type: ignore[method-assign]
     try:
         _sweep_once(tmp / "parts", True)
     finally:
-        ex.group_notable, SweepRerunSink.mark = real_name, real_mark  # type: ignore[method-assign]
+        so.group_notable, SweepRerunSink.mark = real_name, real_mark  # type: ignore[method-assign]
     return took
 
 

@@ -33,3 +33,8 @@ class ConfigError(UsageError):
 
 class MissingExtraError(CorraoiError):
     """An optional dependency is not installed; the message names the extra to install."""
+
+
+class OutputError(UsageError):
+    """An output path that cannot be used: it exists (without --force), is a directory, is
+    being written by another process, ..."""

@@ -21,16 +21,16 @@ of workers, the chunking of the runs, or on the order chunks finish in.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from . import chunks
+from . import sweep_outputs as outputs
 from .chunks import chunk_task, prepare_kernels
 from .errors import ConfigError
 from .grid import Chunk, Grid
@@ -52,119 +52,6 @@ from .sweep_folder import (
 #: Why a GPU sweep and a Dask client do not go together.
 GPU_NOT_ON_CLUSTER = ("--backend gpu runs in this process, on its GPU; leave out --scheduler "
                       "(or use --backend cpu on the cluster)")  # fmt: skip
-
-
-# ---------------------------------------------------------------------------- one run
-
-
-@dataclass
-class RecordOutcome:
-    """What :func:`record_run` wrote: the log (final name, or ``.partial`` when the run
-    stopped on an error), the Rerun recording if any, the slots, and a viewer's problem."""
-
-    mcap: Path
-    rrd: Path | None
-    slots: int
-    viewer_problem: str | None = None
-
-
-def record_run(
-    config: Any,
-    mcap: str | os.PathLike[str],
-    *,
-    rrd: str | os.PathLike[str] | None = None,
-    viewer_url: str | None = None,
-    overwrite: bool = False,
-    on_block: Callable[[Any], None] | None = None,
-    should_stop: Callable[[], bool] | None = None,
-    rerun: Any = None,
-) -> RecordOutcome:
-    """Simulate one run (a ``RunConfig``) and stream every slot to the MCAP log ``mcap`` and,
-    with ``rrd`` or ``viewer_url``, to a Rerun recording (what ``corraoi record`` does for
-    each policy). ``should_stop()`` is asked after every block: the files are then finished
-    with the slots so far (status interrupted). A failed run (a plug-in's bad arm) leaves its
-    log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files.
-    ``rerun``, a :class:`recorder.rerun_worker.RerunWorker`, writes the Rerun recording in
-    its process (the same file), else it is written in this one."""
-    from recorder.errors import ViewerError, WriteError
-    from recorder.mcap_sink import McapSink
-
-    problem: str | None = None
-    rrd_error: WriteError | None = None
-    slots = 0
-    rrd_path: Path | None = None
-    with McapSink(mcap, config, overwrite=overwrite) as log:
-        output: Any = None
-        sink: Any = None  # in this process: the RerunSink in front of ``output``
-        if rrd is not None or viewer_url is not None:
-            where = None if rrd is None else Path(rrd)
-            if rerun is not None:
-                output = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
-                                    overwrite=overwrite)  # fmt: skip
-            else:
-                from recorder.rerun_sink import RerunSink, RrdOutput
-
-                output = RrdOutput(config, rrd_path=where, viewer_url=viewer_url,
-                                   overwrite=overwrite)  # fmt: skip
-                sink = RerunSink(output.recording, config.label, config)
-        try:
-            for block in slots_of(config):
-                log.write(block)
-                if sink is not None:
-                    sink.write(block)
-                elif output is not None:
-                    output.write(block)
-                slots = int(block.t[-1])
-                if on_block is not None:
-                    on_block(block)
-                if should_stop is not None and should_stop():
-                    break
-        except BaseException as exc:
-            if output is not None:
-                if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-                    try:
-                        if sink is not None:
-                            sink.close()  # send the slots it still holds (up to a batch)
-                        output.close()
-                    except (ViewerError, WriteError):
-                        pass
-                else:
-                    try:  # the run's own error is the one to report, not the abort's
-                        output.abort(discard=slots == 0)
-                    except (ViewerError, WriteError):
-                        pass
-            raise
-        if output is not None:
-            if sink is not None:
-                sink.close()
-            try:
-                rrd_path = output.close()
-            except ViewerError as exc:
-                rrd_path = output.path
-                problem = str(exc)
-            except WriteError as exc:  # the MCAP log is still finished properly
-                rrd_error = exc
-    if rrd_error is not None:
-        if log.finished:
-            raise WriteError(f"{rrd_error} (the MCAP log {log.path} is complete)")
-        raise rrd_error
-    return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
-
-
-def slots_of(config: Any) -> Any:
-    """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
-    (``config.streams``) the GPU kernel's own, captured slot by slot."""
-    if config.streams == "cpu":
-        from .engine import simulate_run
-
-        return simulate_run(config.instance, config.policy, config.seed, config.horizon,
-                            channel=config.channel)  # fmt: skip
-    from .gpu.device import device_of
-    from .gpu.runner import capture_run
-
-    device = device_of("emulate" if config.streams == "gpu-emulated" else "cuda")
-    return capture_run(config.instance, config.policy, seed=config.seed,
-                       horizon=config.horizon, channel=config.channel, device=device)  # fmt: skip
 
 
 def reproduce(
@@ -222,79 +109,6 @@ def _execute(
     run_on_cluster(client, tasks, on_done=on_done)
 
 
-# ---------------------------------------------------------------------------- summaries
-
-
-def group_summary(
-    grid: Grid, cells: Sequence[CellRuns], *, workers: int, wall_s: float
-) -> dict[str, Any]:
-    """The summary (``--json``, summary.json) of one (instance, horizon) group."""
-    from .summary import sweep_summary
-    from .theory import analyse
-
-    inst, horizon = cells[0].cell.instance, cells[0].cell.horizon
-    best = analyse(inst).best_arm
-    results = [c.result(best) for c in cells]
-    summary = sweep_summary(inst, results, runs=grid.runs, horizon=horizon, seed=grid.seed,
-                            workers=workers)  # fmt: skip
-    summary["wall_s"] = round(wall_s, 4)
-    summary["notable"] = group_notable(grid, cells)
-    if grid.backend != "cpu":
-        summary["backend"] = grid.backend
-    if grid.baseline is not None:
-        from .paired import paired_against
-
-        base = [c for c in cells if c.cell.policy.name == grid.baseline]
-        if base:
-            summary["baseline"] = base[0].label
-            for name, entry in paired_against(results, base[0].label).items():
-                summary["policies"][name].update(entry)
-            for c in cells:
-                curve = c.paired_curve(base[0]) if c is not base[0] else None
-                if curve is not None:
-                    summary["policies"][c.label]["paired_diff_curve"] = curve
-    return summary
-
-
-def group_notable(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
-    """The group's notable runs (:mod:`corraoi.notable`) from the per-run finals."""
-    from .notable import notable_runs
-
-    base = [c.label for c in cells if c.cell.policy.name == grid.baseline]
-    return notable_runs([c.label for c in cells], [c.regret[:, -1] for c in cells],
-                        [c.cell.channel.to_dict() for c in cells], seed=grid.seed,
-                        baseline=base[0] if base else None)  # fmt: skip
-
-
-def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
-    """The sweep log's configuration of a group (``sweep_config`` with cell labels)."""
-    from recorder.style import spec_color, variant_colors
-
-    from .sweep import sweep_config
-
-    c0 = cells[0].cell
-    config = sweep_config(c0.instance, [c.cell.policy for c in cells], runs=grid.runs,
-                          horizon=c0.horizon, seed=grid.seed,
-                          checkpoints=[int(t) for t in cells[0].checkpoints],
-                          channel=c0.channel)  # fmt: skip
-    # every view draws a policy in its own colour; the parameter values of one policy in
-    # shades of it
-    same: dict[str, list[CellRuns]] = {}
-    for c in cells:
-        same.setdefault(c.cell.policy.name, []).append(c)
-    shade = {
-        id(c): rgb
-        for group in same.values()
-        for c, rgb in zip(group, variant_colors(spec_color(group[0].cell.policy), len(group)),
-                          strict=True)  # fmt: skip
-    }
-    for entry, c in zip(config["policies"], cells, strict=True):
-        entry["name"] = c.label
-        if c.cell.policy.color is not None or len(same[c.cell.policy.name]) > 1:
-            entry["color"] = list(shade[id(c)])
-    return config
-
-
 # ---------------------------------------------------------------------------- the sweep
 
 
@@ -349,7 +163,7 @@ def sweep(
     folder = Path(out) if out is not None else None
     with ExitStack() as stack:
         if folder is not None:
-            from recorder.paths import folder_lock
+            from .locks import folder_lock
 
             _check_parent(folder)
             folder.mkdir(parents=True, exist_ok=True)
@@ -430,11 +244,11 @@ def _sweep(
     for key, cells in grid.groups().items():
         joined = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in cells]
         joined_groups.append((key, joined))
-        summaries.append(group_summary(grid, joined, workers=used, wall_s=wall))
+        summaries.append(outputs.group_summary(grid, joined, workers=used, wall_s=wall))
     if folder is not None:
-        _write_results(folder, grid, parts, labels, warn=warn)
+        outputs.write_results(folder, grid, parts, labels, warn=warn)
         for (key, joined), summary in zip(joined_groups, summaries, strict=True):
-            _write_group(dirs[key], grid, joined, summary, warn=warn)
+            outputs.write_group(dirs[key], grid, joined, summary, warn=warn)
         write_manifest(folder, grid, "complete")
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip
@@ -479,8 +293,8 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
 def _clear(folder: Path, old: Grid | None) -> None:
     """Remove an earlier sweep's files (only with --force); a file another process is
     writing right now is never touched (nothing is removed then)."""
-    from recorder.errors import OutputError
-    from recorder.paths import lock_holder
+    from .errors import OutputError
+    from .locks import lock_holder
 
     for f in sorted(folder.rglob("*")):
         holder = lock_holder(f) if f.is_file() else None
@@ -500,72 +314,3 @@ def _clear(folder: Path, old: Grid | None) -> None:
             shutil.rmtree(t)
         else:
             t.unlink(missing_ok=True)
-
-
-def _write_results(
-    folder: Path,
-    grid: Grid,
-    parts: dict[str, list[ChunkResult]],
-    labels: dict[str, str],
-    *,
-    warn: Callable[[str], None] | None,
-) -> None:
-    """results.parquet, compacted from the parts: one partition per instance."""
-    try:
-        import pyarrow.parquet  # noqa: F401
-    except ImportError:
-        if warn is not None:
-            warn('results.parquet not written: install the analysis extra, '
-                 'pip install "corraoi[analysis]"')  # fmt: skip
-        return
-    from recorder.results import write_dataset
-
-    write_dataset(folder / "results.parquet", grid, parts)
-
-
-def _write_group(
-    folder: Path,
-    grid: Grid,
-    cells: Sequence[CellRuns],
-    summary: dict[str, Any],
-    *,
-    warn: Callable[[str], None] | None,
-) -> None:
-    from recorder.sweep_log import SweepMcapSink
-    from recorder.sweep_rerun import open_sweep_recording
-
-    from .summary import summary_markdown
-
-    folder.mkdir(parents=True, exist_ok=True)
-    config = group_config(grid, cells)
-    config["notable"] = summary["notable"]  # read back by SweepLog.notable
-    with (
-        SweepMcapSink(folder / "sweep.mcap", config) as log,
-        open_sweep_recording(folder / "sweep.rrd", config) as rec,
-    ):
-        for c in cells:
-            for point in c.points():
-                log.write(point)
-                rec.write(point)
-        for c in cells:  # the runs worth watching, over the mean (CPU: every checkpoint)
-            if c.agg is not None or c.regret.shape[1] < 2:
-                continue
-            for kind, e in summary["notable"]["cells"].get(c.label, {}).items():
-                rec.mark(c.label, kind, e["run"], e["seed"], c.t, c.regret[e["run"]])
-    write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
-    write_text(folder / "summary.md", summary_markdown(summary))
-    from recorder.sweep_log import read_sweep
-    from viewer.figure import FigureUnavailable, draw_figure
-
-    try:
-        draw_figure(read_sweep(folder / "sweep.mcap"), folder / "figure.png")
-    except FigureUnavailable as exc:
-        if warn is not None:
-            warn(f"{folder / 'figure.png'} not written: {exc}")
-
-
-def write_text(path: Path, text: str) -> None:
-    """Write ``path`` atomically: ``.partial`` first, renamed when complete."""
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)

@@ -206,9 +206,14 @@ def write_manifest(out: Path, grid: Grid, status: str) -> None:
         "groups": {str(p.relative_to(out)) or ".": {"instance": name, "horizon": h}
                    for (name, h), p in group_dirs(grid, out).items()},  # fmt: skip
     }
-    tmp = out / (MANIFEST + ".partial")
-    tmp.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, out / MANIFEST)
+    write_text(out / MANIFEST, json.dumps(data, indent=1, sort_keys=True) + "\n")
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``path`` atomically: ``.partial`` first, renamed when complete."""
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:

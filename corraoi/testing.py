@@ -30,9 +30,10 @@ def record_run(
     overwrite: bool = False,
 ) -> Path:
     """Simulate one run and record it to the slot log ``path`` (as ``corraoi record``)."""
+    from recorder.record import record_run
+
     from .block import RunConfig
     from .engine import check_instance
-    from .experiments import record_run
     from .instance import load_instance
     from .policies import make_policy
 

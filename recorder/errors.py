@@ -6,15 +6,13 @@ Each carries a one-line message that names the file; the CLI prints it as
 
 from __future__ import annotations
 
-from corraoi.errors import CorraoiError, UsageError
+from corraoi.errors import CorraoiError, OutputError, UsageError
+
+__all__ = ["LogError", "OutputError", "ViewerError", "WriteError"]
 
 
 class LogError(UsageError):
     """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
-
-
-class OutputError(UsageError):
-    """An output path that cannot be used: it exists (without --force), is a directory, ..."""
 
 
 class WriteError(CorraoiError):

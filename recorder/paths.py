@@ -16,10 +16,8 @@ Output names made from data (instance, policy, plug-in names) go through
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import os
-from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -27,14 +25,10 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 if TYPE_CHECKING:
     from typing_extensions import Self
 
+from corraoi.locks import fcntl, is_regular, lock_holder, pid_of_lock
 from corraoi.text import safe_name
 
 from .errors import OutputError, WriteError
-
-try:
-    import fcntl
-except ImportError:  # pragma: no cover - not POSIX: no locks
-    fcntl = None  # type: ignore[assignment]
 
 PARTIAL_SUFFIX = ".partial"
 
@@ -147,77 +141,6 @@ def _busy(part: Path, holder: int) -> str:
     )
 
 
-def lock_holder(part: str | os.PathLike[str]) -> int | None:
-    """Who holds the writer's lock on ``part``: its PID, 0 if the PID is unknown, or None
-    when nobody writes it (or it does not exist)."""
-    if fcntl is None:
-        return None
-    try:
-        fd = os.open(part, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError:
-        return None
-    try:
-        st = os.fstat(fd)
-        if not _is_regular(st.st_mode):
-            return None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return _pid_of_lock(st.st_dev, st.st_ino)
-        except OSError:
-            return None
-        return None
-    finally:
-        os.close(fd)  # also drops the shared lock taken to test
-
-
-@contextlib.contextmanager
-def folder_lock(folder: Path, what: str = "folder") -> Iterator[None]:
-    """Hold an exclusive lock on ``folder`` itself (flock on the directory: no lock file)
-    while a writer fills it; a second writer is refused at once, naming the holder's PID."""
-    if fcntl is None:  # pragma: no cover - not Linux
-        yield
-        return
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            st = os.fstat(fd)
-            holder = _pid_of_lock(st.st_dev, st.st_ino)
-            who = f"process {holder}" if holder > 0 else "another process"
-            raise OutputError(
-                f"{folder}: {who} is writing this {what} right now; not touched (wait for it, "
-                "stop it, or give another folder)"
-            ) from None
-        yield
-    finally:
-        os.close(fd)
-
-
-def _is_regular(mode: int) -> bool:
-    import stat
-
-    return stat.S_ISREG(mode)
-
-
-def _pid_of_lock(dev: int, ino: int) -> int:
-    """The PID holding a flock on (dev, ino), from /proc/locks (Linux); 0 if unknown."""
-    want = f"{os.major(dev):02x}:{os.minor(dev):02x}:{ino}"
-    try:
-        with open("/proc/locks", encoding="ascii", errors="replace") as f:
-            for line in f:
-                parts = line.split()
-                # "1: FLOCK  ADVISORY  WRITE 1234 00:2e:5678 0 EOF" ("->" marks waiters)
-                if "->" in parts or len(parts) < 6 or parts[1] != "FLOCK":
-                    continue
-                if parts[5] == want and parts[3] == "WRITE":
-                    return int(parts[4])
-    except (OSError, ValueError):
-        pass
-    return 0
-
-
 def _fdopen(fd: int) -> BinaryIO:
     """The file object of a locked ``.partial`` (a seam: tests inject faults here)."""
     return os.fdopen(fd, "wb")
@@ -239,14 +162,14 @@ def open_partial(path: Path, *, overwrite: bool, what: str = "output") -> Binary
         for _ in range(10):
             fd = os.open(part, flags, 0o666)
             try:
-                if not _is_regular(os.fstat(fd).st_mode):
+                if not is_regular(os.fstat(fd).st_mode):
                     raise OutputError(f"{part}: is not a regular file; cannot write the {what}")
                 if fcntl is not None:
                     try:
                         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                     except BlockingIOError:
                         st = os.fstat(fd)
-                        raise OutputError(_busy(part, _pid_of_lock(st.st_dev, st.st_ino))) from None
+                        raise OutputError(_busy(part, pid_of_lock(st.st_dev, st.st_ino))) from None
                     # the file we locked may have been renamed or removed by its last owner
                     # between our open and our lock: then lock the one at the path now
                     try:

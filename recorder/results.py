@@ -327,9 +327,10 @@ class SweepData:
         ``rrd``); returns each run's ``RecordOutcome`` (``.mcap``: what ``corraoi.load``
         reads back)."""
         from corraoi.drill import choose
-        from corraoi.experiments import record_run
         from corraoi.policies import make_policies
         from corraoi.text import safe_name
+
+        from .record import record_run
 
         names = (policy,) if isinstance(policy, str) else tuple(policy)
         specs = make_policies(names) if names else []

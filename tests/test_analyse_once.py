@@ -8,9 +8,9 @@ import pytest
 
 import corraoi.theory as theory
 from corraoi.block import RunConfig
-from corraoi.experiments import record_run
 from corraoi.instance import Instance, load_instance
 from corraoi.policies import make_policies
+from recorder.record import record_run
 
 
 @pytest.fixture

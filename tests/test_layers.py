@@ -16,13 +16,11 @@ ROOT = Path(__file__).resolve().parent.parent
 LAYERS = {"corraoi": 0, "recorder": 1, "viewer": 2}
 #: the issue's exceptions: they compose the layers for a user
 MAY_CLIMB = ("corraoi.cli", "corraoi.testing", "corraoi.analysis")
-#: owed (issue 23): experiments wires the sinks and writes the sweep folder's files itself
-#: (the caller should hand it its sinks)
-OWED_CLIMBS = {"corraoi.experiments"}
-#: owed circles: the climb above closes this one
-OWED_CIRCLES = {
-    frozenset({"corraoi.experiments", "recorder.results"}),
-}
+#: owed (issue 23): a sweep writes its folder's outputs itself (results.parquet, the sweep
+#: log and recording through the recorder, figure.png through the viewer)
+OWED_CLIMBS = {"corraoi.sweep_outputs"}
+#: owed circles: none left
+OWED_CIRCLES: set[frozenset[str]] = set()
 
 
 def _modules() -> dict[str, Path]:

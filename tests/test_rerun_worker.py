@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 
 from corraoi.block import RunConfig
-from corraoi.experiments import record_run
 from corraoi.instance import load_instance
 from corraoi.policies import make_policies
 from recorder.errors import OutputError, WriteError
 from recorder.paths import partial_path
 from recorder.reader import open_log
+from recorder.record import record_run
 from recorder.rerun_worker import RerunWorker
 
 from .rrd_util import RERUN, read_rrd

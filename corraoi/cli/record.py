@@ -473,8 +473,9 @@ def _record_into(
     live: Any = None,
     rerun: Any = None,
 ) -> str | None:
+    from recorder.record import record_run
+
     from .. import kernels
-    from ..experiments import record_run
 
     config = plan.config
 

@@ -388,8 +388,9 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from ..experiments import PAPER_INSTANCES, paper_grid, write_text
+    from ..experiments import PAPER_INSTANCES, paper_grid
     from ..summary import summary_markdown
+    from ..sweep_folder import write_text
 
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")

@@ -321,10 +321,10 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> 
     a log already there with the same run and complete is used as it is)."""
     from corraoi.drill import choose
     from corraoi.engine import set_workers
-    from corraoi.experiments import record_run
     from corraoi.text import safe_name
     from recorder.errors import LogError, OutputError
     from recorder.reader import open_log
+    from recorder.record import record_run
 
     drills = choose(folder, run, cells=cells, warn=warn)
     plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
