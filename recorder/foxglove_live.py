@@ -41,6 +41,7 @@ from .format import (
     run_metadata,
     schema_bytes,
 )
+from .paths import Sink
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -210,7 +211,7 @@ class FoxgloveServer:
         self.stop()
 
 
-class FoxgloveSlotSink:
+class FoxgloveSlotSink(Sink):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
     The messages are :class:`recorder.format.BlockEncoder`'s, the MCAP log's bytes;
@@ -280,7 +281,7 @@ def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
     }
 
 
-class FoxgloveSweepSink:
+class FoxgloveSweepSink(Sink):
     """Streams sweep points to ``/corraoi/sweep`` as each checkpoint finishes:
     ``write(point)`` with a JSON-able dict (one message; ``log_time`` its ``t`` seconds
     when it has one), ``close()``."""

@@ -34,7 +34,7 @@ from types import TracebackType
 from typing import Any
 
 from .errors import ViewerError, WriteError
-from .paths import check_output
+from .paths import Sink, check_output
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -142,7 +142,7 @@ class RerunWorker:
         self.stop()
 
 
-class RemoteRecording:
+class RemoteRecording(Sink):
     """One run's recording in a :class:`RerunWorker`: ``write``, then ``close`` or
     ``abort``, with :class:`~recorder.rerun_sink.RrdOutput`'s meaning."""
 
