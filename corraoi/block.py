@@ -15,6 +15,7 @@ from ._version import __version__
 from .channels import Channel, default_channel
 from .errors import ConfigError
 from .instance import Instance
+from .limits import check_horizon, check_seed
 from .policies.spec import PolicySpec
 
 #: Per-slot columns of a block, in log order.
@@ -89,23 +90,6 @@ class RunConfig:
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
         )
-
-
-def check_horizon(horizon: int) -> None:
-    from .limits import MAX_HORIZON
-
-    if not isinstance(horizon, (int, np.integer)) or horizon < 1:
-        raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
-    if horizon > MAX_HORIZON:
-        raise ConfigError(
-            f"horizon {horizon} is too long: at most {MAX_HORIZON:,} slots (sums of ages must "
-            "fit in 64 bits)"
-        )
-
-
-def check_seed(seed: int) -> None:
-    if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
 
 
 @dataclass

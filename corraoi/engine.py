@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from . import threads
-from .block import FIELDS, Columns, SlotBlock, check_horizon, check_seed
+from .block import FIELDS, Columns, SlotBlock
 from .candidates import candidate_bitsets, pseudo_reward_classes
 from .channels import Channel, default_channel
 from .errors import ConfigError
 from .instance import Instance
+from .limits import check_horizon, check_seed
 from .policies.api import CompiledPolicy
 from .policies.spec import PolicySpec
 from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python

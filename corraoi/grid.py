@@ -37,10 +37,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .block import check_horizon, check_seed
 from .channels import Channel, parse_channel
 from .errors import ConfigError
 from .instance import Instance, load_instance
+from .limits import check_horizon, check_seed
 from .policies import PolicySpec, make_policy, parse_policy_names, resolve
 
 #: Keys an experiment file may hold.
@@ -124,9 +124,9 @@ class Grid:
             raise ConfigError(f"the grid has {len(self.cells)} cells; at most {MAX_CELLS}")
         if len({c.key for c in self.cells}) != len(self.cells):
             raise ConfigError("the grid names the same cell twice")
-        check_seed(self.seed)
         if not isinstance(self.runs, int) or self.runs < 1:
             raise ConfigError(f"runs must be an integer >= 1, got {self.runs!r}")
+        check_seed(self.seed, runs=self.runs)
         if not isinstance(self.chunk, int) or self.chunk < 0:
             raise ConfigError(f"chunk must be an integer >= 1 (runs per chunk), got {self.chunk!r}")
         if self.checkpoints < 2:

@@ -157,12 +157,18 @@ def test_i2_non_competitive_arms_are_pulled_o1_times():
 
 
 def test_bad_settings():
-    with pytest.raises(ConfigError, match="horizon must be an integer >= 1"):
+    with pytest.raises(ConfigError, match=r"horizon 0: out of range, expected 1\.\."):
         Simulation(I1, make_policy("ucb"), [0], 0)
     with pytest.raises(ConfigError, match="at least one run"):
         Simulation(I1, make_policy("ucb"), [], 10)
-    with pytest.raises(ConfigError, match="seed must be"):
+    with pytest.raises(ConfigError, match=r"seed -1: out of range, expected 0\.\."):
         Simulation(I1, make_policy("ucb"), [-1], 10)
+    with pytest.raises(ConfigError, match=r"seed 9223372036854775808: out of range"):
+        Simulation(I1, make_policy("ucb"), [2**63], 10)  # one check of seeds, in limits.py
+    from corraoi.grid import build_grid
+
+    with pytest.raises(ConfigError, match=r"and 3 runs use seed \.\. seed\+2"):
+        build_grid(instances=["I1"], policies=["ucb"], horizons=[10], runs=3, seed=2**63 - 2)
     dead = Instance("dead", np.array([1.0]), np.array([[0], [0]]))
     with pytest.raises(ConfigError, match="every arm has mean 0"):
         Simulation(dead, make_policy("ucb"), [0], 10)

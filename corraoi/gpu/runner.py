@@ -18,12 +18,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..block import SlotBlock, check_horizon
+from ..block import SlotBlock
 from ..candidates import pseudo_reward_classes
 from ..channels import Channel, default_channel
 from ..engine import check_instance
 from ..errors import ConfigError
 from ..instance import Instance
+from ..limits import check_horizon
 from ..policies import PolicySpec, gpu_form
 from ..stats import Moments
 from .device import MAX_ARMS, Device, GpuUnavailable, get_device
