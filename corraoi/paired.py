@@ -15,11 +15,8 @@ from typing import Any
 import numpy as np
 
 from .errors import ConfigError
-from .sweep import PolicyResult, mean_ci95
-
-
-def _finite(v: float) -> float | None:
-    return v if math.isfinite(v) else None
+from .stats import finite, mean_ci95
+from .sweep import PolicyResult
 
 
 def paired_diff(policy: np.ndarray, baseline: np.ndarray) -> dict[str, float | None]:
@@ -35,8 +32,8 @@ def paired_diff(policy: np.ndarray, baseline: np.ndarray) -> dict[str, float | N
     _, hb = mean_ci95(b)
     return {
         "paired_diff_mean": float(mean),
-        "paired_diff_ci95": _finite(float(half)),
-        "unpaired_diff_ci95": _finite(math.sqrt(float(ha) ** 2 + float(hb) ** 2)),
+        "paired_diff_ci95": finite(float(half)),
+        "unpaired_diff_ci95": finite(math.sqrt(float(ha) ** 2 + float(hb) ** 2)),
     }
 
 

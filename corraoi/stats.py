@@ -64,6 +64,11 @@ class Moments:
         return t975(self.n - 1) * np.sqrt(self.m2 / (self.n - 1)) / math.sqrt(self.n)
 
 
+def finite(v: float) -> float | None:
+    """``v``, or None where it is not finite (JSON has no NaN: a CI of one run is None)."""
+    return v if math.isfinite(v) else None
+
+
 def mean_ci95(values: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Mean and 95% CI half-width (Student t) along ``axis``; half-width NaN for one value."""
     m = Moments.of(values, axis=axis)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -15,7 +14,7 @@ from .engine import Simulation, Snapshot
 from .errors import ConfigError
 from .instance import Instance
 from .policies import PolicySpec
-from .stats import Moments, mean_ci95, t975  # noqa: F401 (t975: re-exported)
+from .stats import Moments, finite, mean_ci95, t975  # noqa: F401 (t975: re-exported)
 
 
 @dataclass
@@ -54,17 +53,13 @@ class PolicyResult:
             means = self.pulls_mean
         return {
             "regret_mean": float(m),
-            "regret_ci95": _finite(float(h)),
+            "regret_ci95": finite(float(h)),
             "estimator_mean": float(em),
-            "estimator_ci95": _finite(float(eh)),
+            "estimator_ci95": finite(float(eh)),
             "best_arm_share": share,
             "pulls_mean": [float(v) for v in means],
             "wall_s": round(self.wall_s, 4),
         }
-
-
-def _finite(v: float) -> float | None:
-    return v if math.isfinite(v) else None
 
 
 #: Called at each checkpoint with (policy, the runs' state there); T is always one.
@@ -108,8 +103,8 @@ def sweep_points(
     return [
         SweepPoint(
             policy=name, t=int(ts), regret_mean=float(regret.mean[i]),
-            regret_ci95=_finite(float(h[i])), estimator_mean=float(estimator.mean[i]),
-            estimator_ci95=_finite(float(eh[i])), pull_share=pull_share[i],
+            regret_ci95=finite(float(h[i])), estimator_mean=float(estimator.mean[i]),
+            estimator_ci95=finite(float(eh[i])), pull_share=pull_share[i],
         )  # fmt: skip
         for i, ts in enumerate(t)
     ]

@@ -21,9 +21,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from corraoi.policies import AOI_PREFIX
-
-RGB = tuple[int, int, int]
+from corraoi.policies import AOI_PREFIX, RGB
 
 #: Units, in brackets after a quantity's name (view titles, series names, axis labels).
 AOI_UNIT = "[slots]"

@@ -21,7 +21,7 @@ from viewer import compare, replay  # noqa: E402
 from viewer.compare import (  # noqa: E402
     SUMMARY_ENTITY,
     comparability_warnings,
-    run_colors,
+    log_colors,
     summary_table,
 )
 from viewer.runs import safe_label, unique_labels  # noqa: E402
@@ -179,7 +179,7 @@ def test_runs_that_cannot_be_compared_are_warned_about():
 
 
 def test_runs_of_one_policy_get_distinct_colours():
-    colors = run_colors([_fake("ucb", seed=0), _fake("ucb", seed=1), _fake("cts")])
+    colors = log_colors([_fake("ucb", seed=0), _fake("ucb", seed=1), _fake("cts")])
     assert len(set(colors)) == 3
     assert colors[0] == (31, 119, 180)
 

@@ -19,8 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from recorder.style import AOI_UNIT, REGRET_UNIT, RGB, spec_color
-from recorder.style import run_colors as _shades
+from recorder.style import AOI_UNIT, REGRET_UNIT, RGB, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
@@ -117,10 +116,10 @@ def comparability_warnings(logs: Sequence[RunLog]) -> list[str]:
     return out
 
 
-def run_colors(logs: Sequence[RunLog]) -> list[RGB]:
-    """A colour per run (:func:`recorder.style.run_colors`): its policy's, in lighter
+def log_colors(logs: Sequence[RunLog]) -> list[RGB]:
+    """A colour per log (:func:`recorder.style.run_colors`): its policy's, in lighter
     shades for runs that would share one."""
-    return _shades([spec_color(log.config.policy) for log in logs])
+    return run_colors([spec_color(log.config.policy) for log in logs])
 
 
 def compare_recording_id(runs: Sequence[ComparedRun]) -> str:
@@ -214,7 +213,7 @@ def prepare(logs: Sequence[LogLike]) -> tuple[list[ComparedRun], list[str]]:
         raise UsageError("compare needs at least one log")
     opened = [require_slots(as_log(x), "compare") for x in logs]
     labels = unique_labels(opened)
-    colors = run_colors(opened)
+    colors = log_colors(opened)
     runs = [
         ComparedRun(lab, log, col) for lab, log, col in zip(labels, opened, colors, strict=True)
     ]
@@ -279,7 +278,7 @@ def compare(
             r.summary = acc.result()
         out.recording.log(
             SUMMARY_ENTITY,
-            rr.TextDocument(summary_markdown(runs, warnings), media_type=rr.MediaType.MARKDOWN),
+            rr.TextDocument(compare_markdown(runs, warnings), media_type=rr.MediaType.MARKDOWN),
             static=True,
         )
     return Comparison(runs, warnings, out.path)
@@ -318,7 +317,7 @@ def summary_table(runs: Sequence[ComparedRun]) -> str:
     return "\n".join(lines)
 
 
-def summary_markdown(runs: Sequence[ComparedRun], warnings: Sequence[str]) -> str:
+def compare_markdown(runs: Sequence[ComparedRun], warnings: Sequence[str]) -> str:
     """The summary table as markdown (shown in the compare recording).
 
     Made to fit its panel: a row whose value is the same for every run (instance, seed,
