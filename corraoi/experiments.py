@@ -29,11 +29,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import chunks
+from . import backends
 from . import sweep_outputs as outputs
-from .chunks import chunk_task, prepare_kernels
 from .errors import ConfigError
-from .grid import Chunk, Grid
+from .grid import Cell, Chunk, Grid
 from .sweep_folder import (
     GROUP_FILES,
     MANIFEST,
@@ -48,10 +47,6 @@ from .sweep_folder import (
     read_parts,
     write_manifest,
 )
-
-#: Why a GPU sweep and a Dask client do not go together.
-GPU_NOT_ON_CLUSTER = ("--backend gpu runs in this process, on its GPU; leave out --scheduler "
-                      "(or use --backend cpu on the cluster)")  # fmt: skip
 
 
 def reproduce(
@@ -88,25 +83,6 @@ PAPER_INSTANCES = ("I1", "I2")
 
 
 # ---------------------------------------------------------------------------- the folder
-
-
-# ---------------------------------------------------------------------------- executing
-
-
-def _execute(
-    tasks: list[tuple[Chunk, dict[str, Any]]],
-    *,
-    client: Any,
-    on_done: Callable[[ChunkResult], None],
-    on_slots: Callable[[int], None] | None,
-) -> None:
-    if client is None:
-        for _, task in tasks:
-            on_done(chunks.run_chunk(task, on_slots=on_slots))
-        return
-    from .cluster import run_on_cluster
-
-    run_on_cluster(client, tasks, on_done=on_done)
 
 
 # ---------------------------------------------------------------------------- the sweep
@@ -150,16 +126,8 @@ def sweep(
     A folder is locked while the sweep writes it: a second sweep into it is refused at once.
     """
     from contextlib import ExitStack
-    from dataclasses import replace
 
-    if backend is not None and backend != grid.backend:
-        grid = replace(grid, backend=backend)
-    if grid.backend != "cpu":
-        from .gpu import choose_backend
-
-        grid = choose_backend(grid, warn=warn)
-        if grid.backend == "gpu" and client is not None:
-            raise ConfigError(GPU_NOT_ON_CLUSTER)
+    grid = backends.settle(grid, backend, client=client, warn=warn)
     folder = Path(out) if out is not None else None
     with ExitStack() as stack:
         if folder is not None:
@@ -186,10 +154,9 @@ def _sweep(
     on_slots: Callable[[int], None] | None,
     warn: Callable[[str], None] | None,
 ) -> SweepOutcome:
-    from .engine import set_workers
-
     start = time.perf_counter()
-    used = set_workers(workers) if client is None else int(threads_per_worker or 1)
+    runner = backends.choose(grid, client=client, workers=workers,
+                             threads_per_worker=threads_per_worker)  # fmt: skip
     parts: dict[str, list[ChunkResult]] = {}
     if folder is not None:
         grid = _prepare_folder(folder, grid, resume=resume, force=force)
@@ -201,20 +168,14 @@ def _sweep(
                 warn(f"{exc}; its runs are run again (the file is now {aside.name})")
 
         parts = read_parts(folder, grid, on_damaged=damaged)
-    tasks: list[tuple[Chunk, dict[str, Any]]] = []
+    todo: list[tuple[Cell, Chunk]] = []
     skipped = 0
-    threads = threads_per_worker if client is not None else None
-    by_key = {cell.key: cell for cell in grid.cells}
     for cell in grid.cells:
         done = parts.get(cell.key, [])
         skipped += len(done)
-        for chunk in grid.chunks(cell, covered=covered(done)):
-            task = chunk_task(grid, cell, chunk, threads=threads) if grid.backend == "cpu" else {}
-            tasks.append((chunk, task))
-    total = len(tasks)
+        todo += [(cell, chunk) for chunk in grid.chunks(cell, covered=covered(done))]
+    total = len(todo)
     finished = 0
-    if grid.backend == "gpu":
-        todo = [(by_key[ch.cell], ch) for ch, _ in tasks]
 
     def on_done(result: ChunkResult) -> None:
         nonlocal finished
@@ -225,15 +186,7 @@ def _sweep(
         if on_chunk is not None:
             on_chunk(finished, total)
 
-    if grid.backend == "gpu":
-        from .gpu.runner import execute
-
-        execute(grid, todo, on_done=on_done, on_slots=on_slots)
-    else:
-        if client is None and tasks:
-            prepare_kernels([by_key[ch.cell] for ch, _ in tasks])
-        _execute(tasks, client=client, on_done=on_done,
-                 on_slots=on_slots if client is None else None)  # fmt: skip
+    runner.run(grid, todo, on_done=on_done, on_slots=on_slots)
     for p in parts.values():
         p.sort(key=lambda r: r.chunk.start)
     labels = grid.labels()
@@ -244,7 +197,7 @@ def _sweep(
     for key, cells in grid.groups().items():
         joined = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in cells]
         joined_groups.append((key, joined))
-        summaries.append(outputs.group_summary(grid, joined, workers=used, wall_s=wall))
+        summaries.append(outputs.group_summary(grid, joined, workers=runner.workers, wall_s=wall))
     if folder is not None:
         outputs.write_results(folder, grid, parts, labels, warn=warn)
         for (key, joined), summary in zip(joined_groups, summaries, strict=True):

@@ -252,7 +252,7 @@ def _run(
     """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
     from contextlib import ExitStack
 
-    from ..experiments import GPU_NOT_ON_CLUSTER
+    from ..backends import GPU_NOT_ON_CLUSTER
     from ..experiments import sweep as run_sweep
     from ..progress import Progress
 
