@@ -18,16 +18,15 @@ import numpy as np
 
 from . import threads
 from .block import FIELDS, Columns, SlotBlock
-from .candidates import candidate_bitsets, pseudo_reward_classes
-from .channels import Channel, default_channel
+from .candidates import candidate_bitsets
+from .channels import Channel
 from .errors import ConfigError
 from .instance import Instance
-from .limits import check_horizon, check_seed
-from .policies.api import CompiledPolicy
+from .limits import check_seed
 from .policies.spec import PolicySpec
+from .problem import Problem
 from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python
 from .rng import streams_for_seed, streams_for_seeds
-from .theory import InstanceTheory, analyse
 from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
 __all__ = ["RunsBlock", "Simulation", "Snapshot", "set_workers", "shutdown", "simulate",
@@ -69,17 +68,6 @@ class Snapshot:
     pulls: np.ndarray
 
 
-def check_instance(instance: Instance) -> InstanceTheory:
-    """The instance's theory, or a ConfigError when it cannot be simulated (mu* = 0)."""
-    theory = analyse(instance)
-    if theory.mu_star <= 0:
-        raise ConfigError(
-            f"instance {instance.name}: every arm has mean 0, the AoI grows without bound "
-            "and regret is not defined"
-        )
-    return theory
-
-
 class Simulation:
     """The state of R runs of one policy on one instance, advanced by :meth:`advance`.
 
@@ -96,24 +84,28 @@ class Simulation:
         *,
         channel: Channel | None = None,
     ) -> None:
-        check_horizon(horizon)
+        self._setup(Problem.of(instance, policy, horizon, channel), seeds)
+
+    @classmethod
+    def of(cls, problem: Problem, seeds: Sequence[int] | np.ndarray) -> Simulation:
+        """The runs ``seeds`` of a checked :class:`corraoi.problem.Problem`."""
+        sim = cls.__new__(cls)
+        sim._setup(problem, seeds)
+        return sim
+
+    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray) -> None:
         seed_arr = check_seeds(seeds)
-        self.instance = instance
-        self.policy = policy
+        self.problem = pb
+        self.instance = pb.instance
+        self.policy = pb.policy
         self.seeds = seed_arr
-        self.horizon = int(horizon)
-        self.channel = channel if channel is not None else default_channel(instance)
-        self.channel.check(instance, self.horizon)
-        theory = check_instance(instance)
-        self.best = theory.best_arm
-        self.mu_star = theory.mu_star
-        self.cls: Any = policy.resolve()
-        R, K = seed_arr.size, instance.K
-        cdf_rows, self._kind, trace = self.channel.kernel_arrays(instance)
-        # writable C arrays: the types the cached kernels were compiled for (kernels.warm_args)
-        self._cdf_rows = np.require(cdf_rows, np.float64, ["C", "W"])
-        self._trace = np.require(trace, np.int64, ["C", "W"])
-        self._Y = np.require(instance.Y, np.int8, ["C", "W"])
+        self.horizon = pb.horizon
+        self.channel = pb.channel
+        self.best = pb.theory.best_arm
+        self.mu_star = pb.theory.mu_star
+        self.cls: Any = pb.cls
+        R, K = seed_arr.size, pb.K
+        self._cdf_rows, self._kind, self._trace, self._Y = pb.cdf_rows, pb.kind, pb.trace, pb.Y
         self.lat, self.pol = streams_for_seeds(seed_arr)
         self.ncache = np.zeros((R, 2))
         self.xprev = np.full(R, -1, dtype=np.int64)
@@ -124,17 +116,16 @@ class Simulation:
         self.regret = np.zeros(R, dtype=np.int64)
         self.aoisum = np.zeros(R, dtype=np.int64)
         self.t = 0
-        if issubclass(self.cls, CompiledPolicy):
+        if pb.compiled:
             self._kernels: dict[bool, Any] = {}
-            self._params = np.require(policy.param_vector(self.cls), np.float64, ["C", "W"])
-            S = int(self.cls.state_size(K, policy.params))
-            self.pstate = np.zeros((R, max(S, 1)))
-            self._pclass = np.require(pseudo_reward_classes(instance), np.int8, ["C", "W"])
-            self._comb = np.require(candidate_bitsets(self._pclass), np.uint64, ["C", "W"])
+            self._params = pb.params
+            self.pstate = np.zeros((R, max(pb.state_size, 1)))
+            self._pclass = pb.pclass
+            self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
             self._py: Any = None
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
-            self._py = self.cls(**policy.params)
+            self._py = self.cls(**pb.policy.params)
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 

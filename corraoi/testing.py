@@ -33,7 +33,7 @@ def record_run(
     from recorder.record import record_run
 
     from .block import RunConfig
-    from .engine import check_instance
+    from .problem import check_instance
     from .instance import load_instance
     from .policies import make_policy
 

@@ -161,7 +161,7 @@ def sweep(
             raise
         raise type(exc)(f"{experiment}: {exc}") from None
     for cell in grid.cells:
-        from ..engine import check_instance
+        from ..problem import check_instance
 
         check_instance(cell.instance)
     grid = _settle_backend(grid)

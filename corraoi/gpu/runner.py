@@ -19,13 +19,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..block import SlotBlock
-from ..candidates import pseudo_reward_classes
-from ..channels import Channel, default_channel
-from ..engine import check_instance
+from ..channels import Channel
 from ..errors import ConfigError
 from ..instance import Instance
-from ..limits import check_horizon
 from ..policies import PolicySpec, gpu_form
+from ..problem import Problem
 from ..stats import Moments
 from .device import MAX_ARMS, Device, GpuUnavailable, get_device
 
@@ -71,24 +69,21 @@ class _Problem:
 
     def __init__(self, instance: Instance, policy: PolicySpec, horizon: int,
                  channel: Channel | None, runs: int, dev: Device) -> None:  # fmt: skip
-        check_horizon(horizon)
         if runs < 1:
             raise ConfigError(f"runs must be >= 1, got {runs}")
         K = instance.K
         problem = gpu_problem(policy, K)
         if problem is not None:
             raise GpuUnavailable(f"--backend gpu: {problem}; run it with --backend cpu")
-        cls: Any = policy.resolve()
+        pb = Problem.of(instance, policy, horizon, channel)  # every check, once
+        cls: Any = pb.cls
         self.cls = cls
         form = gpu_form(cls)
         assert form is not None
         self.kernel = form.kernel
-        self.theory = check_instance(instance)
-        channel = channel if channel is not None else default_channel(instance)
-        channel.check(instance, horizon)
-        self.cdf, self.kind, trace = channel.kernel_arrays(instance)
-        params = policy.param_vector(cls)
-        self.S_state = int(cls.state_size(K, policy.params)) if form.uses_state else 0
+        self.theory = pb.theory
+        self.cdf, self.kind = pb.cdf_rows, pb.kind
+        self.S_state = pb.state_size if form.uses_state else 0
         self.K, self.R, self.dev = K, int(runs), dev
         xp, R = dev.xp, self.R
 
@@ -98,10 +93,9 @@ class _Problem:
         self.arr = arr
         try:
             self.consts = {
-                "cdf": arr(self.cdf.astype(np.float64)), "trace": arr(trace.astype(np.int64)),
-                "Y": arr(np.asarray(instance.Y, dtype=np.int8)),
-                "pclass": arr(pseudo_reward_classes(instance)),
-                "prm": arr(params if params.size else np.zeros(1)),
+                "cdf": arr(pb.cdf_rows), "trace": arr(pb.trace), "Y": arr(pb.Y),
+                "pclass": arr(pb.pclass),
+                "prm": arr(pb.params if pb.params.size else np.zeros(1)),
                 "none": xp.zeros(1, dtype=np.int64), "none_d": xp.zeros(1),
             }  # fmt: skip
             self.st = {
