@@ -14,48 +14,34 @@ from typing import Any
 
 import numpy as np
 import orjson
-from mcap.writer import IndexType
 
 from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
 from corraoi.theory import analyse
 
 from .errors import LogError
 
-#: Name of the format, stored under ``format`` in the run metadata.
-FORMAT_NAME = "corraoi.slot-log"
-#: The newest version of the format this code reads and writes (see docs/log-format.md):
-#: a run is written as version 1 (built-in policy, i.i.d. channel) or 2 (a plug-in policy or a
-#: Markov/trace channel), ``RunConfig.format_version``.
-FORMAT_VERSION = 2
-TOPIC = "/corraoi/slot"
-SCHEMA_NAME = "corraoi.SlotEvent"
-MESSAGE_ENCODING = "json"
-SCHEMA_ENCODING = "jsonschema"
-#: Metadata record written when the file is opened: the run configuration.
-RUN_METADATA = "corraoi.run"
-#: Metadata record written when the file is finished: how the run ended.
-END_METADATA = "corraoi.end"
-#: Metadata record that marks a sweep log (recorder.sweep_log), not a run log.
-SWEEP_METADATA = "corraoi.sweep"
-#: log_time = publish_time = t * NS_PER_SLOT: one slot shows as one second in MCAP tools.
-NS_PER_SLOT = 1_000_000_000
-#: The largest slot number whose log_time fits MCAP's unsigned 64-bit nanoseconds.
-MAX_SLOT = (2**64 - 1) // NS_PER_SLOT
-#: A chunk is closed (and flushed to the OS) after every slot t with t % FLUSH_EVERY == 0.
-FLUSH_EVERY = 1000
+# The slot log's names, defined in recorder.vocab, under this module's older short names.
+from .vocab import (
+    MAX_SLOT,
+    MCAP_INDEX_TYPES,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    RUN_METADATA,
+    SCHEMA_ENCODING,
+    SWEEP_METADATA,
+    library_name,
+)
+from .vocab import RUN_END_METADATA as END_METADATA
+from .vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from .vocab import SLOT_FORMAT_NAME as FORMAT_NAME
+from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION
+from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SLOT_TOPIC as TOPIC
+
 #: Message keys in the order the encoder writes them.
 MESSAGE_KEYS = FIELDS
-#: The summary indexes every MCAP file we write carries: chunk, message and metadata
-#: indexes. Not the attachment index: we write no attachment, and the mcap writer would
-#: otherwise end every file with an empty attachment-index summary group.
-MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
-
-
-def library_name(version: str) -> str:
-    """The MCAP header's ``library`` field."""
-    return f"corraoi/{version}"
 
 
 def slot_schema(config: RunConfig) -> dict[str, Any]:
@@ -529,14 +515,20 @@ __all__ = [
     "FORMAT_VERSION",
     "MAX_SLOT",
     "MCAP_INDEX_TYPES",
+    "MESSAGE_ENCODING",
+    "MESSAGE_KEYS",
     "NS_PER_SLOT",
     "RUN_METADATA",
     "SCALAR_FIELDS",
+    "SCHEMA_ENCODING",
     "SCHEMA_NAME",
+    "SWEEP_METADATA",
     "TOPIC",
     "decode_messages",
     "empty_block",
     "end_metadata",
+    "library_name",
     "run_metadata",
+    "schema_bytes",
     "slot_schema",
 ]

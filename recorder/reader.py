@@ -47,8 +47,8 @@ from .format import (
     empty_block,
 )
 from .paths import lock_holder
+from .vocab import MAGIC
 
-MAGIC = b"\x89MCAP0\r\n"
 #: The largest uncompressed chunk the reader accepts (writers close chunks at 64 MiB).
 _MAX_CHUNK = 1 << 28
 #: The most a chunk can expand when decompressed (zstd's limit is far below this).

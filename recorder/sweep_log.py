@@ -30,7 +30,6 @@ from mcap.writer import CompressionType, Writer
 from corraoi._version import __version__
 
 from .errors import LogError, WriteError
-from .format import MCAP_INDEX_TYPES, SWEEP_METADATA
 from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
@@ -44,41 +43,28 @@ from .style import (
     policy_color,
 )
 
+# The sweep log's names, defined in recorder.vocab, under this module's older short names.
+from .vocab import (
+    MAGIC,
+    MCAP_INDEX_TYPES,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    SCHEMA_ENCODING,
+    SWEEP_METADATA,
+    library_name,
+)
+from .vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
+from .vocab import SWEEP_END_METADATA as END_METADATA
+from .vocab import SWEEP_FLUSH_EVERY as FLUSH_EVERY
+from .vocab import SWEEP_FORMAT_NAME as FORMAT_NAME
+from .vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
+from .vocab import SWEEP_MESSAGE_KEYS as MESSAGE_KEYS
+from .vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
+from .vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SWEEP_TOPIC as TOPIC
+
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
-
-#: Name of the format, stored under ``format`` in the sweep metadata.
-FORMAT_NAME = "corraoi.sweep-log"
-#: Version this code writes and the newest it reads. Version 2: a CI half-width that is
-#: not defined (one run) is an absent key, where version 1 wrote null (type lists such as
-#: ["number", "null"] are rejected by Foxglove's JSON-schema parser).
-FORMAT_VERSION = 2
-TOPIC = "/corraoi/sweep"
-SCHEMA_NAME = "corraoi.SweepPoint"
-MESSAGE_ENCODING = "json"
-SCHEMA_ENCODING = "jsonschema"
-#: Metadata record written when the file is opened: the sweep configuration.
-#: Metadata record written when the file is finished: how the sweep ended.
-END_METADATA = "corraoi.sweep.end"
-#: log_time = publish_time = t * NS_PER_SLOT: slot t shows as t seconds in MCAP tools.
-NS_PER_SLOT = 1_000_000_000
-#: The open chunk is closed and handed to the OS once FLUSH_EVERY messages wait in it and
-#: whenever the policy changes, so a killed sweep loses fewer than FLUSH_EVERY checkpoints.
-FLUSH_EVERY = 32
-#: Keys a message may lack: a half-width is absent with a single run.
-OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95")
-#: Message keys in the order the writer writes them.
-MESSAGE_KEYS = (
-    "policy",
-    "t",
-    "regret_mean",
-    "regret_ci95",
-    "estimator_mean",
-    "estimator_ci95",
-    "pull_share",
-)
-_MAGIC = b"\x89MCAP0\r\n"
-_SLOT_SCHEMA = "corraoi.SlotEvent"
 
 
 class SweepLogError(LogError):
@@ -212,7 +198,8 @@ class SweepMcapSink(Sink):
             self._writer = Writer(
                 self._stream, compression=CompressionType.ZSTD, index_types=MCAP_INDEX_TYPES
             )
-            self._writer.start(profile="", library=f"corraoi/{config.get('version', __version__)}")
+            library = library_name(str(config.get("version", __version__)))
+            self._writer.start(profile="", library=library)
             self._writer.add_metadata(SWEEP_METADATA, metadata)
             schema_id = self._writer.register_schema(
                 name=SCHEMA_NAME,
@@ -420,10 +407,10 @@ def _check_file(path: Path) -> None:
         raise SweepLogError(f"{path}: no such sweep log{hint}")
     try:
         with open(path, "rb") as f:
-            magic = f.read(len(_MAGIC))
+            magic = f.read(len(MAGIC))
     except OSError as exc:
         raise SweepLogError(f"{path}: cannot read the sweep log: {reason(exc)}") from None
-    if magic != _MAGIC:
+    if magic != MAGIC:
         raise SweepLogError(f"{path}: not an MCAP file (expected a sweep log, sweep.mcap)")
 
 

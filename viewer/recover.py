@@ -228,13 +228,14 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     return complete
 
 
-_MAGIC = b"\x89MCAP0\r\n"
 _RECORD = struct.Struct("<BQ")
 _FOOTER = 0x02
 
 
 def _complete_length(f: IO[bytes]) -> int:
     """Bytes from the start of the file to the end of its last complete record."""
+    from recorder.vocab import MAGIC as _MAGIC
+
     size = os.fstat(f.fileno()).st_size
     f.seek(0)
     if f.read(len(_MAGIC)) != _MAGIC:
