@@ -24,7 +24,6 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 import numpy as np
 import orjson
 from mcap.records import Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
@@ -62,6 +61,7 @@ from .vocab import SWEEP_MESSAGE_KEYS as MESSAGE_KEYS
 from .vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
 from .vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
 from .vocab import SWEEP_TOPIC as TOPIC
+from .walk import Walker
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
@@ -428,7 +428,8 @@ def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
     other_schemas: set[str] = set()
     try:
         with open(p, "rb") as f:
-            for record in StreamReader(f).records:
+            walker = Walker(f, p)
+            for record in walker.mcap_records():
                 if isinstance(record, Message):
                     if record.channel_id == channel_id:
                         payloads.append(record.data)
@@ -452,9 +453,10 @@ def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
                         end = dict(record.metadata)
                 elif isinstance(record, Header):
                     library = record.library
+            truncated = walker.truncated
     except OSError as exc:
         raise SweepLogError(f"{p}: cannot read the sweep log: {reason(exc)}") from None
-    except Exception:  # noqa: BLE001 - a damaged tail: keep every complete record before it
+    except LogError:  # a damaged tail: keep every complete record before it
         truncated = True
     if channel_id is None or meta is None:
         if _SLOT_SCHEMA in other_schemas:

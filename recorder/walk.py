@@ -96,10 +96,11 @@ class Walker:
     """Walks the top-level records of an MCAP file, stopping cleanly at a truncated tail.
 
     :meth:`records` yields ``(kind, item)``: "header", "metadata", "chunk" (ChunkData),
-    "data_end", "footer", and with ``data`` the data section's schemas, channels and
-    messages outside chunks; :meth:`mcap_records` yields mcap records with the chunks
-    opened, as ``StreamReader.records`` does. ``truncated``: the file was cut short;
-    ``position``: the byte after the last complete record."""
+    "data_end", "footer", and with ``data`` the schemas, channels and messages outside
+    chunks (a file without messages has its schema and channel in the summary only);
+    :meth:`mcap_records` yields mcap records with the chunks opened, as
+    ``StreamReader.records`` does. ``truncated``: the file was cut short; ``position``:
+    the byte after the last complete record."""
 
     def __init__(self, f: BinaryIO, path: Path, *, stop_at: int = 0) -> None:
         self.f = f
@@ -132,7 +133,6 @@ class Walker:
             raise self._bad("not an MCAP file (bad magic bytes)")
         pos = self.position = len(MAGIC)
         chunks = 0
-        in_data = data
         while True:
             if self.stop_at and pos >= self.stop_at:
                 return
@@ -170,7 +170,7 @@ class Walker:
                 self.position = end
                 yield "chunk", chunk
             elif opcode in (Opcode.HEADER, Opcode.METADATA) or (
-                in_data and (opcode in _PARSED or opcode == Opcode.MESSAGE)
+                data and (opcode in _PARSED or opcode == Opcode.MESSAGE)
             ):
                 record = _parse(opcode, f.read(length))
                 if record is None:
@@ -178,7 +178,6 @@ class Walker:
                 self.position = end
                 yield _PARSED[opcode][0] if opcode in _PARSED else "message", record
             elif opcode == Opcode.DATA_END:
-                in_data = False
                 f.seek(end)
                 self.position = end
                 yield "data_end", None
@@ -196,8 +195,8 @@ class Walker:
             pos = end
 
     def mcap_records(self) -> Iterator[McapRecord | None]:
-        """The data section's records as mcap objects (Header, Metadata, Schema, Channel,
-        Message; the records of each chunk in turn), then None for the data end."""
+        """The records as mcap objects (Header, Metadata, Schema, Channel, Message; those of
+        each chunk in turn), None for the data end, then the summary's schemas and channels."""
         for kind, item in self.records(read_chunks=True, data=True):
             if kind == "chunk":
                 assert isinstance(item, ChunkData) and item.records is not None
