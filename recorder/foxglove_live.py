@@ -33,14 +33,10 @@ from typing import Any
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import CorraoiError, MissingExtraError, UsageError
 
-from .format import (
-    NS_PER_SLOT,
-    SCHEMA_NAME,
-    TOPIC,
-    BlockEncoder,
-    run_metadata,
-    schema_bytes,
-)
+from .encode import BlockEncoder, run_metadata, schema_bytes
+from .vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
+from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SLOT_TOPIC as TOPIC
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -52,8 +48,6 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 BACKLOG = 1024
 #: Topic of the run metadata record.
 RUN_TOPIC = "/corraoi/run"
-#: Topic of the sweep points.
-SWEEP_TOPIC = "/corraoi/sweep"
 
 
 class FoxgloveError(CorraoiError):
@@ -273,8 +267,8 @@ class FoxgloveSlotSink:
 
 def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
     return {
-        "title": "corraoi.run",
-        "description": "the corraoi.run metadata record of the MCAP log (flat strings)",
+        "title": RUN_METADATA,
+        "description": f"the {RUN_METADATA} metadata record of the MCAP log (flat strings)",
         "type": "object",
         "properties": {key: {"type": "string"} for key in meta},
     }
