@@ -12,12 +12,13 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from itertools import chain
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import orjson
 
-from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
+from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
 
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, slot_schema
 from .errors import LogError
@@ -304,6 +305,58 @@ def _json_error(payloads: Sequence[bytes | memoryview], where: str) -> LogError:
     return LogError(f"{where}: the slot messages do not form valid JSON")
 
 
+# ----------------------------------------------------------------------- run metadata
+
+
+def check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
+    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
+    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
+    facts = {
+        "seed": str(config.seed),
+        "horizon": str(config.horizon),
+        "arms": str(config.instance.K),
+        "states": str(config.instance.n_states),
+        "policy": config.policy.name,
+        "instance": config.instance.name,
+    }
+    for key, value in facts.items():
+        if key in md and md[key] != value:
+            raise LogError(
+                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
+                f"{value!r} in the configuration; expected both to agree"
+            )
+
+
+def not_a_run_log(p: Path, library: str, sweep: bool = False) -> LogError:
+    """The error for an MCAP file that is not a slot log (``sweep``: it is a sweep log)."""
+    if sweep:
+        return LogError(
+            f"{p}: a corraoi sweep log (aggregated curves), not the log of one run; "
+            "draw it with `corraoi figure`"
+        )
+    who = f" (written by {library!r})" if library else ""
+    return LogError(f"{p}: an MCAP file but not a corraoi log{who}: no {RUN_METADATA} metadata")
+
+
+def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
+    """The ``corraoi.run`` record names this format, holds a config, and a version we read."""
+    if md.get("format") != FORMAT_NAME or "config" not in md:
+        raise not_a_run_log(p, library)
+    try:
+        version = int(md.get("format_version", ""))
+    except ValueError:
+        raise LogError(
+            f"{p}: format_version {md.get('format_version')!r} is not an integer"
+        ) from None
+    if version > FORMAT_VERSION:
+        raise LogError(
+            f"{p}: written in log format version {version}, newer than the version "
+            f"{FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
+        )
+    if version < 1:
+        raise LogError(f"{p}: unknown log format version {version}")
+
+
 __all__ = [
     "ARM_FIELDS",
     "BlockEncoder",
@@ -322,10 +375,13 @@ __all__ = [
     "SCHEMA_NAME",
     "SWEEP_METADATA",
     "TOPIC",
+    "check_agrees",
+    "check_run_metadata",
     "decode_messages",
     "empty_block",
     "end_metadata",
     "library_name",
+    "not_a_run_log",
     "run_metadata",
     "schema_bytes",
     "slot_schema",

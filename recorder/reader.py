@@ -26,16 +26,17 @@ from corraoi.errors import CorraoiError
 from .errors import LogError
 from .format import (
     END_METADATA,
-    FORMAT_NAME,
-    FORMAT_VERSION,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     RUN_METADATA,
     SCHEMA_NAME,
     SWEEP_METADATA,
     TOPIC,
+    check_agrees,
+    check_run_metadata,
     decode_messages,
     empty_block,
+    not_a_run_log,
 )
 from .paths import lock_holder
 from .walk import (
@@ -254,7 +255,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                 assert isinstance(item, Metadata)
                 if item.name == RUN_METADATA and run_md is None:
                     run_md = dict(item.metadata)
-                    _check_run_metadata(p, run_md, library)
+                    check_run_metadata(p, run_md, library)
                 elif item.name == END_METADATA:
                     end_md = dict(item.metadata)
                 elif item.name == SWEEP_METADATA:
@@ -262,7 +263,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             elif kind == "chunk":
                 assert isinstance(item, ChunkData)
                 if run_md is None:
-                    raise _not_ours(p, library, sweep)
+                    raise not_a_run_log(p, library, sweep)
                 try:
                     if item.records is not None:
                         if not channel_id:
@@ -288,7 +289,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             elif kind == "footer":
                 finished = True
             elif kind == "data_end" and run_md is None:
-                raise _not_ours(p, library, sweep)
+                raise not_a_run_log(p, library, sweep)
         if run_md is None:
             if walker.records_seen == 0:
                 raise LogError(
@@ -299,14 +300,14 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                     f"{p}: the writer stopped before it wrote the run configuration; "
                     "nothing to read"
                 )
-            raise _not_ours(p, library, sweep)
+            raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {TOPIC} channel with schema {SCHEMA_NAME}")
     try:
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
-    _check_agrees(p, run_md, config)
+    check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
     if damage:
@@ -344,25 +345,6 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
 
 
 # ---------------------------------------------------------------------------- internals
-
-
-def _check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
-    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
-    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
-    facts = {
-        "seed": str(config.seed),
-        "horizon": str(config.horizon),
-        "arms": str(config.instance.K),
-        "states": str(config.instance.n_states),
-        "policy": config.policy.name,
-        "instance": config.instance.name,
-    }
-    for key, value in facts.items():
-        if key in md and md[key] != value:
-            raise LogError(
-                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
-                f"{value!r} in the configuration; expected both to agree"
-            )
 
 
 def _strip_path(exc: LogError, p: Path) -> str:
@@ -404,34 +386,6 @@ def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
         raise LogError(f"{p}: chunk at byte {offset}: slots are not consecutive (expected "
                        f"slot {expected}, got {int(t[0])}..{int(t[-1])})")  # fmt: skip
     return expected + len(t)
-
-
-def _not_ours(p: Path, library: str, sweep: bool = False) -> LogError:
-    if sweep:
-        return LogError(
-            f"{p}: a corraoi sweep log (aggregated curves), not the log of one run; "
-            "draw it with `corraoi figure`"
-        )
-    who = f" (written by {library!r})" if library else ""
-    return LogError(f"{p}: an MCAP file but not a corraoi log{who}: no {RUN_METADATA} metadata")
-
-
-def _check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
-    if md.get("format") != FORMAT_NAME or "config" not in md:
-        raise _not_ours(p, library)
-    try:
-        version = int(md.get("format_version", ""))
-    except ValueError:
-        raise LogError(
-            f"{p}: format_version {md.get('format_version')!r} is not an integer"
-        ) from None
-    if version > FORMAT_VERSION:
-        raise LogError(
-            f"{p}: written in log format version {version}, newer than the version "
-            f"{FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
-        )
-    if version < 1:
-        raise LogError(f"{p}: unknown log format version {version}")
 
 
 def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
