@@ -196,7 +196,8 @@ class Walker:
 
     def mcap_records(self) -> Iterator[McapRecord | None]:
         """The records as mcap objects (Header, Metadata, Schema, Channel, Message; those of
-        each chunk in turn), None for the data end, then the summary's schemas and channels."""
+        each chunk in turn; no indexes), None for the data end, then the summary's schemas
+        and channels."""
         for kind, item in self.records(read_chunks=True, data=True):
             if kind == "chunk":
                 assert isinstance(item, ChunkData) and item.records is not None
