@@ -21,7 +21,7 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 
 from .errors import LogError
 from .paths import PARTIAL_SUFFIX, partial_path, reason
-from .vocab import MAGIC, SWEEP_METADATA
+from .vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
 from .vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
 from .vocab import SWEEP_END_METADATA as END_METADATA
 from .vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
@@ -136,8 +136,8 @@ def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
     meta: dict[str, str] | None = None
     end: dict[str, str] | None = None
     library = ""
-    truncated = False
-    other_schemas: set[str] = set()
+    truncated = damaged = False
+    others: set[str] = set()  # names of other schemas and metadata records
     try:
         with open(p, "rb") as f:
             walker = Walker(f, p)
@@ -157,21 +157,25 @@ def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
                     ):
                         channel_id = record.id
                     elif sch is not None:
-                        other_schemas.add(sch.name)
+                        others.add(sch.name)
                 elif isinstance(record, Metadata):
                     if record.name == SWEEP_METADATA and meta is None:
                         meta = dict(record.metadata)
                     elif record.name == END_METADATA:
                         end = dict(record.metadata)
+                    else:
+                        others.add(record.name)
                 elif isinstance(record, Header):
                     library = record.library
             truncated = walker.truncated
     except OSError as exc:
         raise SweepLogError(f"{p}: cannot read the sweep log: {reason(exc)}") from None
-    except LogError:  # a damaged tail: keep every complete record before it
-        truncated = True
+    except LogError:  # damage (a bad CRC, sizes that do not add up): keep what came before
+        truncated = damaged = True
     if channel_id is None or meta is None:
-        if _SLOT_SCHEMA in other_schemas:
+        # a slot log shows its schema in its first chunk; damage there stops the walk
+        # before it, and then its run metadata says what it is
+        if _SLOT_SCHEMA in others or (damaged and RUN_METADATA in others):
             raise SweepLogError(
                 f"{p}: a per-slot run log, not a sweep log (figures read the sweep.mcap "
                 "written by `corraoi sweep -o DIR`)"

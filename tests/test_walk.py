@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import ast
 import struct
+import zlib
 from pathlib import Path
 
 import pytest
+import zstandard
 from mcap.reader import make_reader
 from mcap.records import DataEnd, MessageIndex
 from mcap.stream_reader import StreamReader
@@ -20,7 +22,7 @@ from recorder.errors import LogError
 from recorder.reader import open_log
 from recorder.results import is_sweep_path
 from recorder.sweep_log import read_sweep
-from recorder.walk import Walker
+from recorder.walk import Walker, records_in
 from tests.test_sweep_log import small_sweep, write_log
 from viewer.recover import recover
 
@@ -204,3 +206,46 @@ def test_the_formats_names_are_defined_once():
 
 def test_the_slot_schema_requires_the_fields_in_block_order(make_config):
     assert slot_schema(make_config())["required"] == list(FIELDS)
+
+
+def _silent_flip(raw: bytes, offset: int) -> int:
+    """A byte of the chunk at ``offset`` whose flip zstd decodes without complaint, to the
+    same records with other bytes in a message: only the CRC can tell (mcap's StreamReader,
+    which the sweep reader used before the walker, checks none and reads the garbage)."""
+    _, _, usize, crc, clen = struct.unpack_from("<QQQII", raw, offset + 9)
+    (dlen,) = struct.unpack_from("<Q", raw, offset + 9 + 32 + clen)
+    data_at = offset + 9 + 32 + clen + 8
+    good = zstandard.ZstdDecompressor().decompress(raw[data_at : data_at + dlen], usize)
+    heads = [body - 9 for _, body, _ in records_in(good, Path("x"), offset)]
+    for at in range(data_at + 20, data_at + dlen):
+        data = bytearray(raw[data_at : data_at + dlen])
+        data[at - data_at] ^= 0x01
+        try:
+            out = zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=usize)
+        except zstandard.ZstdError:
+            continue
+        same_frames = all(out[h : h + 9] == good[h : h + 9] for h in heads)
+        if len(out) == usize and zlib.crc32(out) != crc and same_frames:
+            return at
+    raise AssertionError("no silent flip in the chunk")
+
+
+def test_a_damaged_chunk_ends_a_sweep_log_where_it_starts(tmp_path):
+    """The sweep reader checks each chunk's CRC through the walker: a flipped byte ends the
+    curves at the chunk before it (status truncated), never decodes garbage as points."""
+    path = write_log(tmp_path / "sweep.mcap", small_sweep(("ucb", "cucb"), runs=2, horizon=60))
+    full = read_sweep(path)
+    raw = path.read_bytes()
+    at = _silent_flip(raw, _chunks(path)[-1])
+    cut = read_sweep(_patched(tmp_path, path, at, bytes([raw[at] ^ 0x01]), "bad.mcap"))
+    assert cut.status == "truncated" and 0 < cut.messages < full.messages
+    for name, curve in cut.curves.items():
+        assert list(curve.t) == list(full.curves[name].t[: len(curve)])
+
+
+def test_a_damaged_slot_log_is_still_named_a_slot_log_by_the_sweep_reader(tmp_path, slot_log):
+    path, offsets = slot_log
+    at = offsets[0] + 9 + 32 + 4 + 8 + 200
+    bad = _patched(tmp_path, path, at, bytes([path.read_bytes()[at] ^ 0xFF]), "bad.mcap")
+    with pytest.raises(LogError, match="a per-slot run log, not a sweep log"):
+        read_sweep(bad)
