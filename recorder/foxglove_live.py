@@ -4,8 +4,8 @@ The server is the maintained ``foxglove-sdk`` package (the optional extra ``foxg
 imported only when ``--foxglove`` is asked for. What a client sees:
 
 - ``/corraoi/slot``: one JSON message per slot, with the very schema
-  (:func:`recorder.format.slot_schema`) and the very bytes
-  (:class:`recorder.format.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
+  (:func:`recorder.encode.slot_schema`) and the very bytes
+  (:class:`recorder.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
   the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
 - ``/corraoi/run``: the ``corraoi.run`` metadata record of the MCAP log as one JSON object
   (flat strings). The WebSocket protocol keeps no message for a client that connects
@@ -207,7 +207,7 @@ class FoxgloveServer:
 class FoxgloveSlotSink:
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
-    The messages are :class:`recorder.format.BlockEncoder`'s, the MCAP log's bytes;
+    The messages are :class:`recorder.encode.BlockEncoder`'s, the MCAP log's bytes;
     ``log_time`` is ``t`` seconds. ``pace``: at most that many slots per second (the
     writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C).
     """

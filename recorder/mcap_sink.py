@@ -1,7 +1,7 @@
 """McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
 
 The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
-so a file at ``<path>`` is always complete. Every :data:`~recorder.format.FLUSH_EVERY`
+so a file at ``<path>`` is always complete. Every :data:`~recorder.vocab.SLOT_FLUSH_EVERY`
 slots the current chunk is closed and handed to the operating system, so a writer killed
 with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
 the ``.partial`` file and says the log was cut short.

@@ -134,16 +134,13 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.records import Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
+    from recorder.encode import end_metadata as make_end
     from recorder.errors import LogError
-    from recorder.format import (
-        END_METADATA,
-        FLUSH_EVERY,
-        MCAP_INDEX_TYPES,
-        NS_PER_SLOT,
-        TOPIC,
-        decode_messages,
-    )
-    from recorder.format import end_metadata as make_end
+    from recorder.format import decode_messages
+    from recorder.vocab import MCAP_INDEX_TYPES, NS_PER_SLOT
+    from recorder.vocab import RUN_END_METADATA as END_METADATA
+    from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+    from recorder.vocab import SLOT_TOPIC as TOPIC
     from recorder.walk import Walker
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
