@@ -33,9 +33,9 @@ def record_run(
     from recorder.record import record_run
 
     from .block import RunConfig
-    from .problem import check_instance
     from .instance import load_instance
     from .policies import make_policy
+    from .problem import check_instance
 
     inst = load_instance(instance)
     check_instance(inst)

@@ -1,8 +1,10 @@
-"""The slot-log format: names, the JSON Schema, the metadata, and the block encoder/decoder.
+"""The slot log read back: the strict decoder of slot messages.
 
 One MCAP message per slot on :data:`TOPIC`, JSON encoded. Arms and states are numbered
-from 1 in the log (``SlotBlock`` arrays are 0-based: the encoder adds 1, the decoder
-subtracts it). ``docs/log-format.md`` is the human description; this module is the code.
+from 1 in the log (``SlotBlock`` arrays are 0-based: the decoder subtracts 1). The names
+of the format are defined in :mod:`recorder.vocab` and its writing side (schema, metadata,
+encoder) in :mod:`recorder.encode`; both are re-exported here under the names older code
+imports. ``docs/log-format.md`` is the human description.
 """
 
 from __future__ import annotations
@@ -10,254 +12,37 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from itertools import chain
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import orjson
-from mcap.writer import IndexType
 
 from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
-from corraoi.theory import analyse
 
+from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, slot_schema
 from .errors import LogError
 
-#: Name of the format, stored under ``format`` in the run metadata.
-FORMAT_NAME = "corraoi.slot-log"
-#: The newest version of the format this code reads and writes (see docs/log-format.md):
-#: a run is written as version 1 (built-in policy, i.i.d. channel) or 2 (a plug-in policy or a
-#: Markov/trace channel), ``RunConfig.format_version``.
-FORMAT_VERSION = 2
-TOPIC = "/corraoi/slot"
-SCHEMA_NAME = "corraoi.SlotEvent"
-MESSAGE_ENCODING = "json"
-SCHEMA_ENCODING = "jsonschema"
-#: Metadata record written when the file is opened: the run configuration.
-RUN_METADATA = "corraoi.run"
-#: Metadata record written when the file is finished: how the run ended.
-END_METADATA = "corraoi.end"
-#: Metadata record that marks a sweep log (recorder.sweep_log), not a run log.
-SWEEP_METADATA = "corraoi.sweep"
-#: log_time = publish_time = t * NS_PER_SLOT: one slot shows as one second in MCAP tools.
-NS_PER_SLOT = 1_000_000_000
-#: The largest slot number whose log_time fits MCAP's unsigned 64-bit nanoseconds.
-MAX_SLOT = (2**64 - 1) // NS_PER_SLOT
-#: A chunk is closed (and flushed to the OS) after every slot t with t % FLUSH_EVERY == 0.
-FLUSH_EVERY = 1000
+# The slot log's names, defined in recorder.vocab, under this module's older short names.
+from .vocab import (
+    MAX_SLOT,
+    MCAP_INDEX_TYPES,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    RUN_METADATA,
+    SCHEMA_ENCODING,
+    SWEEP_METADATA,
+    library_name,
+)
+from .vocab import RUN_END_METADATA as END_METADATA
+from .vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from .vocab import SLOT_FORMAT_NAME as FORMAT_NAME
+from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION
+from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SLOT_TOPIC as TOPIC
+
 #: Message keys in the order the encoder writes them.
 MESSAGE_KEYS = FIELDS
-#: The summary indexes every MCAP file we write carries: chunk, message and metadata
-#: indexes. Not the attachment index: we write no attachment, and the mcap writer would
-#: otherwise end every file with an empty attachment-index summary group.
-MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
-
-_NUMPY = orjson.OPT_SERIALIZE_NUMPY
-
-
-def library_name(version: str) -> str:
-    """The MCAP header's ``library`` field."""
-    return f"corraoi/{version}"
-
-
-def slot_schema(config: RunConfig) -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of one slot message of this run."""
-    K, n = config.instance.K, config.instance.n_states
-
-    def integer(desc: str, minimum: int | None = None, maximum: int | None = None) -> dict:
-        out: dict[str, Any] = {"type": "integer", "description": desc}
-        if minimum is not None:
-            out["minimum"] = minimum
-        if maximum is not None:
-            out["maximum"] = maximum
-        return out
-
-    def per_arm(item: dict[str, Any], desc: str) -> dict[str, Any]:
-        return {
-            "type": "array",
-            "description": desc,
-            "items": item,
-            "minItems": K,
-            "maxItems": K,
-        }
-
-    properties: dict[str, Any] = {
-        "t": integer("slot number, 1..horizon", 1),
-        "x": integer(f"hidden state X_t, numbered 1..{n}", 1, n),
-        "arm": integer(f"channel (arm) played at slot t, numbered 1..{K}", 1, K),
-        "success": {"type": "boolean", "description": "r_t = Y[arm, x] = 1"},
-        "aoi": integer("age of information after slot t, in slots (aoi_0 = 1)", 1),
-        "oracle_aoi": integer("age of the oracle that plays the best arm on the same X path", 1),
-        "regret": integer("pathwise AoI regret sum_{s<=t} (aoi_s - oracle_aoi_s), in slots"),
-        "estimator": {
-            "type": "number",
-            "description": "the paper's estimator sum_{s<=t} aoi_s - t / mu*, in slots",
-        },
-        "override": {
-            "type": "boolean",
-            "description": "the AoI-aware rule chose the arm (argmax mu_hat); false otherwise",
-        },
-        "mu_hat": per_arm(
-            {"type": "number", "minimum": 0, "maximum": 1},
-            "empirical mean reward of arms 1..K after the slot's update (0 if never pulled)",
-        ),
-        "pulls": per_arm(
-            {"type": "integer", "minimum": 0}, "pulls of arms 1..K after the slot's update"
-        ),
-        "candidates": {
-            "type": "array",
-            "description": "arms (1..K, ascending) the arm was chosen from: A_t + {k_emp} for "
-            "the correlated policies, every arm otherwise",
-            "items": {"type": "integer", "minimum": 1, "maximum": K},
-            "minItems": 1,
-            "maxItems": K,
-            "uniqueItems": True,
-        },
-    }
-    return {
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "$id": f"urn:corraoi:slot-event:v{FORMAT_VERSION}",
-        "title": SCHEMA_NAME,
-        "description": f"One slot of a corraoi run ({FORMAT_NAME} version {FORMAT_VERSION}); "
-        "arms and states are numbered from 1.",
-        "type": "object",
-        "properties": properties,
-        "required": list(MESSAGE_KEYS),
-        "additionalProperties": False,
-    }
-
-
-def schema_bytes(config: RunConfig) -> bytes:
-    return json.dumps(slot_schema(config), indent=1).encode()
-
-
-def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[str, str]:
-    """The ``corraoi.run`` metadata record: flat strings, plus the full config as JSON."""
-    inst = config.instance
-    theory = analyse(inst)
-    return {
-        "format": FORMAT_NAME,
-        "format_version": str(config.format_version),
-        "corraoi_version": config.version,
-        "label": config.label,
-        "instance": inst.name,
-        "policy": config.policy.name,
-        "params": json.dumps(config.policy.params, sort_keys=True),
-        "seed": str(config.seed),
-        "horizon": str(config.horizon),
-        "arms": str(inst.K),
-        "states": str(inst.n_states),
-        "p": json.dumps([float(v) for v in inst.p]),
-        "Y": json.dumps(inst.Y.astype(int).tolist()),
-        "mu": json.dumps([float(v) for v in theory.mu]),
-        "best_arm": str(theory.best_arm + 1),
-        "mu_star": repr(float(theory.mu_star)),
-        "competitive_arms": json.dumps([a + 1 for a in theory.competitive]),
-        "numbering": "arms and states from 1",
-        "log_time": f"t * {NS_PER_SLOT} ns",
-        "flush_every": str(flush_every),
-        "config": json.dumps(config.to_dict(), sort_keys=True),
-    }
-
-
-def end_metadata(
-    *, slots: int, horizon: int, last: SlotBlock | None, error: str | None = None
-) -> dict[str, str]:
-    """The ``corraoi.end`` metadata record written by a writer that finished its file
-    (``error``: the run stopped on that error, status ``failed``)."""
-    status = "complete" if slots >= horizon else "interrupted"
-    out = {"status": "failed" if error is not None else status, "slots": str(slots)}
-    if error is not None:
-        out["error"] = error
-    if last is not None and len(last):
-        out["regret"] = str(int(last.regret[-1]))
-        out["estimator"] = repr(float(last.estimator[-1]))
-        out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
-    return out
-
-
-class BlockEncoder:
-    """Encodes a SlotBlock into one JSON message per slot, a column at a time.
-
-    Numbers are formatted by orjson a whole column at a time (shortest round-trip text, so
-    the decoder gets back the same float64 values); the messages are then put together by
-    one ``bytes.join`` over the columns interleaved with the constant key texts, and split
-    at a separator no JSON text of ours contains (a newline). That is about twice as fast
-    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py).
-    """
-
-    def __init__(self, K: int) -> None:
-        self.K = int(K)
-        self._weights = (1 << np.arange(self.K, dtype=np.int64)) if self.K <= 62 else None
-        self._sets: dict[int, bytes] = {}
-
-    def _candidates(self, mask: np.ndarray) -> list[bytes]:
-        if self._weights is None:  # too many arms for a bit code: one row at a time
-            return [orjson.dumps(np.flatnonzero(row) + 1, option=_NUMPY) for row in mask]
-        codes, inverse = np.unique(mask.astype(np.int64) @ self._weights, return_inverse=True)
-        sets = self._sets
-        texts = np.empty(len(codes), dtype=object)
-        for i, code in enumerate(codes.tolist()):
-            text = sets.get(code)
-            if text is None:
-                text = orjson.dumps([k + 1 for k in range(self.K) if code >> k & 1])
-                sets[code] = text
-            texts[i] = text
-        return texts[inverse].tolist()
-
-    def encode(self, b: SlotBlock) -> list[bytes]:
-        n = len(b)
-        if n == 0:
-            return []
-        columns: list[list[bytes]] = [
-            _items(b.t),
-            _items(b.x + 1),
-            _items(b.arm + 1),
-            _BOOLS[np.asarray(b.success, dtype=np.intp)].tolist(),
-            _items(b.aoi),
-            _items(b.oracle_aoi),
-            _items(b.regret),
-            _items(b.estimator),
-            _BOOLS[np.asarray(b.override, dtype=np.intp)].tolist(),
-            _rows(b.mu_hat, n),
-            _rows(b.pulls, n),
-            self._candidates(b.candidates),
-        ]
-        step = 2 * len(_KEYS) + 1
-        parts: list[bytes] = [b"}\n"] * (step * n)  # every message ends with "}\n"
-        for i, (key, column) in enumerate(zip(_KEYS, columns, strict=True)):
-            parts[2 * i :: step] = [key] * n
-            parts[2 * i + 1 :: step] = column
-        return b"".join(parts)[:-1].split(b"\n")
-
-
-#: The text before each value of a message; ``encode`` ends each with "}\n" and splits at
-#: the newlines (orjson escapes any newline inside a JSON string).
-_KEYS = (
-    b'{"t":',
-    b',"x":',
-    b',"arm":',
-    b',"success":',
-    b',"aoi":',
-    b',"oracle_aoi":',
-    b',"regret":',
-    b',"estimator":',
-    b',"override":',
-    b',"mu_hat":[',
-    b'],"pulls":[',
-    b'],"candidates":',
-)
-_BOOLS = np.array([b"false", b"true"], dtype=object)
-
-
-def _items(column: np.ndarray) -> list[bytes]:
-    """JSON text of each element of a 1-D numeric array."""
-    return orjson.dumps(np.ascontiguousarray(column), option=_NUMPY)[1:-1].split(b",")
-
-
-def _rows(table: np.ndarray, n: int) -> list[bytes]:
-    """JSON text of each row of a 2-D numeric array, without the brackets."""
-    if table.shape[1] == 0:
-        return [b""] * n
-    return orjson.dumps(np.ascontiguousarray(table), option=_NUMPY)[2:-2].split(b"],[")
 
 
 def empty_block(K: int) -> SlotBlock:
@@ -520,6 +305,58 @@ def _json_error(payloads: Sequence[bytes | memoryview], where: str) -> LogError:
     return LogError(f"{where}: the slot messages do not form valid JSON")
 
 
+# ----------------------------------------------------------------------- run metadata
+
+
+def check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
+    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
+    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
+    facts = {
+        "seed": str(config.seed),
+        "horizon": str(config.horizon),
+        "arms": str(config.instance.K),
+        "states": str(config.instance.n_states),
+        "policy": config.policy.name,
+        "instance": config.instance.name,
+    }
+    for key, value in facts.items():
+        if key in md and md[key] != value:
+            raise LogError(
+                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
+                f"{value!r} in the configuration; expected both to agree"
+            )
+
+
+def not_a_run_log(p: Path, library: str, sweep: bool = False) -> LogError:
+    """The error for an MCAP file that is not a slot log (``sweep``: it is a sweep log)."""
+    if sweep:
+        return LogError(
+            f"{p}: a corraoi sweep log (aggregated curves), not the log of one run; "
+            "draw it with `corraoi figure`"
+        )
+    who = f" (written by {library!r})" if library else ""
+    return LogError(f"{p}: an MCAP file but not a corraoi log{who}: no {RUN_METADATA} metadata")
+
+
+def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
+    """The ``corraoi.run`` record names this format, holds a config, and a version we read."""
+    if md.get("format") != FORMAT_NAME or "config" not in md:
+        raise not_a_run_log(p, library)
+    try:
+        version = int(md.get("format_version", ""))
+    except ValueError:
+        raise LogError(
+            f"{p}: format_version {md.get('format_version')!r} is not an integer"
+        ) from None
+    if version > FORMAT_VERSION:
+        raise LogError(
+            f"{p}: written in log format version {version}, newer than the version "
+            f"{FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
+        )
+    if version < 1:
+        raise LogError(f"{p}: unknown log format version {version}")
+
+
 __all__ = [
     "ARM_FIELDS",
     "BlockEncoder",
@@ -529,14 +366,23 @@ __all__ = [
     "FORMAT_VERSION",
     "MAX_SLOT",
     "MCAP_INDEX_TYPES",
+    "MESSAGE_ENCODING",
+    "MESSAGE_KEYS",
     "NS_PER_SLOT",
     "RUN_METADATA",
     "SCALAR_FIELDS",
+    "SCHEMA_ENCODING",
     "SCHEMA_NAME",
+    "SWEEP_METADATA",
     "TOPIC",
+    "check_agrees",
+    "check_run_metadata",
     "decode_messages",
     "empty_block",
     "end_metadata",
+    "library_name",
+    "not_a_run_log",
     "run_metadata",
+    "schema_bytes",
     "slot_schema",
 ]

@@ -4,8 +4,8 @@ The server is the maintained ``foxglove-sdk`` package (the optional extra ``foxg
 imported only when ``--foxglove`` is asked for. What a client sees:
 
 - ``/corraoi/slot``: one JSON message per slot, with the very schema
-  (:func:`recorder.format.slot_schema`) and the very bytes
-  (:class:`recorder.format.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
+  (:func:`recorder.encode.slot_schema`) and the very bytes
+  (:class:`recorder.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
   the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
 - ``/corraoi/run``: the ``corraoi.run`` metadata record of the MCAP log as one JSON object
   (flat strings). The WebSocket protocol keeps no message for a client that connects
@@ -33,15 +33,11 @@ from typing import Any
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import CorraoiError, MissingExtraError, UsageError
 
-from .format import (
-    NS_PER_SLOT,
-    SCHEMA_NAME,
-    TOPIC,
-    BlockEncoder,
-    run_metadata,
-    schema_bytes,
-)
+from .encode import BlockEncoder, run_metadata, schema_bytes
 from .paths import Sink
+from .vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
+from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SLOT_TOPIC as TOPIC
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -53,8 +49,6 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 BACKLOG = 1024
 #: Topic of the run metadata record.
 RUN_TOPIC = "/corraoi/run"
-#: Topic of the sweep points.
-SWEEP_TOPIC = "/corraoi/sweep"
 
 
 class FoxgloveError(CorraoiError):
@@ -214,7 +208,7 @@ class FoxgloveServer:
 class FoxgloveSlotSink(Sink):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
-    The messages are :class:`recorder.format.BlockEncoder`'s, the MCAP log's bytes;
+    The messages are :class:`recorder.encode.BlockEncoder`'s, the MCAP log's bytes;
     ``log_time`` is ``t`` seconds. ``pace``: at most that many slots per second (the
     writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C).
     """
@@ -274,8 +268,8 @@ class FoxgloveSlotSink(Sink):
 
 def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
     return {
-        "title": "corraoi.run",
-        "description": "the corraoi.run metadata record of the MCAP log (flat strings)",
+        "title": RUN_METADATA,
+        "description": f"the {RUN_METADATA} metadata record of the MCAP log (flat strings)",
         "type": "object",
         "properties": {key: {"type": "string"} for key in meta},
     }

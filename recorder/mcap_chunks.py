@@ -47,7 +47,8 @@ from mcap.records import (
     SummaryOffset,
 )
 
-MAGIC = b"\x89MCAP0\r\n"
+from .vocab import MAGIC
+
 #: opcode u8, record length u64, channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE_HEADER = np.dtype(
     [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")]

@@ -1,7 +1,7 @@
 """McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
 
 The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
-so a file at ``<path>`` is always complete. Every :data:`~recorder.format.FLUSH_EVERY`
+so a file at ``<path>`` is always complete. Every :data:`~recorder.vocab.SLOT_FLUSH_EVERY`
 slots the current chunk is closed and handed to the operating system, so a writer killed
 with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
 the ``.partial`` file and says the log was cut short.
@@ -23,23 +23,8 @@ from mcap.records import Channel, Schema
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError
 
+from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes
 from .errors import WriteError
-from .format import (
-    END_METADATA,
-    FLUSH_EVERY,
-    MAX_SLOT,
-    MESSAGE_ENCODING,
-    NS_PER_SLOT,
-    RUN_METADATA,
-    SCHEMA_ENCODING,
-    SCHEMA_NAME,
-    TOPIC,
-    BlockEncoder,
-    end_metadata,
-    library_name,
-    run_metadata,
-    schema_bytes,
-)
 from .mcap_chunks import ChunkWriter
 from .paths import (
     Sink,
@@ -50,6 +35,18 @@ from .paths import (
     reason,
     unlink_partial,
 )
+from .vocab import (
+    MAX_SLOT,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    RUN_METADATA,
+    SCHEMA_ENCODING,
+    library_name,
+)
+from .vocab import RUN_END_METADATA as END_METADATA
+from .vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SLOT_TOPIC as TOPIC
 
 
 class McapSink(Sink):

@@ -5,28 +5,19 @@ streams the slots (memory bounded by one chunk plus one block). A log whose writ
 killed (no footer, or a ``.partial`` file) is read up to its last complete chunk and
 reported as cut short.
 
-The reader walks the file's records itself (with the ``mcap`` package's record classes
-for the rare records) because it must tell a truncated tail (recover) from a damaged
-chunk (refuse), which the ``mcap`` readers do not distinguish.
+The records are walked by :mod:`recorder.walk`, the one MCAP walker, which tells a
+truncated tail (recover) from a damaged chunk (refuse); this module reads the slots.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import stat
-import struct
-import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
-import zstandard
-from mcap.data_stream import ReadDataStream
-from mcap.opcode import Opcode
 from mcap.records import Header, Metadata
 
 from corraoi.block import FIELDS, RunConfig, SlotBlock
@@ -35,39 +26,28 @@ from corraoi.errors import CorraoiError
 from .errors import LogError
 from .format import (
     END_METADATA,
-    FORMAT_NAME,
-    FORMAT_VERSION,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     RUN_METADATA,
     SCHEMA_NAME,
     SWEEP_METADATA,
     TOPIC,
+    check_agrees,
+    check_run_metadata,
     decode_messages,
     empty_block,
+    not_a_run_log,
 )
 from .paths import lock_holder
-
-MAGIC = b"\x89MCAP0\r\n"
-#: The largest uncompressed chunk the reader accepts (writers close chunks at 64 MiB).
-_MAX_CHUNK = 1 << 28
-#: The most a chunk can expand when decompressed (zstd's limit is far below this).
-_MAX_RATIO = 1 << 16
-_RECORD = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
-_MSG_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log_time, publish_time
-_MSG_PEEK = struct.Struct("<BQH")  # opcode, length, and (for a message) its channel
-_U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
-_U64 = struct.Struct("<Q")
-
-
-@dataclass
-class _Chunk:
-    offset: int
-    start_time: int
-    end_time: int
-    records: bytes | None  # uncompressed records, when read
+from .walk import (
+    ChunkData,
+    Walker,
+    channel_payloads,
+    chunk_offsets,
+    find_channel,
+    last_log_time,
+    open_mcap,
+)
 
 
 @dataclass
@@ -178,33 +158,17 @@ class RunLog:
         K, n = self.config.instance.K, self.config.instance.n_states
         lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
         expected = first
-        with _open(self.path) as f:
-            walker = _Walker(f, self.path, stop_at=self._data_end)
-            for offset in _chunk_offsets(f, walker, lo, hi):
-                f.seek(offset)
-                opcode, length = _RECORD.unpack(f.read(_RECORD.size))
-                if opcode != Opcode.CHUNK:
-                    raise LogError(f"{self.path}: the chunk index points at byte {offset}, "
-                                   "which holds no chunk")
-                chunk = walker._chunk(offset, length, read=True)
-                assert chunk.records is not None
-                payloads = _payloads(chunk.records, self._channel_id, self.path, offset)
-                where = f"{self.path}: chunk at byte {offset}"
-                part = decode_messages(payloads, K, n, where=where)
+        with open_mcap(self.path) as f:
+            walker = Walker(f, self.path, stop_at=self._data_end)
+            for offset in chunk_offsets(f, walker, lo, hi):
+                chunk = walker.chunk_at(offset)
+                part = _decode(chunk, self._channel_id, self.path, K, n)
                 keep = (part.t >= first) & (part.t <= last)
                 if not keep.any():
                     continue
                 idx = np.flatnonzero(keep)
                 part = _slice(part, int(idx[0]), int(idx[-1]) + 1)
-                t = part.t
-                if t[0] != expected or not np.array_equal(
-                    t, np.arange(expected, expected + len(t), dtype=np.int64)
-                ):
-                    raise LogError(
-                        f"{where}: slots are not consecutive (expected slot {expected}, "
-                        f"got {int(t[0])}..{int(t[-1])})"
-                    )
-                expected += len(part)
+                expected = _follows(part, expected, self.path, offset)
                 yield part
         if expected != last + 1:
             raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
@@ -212,25 +176,16 @@ class RunLog:
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
         K, n = self.config.instance.K, self.config.instance.n_states
         expected = 1
-        with _open(self.path) as f:
-            walker = _Walker(f, self.path, stop_at=self._data_end)
+        with open_mcap(self.path) as f:
+            walker = Walker(f, self.path, stop_at=self._data_end)
             for kind, item in walker.records(read_chunks=True):
                 if kind != "chunk":
                     continue
-                assert isinstance(item, _Chunk) and item.records is not None
-                payloads = _payloads(item.records, self._channel_id, self.path, item.offset)
-                if not payloads:
+                assert isinstance(item, ChunkData)
+                part = _decode(item, self._channel_id, self.path, K, n)
+                if not len(part):
                     continue
-                where = f"{self.path}: chunk at byte {item.offset}"
-                part = decode_messages(payloads, K, n, where=where)
-                t = part.t
-                if t[0] != expected or not np.array_equal(
-                    t, np.arange(expected, expected + len(t), dtype=np.int64)
-                ):
-                    raise LogError(
-                        f"{where}: slots are not consecutive (expected slot {expected}, "
-                        f"got {int(t[0])}..{int(t[-1])})"
-                    )
+                _follows(part, expected, self.path, item.offset)
                 if expected + len(part) - 1 > self.n_slots:
                     part = _slice(part, 0, self.n_slots - expected + 1)
                 expected += len(part)
@@ -266,11 +221,11 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         raise LogError(f"{p}: no such file")
     if p.is_dir():
         raise LogError(f"{p}: is a directory, expected an MCAP log file")
-    with _open(p) as f:
+    with open_mcap(p) as f:
         size = os.fstat(f.fileno()).st_size
         if size == 0:
             raise LogError(f"{p}: empty file (0 bytes), not an MCAP log")
-        walker = _Walker(f, p)
+        walker = Walker(f, p)
         damage = ""
         expected = 1
         library = ""
@@ -300,20 +255,24 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                 assert isinstance(item, Metadata)
                 if item.name == RUN_METADATA and run_md is None:
                     run_md = dict(item.metadata)
-                    _check_run_metadata(p, run_md, library)
+                    check_run_metadata(p, run_md, library)
                 elif item.name == END_METADATA:
                     end_md = dict(item.metadata)
                 elif item.name == SWEEP_METADATA:
                     sweep = True
             elif kind == "chunk":
-                assert isinstance(item, _Chunk)
+                assert isinstance(item, ChunkData)
                 if run_md is None:
-                    raise _not_ours(p, library, sweep)
+                    raise not_a_run_log(p, library, sweep)
                 try:
                     if item.records is not None:
                         if not channel_id:
-                            channel_id = _find_channel(item.records, p, item.offset)
-                        last = _last_slot(item.records, channel_id, p, item.offset)
+                            channel_id = find_channel(
+                                item.records, p, item.offset, topic=TOPIC,
+                                encoding=MESSAGE_ENCODING, schema=SCHEMA_NAME,
+                            )  # fmt: skip
+                        t_ns = last_log_time(item.records, channel_id, p, item.offset)
+                        last = (t_ns or 0) // NS_PER_SLOT
                         if salvage:
                             expected = _validate_chunk(item, run_md, channel_id, p, expected)
                     else:  # not verified: trust the chunk header (our chunks hold only slots)
@@ -330,7 +289,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             elif kind == "footer":
                 finished = True
             elif kind == "data_end" and run_md is None:
-                raise _not_ours(p, library, sweep)
+                raise not_a_run_log(p, library, sweep)
         if run_md is None:
             if walker.records_seen == 0:
                 raise LogError(
@@ -341,14 +300,14 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                     f"{p}: the writer stopped before it wrote the run configuration; "
                     "nothing to read"
                 )
-            raise _not_ours(p, library, sweep)
+            raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {TOPIC} channel with schema {SCHEMA_NAME}")
     try:
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
-    _check_agrees(p, run_md, config)
+    check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
     if damage:
@@ -388,46 +347,6 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
 # ---------------------------------------------------------------------------- internals
 
 
-def _open(p: Path) -> BinaryIO:
-    """Open a log for reading; a FIFO, device or socket is refused at once (never read:
-    a FIFO would block and a device may never end)."""
-    try:
-        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-    except IsADirectoryError:
-        raise LogError(f"{p}: is a directory, expected an MCAP log file") from None
-    except OSError as exc:
-        raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    mode = os.fstat(fd).st_mode
-    if not stat.S_ISREG(mode):
-        os.close(fd)
-        if stat.S_ISDIR(mode):
-            raise LogError(f"{p}: is a directory, expected an MCAP log file")
-        kind = (
-            "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else ("a device")
-        )
-        raise LogError(f"{p}: is {kind}, not a regular file; expected an MCAP log file")
-    return os.fdopen(fd, "rb")
-
-
-def _check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
-    """The flat fields of the run metadata must say what its ``config`` says: MCAP has no
-    checksum over metadata, so a flipped digit in either shows up as a disagreement."""
-    facts = {
-        "seed": str(config.seed),
-        "horizon": str(config.horizon),
-        "arms": str(config.instance.K),
-        "states": str(config.instance.n_states),
-        "policy": config.policy.name,
-        "instance": config.instance.name,
-    }
-    for key, value in facts.items():
-        if key in md and md[key] != value:
-            raise LogError(
-                f"{p}: damaged run metadata: {key} is {md[key]!r} in its own field but "
-                f"{value!r} in the configuration; expected both to agree"
-            )
-
-
 def _strip_path(exc: LogError, p: Path) -> str:
     text = str(exc)
     prefix = f"{p}: "
@@ -435,7 +354,7 @@ def _strip_path(exc: LogError, p: Path) -> str:
 
 
 def _validate_chunk(
-    chunk: _Chunk,
+    chunk: ChunkData,
     run_md: dict[str, str] | None,
     channel_id: int,
     p: Path,
@@ -447,302 +366,26 @@ def _validate_chunk(
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
-    payloads = _payloads(chunk.records, channel_id, p, chunk.offset)
-    if not payloads:
-        return expected
-    where = f"{p}: chunk at byte {chunk.offset}"
-    part = decode_messages(payloads, config.instance.K, config.instance.n_states, where=where)
+    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
+    return _follows(part, expected, p, chunk.offset) if len(part) else expected
+
+
+def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int) -> SlotBlock:
+    """The slots of one chunk, decoded and validated (an empty block when it holds none)."""
+    assert chunk.records is not None
+    found = channel_payloads(chunk.records, channel_id, p, chunk.offset)
+    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}")
+
+
+def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
+    """The slots of ``part`` must be ``expected``, ``expected + 1``, ...; the next one."""
     t = part.t
     if t[0] != expected or not np.array_equal(
         t, np.arange(expected, expected + len(t), dtype=np.int64)
     ):
-        raise LogError(f"{where}: slots are not consecutive (expected slot {expected}, got "
-                       f"{int(t[0])}..{int(t[-1])})")  # fmt: skip
+        raise LogError(f"{p}: chunk at byte {offset}: slots are not consecutive (expected "
+                       f"slot {expected}, got {int(t[0])}..{int(t[-1])})")  # fmt: skip
     return expected + len(t)
-
-
-def _not_ours(p: Path, library: str, sweep: bool = False) -> LogError:
-    if sweep:
-        return LogError(
-            f"{p}: a corraoi sweep log (aggregated curves), not the log of one run; "
-            "draw it with `corraoi figure`"
-        )
-    who = f" (written by {library!r})" if library else ""
-    return LogError(f"{p}: an MCAP file but not a corraoi log{who}: no {RUN_METADATA} metadata")
-
-
-def _check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
-    if md.get("format") != FORMAT_NAME or "config" not in md:
-        raise _not_ours(p, library)
-    try:
-        version = int(md.get("format_version", ""))
-    except ValueError:
-        raise LogError(
-            f"{p}: format_version {md.get('format_version')!r} is not an integer"
-        ) from None
-    if version > FORMAT_VERSION:
-        raise LogError(
-            f"{p}: written in log format version {version}, newer than the version "
-            f"{FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
-        )
-    if version < 1:
-        raise LogError(f"{p}: unknown log format version {version}")
-
-
-class _Walker:
-    """Walks the top-level records of an MCAP file, stopping cleanly at a truncated tail."""
-
-    def __init__(self, f: BinaryIO, path: Path, *, stop_at: int = 0) -> None:
-        self.f = f
-        self.path = path
-        self.size = os.fstat(f.fileno()).st_size
-        self.stop_at = stop_at  # 0: read to the end; else stop after this offset
-        self.position = 0
-        self.records_seen = 0
-        self.truncated = False
-        # A file that ends with the MCAP magic was finished by its writer: a record that
-        # does not fit in it is damage, not a writer killed half-way.
-        self.sealed = False
-        if self.size >= 2 * len(MAGIC) + _RECORD.size:
-            here = f.tell()
-            f.seek(self.size - len(MAGIC))
-            self.sealed = f.read(len(MAGIC)) == MAGIC
-            f.seek(here)
-
-    def _bad(self, what: str) -> LogError:
-        return LogError(f"{self.path}: {what}")
-
-    def records(
-        self, *, read_chunks: bool, lazy_after_first: bool = False
-    ) -> Iterator[tuple[str, object]]:
-        f = self.f
-        head = f.read(len(MAGIC))
-        if head != MAGIC:
-            if MAGIC.startswith(head):
-                raise self._bad("not an MCAP file (too short to hold the MCAP magic bytes)")
-            raise self._bad("not an MCAP file (bad magic bytes)")
-        pos = len(MAGIC)
-        chunks = 0
-        while True:
-            if self.stop_at and pos >= self.stop_at:
-                return
-            head = f.read(_RECORD.size)
-            if len(head) < _RECORD.size:
-                if self.sealed:
-                    raise self._bad(
-                        f"damaged at byte {pos}: the file (finished, {self.size} bytes) ends "
-                        "there without its footer record"
-                    )
-                self.truncated = True
-                return
-            opcode, length = _RECORD.unpack(head)
-            body_at = pos + _RECORD.size
-            end = body_at + length
-            if end > self.size:
-                if self.sealed:
-                    raise self._bad(
-                        f"damaged at byte {pos}: a record (opcode 0x{opcode:02x}) claims "
-                        f"{length} bytes, past the end of the file ({self.size} bytes), "
-                        "though the file was finished"
-                    )
-                self.truncated = True  # the writer died in the middle of this record
-                return
-            if opcode == 0 or 0x0F < opcode < 0x80:
-                raise self._bad(f"damaged at byte {pos}: unknown MCAP record opcode "
-                                f"0x{opcode:02x}")  # fmt: skip
-            if self.records_seen == 0 and opcode != Opcode.HEADER:
-                raise self._bad("not an MCAP file (no header record after the magic bytes)")
-            self.records_seen += 1
-            if opcode == Opcode.CHUNK:
-                want = read_chunks and not (lazy_after_first and chunks > 0)
-                chunk = self._chunk(pos, length, read=want)
-                chunks += 1
-                self.position = end
-                yield "chunk", chunk
-            elif opcode in (Opcode.HEADER, Opcode.METADATA):
-                body = f.read(length)
-                stream = ReadDataStream(BytesIO(body))
-                try:
-                    record: object = (
-                        Header.read(stream) if opcode == Opcode.HEADER else Metadata.read(stream)
-                    )
-                except Exception:  # noqa: BLE001 - any parse failure means a damaged record
-                    raise self._bad(f"damaged MCAP record at byte {pos}") from None
-                self.position = end
-                yield ("header" if opcode == Opcode.HEADER else "metadata"), record
-            elif opcode == Opcode.DATA_END:
-                f.seek(end)
-                self.position = end
-                yield "data_end", None
-            elif opcode == Opcode.FOOTER:
-                f.seek(end)
-                self.position = end
-                if f.read(len(MAGIC)) != MAGIC:
-                    self.truncated = True
-                    return
-                yield "footer", None
-                return
-            else:
-                f.seek(end)
-                self.position = end
-            pos = end
-
-    def _chunk(self, pos: int, length: int, *, read: bool) -> _Chunk:
-        f = self.f
-        if length < _CHUNK_HEAD.size + 8:
-            raise self._bad(f"chunk at byte {pos} is damaged (a record of {length} bytes is "
-                            "too short for a chunk)")  # fmt: skip
-        fixed = f.read(_CHUNK_HEAD.size)
-        start, end_time, usize, crc, clen = _CHUNK_HEAD.unpack(fixed)
-        if _CHUNK_HEAD.size + clen + 8 > length:
-            raise self._bad(f"chunk at byte {pos} is damaged (its sizes do not add up)")
-        compression = f.read(clen).decode("utf-8", "replace")
-        (dlen,) = _U64.unpack(f.read(8))
-        data_at = pos + _RECORD.size + _CHUNK_HEAD.size + clen + 8
-        if data_at + dlen > pos + _RECORD.size + length:
-            raise self._bad(f"chunk at byte {pos} is damaged (its sizes do not add up)")
-        if usize > _MAX_CHUNK or (compression != "" and usize > _MAX_RATIO * dlen + 4096):
-            raise self._bad(
-                f"chunk at byte {pos} is damaged (it claims {usize} bytes uncompressed from "
-                f"{dlen} compressed; at most {min(_MAX_CHUNK, _MAX_RATIO * dlen + 4096)} "
-                "are possible)"
-            )
-        if not read:
-            f.seek(pos + _RECORD.size + length)
-            return _Chunk(pos, start, end_time, None)
-        data = f.read(dlen)
-        f.seek(pos + _RECORD.size + length)
-        if compression == "zstd":
-            try:
-                records = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
-            except zstandard.ZstdError as exc:
-                raise self._bad(f"chunk at byte {pos} is damaged (zstd: {exc})") from None
-        elif compression == "":
-            records = data
-        elif compression == "lz4":
-            try:
-                import lz4.frame
-            except ImportError:
-                raise self._bad(
-                    f"chunk at byte {pos} is lz4-compressed; install the lz4 package"
-                ) from None
-            records = lz4.frame.decompress(data)
-        else:
-            raise self._bad(f"chunk at byte {pos}: unknown compression {compression!r}")
-        if len(records) != usize:
-            raise self._bad(f"chunk at byte {pos} is damaged (wrong uncompressed size)")
-        if crc and zlib.crc32(records) != crc:
-            raise self._bad(f"chunk at byte {pos} is damaged (CRC mismatch)")
-        return _Chunk(pos, start, end_time, records)
-
-
-def _chunk_offsets(f: BinaryIO, walker: _Walker, lo: int, hi: int) -> list[int]:
-    """Byte offsets of the chunks whose message times overlap [lo, hi] (ns), in order."""
-    try:
-        from mcap.reader import SeekingReader
-
-        f.seek(0)
-        summary = SeekingReader(f).get_summary()
-    except Exception:  # noqa: BLE001 - no footer or summary: walk the chunk headers instead
-        summary = None
-    if summary is not None and summary.chunk_indexes:
-        return sorted(
-            c.chunk_start_offset
-            for c in summary.chunk_indexes
-            if c.message_end_time >= lo and c.message_start_time <= hi
-        )
-    f.seek(0)
-    return [
-        c.offset
-        for kind, c in walker.records(read_chunks=False)
-        if kind == "chunk" and isinstance(c, _Chunk) and c.end_time >= lo and c.start_time <= hi
-    ]
-
-
-def _records_in(data: bytes, path: Path, offset: int) -> Iterator[tuple[int, int, int]]:
-    """(opcode, body start, body end) of each record inside a chunk."""
-    pos, end = 0, len(data)
-    unpack = _RECORD.unpack_from
-    while pos < end:
-        if pos + _RECORD.size > end:
-            raise LogError(f"{path}: chunk at byte {offset} is damaged (a record is cut)")
-        opcode, length = unpack(data, pos)
-        body = pos + _RECORD.size
-        nxt = body + length
-        if nxt > end:
-            raise LogError(f"{path}: chunk at byte {offset} is damaged (a record is cut)")
-        yield opcode, body, nxt
-        pos = nxt
-
-
-def _payloads(data: bytes, channel_id: int, path: Path, offset: int) -> list[memoryview]:
-    """The payloads of the messages of ``channel_id`` inside a chunk, in order.
-
-    The hot loop of the reader: one ``unpack_from`` per record, payloads as views.
-    """
-    out: list[memoryview] = []
-    view = memoryview(data)
-    head = _MSG_PEEK.unpack_from
-    pos, end = 0, len(data)
-    skip = _RECORD.size + _MSG_HEAD.size
-    append = out.append
-    while pos < end:
-        if pos + _MSG_PEEK.size > end:
-            if pos + _RECORD.size <= end and data[pos] != Opcode.MESSAGE:
-                (length,) = _U64.unpack_from(data, pos + 1)
-                pos += _RECORD.size + length
-                continue
-            raise LogError(f"{path}: chunk at byte {offset} is damaged (a record is cut)")
-        opcode, length, channel = head(data, pos)
-        nxt = pos + _RECORD.size + length
-        if nxt > end:
-            raise LogError(f"{path}: chunk at byte {offset} is damaged (a record is cut)")
-        if opcode == Opcode.MESSAGE and channel == channel_id:
-            append(view[pos + skip : nxt])
-        pos = nxt
-    return out
-
-
-def _last_slot(data: bytes, channel_id: int, path: Path, offset: int) -> int:
-    """The log_time-derived slot of the last message of ``channel_id`` in the chunk (0: none)."""
-    last = 0
-    head = _MSG_HEAD.unpack_from
-    for opcode, body, _ in _records_in(data, path, offset):
-        if opcode == Opcode.MESSAGE:
-            channel, _, log_time, _ = head(data, body)
-            if channel == channel_id:
-                last = log_time // NS_PER_SLOT
-    return last
-
-
-def _string(data: bytes, at: int) -> tuple[str, int]:
-    (n,) = _U32.unpack_from(data, at)
-    at += 4
-    return data[at : at + n].decode("utf-8", "replace"), at + n
-
-
-def _find_channel(data: bytes, path: Path, offset: int) -> int:
-    """The id of the slot channel declared in the first chunk (0 if it is not there)."""
-    schemas: dict[int, str] = {}
-    for opcode, body, _ in _records_in(data, path, offset):
-        try:
-            if opcode == Opcode.SCHEMA:
-                (sid,) = _U16.unpack_from(data, body)
-                name, _ = _string(data, body + 2)
-                schemas[sid] = name
-            elif opcode == Opcode.CHANNEL:
-                cid, sid = struct.unpack_from("<HH", data, body)
-                topic, at = _string(data, body + 4)
-                encoding, _ = _string(data, at)
-                if (
-                    topic == TOPIC
-                    and encoding == MESSAGE_ENCODING
-                    and schemas.get(sid) == SCHEMA_NAME
-                ):
-                    return int(cid)
-        except struct.error:
-            raise LogError(f"{path}: chunk at byte {offset} is damaged") from None
-    return 0
 
 
 def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:

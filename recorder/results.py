@@ -230,11 +230,12 @@ def is_sweep_path(p: Path) -> bool:
 def _first_metadata(p: Path) -> str | None:
     """The name of the first metadata record of an MCAP file (None: none, or not MCAP)."""
     from mcap.records import Metadata
-    from mcap.stream_reader import StreamReader
+
+    from .walk import Walker
 
     try:
         with open(p, "rb") as f:
-            for record in StreamReader(f, skip_magic=False).records:
+            for _, record in Walker(f, p).records(read_chunks=False):
                 if isinstance(record, Metadata):
                     return str(record.name)
     except Exception:  # noqa: BLE001 - not MCAP or damaged: the slot-log reader says why

@@ -9,7 +9,9 @@ runs, horizon, seed, checkpoints, version) is stored in the metadata record
 
 The writer is byte-reproducible: no wall clock anywhere (log_time = publish_time =
 ``t * NS_PER_SLOT``, sequence = 1-based index of the message in the file). It writes
-``<path>.partial`` and renames it to ``path`` only when closed normally.
+``<path>.partial`` and renames it to ``path`` only when closed normally. The reader
+(:func:`read_sweep`, :class:`SweepLog`) lives in :mod:`recorder.sweep_read` and is
+re-exported here.
 """
 
 from __future__ import annotations
@@ -17,21 +19,17 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 import orjson
-from mcap.records import Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
 
-from .errors import LogError, WriteError
-from .format import MCAP_INDEX_TYPES, SWEEP_METADATA
-from .paths import PARTIAL_SUFFIX, Sink, open_partial, partial_path, publish, reason
+from .errors import WriteError
+from .paths import Sink, open_partial, partial_path, publish, reason
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
 from .style import (
@@ -43,61 +41,31 @@ from .style import (
     lighter,
     policy_color,
 )
+from .sweep_read import SweepCurve, SweepLog, SweepLogError, read_sweep, sweep_arms
+
+# The sweep log's names, defined in recorder.vocab, under this module's older short names.
+from .vocab import (
+    MCAP_INDEX_TYPES,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    SCHEMA_ENCODING,
+    SWEEP_METADATA,
+    library_name,
+)
+from .vocab import SWEEP_END_METADATA as END_METADATA
+from .vocab import SWEEP_FLUSH_EVERY as FLUSH_EVERY
+from .vocab import SWEEP_FORMAT_NAME as FORMAT_NAME
+from .vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
+from .vocab import SWEEP_MESSAGE_KEYS as MESSAGE_KEYS
+from .vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
+from .vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from .vocab import SWEEP_TOPIC as TOPIC
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
 
-#: Name of the format, stored under ``format`` in the sweep metadata.
-FORMAT_NAME = "corraoi.sweep-log"
-#: Version this code writes and the newest it reads. Version 2: a CI half-width that is
-#: not defined (one run) is an absent key, where version 1 wrote null (type lists such as
-#: ["number", "null"] are rejected by Foxglove's JSON-schema parser).
-FORMAT_VERSION = 2
-TOPIC = "/corraoi/sweep"
-SCHEMA_NAME = "corraoi.SweepPoint"
-MESSAGE_ENCODING = "json"
-SCHEMA_ENCODING = "jsonschema"
-#: Metadata record written when the file is opened: the sweep configuration.
-#: Metadata record written when the file is finished: how the sweep ended.
-END_METADATA = "corraoi.sweep.end"
-#: log_time = publish_time = t * NS_PER_SLOT: slot t shows as t seconds in MCAP tools.
-NS_PER_SLOT = 1_000_000_000
-#: The open chunk is closed and handed to the OS once FLUSH_EVERY messages wait in it and
-#: whenever the policy changes, so a killed sweep loses fewer than FLUSH_EVERY checkpoints.
-FLUSH_EVERY = 32
-#: Keys a message may lack: a half-width is absent with a single run.
-OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95")
-#: Message keys in the order the writer writes them.
-MESSAGE_KEYS = (
-    "policy",
-    "t",
-    "regret_mean",
-    "regret_ci95",
-    "estimator_mean",
-    "estimator_ci95",
-    "pull_share",
-)
-_MAGIC = b"\x89MCAP0\r\n"
-_SLOT_SCHEMA = "corraoi.SlotEvent"
-
-
-class SweepLogError(LogError):
-    """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
-
 
 # ---------------------------------------------------------------------------- format
-
-
-def _arms(config: dict[str, Any]) -> int:
-    try:
-        K = len(config["instance"]["Y"])
-    except (KeyError, TypeError) as exc:
-        raise ValueError(
-            f"sweep config needs instance.Y (the K x n table), missing {exc}"
-        ) from None
-    if K < 1:
-        raise ValueError("sweep config: instance.Y has no arms")
-    return K
 
 
 def sweep_schema(K: int) -> dict[str, Any]:
@@ -156,7 +124,7 @@ def sweep_metadata(config: dict[str, Any], *, flush_every: int = FLUSH_EVERY) ->
         "format_version": str(FORMAT_VERSION),
         "corraoi_version": str(config.get("version", __version__)),
         "instance": str(inst.get("name", "")),
-        "arms": str(_arms(config)),
+        "arms": str(sweep_arms(config)),
         "policies": json.dumps(policies),
         "runs": str(config.get("runs", "")),
         "horizon": str(config.get("horizon", "")),
@@ -194,7 +162,7 @@ class SweepMcapSink(Sink):
             raise ValueError(f"flush_every must be >= 1, got {flush_every}")
         self.path = Path(path)
         self.config = config
-        self.K = _arms(config)
+        self.K = sweep_arms(config)
         horizon = int(config.get("horizon", 0) or 0)
         if horizon * NS_PER_SLOT >= 2**64:
             raise ValueError(f"horizon {horizon} is too long for an MCAP sweep log")
@@ -212,7 +180,8 @@ class SweepMcapSink(Sink):
             self._writer = Writer(
                 self._stream, compression=CompressionType.ZSTD, index_types=MCAP_INDEX_TYPES
             )
-            self._writer.start(profile="", library=f"corraoi/{config.get('version', __version__)}")
+            library = library_name(str(config.get("version", __version__)))
+            self._writer.start(profile="", library=library)
             self._writer.add_metadata(SWEEP_METADATA, metadata)
             schema_id = self._writer.register_schema(
                 name=SCHEMA_NAME,
@@ -344,225 +313,6 @@ def _opt(v: float | None) -> float | None:
         return None
     v = float(v)
     return v if math.isfinite(v) else None
-
-
-# ---------------------------------------------------------------------------- reader
-
-
-@dataclass(frozen=True, eq=False)
-class SweepCurve:
-    """One policy's curve: arrays over its checkpoints (NaN where a half-width is null)."""
-
-    policy: str
-    t: np.ndarray  # (n,) int64
-    regret_mean: np.ndarray  # (n,) float64
-    regret_ci95: np.ndarray
-    estimator_mean: np.ndarray
-    estimator_ci95: np.ndarray
-    pull_share: np.ndarray  # (n, K), arm order (arm k + 1 in column k)
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-
-@dataclass(eq=False)
-class SweepLog:
-    """A sweep log read back: its config, its policies in order, and their curves."""
-
-    path: Path
-    config: dict[str, Any]
-    policies: list[str]
-    curves: dict[str, SweepCurve]
-    library: str = ""
-    status: str = "complete"  # complete | interrupted | truncated
-    messages: int = 0
-    metadata: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def notable(self) -> dict[str, Any] | None:
-        """The runs worth watching (corraoi.notable), None in logs from before they were named."""
-        value = self.config.get("notable")
-        return value if isinstance(value, dict) else None
-
-    @property
-    def complete(self) -> bool:
-        return self.status == "complete"
-
-    @property
-    def instance_name(self) -> str:
-        inst = self.config.get("instance") or {}
-        return str(inst.get("name", "?"))
-
-    @property
-    def runs(self) -> int | None:
-        v = self.config.get("runs")
-        return int(v) if v is not None else None
-
-    @property
-    def horizon(self) -> int | None:
-        v = self.config.get("horizon")
-        return int(v) if v is not None else None
-
-    @property
-    def K(self) -> int:
-        return _arms(self.config)
-
-
-def _check_file(path: Path) -> None:
-    if path.is_dir():
-        hint = ""
-        if (path / "sweep.mcap").is_file():
-            hint = f" (did you mean {path / 'sweep.mcap'}?)"
-        raise SweepLogError(f"{path}: is a directory, not a sweep log{hint}")
-    if not path.exists():
-        part = partial_path(path)
-        hint = f" ({part} exists: the sweep did not finish)" if part.is_file() else ""
-        raise SweepLogError(f"{path}: no such sweep log{hint}")
-    try:
-        with open(path, "rb") as f:
-            magic = f.read(len(_MAGIC))
-    except OSError as exc:
-        raise SweepLogError(f"{path}: cannot read the sweep log: {reason(exc)}") from None
-    if magic != _MAGIC:
-        raise SweepLogError(f"{path}: not an MCAP file (expected a sweep log, sweep.mcap)")
-
-
-def read_sweep(path: str | os.PathLike[str]) -> SweepLog:
-    """Read a sweep log (also a ``.partial`` file or one cut short: every complete chunk)."""
-    p = Path(path)
-    _check_file(p)
-    schemas: dict[int, Schema] = {}
-    channel_id: int | None = None
-    payloads: list[bytes] = []
-    meta: dict[str, str] | None = None
-    end: dict[str, str] | None = None
-    library = ""
-    truncated = False
-    other_schemas: set[str] = set()
-    try:
-        with open(p, "rb") as f:
-            for record in StreamReader(f).records:
-                if isinstance(record, Message):
-                    if record.channel_id == channel_id:
-                        payloads.append(record.data)
-                elif isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    sch = schemas.get(record.schema_id)
-                    if (
-                        record.topic == TOPIC
-                        and sch is not None
-                        and sch.name == SCHEMA_NAME
-                        and channel_id is None
-                    ):
-                        channel_id = record.id
-                    elif sch is not None:
-                        other_schemas.add(sch.name)
-                elif isinstance(record, Metadata):
-                    if record.name == SWEEP_METADATA and meta is None:
-                        meta = dict(record.metadata)
-                    elif record.name == END_METADATA:
-                        end = dict(record.metadata)
-                elif isinstance(record, Header):
-                    library = record.library
-    except OSError as exc:
-        raise SweepLogError(f"{p}: cannot read the sweep log: {reason(exc)}") from None
-    except Exception:  # noqa: BLE001 - a damaged tail: keep every complete record before it
-        truncated = True
-    if channel_id is None or meta is None:
-        if _SLOT_SCHEMA in other_schemas:
-            raise SweepLogError(
-                f"{p}: a per-slot run log, not a sweep log (figures read the sweep.mcap "
-                "written by `corraoi sweep -o DIR`)"
-            )
-        what = "is cut short before its header" if truncated else "is not a corraoi sweep log"
-        raise SweepLogError(f"{p}: {what} (no {SCHEMA_NAME} channel {TOPIC} with its metadata)")
-    return _build(p, meta, end, payloads, library=library, truncated=truncated)
-
-
-def _build(
-    p: Path,
-    meta: dict[str, str],
-    end: dict[str, str] | None,
-    payloads: list[bytes],
-    *,
-    library: str,
-    truncated: bool,
-) -> SweepLog:
-    version = meta.get("format_version", "")
-    if not version.isdigit():
-        raise SweepLogError(f"{p}: the sweep metadata has no valid format_version ({version!r})")
-    if int(version) > FORMAT_VERSION:
-        raise SweepLogError(
-            f"{p}: written by a newer corraoi (sweep log format version {version}; this one "
-            f"reads up to {FORMAT_VERSION}): upgrade corraoi"
-        )
-    try:
-        config = json.loads(meta["config"])
-        K = _arms(config)
-    except (KeyError, ValueError) as exc:
-        raise SweepLogError(f"{p}: the sweep metadata holds no valid config ({exc})") from None
-    try:
-        rows = orjson.loads(b"[" + b",".join(payloads) + b"]")
-    except orjson.JSONDecodeError as exc:
-        raise SweepLogError(f"{p}: a sweep message is not valid JSON ({exc})") from None
-    grouped: dict[str, list[dict[str, Any]]] = {}
-    for i, row in enumerate(rows):
-        if not isinstance(row, dict) or not isinstance(row.get("policy"), str):
-            raise SweepLogError(f"{p}: sweep message {i + 1} has no policy name")
-        grouped.setdefault(row["policy"], []).append(row)
-    curves = {name: _curve(p, name, group, K) for name, group in grouped.items()}
-    if truncated:
-        status = "truncated"
-    elif end is None:
-        status = "interrupted"
-    else:
-        status = end.get("status", "interrupted")
-    if p.name.endswith(PARTIAL_SUFFIX) and status == "complete":
-        status = "interrupted"
-    return SweepLog(
-        path=p,
-        config=config,
-        policies=list(grouped),
-        curves=curves,
-        library=library,
-        status=status,
-        messages=len(rows),
-        metadata=meta,
-    )
-
-
-def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve:
-    def column(key: str) -> np.ndarray:
-        # an absent key (version 2) or null (version 1) is an undefined half-width
-        if key in OPTIONAL_KEYS:
-            values = [r.get(key) for r in rows]
-        else:
-            values = [r[key] for r in rows]
-        return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
-
-    try:
-        t = np.array([r["t"] for r in rows], dtype=np.int64)
-        curve = SweepCurve(
-            policy=name,
-            t=t,
-            regret_mean=column("regret_mean"),
-            regret_ci95=column("regret_ci95"),
-            estimator_mean=column("estimator_mean"),
-            estimator_ci95=column("estimator_ci95"),
-            pull_share=np.array([r["pull_share"] for r in rows], dtype=np.float64).reshape(
-                len(rows), K
-            ),
-        )
-    except KeyError as exc:
-        raise SweepLogError(f"{p}: a sweep message of {name} lacks the field {exc}") from None
-    except (TypeError, ValueError) as exc:
-        raise SweepLogError(
-            f"{p}: a sweep message of {name} has a field of the wrong type or size ({exc})"
-        ) from None
-    if t.size > 1 and np.any(np.diff(t) <= 0):
-        raise SweepLogError(f"{p}: the checkpoints of {name} are not in increasing order")
-    return curve
 
 
 __all__ = [

@@ -16,13 +16,11 @@ RUN.mcap`` is the usual call; the source is never modified.
 from __future__ import annotations
 
 import errno
-import io
 import os
-import struct
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 from .runs import require_slots
 
@@ -128,33 +126,29 @@ def recover(
     )
 
 
-def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
+def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     """Copy the records of ``log`` (open as ``fin``) into a new MCAP writer on ``fout``.
 
     Returns the byte offset after the last complete record read from the source.
     """
-    from mcap.exceptions import EndOfFile, McapError
-    from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
+    from recorder.encode import end_metadata as make_end
     from recorder.errors import LogError
-    from recorder.format import (
-        END_METADATA,
-        FLUSH_EVERY,
-        MCAP_INDEX_TYPES,
-        NS_PER_SLOT,
-        TOPIC,
-        decode_messages,
-    )
-    from recorder.format import end_metadata as make_end
+    from recorder.format import decode_messages
+    from recorder.vocab import MCAP_INDEX_TYPES, NS_PER_SLOT
+    from recorder.vocab import RUN_END_METADATA as END_METADATA
+    from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+    from recorder.vocab import SLOT_TOPIC as TOPIC
+    from recorder.walk import Walker
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
     try:
         every = max(int(log.metadata.get("flush_every", FLUSH_EVERY)), 1)
     except ValueError:
         every = FLUSH_EVERY
-    complete = _complete_length(fin)
+    complete = _complete_length(fin, src)
     if log.damage:  # stop before the damaged record: what follows is not trusted
         complete = min(complete, log._data_end)
     fin.seek(0)
@@ -168,51 +162,46 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     started = False
     written = 0
     last_payload: bytes | None = None
-    try:
-        for rec in StreamReader(_Bounded(fin, complete), validate_crcs=True).records:
-            if isinstance(rec, Header):
-                writer.start(profile=rec.profile, library=rec.library)
-                started = True
-            elif isinstance(rec, Metadata):
-                if rec.name != END_METADATA:
-                    writer.add_metadata(rec.name, dict(rec.metadata))
-            elif isinstance(rec, Schema):
-                if rec.id not in schemas:
-                    schemas[rec.id] = writer.register_schema(
-                        name=rec.name, encoding=rec.encoding, data=rec.data
-                    )
-            elif isinstance(rec, Channel):
-                if rec.id not in channels:
-                    channels[rec.id] = writer.register_channel(
-                        topic=rec.topic,
-                        message_encoding=rec.message_encoding,
-                        schema_id=schemas.get(rec.schema_id, 0),
-                        metadata=dict(rec.metadata),
-                    )
-                    if rec.topic == TOPIC:
-                        slot_channels.add(rec.id)
-            elif isinstance(rec, Message):
-                if rec.channel_id not in channels:
-                    continue
-                is_slot = rec.channel_id in slot_channels
-                t = rec.log_time // NS_PER_SLOT
-                if is_slot and t > n_slots:
-                    continue
-                writer.add_message(
-                    channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
-                    rec.sequence,
-                )  # fmt: skip
-                if is_slot:
-                    written += 1
-                    last_payload = rec.data
-                    if t % every == 0:
-                        writer.flush()
-            elif isinstance(rec, (DataEnd, Footer)):
-                break
-    except EndOfFile:
-        pass  # the end of the complete records of a killed writer's file
-    except (McapError, struct.error, ValueError) as exc:
-        raise LogError(f"{src}: damaged MCAP data ({exc or type(exc).__name__})") from None
+    for rec in Walker(fin, src, stop_at=complete).mcap_records():
+        if rec is None:  # the data end: the summary is the writer's to make
+            break
+        if isinstance(rec, Header):
+            writer.start(profile=rec.profile, library=rec.library)
+            started = True
+        elif isinstance(rec, Metadata):
+            if rec.name != END_METADATA:
+                writer.add_metadata(rec.name, dict(rec.metadata))
+        elif isinstance(rec, Schema):
+            if rec.id not in schemas:
+                schemas[rec.id] = writer.register_schema(
+                    name=rec.name, encoding=rec.encoding, data=rec.data
+                )
+        elif isinstance(rec, Channel):
+            if rec.id not in channels:
+                channels[rec.id] = writer.register_channel(
+                    topic=rec.topic,
+                    message_encoding=rec.message_encoding,
+                    schema_id=schemas.get(rec.schema_id, 0),
+                    metadata=dict(rec.metadata),
+                )
+                if rec.topic == TOPIC:
+                    slot_channels.add(rec.id)
+        elif isinstance(rec, Message):
+            if rec.channel_id not in channels:
+                continue
+            is_slot = rec.channel_id in slot_channels
+            t = rec.log_time // NS_PER_SLOT
+            if is_slot and t > n_slots:
+                continue
+            writer.add_message(
+                channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
+                rec.sequence,
+            )  # fmt: skip
+            if is_slot:
+                written += 1
+                last_payload = rec.data
+                if t % every == 0:
+                    writer.flush()
     if not started:
         raise LogError(f"{src}: no MCAP header record")
     if written != n_slots:
@@ -228,54 +217,21 @@ def _copy(log: RunLog, fin: IO[bytes], fout: IO[bytes]) -> int:
     return complete
 
 
-_MAGIC = b"\x89MCAP0\r\n"
-_RECORD = struct.Struct("<BQ")
-_FOOTER = 0x02
+def _complete_length(f: BinaryIO, path: Path) -> int:
+    """Bytes from the start of the file to the end of its last complete record (with the
+    closing magic after a footer), as the MCAP walker finds them; damage ends the count
+    where it starts."""
+    from recorder.errors import LogError
+    from recorder.walk import Walker
 
-
-def _complete_length(f: IO[bytes]) -> int:
-    """Bytes from the start of the file to the end of its last complete record."""
-    size = os.fstat(f.fileno()).st_size
     f.seek(0)
-    if f.read(len(_MAGIC)) != _MAGIC:
-        return 0
-    pos = len(_MAGIC)
-    while True:
-        head = f.read(_RECORD.size)
-        if len(head) < _RECORD.size:
-            return pos
-        opcode, length = _RECORD.unpack(head)
-        end = pos + _RECORD.size + length
-        if end > size:
-            return pos  # the writer died inside this record
-        pos = end
-        if opcode == _FOOTER:
-            return min(pos + len(_MAGIC), size)
-        f.seek(pos)
-
-
-class _Bounded(io.RawIOBase):
-    """The first ``limit`` bytes of ``f``, as a readable stream."""
-
-    def __init__(self, f: IO[bytes], limit: int) -> None:
-        super().__init__()
-        self.f = f
-        self.left = limit
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, buffer: Any) -> int:
-        data = self.read(len(buffer))
-        buffer[: len(data)] = data
-        return len(data)
-
-    def read(self, n: int = -1) -> bytes:
-        if n is None or n < 0 or n > self.left:
-            n = self.left
-        data = self.f.read(n)
-        self.left -= len(data)
-        return data
+    walker = Walker(f, path)
+    try:
+        for _ in walker.records(read_chunks=False):
+            pass
+    except LogError:
+        pass
+    return walker.position
 
 
 def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
