@@ -19,20 +19,18 @@ import click
 
 from ..errors import ConfigError, UsageError
 from ..text import safe_text
-from .common import (
+from .common import handle_errors, keep_pandas_out, warn
+from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
+from .options import (
     backend_option,
     channel_option,
-    handle_errors,
     horizon_option,
     instance_option,
-    keep_pandas_out,
     output_option,
     param_options,
     policy_option,
     seed_option,
-    warn,
 )
-from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 
 DEFAULT_OUT = "runs/{label}.mcap"
 _PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}", "{run}", "{from}")

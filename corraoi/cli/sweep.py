@@ -17,19 +17,17 @@ import click
 from .. import limits
 from ..errors import ConfigError, CorraoiError
 from ..text import safe_text
-from .common import (
+from .common import handle_errors, say, warn
+from .options import (
     CHECKPOINTS,
     RUNS,
     WORKERS,
     backend_option,
     channel_option,
-    handle_errors,
     horizon_option,
     output_option,
     policy_option,
-    say,
     seed_option,
-    warn,
 )
 
 #: From this many run-slots (about a minute here) a sweep states its size before it starts.

@@ -17,8 +17,9 @@ import click
 
 from ..errors import UsageError
 from ..text import safe_text
-from .common import errors_exit, handle_errors, keep_pandas_out, output_option, say, warn
+from .common import errors_exit, handle_errors, keep_pandas_out, say, warn
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
+from .options import output_option
 
 F = TypeVar("F", bound=Callable[..., Any])
 
