@@ -36,7 +36,8 @@ from corraoi.engine import set_workers, simulate_run
 from corraoi.instance import load_instance
 from corraoi.policies import make_policy
 from recorder.mcap_sink import McapSink
-from recorder.rerun_sink import RerunSink, RrdOutput
+from recorder.rerun_sink import RerunSink
+from recorder.rrd_output import RrdOutput
 set_workers(1)
 config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, {horizon})
 with McapSink({mcap!r}, config, overwrite=True) as mcap, \\
@@ -91,7 +92,8 @@ def main() -> None:
     from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
     from recorder.mcap_chunks import ChunkWriter
     from recorder.mcap_sink import McapSink
-    from recorder.rerun_sink import RerunSink, RrdOutput
+    from recorder.rerun_sink import RerunSink
+    from recorder.rrd_output import RrdOutput
 
     config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, T)
     set_workers(1)  # as corraoi record does: one run, no use for the engine's threads

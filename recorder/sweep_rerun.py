@@ -1,19 +1,13 @@
 """SweepRerunSink: the aggregated curves of a sweep, streamed into a Rerun recording.
 
-Entities (timeline ``slot``, a sequence; arms numbered from 1):
-
-* ``sweep/regret/<policy>``: mean pathwise AoI regret at each checkpoint;
-  ``sweep/regret/<policy>/lo`` and ``.../hi``: the 95% confidence band (mean -/+ half-width;
-  absent with a single run), thin lines in a lighter shade of the policy's colour;
-* ``sweep/estimator/<policy>``: the paper's estimator sum aoi - t / mu*;
-* ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t.
+The entities, their paths and the default layout are :mod:`recorder.sweep_rerun_layout`'s
+(its names stay importable from here).
 
 Styling (``SeriesLines``/``SeriesPoints`` colours, names, widths) is logged once as static.
 Colours, widths and markers come from :mod:`recorder.style`: each base policy has a colour;
 its ``aoi-aware-`` variant uses the same colour with a thinner line plus a cross marker at
 every checkpoint, since Rerun 0.41 lines cannot be dashed. Units are in the view titles
-and series names (Rerun 0.41 has no axis titles). :func:`sweep_blueprint` is the default layout: the
-regret overlay on top, the pulls per arm of each policy in tabs below.
+and series names (Rerun 0.41 has no axis titles).
 
 No global Rerun state: everything goes through the ``RecordingStream`` passed in. With
 ``set_log_time_enabled(False)`` (done here) and an explicit recording id, two runs of the
@@ -23,15 +17,12 @@ row ids and the blueprint's ids are time-based or random).
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 
 from corraoi.sweep import SweepPoint
 
@@ -39,7 +30,6 @@ from .errors import WriteError
 from .paths import Sink, partial_path, publish, reason
 from .style import (
     MARKER_AOI_AWARE,
-    REGRET_UNIT,
     WIDTH_AOI_AWARE,
     WIDTH_ARM,
     WIDTH_BAND,
@@ -52,41 +42,22 @@ from .style import (
     policy_color,
 )
 from .sweep_log import FLUSH_EVERY
+from .sweep_rerun_layout import (
+    TIMELINE,
+    entity_part,
+    estimator_path,
+    policy_names,
+    pulls_path,
+    regret_path,
+    sweep_blueprint,
+    sweep_recording_id,
+)
 
-TIMELINE = "slot"
-ROOT = "sweep"
 #: Line widths (UI points) of the mean curves (AoI-aware and band: recorder.style).
 WIDTH_BASE = WIDTH_MAIN
-#: More policies than this: the regret view opens as small multiples (base policies beside
-#: their AoI-aware forms), each legend short enough to fit.
-SMALL_MULTIPLES_FROM = 6
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
 AOI_AWARE_MARKER_SIZE = MARKER_AOI_AWARE
-#: The named runs of a cell drawn over its mean (corraoi.notable).
-NOTABLE_KINDS = ("worst", "median", "best")
-
-
-def _part(name: str) -> str:
-    return rr.escape_entity_path_part(name)
-
-
-def regret_path(policy: str) -> str:
-    return f"{ROOT}/regret/{_part(policy)}"
-
-
-def estimator_path(policy: str) -> str:
-    return f"{ROOT}/estimator/{_part(policy)}"
-
-
-def pulls_path(policy: str, arm: int | None = None) -> str:
-    """``sweep/pulls/<policy>`` or, with ``arm`` (numbered from 1), one arm's entity."""
-    base = f"{ROOT}/pulls/{_part(policy)}"
-    return base if arm is None else f"{base}/{arm}"
-
-
-def _policy_names(config: dict[str, Any]) -> list[str]:
-    return [p["name"] if isinstance(p, dict) else str(p) for p in config.get("policies", [])]
 
 
 def _arm_labels(config: dict[str, Any]) -> list[str]:
@@ -94,93 +65,6 @@ def _arm_labels(config: dict[str, Any]) -> list[str]:
     K = len(inst.get("Y", []))
     names = list(inst.get("arms") or [str(k + 1) for k in range(K)])
     return [arm_label(k, names[k]) for k in range(K)]
-
-
-def sweep_recording_id(config: dict[str, Any]) -> str:
-    """A recording id that depends on the sweep configuration only."""
-    digest = hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()
-    return f"corraoi-sweep-{digest[:16]}"
-
-
-def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
-    """The default layout: the regret overlay (and estimator tab), pulls per policy below."""
-    inst = config.get("instance") or {}
-    title = (
-        f"AoI regret {REGRET_UNIT}, {inst.get('name', '?')}: {config.get('runs', '?')} runs, "
-        "mean and 95% band"
-    )
-    horizon = config.get("horizon")
-    # The whole horizon, not a window around the time cursor.
-    axis = (
-        rrb.TimeAxis(
-            view_range=rrb.TimeRange(
-                start=rrb.TimeRangeBoundary.absolute(seq=0),
-                end=rrb.TimeRangeBoundary.absolute(seq=int(horizon)),
-            )
-        )
-        if isinstance(horizon, int) and horizon > 0
-        else None
-    )
-    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
-    names = _policy_names(config)
-    # the runs worth watching (SweepRerunSink.mark) have a tab of their own: one worst run
-    # of 1,400 would flatten means of 20 in the overlay
-    notable = [p for p in names if p in ((config.get("notable") or {}).get("cells") or {})]
-    hidden = [f"- {regret_path(p)}/{k}" for p in notable for k in NOTABLE_KINDS]
-    overlay = rrb.TimeSeriesView(
-        origin=f"{ROOT}/regret", contents=[f"+ {ROOT}/regret/**", *hidden], name=title,
-        plot_legend=legend, axis_x=axis,
-    )  # fmt: skip
-    first: list[rrb.Container | rrb.View] = [overlay]
-    base = [p for p in names if not is_aoi_aware(p)]
-    aware = [p for p in names if is_aoi_aware(p)]
-    if len(names) > SMALL_MULTIPLES_FROM and base and aware:
-        # too many curves for one legend: the base policies beside their AoI-aware forms
-        # (same colours), the overlay of all in the next tab
-        def group(members: list[str], what: str) -> rrb.TimeSeriesView:
-            return rrb.TimeSeriesView(
-                origin=f"{ROOT}/regret",
-                contents=[*(f"+ {regret_path(p)}/**" for p in members), *hidden],
-                name=f"AoI regret {REGRET_UNIT}, {what}",
-                plot_legend=legend,
-                axis_x=axis,
-            )
-
-        first = [
-            rrb.Horizontal(group(base, "policies"), group(aware, "AoI-aware forms"),
-                           name=f"{title}: policies | AoI-aware forms"),
-            overlay,
-        ]  # fmt: skip
-    top = rrb.Tabs(
-        *first,
-        rrb.TimeSeriesView(
-            origin=f"{ROOT}/estimator",
-            name=f"estimator sum aoi - t / mu* {REGRET_UNIT}",
-            plot_legend=legend,
-            axis_x=axis,
-        ),
-        *([rrb.Grid(*(rrb.TimeSeriesView(origin=regret_path(p), axis_x=axis, plot_legend=legend,
-                                         name=f"{p}: mean, worst, median, best run")
-                      for p in notable), name="runs worth watching")] if notable else []),
-        active_tab=0,
-    )  # fmt: skip
-    pulls = [
-        rrb.TimeSeriesView(
-            origin=pulls_path(p),
-            name=f"pull share per arm [fraction], {p}",
-            axis_x=axis,
-            plot_legend=legend,
-        )  # fmt: skip
-        for p in names
-    ]
-    parts: list[rrb.Container | rrb.View] = [top]
-    if pulls:
-        parts.append(rrb.Tabs(*pulls, active_tab=0, name="pull share per arm"))
-    return rrb.Blueprint(
-        rrb.Vertical(*parts, row_shares=[3, 2] if pulls else None),
-        rrb.TimePanel(timeline=TIMELINE),
-        collapse_panels=False,
-    )
 
 
 def open_sweep_recording(
@@ -231,7 +115,7 @@ class SweepRerunSink(Sink):
         self._owned_path: Path | None = None
         self._overwrite = True
         recording.set_log_time_enabled(False)
-        for name in _policy_names(config):
+        for name in policy_names(config):
             self._style(name)
 
     @classmethod
@@ -357,7 +241,7 @@ class SweepRerunSink(Sink):
         """One notable run's regret path (``kind``: worst, median, best) drawn over the mean
         and band of ``policy``, thin, labelled with its run and seed (corraoi.notable)."""
         self.flush()
-        path = f"{regret_path(policy)}/{_part(kind)}"
+        path = f"{regret_path(policy)}/{entity_part(kind)}"
         color = self._colors.get(policy) or policy_color(policy)
         label = f"{policy} {kind}: run {run}, seed {seed}"
         self.recording.send_columns(path, indexes=[], columns=[

@@ -130,7 +130,7 @@ def test_the_walker_sees_a_circle_and_a_climb():
     """The check itself: a made-up circle is found, and corraoi.cli's climbs are seen."""
     assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == {frozenset("abc")}
     edges = _edges()
-    assert "recorder.reader" in edges["corraoi.cli.record"]
+    assert "recorder.reader" in edges["corraoi.cli.record_plan"]
     assert "corraoi.block" in edges["recorder.reader"]
 
 

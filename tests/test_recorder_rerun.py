@@ -15,13 +15,10 @@ from corraoi.block import SlotBlock  # noqa: E402
 from recorder.errors import OutputError  # noqa: E402
 from recorder.paths import partial_path  # noqa: E402
 from recorder.reader import open_log  # noqa: E402
-from recorder.rerun_sink import (  # noqa: E402
-    RerunSink,
-    RrdOutput,
-    new_recording,
-    one_run_blueprint,
-    run_path,
-)
+from recorder.rerun_layout import one_run_blueprint  # noqa: E402
+from recorder.rerun_names import new_recording, run_path  # noqa: E402
+from recorder.rerun_sink import RerunSink  # noqa: E402
+from recorder.rrd_output import RrdOutput  # noqa: E402
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 

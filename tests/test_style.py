@@ -17,8 +17,11 @@ from rerun.chunk import RrdReader
 import recorder.sweep_log as sweep_log
 from corraoi.theory import analyse
 from recorder import style
-from recorder.rerun_sink import RerunSink, RrdOutput, run_path
-from recorder.sweep_rerun import SweepRerunSink, regret_path
+from recorder.rerun_names import run_path
+from recorder.rerun_sink import RerunSink
+from recorder.rrd_output import RrdOutput
+from recorder.sweep_rerun import SweepRerunSink
+from recorder.sweep_rerun_layout import regret_path
 from viewer.compare import compare
 
 from .rrd_util import read_rrd

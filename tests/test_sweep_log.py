@@ -322,7 +322,8 @@ def _rgba(rgb: tuple[int, int, int]) -> int:
 def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
     from rerun.chunk import RrdReader
 
-    from recorder.sweep_rerun import open_sweep_recording, sweep_recording_id
+    from recorder.sweep_rerun import open_sweep_recording
+    from recorder.sweep_rerun_layout import sweep_recording_id
 
     config, points = sweep
     path = tmp_path / "sweep.rrd"
@@ -362,7 +363,8 @@ def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
 def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
     import rerun as rr
 
-    from recorder.sweep_rerun import SweepRerunSink, sweep_blueprint
+    from recorder.sweep_rerun import SweepRerunSink
+    from recorder.sweep_rerun_layout import sweep_blueprint
 
     config, points = small_sweep(("ts", "aoi-aware-ts"), runs=1, horizon=40)
     rec = rr.RecordingStream("corraoi", recording_id="test-sweep")

@@ -16,7 +16,7 @@ from corraoi.block import FIELDS, RunConfig, SlotBlock  # noqa: E402
 from corraoi.cli import main  # noqa: E402
 from corraoi.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder.rerun_sink import run_path  # noqa: E402
+from recorder.rerun_names import run_path  # noqa: E402
 from viewer import compare, replay  # noqa: E402
 from viewer.compare import (  # noqa: E402
     SUMMARY_ENTITY,

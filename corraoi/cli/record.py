@@ -1,5 +1,8 @@
 """``corraoi record``: simulate runs and stream every slot to an MCAP log and a Rerun recording.
 
+What to record and where is :mod:`corraoi.cli.record_plan`'s, running the runs and reporting
+them :mod:`corraoi.cli.record_loop`'s; this module is the command: its options, the refusals
+before anything runs, the viewers and the exit status.
 The recorder (and rerun) are imported inside the command, so ``corraoi --help`` stays fast.
 """
 
@@ -7,142 +10,26 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import sys
-import time
-from dataclasses import dataclass, field
-from pathlib import Path
-from types import FrameType
-from typing import Any
 
 import click
 
 from ..errors import ConfigError, UsageError
 from ..text import safe_text
-from .common import (
+from .common import handle_errors, keep_pandas_out, warn
+from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
+from .options import (
     backend_option,
     channel_option,
-    handle_errors,
     horizon_option,
     instance_option,
-    keep_pandas_out,
     output_option,
     param_options,
     policy_option,
     seed_option,
-    warn,
 )
-from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
-
-DEFAULT_OUT = "runs/{label}.mcap"
-_PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}", "{run}", "{from}")
-#: The default name of a run recorded from a sweep (--from): where it came from.
-FROM_OUT = "runs/{from}.mcap"
-
-
-@dataclass
-class _Plan:
-    config: Any  # RunConfig
-    mcap: Path
-    rrd: Path | None
-
-
-@dataclass
-class _Result:
-    plan: _Plan
-    slots: int = 0
-    wall: float = 0.0
-    regret: int | None = None
-    estimator: float | None = None
-    pulls: list[int] = field(default_factory=list)
-    mcap: Path | None = None
-    rrd: Path | None = None
-    #: seconds of the wall time spent compiling the kernels (first use only)
-    compile_s: float = 0.0
-
-
-class _Stop:
-    """SIGINT/SIGTERM/SIGHUP while recording: the first asks the loop to stop at the next block
-    (the files are then finished with every slot simulated so far); a second one raises
-    KeyboardInterrupt at once."""
-
-    def __init__(self) -> None:
-        self.signal: str | None = None
-        self._old: dict[int, Any] = {}
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        if self.signal is not None:
-            raise KeyboardInterrupt
-        self.signal = signal.Signals(signum).name
-
-    def __enter__(self) -> _Stop:
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            try:
-                self._old[sig] = signal.signal(sig, self._handle)
-            except ValueError:  # not the main thread: keep the defaults
-                pass
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-        self._old.clear()
-
-
-def _expand(template: str, config: Any, drill: Any = None) -> Path:
-    """The path ``template`` names for ``config``. The names filled in are data (from an
-    instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
-    climb out of one (``../``) or carry control codes into the file name."""
-    from ..text import safe_name
-
-    values = {
-        "{label}": config.label,
-        "{policy}": config.policy.name,
-        "{instance}": config.instance.name,
-        "{seed}": str(config.seed),
-        "{run}": str(drill.run) if drill is not None else str(config.seed),
-        "{from}": drill.name if drill is not None else config.label,
-    }
-    out = template
-    for key, value in values.items():
-        out = out.replace(key, safe_name(value))
-    return Path(out)
-
-
-def _rrd_beside(mcap: Path) -> Path:
-    return mcap.with_suffix(".rrd") if mcap.suffix == ".mcap" else Path(f"{mcap}.rrd")
-
-
-def _plans(
-    configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool, drills: Any = None
-) -> list[_Plan]:
-    several = len(configs) > 1
-    for option, value in (("-o/--output", out), ("--rrd", rrd)):
-        if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
-            raise UsageError(
-                f"{option} {value}: names one file but {len(configs)} "
-                f"{'runs' if drills else 'policies'} are recorded; put {{label}} or "
-                f"{'{from}' if drills else '{policy}'} in it (e.g. -o "
-                f"'runs/{'{from}' if drills else '{label}'}.mcap')"
-            )
-        if value is not None and value.strip() == "":
-            raise UsageError(f"{option}: empty path")
-    plans = []
-    for i, config in enumerate(configs):
-        drill = drills[i] if drills else None
-        mcap = _expand(out or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
-        path = None if no_rrd else (_expand(rrd, config, drill) if rrd else _rrd_beside(mcap))
-        plans.append(_Plan(config, mcap, path))
-    seen: dict[str, str] = {}
-    for plan in plans:
-        for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
-            if p is None:
-                continue
-            key = os.path.abspath(p)
-            if key in seen:
-                raise UsageError(f"{p}: used twice (as {seen[key]} and as {kind})")
-            seen[key] = kind
-    return plans
+from .record_loop import Outlets, record_all, report
+from .record_plan import from_sweep, plan_files, say_where_from, up_to_date
 
 
 @click.command("record")
@@ -246,7 +133,7 @@ def record(
     drills = None
     if from_ is not None:
         which = run if run is not None else "worst"
-        drills = _from_sweep(from_, which, cell, policy, param, c=c, beta=beta)
+        drills = from_sweep(from_, which, cell, policy, param, c=c, beta=beta)
         configs = [d.config for d in drills]
     else:
         if run is not None or cell:
@@ -256,15 +143,15 @@ def record(
         chan = parse_channel(channel, inst)
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
-    plans = _plans(configs, output, rrd, no_rrd, drills)
+    plans = plan_files(configs, output, rrd, no_rrd, drills)
     if drills:
-        _say_where_from(drills)  # once the plan stands: a refusal above stays one line
+        say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from recorder.errors import OutputError
     from recorder.paths import check_output
 
-    fresh = [p for p in plans if _up_to_date(p)] if not (force or viewer.asked or foxglove) else []
+    fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
     for p in fresh:
         click.echo(
@@ -302,9 +189,9 @@ def record(
     # a port in use: one error line; the files are still written
     live.start([p.config for p in plans], tolerant=True)
     viewer_failed = viewer.problem is not None or live.problem is not None
+    outlets = Outlets(viewer_url=viewer_url, overwrite=force, live=live, rerun=worker)
     try:
-        results, stopped, viewer_problem = _record_all(plans, viewer_url, force, live=live,
-                                                       rerun=worker)  # fmt: skip
+        results, stopped, viewer_problem = record_all(plans, outlets)
     except BaseException:
         viewer.stop()
         raise
@@ -315,7 +202,7 @@ def record(
     if viewer_problem:
         click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
-    _report(results, as_json=as_json)
+    report(results, as_json=as_json)
     if stopped:
         last = results[-1]
         click.echo(
@@ -328,236 +215,6 @@ def record(
     viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
-
-
-def _from_sweep(
-    folder: str,
-    run: str,
-    cells: tuple[str, ...],
-    policy: tuple[str, ...],
-    param: tuple[str, ...],
-    *,
-    c: float | None,
-    beta: float | None,
-) -> list[Any]:
-    """The runs ``--from`` names (corraoi.drill); what the sweep fixed cannot be given too."""
-    from click.core import ParameterSource
-
-    from ..drill import choose
-    from ..policies import make_policies, parse_param_assignments
-
-    ctx = click.get_current_context()
-    fixed = [("instance", "--instance"), ("horizon", "--horizon"), ("seed", "--seed"),
-             ("channel", "--channel")]  # fmt: skip
-    for name, option in fixed:
-        if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None):
-            raise UsageError(f"{option} and --from: the sweep fixes the {name} of its runs; "
-                             "leave out " + option)  # fmt: skip
-    given = ctx.get_parameter_source("policy") not in (ParameterSource.DEFAULT, None)
-    if not given and (param or c is not None or beta is not None):
-        raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
-                         "parameters (with --policy they set those of a policy added)")
-    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
-             if given else [])  # fmt: skip
-    return choose(folder, run, cells=cells, policies=specs, warn=warn)
-
-
-def _say_where_from(drills: list[Any]) -> None:
-    for d in drills:
-        what = "" if d.cell is not None else ", added"
-        label = d.cell if d.cell is not None else d.config.policy.label
-        click.echo(f"from {safe_text(d.folder)}: {safe_text(d.config.instance.name)} "
-                   f"{safe_text(label)}, run {d.run} (seed {d.config.seed}, {d.choice}{what})",
-                   err=True)  # fmt: skip
-
-
-def _up_to_date(plan: _Plan) -> bool:
-    """The plan's files exist, and its MCAP log is complete with the same configuration
-    (the version of corraoi included): recording again would write the same bytes."""
-    from recorder.errors import LogError
-    from recorder.reader import open_log
-
-    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
-        return False
-    try:
-        log = open_log(plan.mcap, verify=False)
-    except LogError:
-        return False
-    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
-
-
-def _record_all(
-    plans: list[_Plan], viewer_url: str | None, force: bool, *, live: Any = None,
-    rerun: Any = None,
-) -> tuple[list[_Result], str | None, str | None]:
-    """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from ..engine import set_workers
-    from ..progress import Progress
-
-    # One run has nothing to spread over threads, and idle numba workers compete with
-    # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
-    set_workers(1)
-    if rerun is None and (viewer_url is not None or any(p.rrd is not None for p in plans)):
-        keep_pandas_out()  # Rerun's logging goes through pyarrow
-    _prepare_kernels(plans)
-    results: list[_Result] = []
-    viewer_problem: str | None = None
-    total = sum(p.config.horizon for p in plans)
-    with _Stop() as stop, Progress(total, "record") as bar:
-        for plan in plans:
-            result = _Result(plan)
-            results.append(result)
-            problem = _record_one(plan, result, viewer_url, force, stop, bar, live=live,
-                                  rerun=rerun)  # fmt: skip
-            viewer_problem = viewer_problem or problem
-            if stop.signal:
-                return results, stop.signal, viewer_problem
-    return results, None, viewer_problem
-
-
-def _prepare_kernels(plans: list[_Plan]) -> None:
-    """Several policy families to record for the first time: compile their record kernels
-    at once, one worker process per core, before the first run starts."""
-    from .. import kernels
-    from ..policies.api import CompiledPolicy
-
-    classes = {}
-    for plan in plans:
-        if plan.config.streams != "cpu":  # a GPU sweep's run: the GPU kernel decides it
-            continue
-        cls = plan.config.policy.resolve()
-        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            classes[cls.name] = cls
-    kernels.prepare(classes.values(), record=True)
-
-
-def _record_one(
-    plan: _Plan,
-    result: _Result,
-    viewer_url: str | None,
-    force: bool,
-    stop: _Stop,
-    bar: Any,
-    *,
-    live: Any = None,
-    rerun: Any = None,
-) -> str | None:
-    """Record one run into its files; returns a problem with the viewer, if any."""
-    from .. import kernels
-    from ..pyengine import PolicyRuntimeError
-
-    start = time.perf_counter()
-    compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
-    try:
-        return _record_into(plan, result, viewer_url, force, stop, bar, start, compiled_before,
-                            live=live, rerun=rerun)  # fmt: skip
-    except PolicyRuntimeError as exc:
-        from recorder.paths import partial_path
-
-        where = partial_path(plan.mcap)
-        left = (f"; the log is left as {where}, marked failed" if where.exists()
-                else f"; no log written ({plan.mcap} would have held no slot)")
-        raise PolicyRuntimeError(f"{exc}{left}") from None
-
-
-def _record_into(
-    plan: _Plan,
-    result: _Result,
-    viewer_url: str | None,
-    force: bool,
-    stop: _Stop,
-    bar: Any,
-    start: float,
-    compiled_before: float,
-    *,
-    live: Any = None,
-    rerun: Any = None,
-) -> str | None:
-    from recorder.record import record_run
-
-    from .. import kernels
-
-    config = plan.config
-
-    fox = live.sink(config, lambda: stop.signal is not None) if live is not None else None
-
-    def on_block(block: Any) -> None:
-        if fox is not None:
-            fox.write(block)  # with --pace, this is what slows the run
-        result.slots = int(block.t[-1])
-        result.regret = int(block.regret[-1])
-        result.estimator = float(block.estimator[-1])
-        result.pulls = [int(v) for v in block.pulls[-1]]
-        bar.update(len(block), note=f"{config.label} slot {result.slots}")
-
-    try:
-        outcome = record_run(
-            config, plan.mcap, rrd=plan.rrd, viewer_url=viewer_url, overwrite=force,
-            on_block=on_block, should_stop=lambda: stop.signal is not None, rerun=rerun,
-        )  # fmt: skip
-    finally:
-        result.wall = time.perf_counter() - start
-        result.compile_s = kernels.compile_seconds - compiled_before
-    result.mcap, result.rrd = outcome.mcap, outcome.rrd
-    return outcome.viewer_problem
-
-
-def _report(results: list[_Result], *, as_json: bool) -> None:
-    from recorder.live import view_command
-
-    rrds = [str(r.rrd) for r in results if r.rrd is not None]
-    command = view_command(rrds) if rrds else None
-    if as_json:
-        out = {
-            "runs": [
-                {
-                    "label": r.plan.config.label,
-                    "policy": r.plan.config.policy.name,
-                    "params": r.plan.config.policy.params,
-                    "instance": r.plan.config.instance.name,
-                    "seed": r.plan.config.seed,
-                    "horizon": r.plan.config.horizon,
-                    "slots": r.slots,
-                    "complete": r.slots == r.plan.config.horizon,
-                    "regret": r.regret,
-                    "estimator": r.estimator,
-                    "pulls": r.pulls,
-                    "mcap": str(r.mcap) if r.mcap else None,
-                    "rrd": str(r.rrd) if r.rrd else None,
-                    "wall_s": round(r.wall, 4),
-                    "compile_s": round(r.compile_s, 4),
-                }
-                for r in results
-            ],
-            "view": command,
-        }
-        click.echo(json.dumps(out, indent=2))
-        return
-    for r in results:
-        c = r.plan.config
-        params = ", ".join(f"{k}={v:g}" for k, v in c.policy.params.items())
-        run_s = r.wall - r.compile_s
-        rate = r.slots / run_s if run_s > 0 else 0.0
-        compiled = f", after {r.compile_s:.1f} s compiling" if r.compile_s else ""
-        done = "" if r.slots == c.horizon else " (interrupted)"
-        click.echo(
-            f"{safe_text(c.policy.name)}{f' ({params})' if params else ''} on "
-            f"{safe_text(c.instance.name)}, seed "
-            f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
-            f"({rate:,.0f} slots/s{compiled})"
-        )
-        if r.regret is not None and r.estimator is not None:
-            click.echo(
-                f"  AoI regret at slot {r.slots}: {r.regret} (pathwise), "
-                f"{r.estimator:.1f} (paper's estimator sum aoi - t/mu*)"
-            )
-            pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
-            click.echo(f"  pulls per arm: {pulls}")
-        click.echo(f"  MCAP log:        {safe_text(r.mcap)}")
-        if r.rrd is not None:
-            click.echo(f"  Rerun recording: {safe_text(r.rrd)}")
-    if command:
-        click.echo(f"open in the Rerun viewer:  {safe_text(command)}")
 
 
 __all__ = ["record"]

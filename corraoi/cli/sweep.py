@@ -1,5 +1,9 @@
-"""``corraoi sweep`` and ``corraoi reproduce``: grids of Monte Carlo runs (corraoi.experiments),
-in this process or on a Dask cluster, optionally into a resumable results folder.
+"""``corraoi sweep``: grids of Monte Carlo runs (corraoi.experiments), in this process or on a
+Dask cluster, optionally into a resumable results folder.
+
+Running the grid is :mod:`corraoi.cli.sweep_run`'s, the printed tables
+:mod:`corraoi.cli.sweep_table`'s; ``corraoi reproduce`` (:mod:`corraoi.cli.reproduce`) and
+``print_table`` stay importable from here.
 
 recorder and viewer are imported by the library only with ``-o``; Dask only with --scheduler.
 """
@@ -7,8 +11,6 @@ recorder and viewer are imported by the library only with ``-o``; Dask only with
 from __future__ import annotations
 
 import json
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -16,21 +18,20 @@ import click
 
 from .. import limits
 from ..errors import ConfigError, CorraoiError
-from ..text import safe_text
-from .common import (
+from .common import handle_errors, warn
+from .options import (
     CHECKPOINTS,
     RUNS,
     WORKERS,
     backend_option,
     channel_option,
-    handle_errors,
-    horizon_option,
     output_option,
     policy_option,
-    say,
     seed_option,
-    warn,
 )
+from .reproduce import reproduce
+from .sweep_run import run_grid, settle_backend
+from .sweep_table import print_table
 
 #: From this many run-slots (about a minute here) a sweep states its size before it starts.
 SAY_SIZE_FROM = 10**9
@@ -164,7 +165,7 @@ def sweep(
         from ..problem import check_instance
 
         check_instance(cell.instance)
-    grid = _settle_backend(grid)
+    grid = settle_backend(grid)
     # the biggest cell's runs x checkpoints are held at once when its results are joined (a
     # GPU sweep keeps every run's final values only)
     per_run = out is not None and grid.backend == "cpu"
@@ -176,7 +177,7 @@ def sweep(
         click.echo(f"corraoi: sweep of {size}; the progress bar shows the time left", err=True)
     for note in _notes(grid):
         warn(note)
-    outcome = _run(grid, out=out, scheduler=scheduler, resume=resume, force=force,
+    outcome = run_grid(grid, out=out, scheduler=scheduler, resume=resume, force=force,
                    workers=workers, label="sweep")  # fmt: skip
     if as_json:
         if len(outcome.summaries) == 1:
@@ -198,18 +199,6 @@ def sweep(
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
 
-
-def _settle_backend(grid: Any) -> Any:
-    """The grid with ``auto`` resolved (a notice when it falls back to the CPU) and ``gpu``
-    checked; says which device runs it."""
-    if grid.backend == "cpu":
-        return grid
-    from ..gpu import choose_backend, get_device
-
-    grid = choose_backend(grid, warn=warn)
-    if grid.backend == "gpu":
-        click.echo(f"backend gpu: {get_device().name}", err=True)
-    return grid
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
@@ -239,189 +228,4 @@ def _notes(grid: Any) -> list[str]:
     return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
 
 
-def _run(
-    grid: Any,
-    *,
-    out: Path | None,
-    scheduler: str | None,
-    resume: bool,
-    force: bool,
-    workers: int | None,
-    label: str,
-) -> Any:
-    """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
-    from contextlib import ExitStack
-
-    from ..backends import GPU_NOT_ON_CLUSTER
-    from ..experiments import sweep as run_sweep
-    from ..progress import Progress
-
-    if scheduler is not None and grid.backend == "gpu":  # before a cluster is started
-        raise ConfigError(GPU_NOT_ON_CLUSTER)
-    with ExitStack() as stack:
-        client = None
-        if scheduler is not None:
-            from ..cluster import connect
-
-            client = stack.enter_context(connect(scheduler))
-        if client is None:
-            total = sum(c.horizon for c in grid.cells) * grid.runs // grid.chunk_runs
-            bar = stack.enter_context(Progress(max(total, 1), label))
-            on_slots = bar.update
-            on_chunk = None
-        else:
-            chunks = sum(-(-grid.runs // grid.chunk_runs) for _ in grid.cells)
-            bar = stack.enter_context(Progress(chunks, f"{label} (chunks)"))
-
-            def on_chunk(done: int, total: int) -> None:
-                bar.update(1, note=f"{done}/{total} chunks")
-
-            on_slots = None
-        try:
-            return run_sweep(grid, out=out, client=client, resume=resume, force=force,
-                             workers=workers, on_chunk=on_chunk, on_slots=on_slots,
-                             warn=warn)  # fmt: skip
-        except KeyboardInterrupt:
-            where = f"; finished chunks are saved in {out}: --resume continues" if out else ""
-            click.echo(f"corraoi: interrupted{where}", err=True)
-            sys.exit(130)
-
-
-def print_table(summary: dict[str, Any], folder: Path | None = None) -> None:
-    name = safe_text(summary["instance"]["name"])
-    runs, seed = summary["runs"], summary["seed"]
-    click.echo(
-        f"instance {name}, {runs} runs (seeds {seed}..{seed + runs - 1}), "
-        f"horizon {summary['horizon']}, C = {summary['theory']['C']}"
-    )
-    click.echo(
-        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9}"
-        f" {'wall s':>7}  bound at T"
-    )
-    for pname, s in summary["policies"].items():
-        ci = s["regret_ci95"]
-        ci_text = f"{ci:9.1f}" if ci is not None else f"{'n/a':>9}"
-        bound = s.get("bound")
-        btext = ""
-        if bound is not None:
-            btext = f"  {bound['value']:.4g}" if bound["value"] is not None else "  n/a"
-        say(
-            f"{safe_text(pname):22s} {s['regret_mean']:10.1f} {ci_text} "
-            f"{s['estimator_mean']:11.1f} "
-            f"{s['best_arm_share']:9.3f} {s['wall_s']:7.3f}{btext}"
-        )
-    if summary.get("baseline") is not None:
-        _print_paired(summary)
-    _print_notable(summary, folder)
-
-
-def _print_notable(summary: dict[str, Any], folder: Path | None) -> None:
-    """The runs worth watching: per policy its worst, median and best run, and the widest
-    paired gap; with a folder, the command that records one slot by slot."""
-    notable = summary.get("notable")
-    if not notable:
-        return
-    click.echo("runs worth watching: final regret (run index)")
-    click.echo(f"{'policy':22s} {'worst':>16} {'median':>16} {'best':>16}")
-    for pname, c in notable["cells"].items():
-        cols = "".join(f" {c[k]['regret']:g} (run {c[k]['run']})".rjust(17)
-                       for k in ("worst", "median", "best"))  # fmt: skip
-        say(f"{safe_text(pname):22s}{cols}")
-    if notable["pairs"]:
-        g = notable["pairs"][0]
-        a, b = (safe_text(n) for n in g["policies"])
-        say(f"widest paired gap: {a} - {b} = {g['difference']:+g} at run {g['run']} "
-            f"(seed {g['seed']})")  # fmt: skip
-    if folder is not None:
-        say(f"record one slot by slot: corraoi record --from {safe_text(folder)} "
-            "--run worst|median|best|widest-gap|N [-p POLICY]")  # fmt: skip
-
-
-def _print_paired(summary: dict[str, Any]) -> None:
-    base = summary["baseline"]
-    click.echo(f"paired against {base}: per-run regret(policy) - regret({base}), same seeds")
-    click.echo(f"{'policy':22s} {'diff':>10} {'+-paired':>9} {'+-unpaired':>11}")
-
-    def ci(v: float | None, width: int) -> str:
-        return f"{v:{width}.1f}" if v is not None else f"{'n/a':>{width}}"
-
-    for pname, s in summary["policies"].items():
-        if "paired_diff_mean" in s:
-            click.echo(
-                f"{pname:22s} {s['paired_diff_mean']:10.1f} {ci(s['paired_diff_ci95'], 9)} "
-                f"{ci(s['unpaired_diff_ci95'], 11)}"
-            )
-
-
-
-
-@click.command()
-@output_option(metavar="DIR", default=Path("paper"), show_default=True,
-               help="Writes DIR/I1/, DIR/I2/ (each as `sweep -o`), DIR/summary.md.")  # fmt: skip
-@click.option("--runs", "-n", type=RUNS, default=200, show_default=True,
-              help="Monte Carlo runs per policy.")  # fmt: skip
-@horizon_option(10_000)
-@seed_option
-@click.option("--workers", "-j", type=WORKERS, default=None,
-              help="Threads for the engine [default: every core].")  # fmt: skip
-@click.option("--force", is_flag=True, help="Overwrite sweeps already in DIR.")
-@backend_option("cpu, gpu or auto, as for sweep [default: cpu] (docs/gpu.md).")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print both summaries as one JSON object instead of tables.")  # fmt: skip
-@handle_errors
-def reproduce(
-    output: Path,
-    runs: int,
-    horizon: int,
-    seed: int,
-    workers: int | None,
-    force: bool,
-    backend: str | None,
-    as_json: bool,
-) -> None:
-    """Regenerate the paper's simulations: I1 and I2, all twelve policies, 200 runs, T = 10,000.
-
-    Each instance gets the logs, summary and figure of `corraoi sweep -o`; DIR/summary.md
-    puts the two ranked tables side by side.
-
-    \b
-    Example:
-      corraoi reproduce -o paper && open paper/I1/figure.png
-    """
-    from ..experiments import PAPER_INSTANCES, paper_grid
-    from ..summary import summary_markdown
-    from ..sweep_folder import write_text
-
-    out = output
-    limits.check_seed(seed, runs=runs, name="--seed")
-    grid = paper_grid(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu")
-    grid = _settle_backend(grid)
-    limits.check_sweep_memory(runs, 4, policies=1,
-                              checkpoints=grid.checkpoints if grid.backend == "cpu" else 0)
-    start = time.perf_counter()
-    outcome = _run(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
-                   label="reproduce")  # fmt: skip
-    parts = []
-    summaries: dict[str, Any] = {}
-    for summary in outcome.summaries:
-        summaries[summary["instance"]["name"]] = summary
-        if not as_json:
-            print_table(summary, output)
-            click.echo("")
-        parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
-    head = (
-        "# The paper's simulations, regenerated\n\n"
-        f"`corraoi reproduce --runs {runs} --horizon {horizon} --seed {seed}`; figures in "
-        + ", ".join(f"`{n}/figure.png`" for n in PAPER_INSTANCES)
-        + ".\n\n"
-    )
-    write_text(
-        out / "summary.md",
-        head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
-    )
-    if as_json:
-        click.echo(json.dumps({"output": str(out), "instances": summaries}, indent=2))
-    else:
-        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES)
-                   + ", summary.md")  # fmt: skip
-    click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)
+__all__ = ["SAY_SIZE_FROM", "SWEEP_FILES", "print_table", "reproduce", "sweep"]

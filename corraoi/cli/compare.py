@@ -1,0 +1,155 @@
+"""``corraoi compare``: recorded runs side by side in one Rerun recording, with their summary
+table; with ``--from SWEEP``, the chosen runs of a sweep are recorded first. ``viewer``,
+``recorder`` and ``rerun`` are imported inside the command, so ``corraoi --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..errors import UsageError
+from ..text import safe_text
+from .common import handle_errors, keep_pandas_out, say, warn
+from .live import ViewerChoice, viewer_options
+from .options import output_option
+from .reading import LOG, not_an_input, progress
+
+
+@click.command("compare")
+@click.argument("logs", nargs=-1, type=LOG, metavar="A.mcap B.mcap ...")
+@click.option("--from", "from_", metavar="SWEEP", default=None,
+              help="Instead of logs: record the chosen run of every policy of the sweep folder "
+                   "SWEEP into runs/ (as `record --from`) and compare those.")  # fmt: skip
+@click.option("--run", "run", metavar="N|worst|best|median|widest-gap", default=None,
+              help="With --from: which run of each policy (as for record) [default: worst].")
+@click.option("--cell", "cell", metavar="LABEL", multiple=True,
+              help="With --from: only these cells (as for record); repeat for several.")
+@output_option(metavar="OUT.rrd", aliases=("--out", "--rrd"),
+               help="Rerun recording to write [default: compare.rrd, unless a viewer option "
+               "is given].")  # fmt: skip
+@click.option("--no-rrd", is_flag=True, help="Only print the summary table; write nothing.")
+@viewer_options
+@click.option("--force", "-f", is_flag=True, help="Overwrite an existing recording.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
+@handle_errors
+def compare(
+    logs: tuple[Path, ...],
+    output: Path | None,
+    no_rrd: bool,
+    spawn: bool,
+    connect: str | None,
+    serve_web: bool,
+    web_port: int,
+    force: bool,
+    as_json: bool,
+    from_: str | None,
+    run: str | None,
+    cell: tuple[str, ...],
+) -> None:
+    """Put recorded runs side by side in one Rerun recording, and print their summary.
+
+    Every run goes under runs/<label>/ (labels from the policy names, made unique with
+    the instance, seed or horizon where needed). The embedded layout has one column per
+    run -- AoI against the oracle's, the channel played, the empirical means, the
+    candidate (competitive) set -- above one panel overlaying every run's regret curve.
+    The table gives per run the final pathwise regret, the paper's estimator, pulls per
+    arm, the share of slots on the best arm, the slots where the AoI-aware override
+    fired and the first slot from which the run stayed on the best arm. Runs on
+    different instances or horizons are allowed, with a warning.
+
+    \b
+    Examples:
+      corraoi compare runs/ucb-I1-s0.mcap runs/cucb-I1-s0.mcap -o ucb-vs-cucb.rrd
+      corraoi compare runs/*.mcap --serve-web
+      corraoi compare --from sweeps/I2 --run worst    # each policy's worst run of a sweep
+    """
+    from viewer.compare import compare as do_compare
+    from viewer.compare import prepare
+
+    if from_ is not None:
+        if logs:
+            raise UsageError("A.mcap ... and --from: compare logs or a sweep's runs, not both")
+        logs = _record_from(from_, run if run is not None else "worst", cell, force)
+    elif run is not None or cell:
+        raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
+    elif not logs:
+        raise UsageError("nothing to compare: give logs (A.mcap B.mcap ...) or --from SWEEP")
+    keep_pandas_out()
+
+    out = output
+    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    if no_rrd and (out is not None or viewer.asked):
+        raise UsageError("--no-rrd: nothing to send; leave out -o and the viewer options")
+    runs, warnings = prepare(logs)  # bad input: one line, exit 2, nothing written
+    if out is None and not viewer.asked and not no_rrd:
+        out = Path("compare.rrd")
+    if out is not None:
+        from recorder.paths import check_output
+
+        not_an_input(out, logs)
+        check_output(out, overwrite=force, what="Rerun recording")
+    for w in warnings:
+        warn(w)
+    url = viewer.start() if viewer.asked else None
+    total = sum(r.log.n_slots for r in runs)
+    try:
+        with progress(total, "compare") as bar:
+            result = do_compare([r.log for r in runs], rrd_path=out, viewer_url=url,
+                                overwrite=force, on_block=bar.update)  # fmt: skip
+    except BaseException:
+        viewer.stop()
+        raise
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=2))
+    else:
+        say(result.table())
+        if result.path is not None:
+            click.echo(f"Rerun recording: {safe_text(result.path)}")
+            if not viewer.asked:
+                from recorder.live import view_command
+
+                click.echo(
+                    f"open in the Rerun viewer:  {safe_text(view_command([str(result.path)]))}"
+                )
+    viewer.serve_until_stopped()
+
+
+def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> tuple[Path, ...]:
+    """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
+    a log already there with the same run and complete is used as it is)."""
+    from corraoi.drill import choose
+    from corraoi.engine import set_workers
+    from corraoi.text import safe_name
+    from recorder.errors import LogError, OutputError
+    from recorder.reader import open_log
+    from recorder.record import record_run
+
+    drills = choose(folder, run, cells=cells, warn=warn)
+    plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
+    todo = []
+    for d, path in plans:
+        if path.is_file():
+            try:
+                log = open_log(path, verify=False)
+                same = log.status == "complete" and log.config.to_dict() == d.config.to_dict()
+            except LogError:
+                same = False
+            if same:
+                continue
+            if not force:
+                raise OutputError(f"{path}: already exists and holds another run; use --force "
+                                  "to overwrite it")  # fmt: skip
+        todo.append((d, path))
+    set_workers(1)  # one run has nothing to spread over threads
+    for d, path in todo:
+        click.echo(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
+                   f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
+                   f"{d.config.seed}, {d.choice})", err=True)  # fmt: skip
+        record_run(d.config, path, overwrite=True)
+    return tuple(path for _, path in plans)
+
+
+__all__ = ["compare"]
