@@ -146,3 +146,10 @@ def test_readers_the_core_names_by_string_exist_in_the_recorder():
         module, _, function = name.partition(":")
         assert module.split(".")[0] == "recorder", (suffix, name)
         assert callable(getattr(importlib.import_module(module), function)), (suffix, name)
+
+
+def test_no_module_is_over_400_lines():
+    """One job per module (issue 23): none of the three packages' modules is over 400 lines."""
+    long = {str(p.relative_to(ROOT)): n for p in _modules().values()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 400}  # fmt: skip
+    assert long == {}
