@@ -89,11 +89,13 @@ def main() -> None:
     from corraoi.engine import set_workers, simulate_run
     from corraoi.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
+    from recorder.format import BlockEncoder
     from recorder.mcap_chunks import ChunkWriter
     from recorder.mcap_sink import McapSink
     from recorder.rerun_sink import RerunSink
     from recorder.rrd_output import RrdOutput
+    from recorder.vocab import NS_PER_SLOT
+    from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 
     config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, T)
     set_workers(1)  # as corraoi record does: one run, no use for the engine's threads

@@ -13,9 +13,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .errors import LogError, OutputError, ViewerError, WriteError
-from .format import FORMAT_VERSION, TOPIC
 from .mcap_sink import McapSink
 from .reader import RunLog, open_log
+from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION  # the slot log's, as always
+from .vocab import SLOT_TOPIC as TOPIC
 
 if TYPE_CHECKING:
     from .rerun_sink import RerunSink, RrdOutput, new_recording, one_run_blueprint

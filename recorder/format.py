@@ -1,10 +1,10 @@
 """The slot log read back: the strict decoder of slot messages.
 
-One MCAP message per slot on :data:`TOPIC`, JSON encoded. Arms and states are numbered
+One MCAP message per slot on :data:`SLOT_TOPIC`, JSON encoded. Arms and states are numbered
 from 1 in the log (``SlotBlock`` arrays are 0-based: the decoder subtracts 1). The names
 of the format are defined in :mod:`recorder.vocab` and its writing side (schema, metadata,
-encoder) in :mod:`recorder.encode`; both are re-exported here under the names older code
-imports. ``docs/log-format.md`` is the human description.
+encoder) in :mod:`recorder.encode`, whose functions are re-exported here.
+``docs/log-format.md`` is the human description.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBloc
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, slot_schema
 from .errors import LogError
 
-# The slot log's names, defined in recorder.vocab, under this module's older short names.
+# The slot log's names (recorder.vocab)
 from .vocab import (
     MAX_SLOT,
     MCAP_INDEX_TYPES,
@@ -31,15 +31,11 @@ from .vocab import (
     NS_PER_SLOT,
     RUN_METADATA,
     SCHEMA_ENCODING,
+    SLOT_FORMAT_NAME,
+    SLOT_FORMAT_VERSION,
     SWEEP_METADATA,
     library_name,
 )
-from .vocab import RUN_END_METADATA as END_METADATA
-from .vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-from .vocab import SLOT_FORMAT_NAME as FORMAT_NAME
-from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION
-from .vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
-from .vocab import SLOT_TOPIC as TOPIC
 
 #: Message keys in the order the encoder writes them.
 MESSAGE_KEYS = FIELDS
@@ -340,7 +336,7 @@ def not_a_run_log(p: Path, library: str, sweep: bool = False) -> LogError:
 
 def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
     """The ``corraoi.run`` record names this format, holds a config, and a version we read."""
-    if md.get("format") != FORMAT_NAME or "config" not in md:
+    if md.get("format") != SLOT_FORMAT_NAME or "config" not in md:
         raise not_a_run_log(p, library)
     try:
         version = int(md.get("format_version", ""))
@@ -348,10 +344,10 @@ def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
         raise LogError(
             f"{p}: format_version {md.get('format_version')!r} is not an integer"
         ) from None
-    if version > FORMAT_VERSION:
+    if version > SLOT_FORMAT_VERSION:
         raise LogError(
             f"{p}: written in log format version {version}, newer than the version "
-            f"{FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
+            f"{SLOT_FORMAT_VERSION} this corraoi reads; upgrade corraoi to read it"
         )
     if version < 1:
         raise LogError(f"{p}: unknown log format version {version}")
@@ -360,10 +356,6 @@ def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
 __all__ = [
     "ARM_FIELDS",
     "BlockEncoder",
-    "END_METADATA",
-    "FLUSH_EVERY",
-    "FORMAT_NAME",
-    "FORMAT_VERSION",
     "MAX_SLOT",
     "MCAP_INDEX_TYPES",
     "MESSAGE_ENCODING",
@@ -372,9 +364,7 @@ __all__ = [
     "RUN_METADATA",
     "SCALAR_FIELDS",
     "SCHEMA_ENCODING",
-    "SCHEMA_NAME",
     "SWEEP_METADATA",
-    "TOPIC",
     "check_agrees",
     "check_run_metadata",
     "decode_messages",

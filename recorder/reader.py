@@ -25,13 +25,6 @@ from corraoi.errors import CorraoiError
 
 from .errors import LogError
 from .format import (
-    END_METADATA,
-    MESSAGE_ENCODING,
-    NS_PER_SLOT,
-    RUN_METADATA,
-    SCHEMA_NAME,
-    SWEEP_METADATA,
-    TOPIC,
     check_agrees,
     check_run_metadata,
     decode_messages,
@@ -39,6 +32,15 @@ from .format import (
     not_a_run_log,
 )
 from .paths import lock_holder
+from .vocab import (
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    RUN_END_METADATA,
+    RUN_METADATA,
+    SLOT_SCHEMA_NAME,
+    SLOT_TOPIC,
+    SWEEP_METADATA,
+)
 from .walk import (
     ChunkData,
     Walker,
@@ -256,7 +258,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                 if item.name == RUN_METADATA and run_md is None:
                     run_md = dict(item.metadata)
                     check_run_metadata(p, run_md, library)
-                elif item.name == END_METADATA:
+                elif item.name == RUN_END_METADATA:
                     end_md = dict(item.metadata)
                 elif item.name == SWEEP_METADATA:
                     sweep = True
@@ -268,8 +270,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                     if item.records is not None:
                         if not channel_id:
                             channel_id = find_channel(
-                                item.records, p, item.offset, topic=TOPIC,
-                                encoding=MESSAGE_ENCODING, schema=SCHEMA_NAME,
+                                item.records, p, item.offset, topic=SLOT_TOPIC,
+                                encoding=MESSAGE_ENCODING, schema=SLOT_SCHEMA_NAME,
                             )  # fmt: skip
                         t_ns = last_log_time(item.records, channel_id, p, item.offset)
                         last = (t_ns or 0) // NS_PER_SLOT
@@ -302,7 +304,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                 )
             raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
-            raise LogError(f"{p}: no {TOPIC} channel with schema {SCHEMA_NAME}")
+            raise LogError(f"{p}: no {SLOT_TOPIC} channel with schema {SLOT_SCHEMA_NAME}")
     try:
         config = RunConfig.from_dict(json.loads(run_md["config"]))
     except (CorraoiError, KeyError, TypeError, ValueError) as exc:

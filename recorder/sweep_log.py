@@ -1,7 +1,7 @@
 """The sweep log: the aggregated curves of a sweep, streamed to MCAP as the sweep runs.
 
-One JSON message per (policy, checkpoint slot) on :data:`TOPIC` (schema
-:data:`SCHEMA_NAME`), in the order the sweep produces them: all checkpoints of the first
+One JSON message per (policy, checkpoint slot) on :data:`SWEEP_TOPIC` (schema
+:data:`SWEEP_SCHEMA_NAME`), in the order the sweep produces them: all checkpoints of the first
 policy, then the next policy, ... The configuration of the sweep (instance, policies,
 runs, horizon, seed, checkpoints, version) is stored in the metadata record
 :data:`SWEEP_METADATA`, so a figure can be redrawn from the file alone.
@@ -43,23 +43,23 @@ from .style import (
 )
 from .sweep_read import SweepCurve, SweepLog, SweepLogError, read_sweep, sweep_arms
 
-# The sweep log's names, defined in recorder.vocab, under this module's older short names.
+# The sweep log's names (recorder.vocab)
 from .vocab import (
     MCAP_INDEX_TYPES,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     SCHEMA_ENCODING,
+    SWEEP_END_METADATA,
+    SWEEP_FLUSH_EVERY,
+    SWEEP_FORMAT_NAME,
+    SWEEP_FORMAT_VERSION,
+    SWEEP_MESSAGE_KEYS,
     SWEEP_METADATA,
+    SWEEP_OPTIONAL_KEYS,
+    SWEEP_SCHEMA_NAME,
+    SWEEP_TOPIC,
     library_name,
 )
-from .vocab import SWEEP_END_METADATA as END_METADATA
-from .vocab import SWEEP_FLUSH_EVERY as FLUSH_EVERY
-from .vocab import SWEEP_FORMAT_NAME as FORMAT_NAME
-from .vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
-from .vocab import SWEEP_MESSAGE_KEYS as MESSAGE_KEYS
-from .vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
-from .vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
-from .vocab import SWEEP_TOPIC as TOPIC
 
 if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pay for it
     from corraoi.sweep import SweepPoint
@@ -69,14 +69,14 @@ if TYPE_CHECKING:  # corraoi.sweep imports the numba engine: readers need not pa
 
 
 def sweep_schema(K: int) -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of one :data:`SCHEMA_NAME` message for K arms."""
+    """The JSON Schema (draft 2020-12) of one :data:`SWEEP_SCHEMA_NAME` message for K arms."""
     half_width = {"type": "number", "minimum": 0}
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "$id": f"urn:corraoi:sweep-point:v{FORMAT_VERSION}",
-        "title": SCHEMA_NAME,
+        "$id": f"urn:corraoi:sweep-point:v{SWEEP_FORMAT_VERSION}",
+        "title": SWEEP_SCHEMA_NAME,
         "description": f"Aggregates over the runs of one policy at one checkpoint slot "
-        f"({FORMAT_NAME} version {FORMAT_VERSION}); arms are numbered from 1.",
+        f"({SWEEP_FORMAT_NAME} version {SWEEP_FORMAT_VERSION}); arms are numbered from 1.",
         "type": "object",
         "properties": {
             "policy": {"type": "string", "minLength": 1, "description": "policy name"},
@@ -110,18 +110,20 @@ def sweep_schema(K: int) -> dict[str, Any]:
                 "maxItems": K,
             },
         },
-        "required": [k for k in MESSAGE_KEYS if k not in OPTIONAL_KEYS],
+        "required": [k for k in SWEEP_MESSAGE_KEYS if k not in SWEEP_OPTIONAL_KEYS],
         "additionalProperties": False,
     }
 
 
-def sweep_metadata(config: dict[str, Any], *, flush_every: int = FLUSH_EVERY) -> dict[str, str]:
+def sweep_metadata(
+    config: dict[str, Any], *, flush_every: int = SWEEP_FLUSH_EVERY
+) -> dict[str, str]:
     """The :data:`SWEEP_METADATA` record: flat strings, plus the full config as JSON."""
     inst = config.get("instance") or {}
     policies = [p["name"] if isinstance(p, dict) else str(p) for p in config.get("policies", [])]
     return {
-        "format": FORMAT_NAME,
-        "format_version": str(FORMAT_VERSION),
+        "format": SWEEP_FORMAT_NAME,
+        "format_version": str(SWEEP_FORMAT_VERSION),
         "corraoi_version": str(config.get("version", __version__)),
         "instance": str(inst.get("name", "")),
         "arms": str(sweep_arms(config)),
@@ -155,7 +157,7 @@ class SweepMcapSink(Sink):
         config: dict[str, Any],
         *,
         overwrite: bool = True,
-        flush_every: int = FLUSH_EVERY,
+        flush_every: int = SWEEP_FLUSH_EVERY,
         fsync: bool = True,
     ) -> None:
         if flush_every < 1:
@@ -184,15 +186,15 @@ class SweepMcapSink(Sink):
             self._writer.start(profile="", library=library)
             self._writer.add_metadata(SWEEP_METADATA, metadata)
             schema_id = self._writer.register_schema(
-                name=SCHEMA_NAME,
+                name=SWEEP_SCHEMA_NAME,
                 encoding=SCHEMA_ENCODING,
                 data=json.dumps(sweep_schema(self.K), indent=1).encode(),
             )
             self._channel = self._writer.register_channel(
-                topic=TOPIC,
+                topic=SWEEP_TOPIC,
                 message_encoding=MESSAGE_ENCODING,
                 schema_id=schema_id,
-                metadata={"format_version": str(FORMAT_VERSION)},
+                metadata={"format_version": str(SWEEP_FORMAT_VERSION)},
             )
             self._writer.flush()
         except OSError as exc:
@@ -278,7 +280,7 @@ class SweepMcapSink(Sink):
         self._closed = True
         try:
             self._writer.add_metadata(
-                END_METADATA,
+                SWEEP_END_METADATA,
                 {
                     "status": status,
                     "messages": str(self._count),
@@ -317,16 +319,9 @@ def _opt(v: float | None) -> float | None:
 
 __all__ = [
     "ARM_COLORS",
-    "END_METADATA",
-    "FLUSH_EVERY",
-    "FORMAT_NAME",
-    "FORMAT_VERSION",
     "NS_PER_SLOT",
-    "OPTIONAL_KEYS",
     "POLICY_COLORS",
-    "SCHEMA_NAME",
     "SWEEP_METADATA",
-    "TOPIC",
     "arm_color",
     "base_policy",
     "is_aoi_aware",

@@ -41,7 +41,6 @@ from .style import (
     lighter,
     policy_color,
 )
-from .sweep_log import FLUSH_EVERY
 from .sweep_rerun_layout import (
     TIMELINE,
     entity_part,
@@ -52,6 +51,7 @@ from .sweep_rerun_layout import (
     sweep_blueprint,
     sweep_recording_id,
 )
+from .vocab import SWEEP_FLUSH_EVERY
 
 #: Line widths (UI points) of the mean curves (AoI-aware and band: recorder.style).
 WIDTH_BASE = WIDTH_MAIN
@@ -73,7 +73,7 @@ def open_sweep_recording(
     *,
     recording_id: str | None = None,
     overwrite: bool = True,
-    flush_every: int = FLUSH_EVERY,
+    flush_every: int = SWEEP_FLUSH_EVERY,
 ) -> SweepRerunSink:
     """A sink that writes ``path`` (.rrd with the default blueprint) and owns its recording.
 
@@ -99,7 +99,7 @@ class SweepRerunSink(Sink):
         recording: rr.RecordingStream,
         config: dict[str, Any],
         *,
-        flush_every: int = FLUSH_EVERY,
+        flush_every: int = SWEEP_FLUSH_EVERY,
     ) -> None:
         if flush_every < 1:
             raise ValueError(f"flush_every must be >= 1, got {flush_every}")
@@ -127,7 +127,7 @@ class SweepRerunSink(Sink):
         recording_id: str | None = None,
         application_id: str = "corraoi",
         overwrite: bool = True,
-        flush_every: int = FLUSH_EVERY,
+        flush_every: int = SWEEP_FLUSH_EVERY,
     ) -> SweepRerunSink:
         """A sink that owns its recording: saved to ``<path>.partial`` with the default
         blueprint, disconnected and renamed to ``path`` on :meth:`close`."""

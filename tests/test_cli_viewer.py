@@ -48,7 +48,8 @@ def _other_tool(path: Path) -> Path:
 
 
 def _newer(path: Path) -> Path:
-    from recorder.format import RUN_METADATA, run_metadata
+    from recorder.format import run_metadata
+    from recorder.vocab import RUN_METADATA
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 0, 100)
     meta = run_metadata(config)

@@ -19,8 +19,10 @@ from corraoi.cli import main
 from corraoi.instance import load_instance
 from corraoi.policies import make_policies, paper_names
 from corraoi.sweep import sweep_config
-from recorder.format import SWEEP_METADATA
-from recorder.sweep_log import SCHEMA_NAME, TOPIC, read_sweep
+from recorder.sweep_log import read_sweep
+from recorder.vocab import SWEEP_METADATA
+from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from recorder.vocab import SWEEP_TOPIC as TOPIC
 
 from .conftest import Recorded
 

@@ -29,7 +29,7 @@ from mcap.reader import make_reader  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
 from corraoi.block import SlotBlock  # noqa: E402
-from recorder.format import TOPIC, schema_bytes  # noqa: E402
+from recorder.format import schema_bytes  # noqa: E402
 from recorder.foxglove_live import (  # noqa: E402
     BACKLOG,
     RUN_TOPIC,
@@ -44,6 +44,7 @@ from recorder.foxglove_live import (  # noqa: E402
 )
 from recorder.mcap_sink import McapSink  # noqa: E402
 from recorder.reader import open_log  # noqa: E402
+from recorder.vocab import SLOT_TOPIC as TOPIC  # noqa: E402
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) must be used:DeprecationWarning")

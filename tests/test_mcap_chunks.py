@@ -14,10 +14,12 @@ from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, IndexType, Writer
 
 from corraoi.block import SlotBlock
-from recorder.format import FLUSH_EVERY, NS_PER_SLOT, BlockEncoder
+from recorder.format import BlockEncoder
 from recorder.mcap_chunks import ZSTD_LEVEL, ChunkWriter
 from recorder.mcap_sink import McapSink
 from recorder.reader import open_log
+from recorder.vocab import NS_PER_SLOT
+from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 
 
 def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:

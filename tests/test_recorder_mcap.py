@@ -14,10 +14,11 @@ from mcap.reader import make_reader
 from corraoi.block import RunConfig, SlotBlock
 from recorder import mcap_sink as mcap_sink_module
 from recorder.errors import OutputError, WriteError
-from recorder.format import NS_PER_SLOT, TOPIC
 from recorder.mcap_sink import McapSink
 from recorder.paths import partial_path
 from recorder.reader import open_log
+from recorder.vocab import NS_PER_SLOT
+from recorder.vocab import SLOT_TOPIC as TOPIC
 
 
 @pytest.mark.parametrize("policy", ["cucb", "ts", "aoi-aware-cts", "aoi-aware-ucb"])

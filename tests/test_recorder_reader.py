@@ -11,8 +11,9 @@ from mcap.writer import Writer
 
 from corraoi.errors import UsageError
 from recorder.errors import LogError
-from recorder.format import RUN_METADATA, run_metadata
+from recorder.format import run_metadata
 from recorder.reader import open_log
+from recorder.vocab import RUN_METADATA
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000, 4096])

@@ -23,19 +23,12 @@ from corraoi.instance import load_instance
 from corraoi.policies import make_policies
 from corraoi.sweep import SweepPoint, checkpoint_point, run_sweep, sweep_config
 from recorder.errors import LogError
-from recorder.sweep_log import (
-    END_METADATA,
-    NS_PER_SLOT,
-    POLICY_COLORS,
-    SCHEMA_NAME,
-    SWEEP_METADATA,
-    TOPIC,
-    SweepLogError,
-    SweepMcapSink,
-    lighter,
-    policy_color,
-    read_sweep,
-)
+from recorder.style import POLICY_COLORS, lighter, policy_color
+from recorder.sweep_log import SweepLogError, SweepMcapSink, read_sweep
+from recorder.vocab import NS_PER_SLOT, SWEEP_METADATA
+from recorder.vocab import SWEEP_END_METADATA as END_METADATA
+from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from recorder.vocab import SWEEP_TOPIC as TOPIC
 
 POLICIES = ("ucb", "cucb", "aoi-aware-cucb", "cts")
 CHECKPOINTS = (1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 100, 150, 200, 250, 300)
@@ -404,7 +397,8 @@ def test_channel_metadata_carries_the_format_version(tmp_path):
 
     from corraoi.instance import load_instance
     from corraoi.policies import make_policies
-    from recorder.sweep_log import FORMAT_VERSION, SweepMcapSink
+    from recorder.sweep_log import SweepMcapSink
+    from recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
 
     specs = make_policies(["ucb"])
     config = sweep_config(load_instance("I1"), specs, runs=2, horizon=10, seed=0, checkpoints=[10])
