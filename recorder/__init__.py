@@ -19,16 +19,21 @@ from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION  # the slot log's, as a
 from .vocab import SLOT_TOPIC as TOPIC
 
 if TYPE_CHECKING:
-    from .rerun_sink import RerunSink, RrdOutput, new_recording, one_run_blueprint
+    from .rerun_layout import one_run_blueprint
+    from .rerun_names import new_recording
+    from .rerun_sink import RerunSink
+    from .rrd_output import RrdOutput
 
-_LAZY = {"RerunSink", "RrdOutput", "new_recording", "one_run_blueprint"}
+#: the Rerun parts, by the module that defines each (imported on first use)
+_LAZY = {"RerunSink": "rerun_sink", "RrdOutput": "rrd_output", "new_recording": "rerun_names",
+         "one_run_blueprint": "rerun_layout"}  # fmt: skip
 
 
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
-        from . import rerun_sink
+        import importlib
 
-        return getattr(rerun_sink, name)
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'recorder' has no attribute {name!r}")
 
 

@@ -60,7 +60,8 @@ def record_run(
                 output = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
                                     overwrite=overwrite)  # fmt: skip
             else:
-                from .rerun_sink import RerunSink, RrdOutput
+                from .rerun_sink import RerunSink
+                from .rrd_output import RrdOutput
 
                 output = RrdOutput(config, rrd_path=where, viewer_url=viewer_url,
                                    overwrite=overwrite)  # fmt: skip

@@ -8,9 +8,6 @@ cost ~50 us a call. No global Rerun state: the caller passes a ``RecordingStream
 (:func:`~recorder.rerun_names.new_recording` makes one with reproducible settings) and owns
 where it goes; :class:`~recorder.rrd_output.RrdOutput` is the owner ``corraoi record`` uses
 (an ``.rrd`` file and/or a viewer).
-
-The names of those modules stay importable from here (``from recorder.rerun_sink import
-RrdOutput, run_path, ...``), as they were before the split.
 """
 
 from __future__ import annotations

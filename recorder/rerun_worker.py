@@ -5,7 +5,7 @@ long as numba's import and the first kernel load together, and a one-run ``corra
 would otherwise pay the two one after the other (issue 22). Forked before the parent
 imports numba, the worker imports Rerun on the other core, then receives the run's
 :class:`~corraoi.block.SlotBlock` s over a pipe and feeds them to the same
-:class:`~recorder.rerun_sink.RrdOutput` and :class:`~recorder.rerun_sink.RerunSink` that an
+:class:`~recorder.rrd_output.RrdOutput` and :class:`~recorder.rerun_sink.RerunSink` that an
 in-process recording uses: the file is the same, only the process differs.
 ``benchmarks/bench_start.py`` measures the gain (the "record --policy cucb" row).
 
@@ -144,7 +144,7 @@ class RerunWorker:
 
 class RemoteRecording(Sink):
     """One run's recording in a :class:`RerunWorker`: ``write``, then ``close`` or
-    ``abort``, with :class:`~recorder.rerun_sink.RrdOutput`'s meaning."""
+    ``abort``, with :class:`~recorder.rrd_output.RrdOutput`'s meaning."""
 
     def __init__(self, worker: RerunWorker, path: Path | None) -> None:
         self._worker = worker
@@ -209,7 +209,8 @@ def _serve(conn: Any, parents_end: Any, before_import: Callable[[], None] | None
     parents_end.close()  # else the pipe would stay open here when the parent dies
     if before_import is not None:
         before_import()
-    from .rerun_sink import RerunSink, RrdOutput
+    from .rerun_sink import RerunSink
+    from .rrd_output import RrdOutput
 
     output: RrdOutput | None = None
     sink: RerunSink | None = None

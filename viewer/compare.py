@@ -133,7 +133,8 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from recorder.rerun_sink import TIMELINE, run_path, time_windows
+    from recorder.rerun_layout import time_windows
+    from recorder.rerun_names import TIMELINE, run_path
 
     tw = time_windows(window)
     window_axis, window_query, whole = tw.window_axis, tw.window_query, tw.whole_axis
@@ -247,7 +248,8 @@ def compare(
 
     import rerun as rr
 
-    from recorder.rerun_sink import RerunSink, RrdOutput
+    from recorder.rerun_sink import RerunSink
+    from recorder.rrd_output import RrdOutput
 
     with RrdOutput(
         runs[0].config,

@@ -2,7 +2,7 @@
 
 The log is read back into the SlotBlocks that were recorded and handed, block by block,
 to the very :class:`recorder.rerun_sink.RerunSink` that ``record`` streams into, with the
-same label, recording id and default blueprint (:class:`recorder.rerun_sink.RrdOutput`).
+same label, recording id and default blueprint (:class:`recorder.rrd_output.RrdOutput`).
 So the replayed ``.rrd`` of a finished log equals the live one under ``rerun rrd
 compare``. Nothing is simulated.
 """
@@ -55,7 +55,8 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
-    from recorder.rerun_sink import RerunSink, RrdOutput
+    from recorder.rerun_sink import RerunSink
+    from recorder.rrd_output import RrdOutput
 
     run = require_slots(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"
