@@ -26,7 +26,7 @@ import numpy as np
 
 def _sweep_once(out: Path, named: bool) -> float:
     import corraoi.experiments as ex
-    import corraoi.sweep_outputs as so
+    import corraoi.summary as so
     from corraoi.grid import build_grid
 
     grid = build_grid(instances=["I1"], policies=["all"], horizons=[10_000], runs=200)
@@ -43,7 +43,7 @@ def _sweep_once(out: Path, named: bool) -> float:
 
 def _parts(tmp: Path) -> dict[str, float]:
     """The two costs inside one named sweep: computing the runs, drawing them in sweep.rrd."""
-    import corraoi.sweep_outputs as so
+    import corraoi.summary as so
     from recorder.sweep_rerun import SweepRerunSink
 
     took = {"naming (corraoi.notable)": 0.0, "drawing 36 runs into sweep.rrd": 0.0}

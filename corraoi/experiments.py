@@ -21,18 +21,19 @@ of workers, the chunking of the runs, or on the order chunks finish in.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from . import backends
-from . import sweep_outputs as outputs
 from .errors import ConfigError
 from .grid import Cell, Chunk, Grid
+from .summary import group_summary, summary_markdown
 from .sweep_folder import (
     GROUP_FILES,
     MANIFEST,
@@ -46,6 +47,7 @@ from .sweep_folder import (
     read_manifest,
     read_parts,
     write_manifest,
+    write_text,
 )
 
 
@@ -88,6 +90,34 @@ PAPER_INSTANCES = ("I1", "I2")
 # ---------------------------------------------------------------------------- the sweep
 
 
+class SweepOutputs(Protocol):
+    """What writes a finished sweep folder's files in the upper layers' formats: the folder's
+    ``results.parquet`` from the parts, then each (instance, horizon) group's files."""
+
+    def write_results(self, folder: Path, grid: Grid, parts: dict[str, list[ChunkResult]],
+                      labels: dict[str, str], *,
+                      warn: Callable[[str], None] | None) -> None: ...  # fmt: skip
+
+    def write_group(self, folder: Path, grid: Grid, cells: Sequence[CellRuns],
+                    summary: dict[str, Any], *,
+                    warn: Callable[[str], None] | None) -> None: ...  # fmt: skip
+
+
+#: The outputs a sweep folder is written with unless the caller hands its own, named here
+#: and imported when a folder is written (the formats are the recorder's and the figure the
+#: viewer's: the core names them instead of importing the layers above it).
+DEFAULT_OUTPUTS = "viewer.sweep_outputs:FolderOutputs"
+
+
+def default_outputs() -> SweepOutputs:
+    """An instance of :data:`DEFAULT_OUTPUTS`."""
+    import importlib
+
+    module, _, name = DEFAULT_OUTPUTS.partition(":")
+    made: SweepOutputs = getattr(importlib.import_module(module), name)()
+    return made
+
+
 @dataclass
 class SweepOutcome:
     grid: Grid
@@ -110,8 +140,13 @@ def sweep(
     on_slots: Callable[[int], None] | None = None,
     warn: Callable[[str], None] | None = None,
     backend: str | None = None,
+    outputs: SweepOutputs | None = None,
 ) -> SweepOutcome:
     """Run ``grid``; with ``out``, into a resumable folder (module docstring).
+
+    ``outputs`` writes the folder's files beyond its parts, manifest and summaries
+    (:class:`SweepOutputs`; by default ``viewer.sweep_outputs.FolderOutputs``: the sweep
+    logs, recordings, ``results.parquet`` and figures).
 
     ``backend``: "cpu", "gpu" or "auto" (docs/gpu.md), else the grid's own (``cpu`` unless
     set). "gpu" runs every cell on the GPU (:class:`corraoi.gpu.GpuUnavailable` says why
@@ -138,7 +173,7 @@ def sweep(
             stack.enter_context(folder_lock(folder, "sweep folder"))
         return _sweep(grid, folder, client=client, resume=resume, force=force, workers=workers,
                       threads_per_worker=threads_per_worker, on_chunk=on_chunk,
-                      on_slots=on_slots, warn=warn)  # fmt: skip
+                      on_slots=on_slots, warn=warn, outputs=outputs)  # fmt: skip
 
 
 def _sweep(
@@ -153,6 +188,7 @@ def _sweep(
     on_chunk: Callable[[int, int], None] | None,
     on_slots: Callable[[int], None] | None,
     warn: Callable[[str], None] | None,
+    outputs: SweepOutputs | None,
 ) -> SweepOutcome:
     start = time.perf_counter()
     runner = backends.choose(grid, client=client, workers=workers,
@@ -197,11 +233,15 @@ def _sweep(
     for key, cells in grid.groups().items():
         joined = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in cells]
         joined_groups.append((key, joined))
-        summaries.append(outputs.group_summary(grid, joined, workers=runner.workers, wall_s=wall))
+        summaries.append(group_summary(grid, joined, workers=runner.workers, wall_s=wall))
     if folder is not None:
-        outputs.write_results(folder, grid, parts, labels, warn=warn)
+        writer = outputs if outputs is not None else default_outputs()
+        writer.write_results(folder, grid, parts, labels, warn=warn)
         for (key, joined), summary in zip(joined_groups, summaries, strict=True):
-            outputs.write_group(dirs[key], grid, joined, summary, warn=warn)
+            dirs[key].mkdir(parents=True, exist_ok=True)
+            writer.write_group(dirs[key], grid, joined, summary, warn=warn)
+            write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
+            write_text(dirs[key] / "summary.md", summary_markdown(summary))
         write_manifest(folder, grid, "complete")
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip

@@ -8,13 +8,17 @@ they are about.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .bounds import DEFAULT_BOUND_BETA, Bound, cts_bound, cucb_bound
 from .instance import Instance
 from .policies.spec import PolicySpec
 from .sweep import PolicyResult
 from .theory import analyse
+
+if TYPE_CHECKING:
+    from .grid import Grid
+    from .sweep_folder import CellRuns
 
 
 def policy_bound(instance: Instance, policy: PolicySpec, horizon: int) -> Bound | None:
@@ -201,3 +205,44 @@ def notable_markdown(notable: dict[str, Any] | None, pairs: int = 5) -> list[str
             a, b = g["policies"]
             lines.append(f"- {a} - {b}: {g['difference']:+g} at run {g['run']} (seed {g['seed']})")
     return lines
+
+
+# ------------------------------------------------------------- a sweep's (instance, horizon) group
+
+
+def group_summary(
+    grid: Grid, cells: Sequence[CellRuns], *, workers: int, wall_s: float
+) -> dict[str, Any]:
+    """The summary (``--json``, summary.json) of one (instance, horizon) group."""
+    inst, horizon = cells[0].cell.instance, cells[0].cell.horizon
+    best = analyse(inst).best_arm
+    results = [c.result(best) for c in cells]
+    summary = sweep_summary(inst, results, runs=grid.runs, horizon=horizon, seed=grid.seed,
+                            workers=workers)  # fmt: skip
+    summary["wall_s"] = round(wall_s, 4)
+    summary["notable"] = group_notable(grid, cells)
+    if grid.backend != "cpu":
+        summary["backend"] = grid.backend
+    if grid.baseline is not None:
+        from .paired import paired_against
+
+        base = [c for c in cells if c.cell.policy.name == grid.baseline]
+        if base:
+            summary["baseline"] = base[0].label
+            for name, entry in paired_against(results, base[0].label).items():
+                summary["policies"][name].update(entry)
+            for c in cells:
+                curve = c.paired_curve(base[0]) if c is not base[0] else None
+                if curve is not None:
+                    summary["policies"][c.label]["paired_diff_curve"] = curve
+    return summary
+
+
+def group_notable(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
+    """The group's notable runs (:mod:`corraoi.notable`) from the per-run finals."""
+    from .notable import notable_runs
+
+    base = [c.label for c in cells if c.cell.policy.name == grid.baseline]
+    return notable_runs([c.label for c in cells], [c.regret[:, -1] for c in cells],
+                        [c.cell.channel.to_dict() for c in cells], seed=grid.seed,
+                        baseline=base[0] if base else None)  # fmt: skip

@@ -16,9 +16,8 @@ ROOT = Path(__file__).resolve().parent.parent
 LAYERS = {"corraoi": 0, "recorder": 1, "viewer": 2}
 #: the issue's exceptions: they compose the layers for a user
 MAY_CLIMB = ("corraoi.cli", "corraoi.testing", "corraoi.analysis")
-#: owed (issue 23): a sweep writes its folder's outputs itself (results.parquet, the sweep
-#: log and recording through the recorder, figure.png through the viewer)
-OWED_CLIMBS = {"corraoi.sweep_outputs"}
+#: owed climbs (issue 23): none left
+OWED_CLIMBS: set[str] = set()
 #: owed circles: none left
 OWED_CIRCLES: set[frozenset[str]] = set()
 
@@ -134,18 +133,29 @@ def test_the_walker_sees_a_circle_and_a_climb():
     assert "corraoi.block" in edges["recorder.reader"]
 
 
-def test_readers_the_core_names_by_string_exist_in_the_recorder():
-    """The one declared seam: the core names the recorder's reader of a slot log's states in
-    a table (imported when such a trace is asked for, as fsspec names file systems) instead
-    of importing it; the names must resolve, to the recorder and nowhere higher."""
+def test_the_seams_the_core_names_by_string_resolve_upward_only_there():
+    """The declared seams: the core names a reader or writer of the layers above by string,
+    imported only when it is used (as fsspec names file systems), instead of importing it:
+    a trace channel's slot-log reader (recorder) and a sweep folder's default outputs
+    (viewer, which writes the recorder's formats and the figure). Each name must resolve,
+    to the layer it claims; no other string names a module of recorder or viewer."""
     import importlib
+    import re
 
     from corraoi.channels import TRACE_READERS
+    from corraoi.experiments import DEFAULT_OUTPUTS
 
-    for suffix, name in TRACE_READERS.items():
-        module, _, function = name.partition(":")
-        assert module.split(".")[0] == "recorder", (suffix, name)
-        assert callable(getattr(importlib.import_module(module), function)), (suffix, name)
+    seams = {**{f"trace {k}": v for k, v in TRACE_READERS.items()}, "outputs": DEFAULT_OUTPUTS}
+    for what, name in seams.items():
+        module, _, attr = name.partition(":")
+        assert module.split(".")[0] in ("recorder", "viewer"), (what, name)
+        assert callable(getattr(importlib.import_module(module), attr)), (what, name)
+    named = set(seams.values())
+    for mod, path in _modules().items():
+        if LAYERS[mod.split(".")[0]] or mod.startswith(MAY_CLIMB):
+            continue
+        for text in re.findall(r"[\"']((?:recorder|viewer)\.[\w.]+:\w+)[\"']", path.read_text()):
+            assert text in named, (mod, text)
 
 
 def test_no_module_is_over_400_lines():
