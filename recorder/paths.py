@@ -42,6 +42,10 @@ class Sink:
     Writers that treat Ctrl-C differently override ``__exit__``.
     """
 
+    def write(self, *args: Any, **kwargs: Any) -> Any:
+        """Take the next item: a block of slots, or a sweep's point."""
+        raise NotImplementedError
+
     def close(self) -> Any:
         raise NotImplementedError
 

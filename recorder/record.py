@@ -7,7 +7,8 @@ The core gives the slots (``corraoi.slots.slots_of``); the sinks are the recorde
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ from corraoi.slots import slots_of
 
 from .errors import ViewerError, WriteError
 from .mcap_sink import McapSink
+from .paths import Sink
 
 
 @dataclass
@@ -39,6 +41,7 @@ def record_run(
     on_block: Callable[[Any], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     rerun: Any = None,
+    sinks: Sequence[Sink] = (),
 ) -> RecordOutcome:
     """Simulate one run (a ``RunConfig``) and stream every slot to the MCAP log ``mcap`` and,
     with ``rrd`` or ``viewer_url``, to a Rerun recording (what ``corraoi record`` does for
@@ -46,12 +49,15 @@ def record_run(
     with the slots so far (status interrupted). A failed run (a plug-in's bad arm) leaves its
     log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files.
     ``rerun``, a :class:`recorder.rerun_worker.RerunWorker`, writes the Rerun recording in
-    its process (the same file), else it is written in this one."""
+    its process (the same file), else it is written in this one. ``sinks``: further
+    :class:`~recorder.paths.Sink` s (a Foxglove live server's, your own) that take every
+    block after those two, closed with the run, or aborted when it fails."""
     problem: str | None = None
     rrd_error: WriteError | None = None
     slots = 0
     rrd_path: Path | None = None
-    with McapSink(mcap, config, overwrite=overwrite) as log:
+    with McapSink(mcap, config, overwrite=overwrite) as log, ExitStack() as more:
+        extra = [more.enter_context(s) for s in sinks]  # each closed, or aborted, with the run
         output: Any = None
         sink: Any = None  # in this process: the RerunSink in front of ``output``
         if rrd is not None or viewer_url is not None:
@@ -73,6 +79,8 @@ def record_run(
                     sink.write(block)
                 elif output is not None:
                     output.write(block)
+                for other in extra:
+                    other.write(block)
                 slots = int(block.t[-1])
                 if on_block is not None:
                     on_block(block)

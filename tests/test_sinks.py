@@ -53,3 +53,60 @@ def test_an_error_inside_the_with_aborts_and_leaves_the_partial_file(tmp_path: P
             sink.write(block)
             raise RuntimeError("boom")
     assert not out.exists() and partial_path(out).stat().st_size > 0
+
+
+class _Collect(Sink):
+    """A user's own sink: keeps the slots it is given and how it was ended."""
+
+    def __init__(self) -> None:
+        self.t: list[int] = []
+        self.ended: list[str] = []
+
+    def write(self, block):  # type: ignore[no-untyped-def]
+        self.t += [int(v) for v in block.t]
+
+    def close(self) -> None:
+        self.ended.append("close")
+
+    def abort(self) -> None:
+        self.ended.append("abort")
+
+
+def test_record_run_hands_every_block_to_the_sinks_it_is_given(tmp_path: Path):
+    from corraoi.block import RunConfig
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policy
+    from recorder.reader import open_log
+    from recorder.record import record_run
+
+    config = RunConfig(load_instance("I1"), make_policy("cucb"), 4, 2500)
+    mine = _Collect()
+    out = record_run(config, tmp_path / "a.mcap", sinks=[mine])
+    assert mine.t == list(range(1, 2501)) and mine.ended == ["close"]
+    assert list(open_log(out.mcap).read_all().t) == mine.t
+    # stopped after the first block: the sink is closed with the slots so far
+    stopped = _Collect()
+    record_run(config, tmp_path / "b.mcap", sinks=[stopped], should_stop=lambda: True)
+    assert stopped.t == list(range(1, 1001)) and stopped.ended == ["close"]
+
+
+def test_a_failed_run_aborts_the_sinks(tmp_path: Path):
+    from corraoi.block import RunConfig
+    from corraoi.instance import load_instance
+    from corraoi.policies import make_policy
+    from corraoi.pyengine import PolicyRuntimeError
+    from recorder.record import record_run
+
+    plugin = tmp_path / "late.py"
+    plugin.write_text(
+        "import numpy as np\nfrom corraoi.policies import Policy\n"
+        "class Late(Policy):\n    name = 'late'\n"
+        "    def select(self, t, state):\n"
+        "        if t > 1500:\n            raise RuntimeError('tired')\n"
+        "        return np.zeros(state.runs, dtype=np.int64)\n"
+    )
+    config = RunConfig(load_instance("I1"), make_policy(f"{plugin}:Late"), 0, 3000)
+    mine = _Collect()
+    with pytest.raises(PolicyRuntimeError, match="tired"):
+        record_run(config, tmp_path / "c.mcap", sinks=[mine])
+    assert mine.t == list(range(1, 1501)) and mine.ended == ["abort"]

@@ -1,5 +1,5 @@
 """Running ``corraoi record``'s plans one after another: each run into its files (through
-corraoi.experiments.record_run) with a progress bar, Ctrl-C/SIGTERM finishing the files at the
+recorder.record.record_run) with a progress bar, Ctrl-C/SIGTERM finishing the files at the
 next block, and the summary printed (or its JSON) once they are done.
 """
 
@@ -152,13 +152,10 @@ def _record_into(
 
     config = plan.config
     live = outlets.live
-
-
+    # with --pace, the Foxglove sink's write is what slows the run
     fox = live.sink(config, lambda: stop.signal is not None) if live is not None else None
 
     def on_block(block: Any) -> None:
-        if fox is not None:
-            fox.write(block)  # with --pace, this is what slows the run
         result.slots = int(block.t[-1])
         result.regret = int(block.regret[-1])
         result.estimator = float(block.estimator[-1])
@@ -170,6 +167,7 @@ def _record_into(
             config, plan.mcap, rrd=plan.rrd, viewer_url=outlets.viewer_url,
             overwrite=outlets.overwrite,
             on_block=on_block, should_stop=lambda: stop.signal is not None, rerun=outlets.rerun,
+            sinks=[fox] if fox is not None else [],
         )  # fmt: skip
     finally:
         result.wall = time.perf_counter() - start
