@@ -1,6 +1,6 @@
 """The limits of corraoi's numbers, stated once: horizon, seeds, runs, checkpoints, ports.
 
-Every numeric command-line option is range-checked against these (``corraoi.cli.common``)
+Every numeric command-line option is range-checked against these (``corraoi.cli.options``)
 before anything is allocated, so that a value beyond what the engine's 64-bit sums, the
 log format or the machine can hold is one line naming the option and the limit, never a
 traceback or a memory blow-up. The engine can call the ``check_*`` functions too.

@@ -12,11 +12,8 @@ from typing import Any
 import click
 
 from .._version import __version__
-from .common import (
-    HORIZON,
-    OneLineGroup,
-    handle_errors,
-)
+from .common import OneLineGroup, handle_errors
+from .options import HORIZON
 
 
 @click.group(

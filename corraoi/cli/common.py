@@ -1,7 +1,7 @@
 """How every command reports: its output, warnings and errors, each one line, and its exit
 status (``corraoi: error: ...``), and the group that makes click's usage errors one line too.
 
-The shared options are :mod:`corraoi.cli.options`'s; they stay importable from here.
+The shared options are in :mod:`corraoi.cli.options`.
 Kept free of heavy imports (no numba, rerun or mcap) so that ``corraoi --help`` is fast.
 """
 
@@ -16,23 +16,6 @@ import click
 
 from ..errors import CorraoiError
 from ..text import safe_text
-from .options import (
-    CHECKPOINTS,
-    HORIZON,
-    PORT,
-    RUNS,
-    SEED,
-    WORKERS,
-    Bounded,
-    backend_option,
-    channel_option,
-    horizon_option,
-    instance_option,
-    output_option,
-    param_options,
-    policy_option,
-    seed_option,
-)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -206,26 +189,11 @@ class OneLineGroup(click.Group):
 
 
 __all__ = [
-    "CHECKPOINTS",
-    "HORIZON",
-    "PORT",
-    "RUNS",
-    "SEED",
-    "WORKERS",
-    "Bounded",
     "OneLineGroup",
-    "backend_option",
-    "channel_option",
     "errors_exit",
     "fail",
     "handle_errors",
-    "horizon_option",
-    "instance_option",
     "keep_pandas_out",
-    "output_option",
-    "param_options",
-    "policy_option",
     "say",
-    "seed_option",
     "warn",
 ]

@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import click
 
 from ..errors import UsageError
-from .common import PORT
+from .options import PORT
 
 F = TypeVar("F", bound=Callable[..., Any])
 
