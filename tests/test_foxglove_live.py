@@ -130,6 +130,15 @@ def _wait(cond: Any, timeout: float = 10.0) -> None:
         time.sleep(0.01)
 
 
+def _write_kept_up(sink: Any, block: Any, client: Client, before: int = 0) -> None:
+    """Publish one block (1,000 slots and the run record, within the SDK's per-client
+    backlog of 1,024) and wait until the client has read its slots: a client that keeps
+    up, however loaded the machine. (A fixed sleep between blocks let a starved client's
+    queue overflow, and the SDK then drops the oldest messages by design.)"""
+    sink.write(block)
+    _wait(lambda: len(client.slots()) >= int(block.t[-1]) - before, timeout=30)
+
+
 def _rss_kib() -> int:
     with open("/proc/self/status") as f:
         for line in f:
@@ -152,8 +161,7 @@ def test_a_client_gets_the_mcap_logs_messages_schema_and_run_record(tmp_path, ma
         with McapSink(tmp_path / "run.mcap", config, fsync=False) as mcap:
             for block in engine(config):
                 mcap.write(block)
-                sink.write(block)
-                time.sleep(0.01)  # a client that keeps up: 100,000 slots/s at most
+                _write_kept_up(sink, block, client)
         reader.join()
         client.close()
     file = _mcap_messages(tmp_path / "run.mcap")
@@ -206,8 +214,7 @@ def test_a_late_client_gets_the_advertisement_and_the_messages_from_then_on(make
         _wait(sink._slots.has_sinks)
         reader = client.pump_in_background(lambda: len(client.slots()) >= 3000)
         for block in blocks[2:]:
-            sink.write(block)
-            time.sleep(0.01)
+            _write_kept_up(sink, block, client, before=2000)
         reader.join()
         client.close()
     assert client.channels[TOPIC]["schema"].encode() == schema_bytes(config)
