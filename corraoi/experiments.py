@@ -92,7 +92,8 @@ PAPER_INSTANCES = ("I1", "I2")
 
 class SweepOutputs(Protocol):
     """What writes a finished sweep folder's files in the upper layers' formats: the folder's
-    ``results.parquet`` from the parts, then each (instance, horizon) group's files."""
+    ``results.parquet`` from the parts, then each (instance, horizon) group's files, then
+    ``finish``."""
 
     def write_results(self, folder: Path, grid: Grid, parts: dict[str, list[ChunkResult]],
                       labels: dict[str, str], *,
@@ -101,6 +102,10 @@ class SweepOutputs(Protocol):
     def write_group(self, folder: Path, grid: Grid, cells: Sequence[CellRuns],
                     summary: dict[str, Any], *,
                     warn: Callable[[str], None] | None) -> None: ...  # fmt: skip
+
+    def finish(self, *, warn: Callable[[str], None] | None) -> None:
+        """Every file complete (outputs written meanwhile by other processes waited for),
+        before the manifest says the folder is."""
 
 
 #: The outputs a sweep folder is written with unless the caller hands its own, named here
@@ -242,6 +247,7 @@ def _sweep(
             writer.write_group(dirs[key], grid, joined, summary, warn=warn)
             write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
+        writer.finish(warn=warn)
         write_manifest(folder, grid, "complete")
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip

@@ -45,6 +45,20 @@ _ANSWER = 60.0
 _ABORT_WAIT = 10.0
 
 
+def fork_context() -> Any:
+    """multiprocessing's ``fork`` context, or None where forking this process now is not
+    safe: no ``fork`` (Windows), or other threads running (one may hold a lock, the import
+    lock or a logger's, that the child would wait on for ever: a test runner's, a Dask
+    client's or an application's threads)."""
+    import threading
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return None
+    if threading.active_count() > 1:
+        return None
+    return multiprocessing.get_context("fork")
+
+
 class RerunWorker:
     """A worker process that imports Rerun now and writes recordings when asked."""
 
@@ -59,16 +73,8 @@ class RerunWorker:
 
     @classmethod
     def start(cls, before_import: Callable[[], None] | None = None) -> RerunWorker | None:
-        """A worker, or None where processes cannot be forked (Windows)."""
-        import threading
-
-        if "fork" not in multiprocessing.get_all_start_methods():
-            return None
-        if threading.active_count() > 1:
-            # forking a process whose other threads may hold a lock (the import lock, a
-            # logger's) can deadlock the child: a test runner's or an application's threads
-            return None
-        return cls(before_import)
+        """A worker, or None where a process cannot be forked safely (:func:`fork_context`)."""
+        return cls(before_import) if fork_context() is not None else None
 
     def open(
         self,
@@ -268,4 +274,4 @@ def _serve(conn: Any, parents_end: Any, before_import: Callable[[], None] | None
             return
 
 
-__all__ = ["RemoteRecording", "RerunWorker"]
+__all__ = ["RemoteRecording", "RerunWorker", "fork_context"]

@@ -18,7 +18,6 @@ from corraoi.sweep_folder import CellRuns, ChunkResult
 from .results import write_dataset
 from .style import spec_color, variant_colors
 from .sweep_log import SweepMcapSink
-from .sweep_rerun import open_sweep_recording
 
 
 def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
@@ -65,21 +64,31 @@ def write_results(
     write_dataset(folder / "results.parquet", grid, parts)
 
 
-def write_group_logs(
+def write_group_log(
     folder: Path, grid: Grid, cells: Sequence[CellRuns], summary: dict[str, Any]
-) -> None:
-    """A group's sweep log (``sweep.mcap``) and Rerun recording (``sweep.rrd``), with the
-    runs worth watching drawn over the mean."""
+) -> dict[str, Any]:
+    """A group's sweep log (``sweep.mcap``); returns its configuration, which
+    :func:`write_group_recording` takes."""
     folder.mkdir(parents=True, exist_ok=True)
     config = group_config(grid, cells)
     config["notable"] = summary["notable"]  # read back by SweepLog.notable
-    with (
-        SweepMcapSink(folder / "sweep.mcap", config) as log,
-        open_sweep_recording(folder / "sweep.rrd", config) as rec,
-    ):
+    with SweepMcapSink(folder / "sweep.mcap", config) as log:
         for c in cells:
             for point in c.points():
                 log.write(point)
+    return config
+
+
+def write_group_recording(
+    folder: Path, config: dict[str, Any], cells: Sequence[CellRuns], summary: dict[str, Any]
+) -> None:
+    """A group's Rerun recording (``sweep.rrd``): the points of its sweep log, with the runs
+    worth watching drawn over the mean. Imports Rerun (only here)."""
+    from .sweep_rerun import open_sweep_recording
+
+    with open_sweep_recording(folder / "sweep.rrd", config) as rec:
+        for c in cells:
+            for point in c.points():
                 rec.write(point)
         for c in cells:  # the runs worth watching, over the mean (CPU: every checkpoint)
             if c.agg is not None or c.regret.shape[1] < 2:

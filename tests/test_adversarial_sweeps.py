@@ -26,6 +26,7 @@ def _cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedPro
 # ---------------------------------------------------------------- interrupts
 
 
+@pytest.mark.slow
 def test_interrupts_at_ten_random_moments_of_a_huge_chunk_land_within_a_second(tmp_path: Path):
     # one chunk of 100,000 runs x 100,000 slots = 1e10 run-slots (about an hour here)
     rng = random.Random(19)

@@ -25,6 +25,7 @@ def test_first_python_block_is_the_eps_greedy_plugin_file():
     assert "class EpsilonGreedy(Policy)" in first and "Param(0.1" in first
 
 
+@pytest.mark.slow
 def test_every_command_runs_as_shown(tmp_path: Path):
     for code in blocks("python"):
         head = code.splitlines()[0]

@@ -32,6 +32,7 @@ def test_the_experiment_file_in_the_doc_is_the_shipped_one():
     assert keys(shipped) == keys(blocks("toml")[0])
 
 
+@pytest.mark.slow
 def test_every_command_and_example_runs_as_shown(tmp_path: Path):
     shutil.copytree(ROOT / "docs" / "examples", tmp_path / "docs" / "examples")
     bindir = Path(sys.executable).parent

@@ -295,6 +295,7 @@ def test_foreign_and_damaged_folders_get_one_line(folder: Path, tmp_path: Path) 
         assert out.returncode != 0 and len(lines) == 1 and says in lines[0], (path, out.stderr)
 
 
+@pytest.mark.slow
 def test_the_docs_section_runs_as_shown_on_the_papers_outlier(tmp_path: Path) -> None:
     """docs/analysis.md, "Finding the run worth watching": every command, in a fresh
     directory, and the figures the text states (I2, aoi-aware-cts, run 114, regret 1410)."""

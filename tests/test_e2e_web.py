@@ -173,6 +173,7 @@ MARKS = (
 )
 
 
+@pytest.mark.slow
 def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
     exe = find_chromium()
     logs = [str(record_mcap(p, seed=2, horizon=1500)[0]) for p in POLICIES]

@@ -417,6 +417,7 @@ def test_ctrl_c_mid_stream_finishes_the_log_and_exits_130(tmp_path):
     assert got == file[start : start + len(got)]
 
 
+@pytest.mark.slow
 def test_a_client_leaving_mid_stream_does_not_disturb_the_run(tmp_path):
     proc, url = _start(["record", "-p", "ucb", "-T", "6000", "--no-rrd", "-o", "a.mcap",
                         "--foxglove", "127.0.0.1:0", "--pace", "6000"], tmp_path)  # fmt: skip

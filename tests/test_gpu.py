@@ -509,6 +509,7 @@ def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
         assert s["backend"] == "gpu" and len(s["policies"]) == 12
 
 
+@pytest.mark.slow
 def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """docs/gpu.md's commands and Python example, on the emulated device."""
     import os

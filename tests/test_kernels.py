@@ -128,6 +128,7 @@ def test_two_processes_sharing_a_fresh_cache_compile_once(tmp_path: Path):
     assert len(list(cache.glob("kernels-*/corraoi_sweep_*.py"))) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["index", "data", "source"])
 def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which: str):
     cache = tmp_path / "cache"
@@ -160,6 +161,7 @@ print(json.dumps({"notes": notes}))
 """
 
 
+@pytest.mark.slow
 def test_prepare_compiles_families_concurrently_into_the_cache(tmp_path: Path):
     cache = tmp_path / "cache"
     out = _result(_python(_PREPARE, cache, "ucb", "cucb", "ts", "cts-gauss"))

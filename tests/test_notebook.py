@@ -9,6 +9,7 @@ import pytest
 NOTEBOOK = Path(__file__).resolve().parent.parent / "docs" / "examples" / "analysis.ipynb"
 
 
+@pytest.mark.slow
 def test_the_analysis_notebook_runs(tmp_path: Path):
     for name in ("nbclient", "nbformat", "ipykernel", "pandas", "pyarrow", "matplotlib"):
         why = f'{name} is not installed (pip install -e ".[analysis,notebook]")'

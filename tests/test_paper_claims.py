@@ -6,6 +6,8 @@ policies share their seeds, hence their hidden paths), not from tuned constants.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -49,19 +51,25 @@ class Sweep:
         return float(m), float(h)
 
 
+@functools.cache
+def _sweep(name: str) -> Sweep:
+    """One sweep per instance and process, whichever fixture asks (they are only read)."""
+    return Sweep(name)
+
+
 @pytest.fixture(scope="module", params=["I1", "I2"])
 def sweep(request: pytest.FixtureRequest) -> Sweep:
-    return Sweep(request.param)
+    return _sweep(request.param)
 
 
 @pytest.fixture(scope="module")
 def i1() -> Sweep:
-    return Sweep("I1")
+    return _sweep("I1")
 
 
 @pytest.fixture(scope="module")
 def i2() -> Sweep:
-    return Sweep("I2")
+    return _sweep("I2")
 
 
 def test_cts_or_aoi_aware_cts_lowest(sweep: Sweep):

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.slow  # the README's commands, one after the other: about 40 s
 
 #: Shown but not run here, and why.
 NOT_RUN = {

@@ -22,6 +22,9 @@ class Recorded:
     def write_group(self, folder, grid, cells, summary, *, warn):  # type: ignore[no-untyped-def]
         self.calls.append(("group", (folder.name, [c.label for c in cells], summary["runs"])))
 
+    def finish(self, *, warn):  # type: ignore[no-untyped-def]
+        self.calls.append(("finish", None))
+
 
 def _grid():  # type: ignore[no-untyped-def]
     return build_grid(instances=["I1", "I2"], policies=["ucb", "cucb"], horizons=[200],
@@ -33,7 +36,8 @@ def test_the_callers_outputs_get_every_group_and_the_core_writes_the_summaries(t
     outcome = sweep(_grid(), out=tmp_path / "s", outputs=mine, workers=1)
     assert mine.calls == [("results", ["cucb", "cucb", "ucb", "ucb"]),
                           ("group", ("I1", ["ucb", "cucb"], 6)),
-                          ("group", ("I2", ["ucb", "cucb"], 6))]  # fmt: skip
+                          ("group", ("I2", ["ucb", "cucb"], 6)),
+                          ("finish", None)]  # fmt: skip
     for folder, summary in zip(outcome.folders, outcome.summaries, strict=True):
         assert json.loads((folder / "summary.json").read_text()) == summary
         assert (folder / "summary.md").read_text().startswith("# Sweep:")
