@@ -102,6 +102,11 @@ def main() -> None:
             "compare to .rrd": lambda k: ["compare", f"ucb-{k}.mcap", f"cucb-{k}.mcap",
                                           "-o", f"c-{k}.rrd", "--force"],
             "paper workload": lambda k: PAPER,
+            "sweep -o, small (2 policies x 40 runs x 500 slots)":
+                lambda k: ["sweep", "-p", "ucb,cucb", "-n", "40", "-T", "500",
+                           "-o", f"s-{k}", "--force"],
+            "sweep --policy all -o (the README's)":
+                lambda k: ["sweep", "--policy", "all", "-o", f"a-{k}", "--force"],
             "--help": lambda k: ["--help"],
         }  # fmt: skip
         for _ in range(args.repeat):

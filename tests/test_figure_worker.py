@@ -1,6 +1,6 @@
-"""A sweep folder's figures drawn by a forked worker (viewer/figure_worker.py, issue 22): the
-same bytes as drawn in-process, nothing lost when the worker dies, the same warning without
-matplotlib, and ``corraoi sweep -o`` using it.
+"""A sweep folder's figures drawn by a forked worker (viewer/figure_worker.py, issue 22):
+``corraoi sweep -o`` uses it and its figures are the bytes drawn in-process, nothing is lost
+when the worker dies, and without matplotlib each figure is one warning.
 
 The worker forks only a process with no other thread (a pytest-xdist worker has some), so
 each case runs in a fresh interpreter."""
@@ -29,19 +29,14 @@ from viewer.sweep_outputs import FolderOutputs
 
 grid = build_grid(instances=["I1", "I2"], policies=["ucb", "cts"], horizons=[300], runs=8)
 notes = []
-if how == "in-process":
-    outputs = FolderOutputs()
-    sweep(grid, out=out, outputs=outputs, workers=1, warn=notes.append)
-    started = None
-else:
-    worker = FigureWorker.start()
-    started = worker is not None and worker._proc.pid
-    if how == "killed":
-        os.kill(worker._proc.pid, signal.SIGKILL)  # dead before it draws anything
-        worker._proc.join()
-    with worker:
-        sweep(grid, out=out, outputs=FolderOutputs(worker), workers=1, warn=notes.append)
-    started = started and not worker._proc.is_alive()
+worker = FigureWorker.start()
+started = worker is not None and worker._proc.pid
+if how == "killed":
+    os.kill(worker._proc.pid, signal.SIGKILL)  # dead before it draws anything
+    worker._proc.join()
+with worker:
+    sweep(grid, out=out, outputs=FolderOutputs(worker), workers=1, warn=notes.append)
+started = started and not worker._proc.is_alive()
 print(json.dumps({"notes": notes, "started_and_stopped": bool(started)}))
 """
 
@@ -54,26 +49,43 @@ def _run(how: str, out: Path) -> dict:
     return result
 
 
-def test_the_worker_draws_the_figures_drawn_in_process_byte_for_byte(tmp_path: Path):
-    here = _run("in-process", tmp_path / "here")
-    there = _run("worker", tmp_path / "there")
-    assert there["started_and_stopped"] and here["notes"] == there["notes"] == []
+def _drawn_here(folder: Path, tmp_path: Path) -> bytes:
+    """The figure of a group's sweep log as drawn in this process."""
+    from recorder.sweep_log import read_sweep
+    from viewer.figure import draw_figure
+
+    out = tmp_path / f"here-{folder.name}.png"
+    return draw_figure(read_sweep(folder / "sweep.mcap"), out).read_bytes()
+
+
+def test_sweep_o_draws_its_figures_in_the_worker_as_they_are_drawn_in_process(tmp_path: Path):
+    code = ("import sys, viewer.figure_worker as w; calls = []; real = w.FigureWorker.draw\n"
+            "def draw(self, log, out):\n    calls.append(str(out)); real(self, log, out)\n"
+            "w.FigureWorker.draw = draw\n"
+            "import atexit; atexit.register(lambda: print('DRAWN', len(calls)))\n"
+            "sys.argv = ['corraoi', 'sweep', '-i', 'I1,I2', '-p', 'ucb,cts', '-T', '300',"
+            " '-n', '8', '-o', sys.argv[1]]\n"
+            "from corraoi.cli import run; run()\n")  # fmt: skip
+    folder = tmp_path / "cli"
+    done = subprocess.run([sys.executable, "-c", code, str(folder)],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "DRAWN 2" in done.stdout  # the command forked the worker and it drew both
     for group in ("I1", "I2"):
-        a = (tmp_path / "here" / group / "figure.png").read_bytes()
-        b = (tmp_path / "there" / group / "figure.png").read_bytes()
-        assert a[:8] == b"\x89PNG\r\n\x1a\n" and a == b
-        assert (tmp_path / "there" / group / "sweep.rrd").exists()
-    assert not list(tmp_path.rglob("*.partial"))
+        fig = (folder / group / "figure.png").read_bytes()
+        assert fig[:8] == b"\x89PNG\r\n\x1a\n" and fig == _drawn_here(folder / group, tmp_path)
+        assert (folder / group / "sweep.rrd").exists()
+    assert json.loads((folder / "manifest.json").read_text())["status"] == "complete"
+    assert not list(folder.rglob("*.partial"))
 
 
 def test_figures_a_dead_worker_did_not_draw_are_drawn_here(tmp_path: Path):
-    _run("in-process", tmp_path / "here")
-    got = _run("killed", tmp_path / "there")
-    assert got["notes"] == []
+    got = _run("killed", tmp_path / "s")
+    assert got["started_and_stopped"] and got["notes"] == []
     for group in ("I1", "I2"):
-        assert ((tmp_path / "there" / group / "figure.png").read_bytes()
-                == (tmp_path / "here" / group / "figure.png").read_bytes())  # fmt: skip
-    manifest = json.loads((tmp_path / "there" / "manifest.json").read_text())
+        folder = tmp_path / "s" / group
+        assert (folder / "figure.png").read_bytes() == _drawn_here(folder, tmp_path)
+    manifest = json.loads((tmp_path / "s" / "manifest.json").read_text())
     assert manifest["status"] == "complete"
 
 
@@ -85,25 +97,3 @@ def test_without_matplotlib_the_worker_path_warns_once_per_figure(tmp_path: Path
         assert "plot" in note  # names the extra to install
         assert (tmp_path / "s" / group / "sweep.rrd").exists()
         assert not (tmp_path / "s" / group / "figure.png").exists()
-
-
-def test_sweep_o_draws_its_figure_in_the_worker(tmp_path: Path):
-    """The command forks the worker (its figure is the in-process one, byte for byte)."""
-    code = ("import sys, viewer.figure_worker as w; calls = []; real = w.FigureWorker.draw\n"
-            "def draw(self, log, out):\n    calls.append(str(out)); real(self, log, out)\n"
-            "w.FigureWorker.draw = draw\n"
-            "import atexit; atexit.register(lambda: print('DRAWN', len(calls)))\n"
-            "sys.argv = ['corraoi', 'sweep', '-i', 'I1', '-p', 'ucb,cts', '-T', '300',"
-            " '-n', '8', '-o', sys.argv[1]]\n"
-            "from corraoi.cli import run; run()\n")  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "cli")],
-                          capture_output=True, text=True, timeout=300)  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    assert "DRAWN 1" in done.stdout
-    from recorder.sweep_log import read_sweep
-    from viewer.figure import draw_figure
-
-    folder = tmp_path / "cli"
-    again = draw_figure(read_sweep(folder / "sweep.mcap"), tmp_path / "again.png")
-    assert (folder / "figure.png").read_bytes() == again.read_bytes()
-    assert json.loads((folder / "manifest.json").read_text())["status"] == "complete"

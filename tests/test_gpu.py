@@ -547,3 +547,31 @@ def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_pa
                 - at[at["policy"] == "ucb"]["regret"].to_numpy())  # fmt: skip
         m = Moments.of(diff)
         assert math.isclose(curve["mean"][i], float(m.mean), rel_tol=1e-12, abs_tol=1e-12)
+
+
+def test_two_builders_on_a_fresh_cache_compile_the_emulation_once(
+    emulate_env: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    """The emulated device's library is compiled under the kernel cache's lock: a second
+    process (here a thread, with its own lock file descriptor) waits and loads it."""
+    import threading
+    import time
+
+    monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
+    compiled: list[Path] = []
+
+    def fake_compile(self: EmulatedDevice, lib: Path, flags: tuple[str, ...]) -> Path:
+        compiled.append(lib)
+        time.sleep(0.3)  # long enough for the other builder to arrive meanwhile
+        lib.write_bytes(b"library")
+        return lib
+
+    monkeypatch.setattr(EmulatedDevice, "_compile_to", fake_compile)
+    got: list[Path] = []
+    builders = [threading.Thread(target=lambda: got.append(EmulatedDevice()._build(3)))
+                for _ in range(2)]  # fmt: skip
+    for b in builders:
+        b.start()
+    for b in builders:
+        b.join()
+    assert len(compiled) == 1 and got == [compiled[0], compiled[0]]

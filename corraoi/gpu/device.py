@@ -192,7 +192,7 @@ class EmulatedDevice(Device):
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
-        from ..kernels import _writable, cache_dir
+        from ..kernels import _locked, _writable, cache_dir
 
         text = source()
         flags = (*self.FLAGS, f"-DKARMS={K}")
@@ -201,6 +201,13 @@ class EmulatedDevice(Device):
         lib = folder / f"kernel-K{K}-{digest}.so"
         if lib.exists():
             return lib
+        with _locked(folder, lib.stem):  # two processes on a fresh cache: one compiles
+            if lib.exists():
+                return lib
+            return self._compile_to(lib, flags)
+
+    def _compile_to(self, lib: Path, flags: tuple[str, ...]) -> Path:
+        folder = lib.parent
         fd, tmp = tempfile.mkstemp(prefix=lib.name, suffix=".partial", dir=folder)
         os.close(fd)
         try:
