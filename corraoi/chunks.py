@@ -104,7 +104,7 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
 
 def prepare_kernels(cells: Sequence[Cell]) -> None:
     """Compile the sweep kernels the cells need and the cache lacks, concurrently."""
-    from .kernels import prepare
+    from .kernel_pool import prepare
     from .policies.api import CompiledPolicy
 
     classes = {}

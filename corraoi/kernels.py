@@ -13,7 +13,8 @@ runtime flags, so the paper's twelve policies need three families. Each family h
 kernels shaped by their job (the template's docstring): the serial record kernel, which a
 one-run ``corraoi record`` compiles in about 3 s, and the sweep kernel, without the per-slot
 recording path. A command compiles only the one it uses; when several families must compile
-(a first ``--policy all``), :func:`prepare` compiles them in worker processes at once. A lock
+(a first ``--policy all``), :func:`corraoi.kernel_pool.prepare` compiles them in worker
+processes at once. A lock
 file per kernel makes two processes that share a fresh cache compile it once, and a damaged
 cache entry is rebuilt with one notice.
 
@@ -29,13 +30,12 @@ import hashlib
 import importlib
 import importlib.util
 import os
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -309,91 +309,3 @@ def kernel_for(policy: type[CompiledPolicy], *, record: bool) -> Any:
         kernel = _load(folder, modname, path, policy.name)
         _LOADED[modname] = kernel
         return kernel
-
-
-def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool) -> None:
-    """Compile the kernels ``policies`` need that are not cached yet, concurrently: one worker
-    process per family (at most one per core), all sharing the on-disk cache, with one
-    notice and a progress line. The caller then loads each from the cache. Families whose
-    hooks a fresh process cannot import (a plug-in loaded from a file) compile in-process
-    later, as before."""
-    folder = _writable(cache_dir())
-    todo: dict[str, tuple[Path, str]] = {}
-    for policy in policies:
-        try:
-            modname, source = kernel_source(policy, record=record)
-        except KernelError:
-            continue  # reported by kernel_for with the policy's name
-        if modname in _LOADED or modname in todo or _is_cached(folder, modname):
-            continue
-        if not all(_importable(ref) for ref in hooks_of(policy)):
-            continue
-        todo[modname] = (_write_source(folder, modname, source), policy.name)
-    if len(todo) < 2:
-        return  # one kernel compiles as fast in this process
-    global compile_seconds
-    start = time.perf_counter()
-    names = sorted({name for _, name in todo.values()})
-    if on_compile is not None:
-        on_compile(
-            f"compiling the engine for {len(todo)} policy families ({', '.join(names)}; "
-            f"first use, {min(len(todo), os.cpu_count() or 1)} at a time; cached in {folder})"
-        )
-    pending = list(todo.items())
-    running: list[subprocess.Popen[bytes]] = []
-    done = 0
-    try:
-        while pending or running:
-            while pending and len(running) < max(1, os.cpu_count() or 1):
-                modname, (path, _) = pending.pop(0)
-                running.append(
-                    subprocess.Popen(
-                        [sys.executable, "-c", _WORKER, str(folder), modname, str(path)],
-                        stdout=subprocess.DEVNULL,
-                        stderr=subprocess.DEVNULL,
-                    )
-                )
-            time.sleep(0.02)
-            for proc in [p for p in running if p.poll() is not None]:
-                running.remove(proc)
-                done += 1
-                if on_compile is not None:
-                    took = time.perf_counter() - start
-                    on_compile(f"  {done}/{len(todo)} compiled ({took:.1f} s)")
-    finally:
-        for proc in running:  # interrupted: stop the workers (their locks go with them)
-            proc.kill()
-            proc.wait()
-    compile_seconds += time.perf_counter() - start
-
-
-# A worker of prepare(): compile one generated kernel module into the shared cache. A failure
-# is left to the parent, which compiles in-process and reports it with the policy's name.
-_WORKER = (
-    "import sys\n"
-    "from pathlib import Path\n"
-    "from corraoi import kernels\n"
-    "kernels._load(Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), sys.argv[2])\n"
-)
-
-
-def _importable(ref: Any) -> bool:
-    """Whether a fresh process can import the hook ``ref`` by its module's name."""
-    if isinstance(ref, str):
-        modname = ref.partition(":")[0]
-    else:
-        func = getattr(ref, "py_func", None)
-        modname = getattr(func, "__module__", "") if func is not None else ""
-    if not modname:
-        return False
-    module = sys.modules.get(modname)
-    file = getattr(module, "__file__", None) if module is not None else None
-    if module is not None and file is None:
-        return False
-    try:
-        spec = importlib.util.find_spec(modname)
-    except (ImportError, ValueError):
-        return False
-    if spec is None or spec.origin is None:
-        return False
-    return file is None or Path(spec.origin).resolve() == Path(file).resolve()

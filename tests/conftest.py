@@ -25,21 +25,20 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 
 def pytest_configure(config: pytest.Config) -> None:
     """Before any test, compile every built-in family's record and sweep kernels that the
-    kernel cache lacks, a worker process per core (kernels.prepare): on a fresh machine the
+    kernel cache lacks, a worker process per core (kernel_pool.prepare): on a fresh machine the
     tests then load them instead of compiling one by one inside the first tests that need
     them. Done once, by the main process (not by each pytest-xdist worker)."""
     if hasattr(config, "workerinput"):
         return
     _compile_bytecode()
-    from corraoi import kernels
+    from corraoi import kernel_pool, kernels
     from corraoi.policies import builtins
 
     classes = [make_policy(name).resolve() for name in builtins()]
     notes: list[str] = []
     previous, kernels.on_compile = kernels.on_compile, notes.append
     try:
-        for record in (True, False):
-            kernels.prepare(classes, record=record)
+        kernel_pool.prepare(classes, record=(True, False))
     finally:
         kernels.on_compile = previous
     if notes:

@@ -151,12 +151,12 @@ def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which:
 
 _PREPARE = """
 import sys, json
-from corraoi import kernels
+from corraoi import kernel_pool, kernels
 from corraoi.policies import make_policy
 notes = []
 kernels.on_compile = notes.append
 classes = [make_policy(n).resolve() for n in sys.argv[1:]]
-kernels.prepare(classes, record=False)
+kernel_pool.prepare(classes, record=False)
 print(json.dumps({"notes": notes}))
 """
 
@@ -183,3 +183,28 @@ def test_kernel_source_variants_differ_only_where_they_should():
     assert "parallel=True" in sw and "parallel=True" not in rec.split("def advance(")[0][-300:]
     # no parfor, so no numba thread team under the engine's threads
     assert "prange(" not in sw and "import prange" not in sw
+
+
+def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path, monkeypatch):
+    """A first test run's record and sweep kernels go to one pool (no core idles between two
+    batches), the longer sweep kernels first; the notice counts families and kernels."""
+    from corraoi import kernel_pool
+
+    monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
+    started: list[str] = []
+
+    class Done:  # a worker that has finished at once
+        def __init__(self, argv: list[str], **_: object) -> None:
+            started.append(argv[4])  # the kernel module's name
+
+        def poll(self) -> int:
+            return 0
+
+    monkeypatch.setattr(kernel_pool.subprocess, "Popen", Done)
+    notes: list[str] = []
+    monkeypatch.setattr(kernels, "on_compile", notes.append)
+    classes = [make_policy(n).resolve() for n in ("ucb", "cucb", "ts")]  # two families
+    kernel_pool.prepare(classes, record=(True, False))
+    assert [n.split("_")[1] for n in started] == ["sweep", "sweep", "record", "record"]
+    assert notes[0].startswith("compiling the engine for 2 policy families (ts, ucb, 4 kernels;")
+    assert [n.split()[0] for n in notes[1:]] == ["1/4", "2/4", "3/4", "4/4"]

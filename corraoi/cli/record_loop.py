@@ -106,7 +106,7 @@ def record_all(
 def _prepare_kernels(plans: list[Plan]) -> None:
     """Several policy families to record for the first time: compile their record kernels
     at once, one worker process per core, before the first run starts."""
-    from .. import kernels
+    from .. import kernel_pool
     from ..policies.api import CompiledPolicy
 
     classes = {}
@@ -116,7 +116,7 @@ def _prepare_kernels(plans: list[Plan]) -> None:
         cls = plan.config.policy.resolve()
         if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
             classes[cls.name] = cls
-    kernels.prepare(classes.values(), record=True)
+    kernel_pool.prepare(classes.values(), record=True)
 
 
 def _record_one(plan: Plan, result: Result, outlets: Outlets, stop: Stop, bar: Any) -> str | None:
