@@ -191,6 +191,7 @@ def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path,
     from corraoi import kernel_pool
 
     monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(kernels, "_LOADED", {})  # as in a fresh process (whatever ran before)
     started: list[str] = []
 
     class Done:  # a worker that has finished at once
