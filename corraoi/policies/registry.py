@@ -21,7 +21,7 @@ import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 from .._version import __version__
 from ..errors import PolicyError
@@ -36,9 +36,6 @@ from .loading import (
     module_version,
     one_line,
 )
-
-if TYPE_CHECKING:
-    from .spec import PolicySpec
 
 ENTRY_POINT_GROUP = "corraoi.policies"
 #: what a registered name may look like: a word of the command line (no ``:`` or ``,``)
@@ -213,20 +210,8 @@ def unknown_policy_message(name: str) -> str:
     )
 
 
-def resolve_spec(spec: PolicySpec) -> type[PolicyBase]:
-    """The class of a spec (from a log or made here)."""
-    if spec.builtin:
-        cls = builtins().get(spec.name)
-        if cls is None:
-            raise PolicyError(f"policy {spec.name}: not a built-in of corraoi {__version__}")
-        return cls
-    held = _TABLE.get(spec.name)
-    if held is not None and _qualname(held) == spec.qualname:
-        return held  # registered in this process (perhaps from a script, not importable)
-    qual = spec.qualname
-    if qual.startswith("file:"):
-        body = qual[len("file:") :]
-        return resolve(body).cls
-    if ":" in qual and not qual.startswith("plugin:"):
-        return resolve(qual).cls
-    return resolve(spec.name).cls
+def held(name: str, qualname: str) -> type[PolicyBase] | None:
+    """The class registered in this process under ``name``, if it is the one ``qualname``
+    names (perhaps defined in a script, so not importable again); otherwise None."""
+    cls = _TABLE.get(name)
+    return cls if cls is not None and _qualname(cls) == qualname else None

@@ -17,7 +17,7 @@ import numpy as np
 from .._version import __version__
 from ..errors import PolicyError
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
-from .registry import builtins, paper_names, policy_name, resolve, resolve_spec
+from .registry import builtins, held, paper_names, policy_name, resolve
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,20 @@ class PolicySpec:
 
     def resolve(self) -> type[PolicyBase]:
         """The policy class (importing the plug-in); PolicyError when it cannot be had."""
-        return resolve_spec(self)
+        if self.builtin:
+            cls = builtins().get(self.name)
+            if cls is None:
+                raise PolicyError(f"policy {self.name}: not a built-in of corraoi {__version__}")
+            return cls
+        here = held(self.name, self.qualname)
+        if here is not None:
+            return here
+        qual = self.qualname
+        if qual.startswith("file:"):
+            return resolve(qual[len("file:") :]).cls
+        if ":" in qual and not qual.startswith("plugin:"):
+            return resolve(qual).cls
+        return resolve(self.name).cls
 
     def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
         """The parameters in the class's declared order (what compiled hooks receive)."""
