@@ -2,7 +2,8 @@
 
 Prints four tables:
 
-1. per policy, the paper's workload in-process (I1, 200 runs, T = 10,000; best of --repeat);
+1. per policy, the paper's workload in-process (I1, 200 runs, T = 10,000; best of --repeat),
+   and a compiled plug-in (tests/plugins/compiled_greedy.py, UCB with a bonus);
 2. the paper workload as whole processes, ``corraoi sweep --instance I1 --policy all --runs 200
    --horizon 10000 --json`` (best of --repeat, warm kernel cache), and start-up (the same
    command with one run of one slot);
@@ -27,6 +28,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PLUGIN = ROOT / "tests" / "plugins" / "eps_greedy.py"
+#: A compiled plug-in (UCB with a bonus): its hooks go through the kernel as a user's do.
+COMPILED = f"{ROOT / 'tests' / 'plugins' / 'compiled_greedy.py'}:BonusUCB"
 
 
 def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
@@ -36,7 +39,7 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
 
     inst = load_instance("I1")
     workers = set_workers(None)
-    names = list(builtins()) if extra else paper_names()
+    names = [*(builtins() if extra else paper_names()), COMPILED]
     times: dict[str, list[float]] = {n: [] for n in names}
     for _ in range(repeat):
         for name in names:
@@ -51,7 +54,8 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
     best = {n: min(v) for n, v in times.items()}
     for name, dt in best.items():
         spread = max(times[name]) / dt - 1
-        print(f"{name:22s} {dt:8.3f} {run_slots / dt:14,.0f} {spread:6.0%}")
+        label = "compiled plug-in" if name == COMPILED else name
+        print(f"{label:22s} {dt:8.3f} {run_slots / dt:14,.0f} {spread:6.0%}")
     paper = [best[n] for n in paper_names()]
     print(f"{'total (paper twelve)':22s} {sum(paper):8.3f} "
           f"{run_slots * len(paper) / sum(paper):14,.0f}")  # fmt: skip

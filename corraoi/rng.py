@@ -8,6 +8,11 @@ hidden path, the policy stream everything a policy randomises. The SFC64 step is
 These functions are the public toolbox of compiled policies (``docs/extending.md``): call them
 from your own ``@njit`` hooks with the ``pst`` (policy stream) and ``cache`` arrays the kernel
 hands you (``cache`` held the polar method's spare normal; the ziggurat needs none).
+
+Every sampler a kernel or a hook can call is ``inline="always"``, as are the built-in hooks.
+Called out of line, one compiled copy served every kernel of the process, and where that copy
+landed against a kernel's code decided whether a policy family ran at full or half rate;
+inlined, the rate no longer depends on it (measured in docs/performance.md).
 """
 
 from __future__ import annotations
@@ -46,7 +51,7 @@ def uniform(st):
     return float(next_u64(st) >> _S11) * _INV53
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def integer(st, high):
     """A uniform integer in [0, high) (``high`` >= 1), from one uniform draw."""
     k = int(uniform(st) * high)
@@ -112,7 +117,7 @@ def normal(st, cache):
             return x
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def gamma(st, cache, shape):
     """Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang 2000)."""
     d = shape - 1.0 / 3.0
@@ -138,7 +143,7 @@ def gamma_dc(st, cache, d, c):
             return d * v
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def beta(st, cache, a, b):
     """Beta(a, b) for a, b >= 1, as Gamma(a) / (Gamma(a) + Gamma(b))."""
     ga = gamma(st, cache, a)
@@ -146,7 +151,7 @@ def beta(st, cache, a, b):
     return ga / (ga + gb)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def argmax_random(vals, mask, st, K):
     """Index of the largest ``vals[k]`` with ``mask[k]``; ties uniformly at random.
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numba import njit
 
 from corraoi import kernels
 from corraoi.engine import Simulation, set_workers
@@ -209,3 +210,56 @@ def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path,
     assert [n.split("_")[1] for n in started] == ["sweep", "sweep", "record", "record"]
     assert notes[0].startswith("compiling the engine for 2 policy families (ts, ucb, 4 kernels;")
     assert [n.split()[0] for n in notes[1:]] == ["1/4", "2/4", "3/4", "4/4"]
+
+
+@njit
+def _plain_hook(t, K, npull, nsucc, params, ps, pst):
+    return -1
+
+
+@njit(fastmath=True)
+def _fastmath_hook(t, K, npull, nsucc, params, ps, pst):
+    return -1
+
+
+@njit(inline="never")
+def _never_hook(t, K, npull, nsucc, params, ps, pst):
+    return -1
+
+
+def test_hooks_are_inlined_unless_their_options_change_their_code():
+    """An out-of-line hook doubled a UCB plug-in's time per slot (docs/performance.md): the
+    kernel re-declares a plain hook inline="always", the same function; a hook whose options
+    change its code is called as declared."""
+    from corraoi import _kernel
+
+    got = _kernel.inlined(_plain_hook)
+    assert got is not _plain_hook and got.py_func is _plain_hook.py_func
+    assert got.targetoptions["inline"] == "always"
+    for hook in (_fastmath_hook, _never_hook, got):
+        assert _kernel.inlined(hook) is hook
+    # the compiled plug-in's kernel (its score hook is a plain @njit) calls it inlined
+    cls = make_policy(f"{PLUGINS / 'compiled_greedy.py'}:BonusUCB").resolve()
+    kernel = kernels.kernel_for(cls, record=False)
+    score = kernel.py_func.__globals__["_score"]
+    assert score.py_func.__name__ == "bonus_score"
+    assert score.targetoptions["inline"] == "always"
+
+
+def test_every_sampler_a_kernel_can_call_is_inlined():
+    """Kernels and hooks call these in the per-slot loop; out of line, a family ran at full
+    or half rate by where its code landed in memory (docs/performance.md)."""
+    import inspect
+
+    from corraoi import rng
+    from corraoi.policies import builtin_hooks, hooks
+
+    standalone = {"sfc64_doubles"}  # called from Python only (tests against NumPy)
+    seen = []
+    for module in (rng, hooks, builtin_hooks):
+        for name, obj in inspect.getmembers(module, lambda o: hasattr(o, "targetoptions")):
+            if obj.py_func.__module__ != module.__name__ or name in standalone:
+                continue
+            seen.append(name)
+            assert obj.targetoptions.get("inline") == "always", f"{module.__name__}.{name}"
+    assert {"argmax_random", "beta", "gamma", "integer", "uniform", "ucb_score"} <= set(seen)
