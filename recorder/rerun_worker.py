@@ -18,8 +18,9 @@ problem raises the same :class:`~recorder.errors.WriteError` or
 
 The worker ignores Ctrl-C, SIGTERM and SIGHUP (the terminal sends them to the whole
 process group): the parent decides, and tells it to finish or to abort. A parent that
-dies without a word (SIGKILL) closes the pipe: the worker then aborts, leaving the
-``.partial`` file, as an in-process recording killed at that moment would.
+dies without a word (SIGKILL) takes the worker with it (:func:`die_with_parent`; elsewhere
+the closed pipe makes it abort), leaving the ``.partial`` file, as an in-process recording
+killed at that moment would.
 """
 
 from __future__ import annotations
@@ -59,13 +60,33 @@ def fork_context() -> Any:
     return multiprocessing.get_context("fork")
 
 
+def die_with_parent(parent: int) -> None:
+    """Have the kernel kill this forked worker when its parent dies (Linux's
+    ``PR_SET_PDEATHSIG``); leave now if the parent ``parent`` is gone already.
+
+    Without it a worker whose parent was SIGKILLed finishes what it is doing first: a
+    figure it was drawing then lands in a sweep folder that a resumed sweep is writing, and
+    the locks it inherited (the folder's) outlive the parent. Elsewhere the closed pipe
+    still ends the worker, after its current task."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux
+    if os.getppid() != parent:  # it died before the line above
+        os._exit(0)
+
+
 class RerunWorker:
     """A worker process that imports Rerun now and writes recordings when asked."""
 
     def __init__(self, before_import: Callable[[], None] | None = None) -> None:
         ctx = multiprocessing.get_context("fork")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, self._conn, before_import),
+        self._proc = ctx.Process(target=_serve,
+                                 args=(child, self._conn, before_import, os.getpid()),
                                  daemon=True, name="corraoi-rerun")  # fmt: skip
         self._proc.start()
         child.close()
@@ -208,8 +229,11 @@ def _left(path: Path | None) -> str:
     return f"; the incomplete file is left as {partial_path(path)}"
 
 
-def _serve(conn: Any, parents_end: Any, before_import: Callable[[], None] | None) -> None:
+def _serve(
+    conn: Any, parents_end: Any, before_import: Callable[[], None] | None, parent: int
+) -> None:
     """The worker's loop: import Rerun, then carry out the parent's messages."""
+    die_with_parent(parent)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     parents_end.close()  # else the pipe would stay open here when the parent dies

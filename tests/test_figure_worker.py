@@ -97,3 +97,78 @@ def test_without_matplotlib_the_worker_path_warns_once_per_figure(tmp_path: Path
         assert "plot" in note  # names the extra to install
         assert (tmp_path / "s" / group / "sweep.rrd").exists()
         assert not (tmp_path / "s" / group / "figure.png").exists()
+
+
+_ORPHAN = r"""
+import sys, time
+import viewer.figure_worker as fw
+from recorder.rerun_worker import RerunWorker
+fw.draw_from_log = lambda log, out: time.sleep(60)  # a figure that takes a minute
+figures = fw.FigureWorker.start()
+figures.draw("sweep.mcap", "figure.png")  # busy: it does not read the pipe meanwhile
+rerun = RerunWorker.start(lambda: time.sleep(60))  # busy before it imports Rerun
+print(figures._proc.pid, rerun._proc.pid, flush=True)
+time.sleep(60)  # killed long before
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"  # a zombie is dead
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_worker_dies_with_its_parent(tmp_path: Path):
+    """A SIGKILLed sweep's figure worker used to finish its figure and publish it into the
+    folder a resumed sweep was writing (and to hold the folder's inherited lock meanwhile);
+    both workers, busy, die with the parent."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-c", _ORPHAN], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        pids = [int(p) for p in proc.stdout.readline().split()]
+        assert len(pids) == 2 and all(_alive(p) for p in pids)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 10
+        while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not any(_alive(p) for p in pids), "a worker outlived its parent"
+    finally:
+        proc.kill()
+
+
+def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path: Path):
+    """draw_figure writes through the recorder's locked .partial: a second writer of the same
+    figure is told who holds it instead of renaming the other's file away."""
+    from corraoi.errors import CorraoiError
+    from corraoi.experiments import sweep
+    from corraoi.grid import build_grid
+    from recorder.sweep_log import read_sweep
+    from viewer.figure import draw_figure
+
+    grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[200], runs=4)
+    sweep(grid, out=tmp_path / "sw", workers=1)
+    log = read_sweep(tmp_path / "sw" / "sweep.mcap")
+    out = tmp_path / "fig.png"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'wb'); "
+         "f.write(b'theirs'); f.flush(); fcntl.flock(f, fcntl.LOCK_EX); print(1, flush=True); "
+         "time.sleep(60)", str(out) + ".partial"],
+        stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "1"
+        busy = rf"fig\.png\.partial: is being written by process {holder.pid}"
+        with pytest.raises(CorraoiError, match=busy):
+            draw_figure(log, out)
+        assert (tmp_path / "fig.png.partial").read_bytes() == b"theirs" and not out.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    assert draw_figure(log, out).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # then it is ours
+    assert not (tmp_path / "fig.png.partial").exists()

@@ -155,9 +155,9 @@ _PROBE = """
 import json, os, sys
 import recorder.rerun_worker as w
 serve = w._serve
-def spy(conn, end, before):
+def spy(*args):
     try:
-        serve(conn, end, before)
+        serve(*args)
     finally:
         heavy = sorted(m for m in ("numba", "rerun", "pandas", "pyarrow") if m in sys.modules)
         with open("child.json", "w") as f:

@@ -13,7 +13,6 @@ figure is drawn with the object-oriented API (no pyplot, no global backend switc
 
 from __future__ import annotations
 
-import contextlib
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from corraoi.errors import CorraoiError, UsageError
+from recorder.paths import open_partial, publish, unlink_partial
 from recorder.style import (
     DASH_AOI_AWARE,
     REGRET_UNIT,
@@ -52,7 +52,6 @@ FORMATS = {
 }
 YLABEL = f"pathwise AoI regret  sum (aoi - oracle aoi)  {REGRET_UNIT}"
 MISSING_MATPLOTLIB = "figures need matplotlib: pip install 'corraoi[plot]'"
-_PARTIAL = ".partial"
 
 
 class FigureUnavailable(CorraoiError):
@@ -174,15 +173,14 @@ def draw_figure(
     else:
         axes[0].set_title(figure_title(sweep), fontsize=11)
 
-    part = out.with_name(out.name + _PARTIAL)
+    # the recorder's locked .partial: a second writer of the same figure (another sweep
+    # resuming this folder, say) is refused by name instead of renaming ours away
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with open(part, "wb") as f:
+        with open_partial(out, overwrite=True, what="figure") as f:
             fig.savefig(f, format=fmt, metadata=_metadata(fmt))
-        os.replace(part, out)
+            publish(out, overwrite=True)  # while the lock is held
     except BaseException:
-        with contextlib.suppress(OSError):
-            part.unlink()
+        unlink_partial(out)  # ours only: not one another process holds
         raise
     return out
 

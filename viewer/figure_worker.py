@@ -14,17 +14,18 @@ or other threads running); :class:`viewer.sweep_outputs.FolderOutputs` then draw
 in-process. Nothing is lost when the worker fails: a figure it did not deliver (it died,
 did not answer, or its answer could not be read) is drawn in this process instead. The
 worker ignores Ctrl-C, SIGTERM and SIGHUP (the parent decides); a parent that dies
-without a word closes the pipe and the worker leaves.
+without a word takes the worker with it, mid-figure if need be (:func:`die_with_parent`).
 """
 
 from __future__ import annotations
 
+import os
 import signal
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from recorder.rerun_worker import fork_context
+from recorder.rerun_worker import die_with_parent, fork_context
 
 #: Seconds the parent waits for one figure before drawing it itself.
 _ANSWER = 120.0
@@ -35,8 +36,8 @@ class FigureWorker:
 
     def __init__(self, ctx: Any) -> None:
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, self._conn), daemon=True,
-                                 name="corraoi-figures")  # fmt: skip
+        self._proc = ctx.Process(target=_serve, args=(child, self._conn, os.getpid()),
+                                 daemon=True, name="corraoi-figures")  # fmt: skip
         self._proc.start()
         child.close()
         self._pending: list[tuple[Path, Path]] = []
@@ -128,8 +129,9 @@ def draw_from_log(log: str, out: str) -> BaseException | None:
     return None
 
 
-def _serve(conn: Any, parents_end: Any) -> None:
+def _serve(conn: Any, parents_end: Any, parent: int) -> None:
     """The worker's loop: import matplotlib, then draw what the parent asks for."""
+    die_with_parent(parent)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     parents_end.close()  # else the pipe would stay open here when the parent dies
