@@ -67,7 +67,8 @@ def die_with_parent(parent: int) -> None:
     Without it a worker whose parent was SIGKILLed finishes what it is doing first: a
     figure it was drawing then lands in a sweep folder that a resumed sweep is writing, and
     the locks it inherited (the folder's) outlive the parent. Elsewhere the closed pipe
-    still ends the worker, after its current task."""
+    still ends the worker, after its current task. (The signal follows the thread that
+    forked; the workers fork only a process with one thread, :func:`fork_context`.)"""
     try:
         import ctypes
 
