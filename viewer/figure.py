@@ -1,6 +1,6 @@
 """The sweep figure: AoI regret against t, one line per policy with its 95% band.
 
-Drawn from a sweep log alone (:func:`recorder.sweep_log.read_sweep`), never by simulating.
+Drawn from a sweep log alone (:func:`recorder.sweeplog.log.read_sweep`), never by simulating.
 Style of the paper's figures, from :mod:`recorder.style` (the colours of every view): a
 line per policy in its base policy's colour, AoI-aware variants dashed in the same colour,
 a shaded 95% confidence band, the legend outside the axes so that twelve curves never hide
@@ -31,7 +31,7 @@ from recorder.style import (
     mpl,
     policy_color,
 )
-from recorder.sweep_log import SweepCurve, SweepLog
+from recorder.sweeplog.log import SweepCurve, SweepLog
 
 #: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
 FIGSIZE = (10.0, 6.0)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 from .runs import require_slots
 
 if TYPE_CHECKING:
-    from recorder.reader import RunLog
+    from recorder.slotlog.reader import RunLog
 
 #: Chunks of the copy are closed by slot count like the writer's; this only caps a chunk.
 _CHUNK_BYTES = 64 * 1024 * 1024
@@ -85,7 +85,7 @@ def recover(
     directory, or is the source itself. Nothing is written on error.
     """
     from recorder.errors import OutputError
-    from recorder.reader import open_log
+    from recorder.slotlog.reader import open_log
 
     src = Path(source)
     log = require_slots(open_log(src, salvage=True), "recover")
@@ -134,9 +134,9 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.records import Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
-    from recorder.encode import end_metadata as make_end
     from recorder.errors import LogError
-    from recorder.format import decode_messages
+    from recorder.slotlog.decode import decode_messages
+    from recorder.slotlog.encode import end_metadata as make_end
     from recorder.vocab import MCAP_INDEX_TYPES, NS_PER_SLOT
     from recorder.vocab import RUN_END_METADATA as END_METADATA
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from .device import DEVICE_ENV, MAX_ARMS, GpuUnavailable, get_device
 
 if TYPE_CHECKING:
-    from ..grid import Grid
+    from corraoi.experiments.grid import Grid
 
 
 def gpu_problem_of(grid: Grid) -> str | None:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CorraoiError
+from corraoi.errors import CorraoiError
 
 SOURCE_PATH = Path(__file__).with_name("kernel.cu")
 #: The entry points of kernel.cu (``advance_<name>``), one per built-in policy family.
@@ -192,7 +192,7 @@ class EmulatedDevice(Device):
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
-        from ..kernels import _locked, _writable, cache_dir
+        from corraoi.engine.kernels import _locked, _writable, cache_dir
 
         text = source()
         flags = (*self.FLAGS, f"-DKARMS={K}")
