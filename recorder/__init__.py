@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from corraoi.errors import LogError, OutputError, ViewerError, WriteError
 from recorder.slotlog.reader import RunLog, open_log
 from recorder.slotlog.sink import McapSink
 
-from .errors import LogError, OutputError, ViewerError, WriteError
 from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION  # the slot log's, as always
 from .vocab import SLOT_TOPIC as TOPIC
 

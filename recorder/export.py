@@ -14,9 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from corraoi.errors import UsageError
+from corraoi.errors import UsageError, WriteError
 
-from .errors import WriteError
 from .paths import check_output, partial_path, publish, reason
 
 if TYPE_CHECKING:

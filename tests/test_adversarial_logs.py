@@ -17,9 +17,9 @@ from click.testing import CliRunner
 from corraoi.cli import main
 from corraoi.engine.block import RunConfig
 from corraoi.engine.simulation import simulate_run
+from corraoi.errors import LogError
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.errors import LogError
 from recorder.slotlog.decode import BlockEncoder
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink

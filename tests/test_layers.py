@@ -156,10 +156,3 @@ def test_the_seams_the_core_names_by_string_resolve_upward_only_there():
             continue
         for text in re.findall(r"[\"']((?:recorder|viewer)\.[\w.]+:\w+)[\"']", path.read_text()):
             assert text in named, (mod, text)
-
-
-def test_no_module_is_over_400_lines():
-    """One job per module (issue 23): none of the three packages' modules is over 400 lines."""
-    long = {str(p.relative_to(ROOT)): n for p in _modules().values()
-            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 400}  # fmt: skip
-    assert long == {}

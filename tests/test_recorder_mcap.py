@@ -12,7 +12,7 @@ from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from recorder.errors import OutputError, WriteError
+from corraoi.errors import OutputError, WriteError
 from recorder.paths import partial_path
 from recorder.slotlog import sink as mcap_sink_module
 from recorder.slotlog.reader import open_log

@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 
 from corraoi.engine.block import RunConfig
+from corraoi.errors import OutputError, WriteError
 from corraoi.face.recording import record_run
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
-from recorder.errors import OutputError, WriteError
 from recorder.paths import partial_path
 from recorder.rerun.worker import RerunWorker
 from recorder.slotlog.reader import open_log

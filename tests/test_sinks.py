@@ -92,7 +92,7 @@ def test_record_run_hands_every_block_to_the_sinks_it_is_given(tmp_path: Path):
 
 def test_a_failed_run_aborts_the_sinks(tmp_path: Path):
     from corraoi.engine.block import RunConfig
-    from corraoi.engine.pyengine import PolicyRuntimeError
+    from corraoi.errors import PolicyRuntimeError
     from corraoi.face.recording import record_run
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy

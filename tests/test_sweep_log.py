@@ -18,11 +18,10 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from corraoi._version import __version__
-from corraoi.errors import UsageError
+from corraoi.errors import LogError, UsageError
 from corraoi.experiments.montecarlo import SweepPoint, checkpoint_point, run_sweep, sweep_config
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
-from recorder.errors import LogError
 from recorder.style import POLICY_COLORS, lighter, policy_color
 from recorder.sweeplog.log import SweepLogError, SweepMcapSink, read_sweep
 from recorder.vocab import NS_PER_SLOT, SWEEP_METADATA

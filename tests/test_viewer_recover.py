@@ -14,7 +14,7 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
 from corraoi.engine.block import FIELDS, SlotBlock
-from recorder.errors import LogError, OutputError
+from corraoi.errors import LogError, OutputError
 from recorder.slotlog.reader import open_log
 from viewer import diff, recover
 

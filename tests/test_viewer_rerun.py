@@ -198,7 +198,7 @@ def test_the_side_by_side_table_aligns_columns(record_mcap):
 def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
     import struct
 
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
 
     path, _, _ = record_mcap("ucb", horizon=5000)
     data = bytearray(path.read_bytes())
@@ -223,7 +223,7 @@ def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
 
 
 def _items_then_boom():
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
 
     yield 1
     yield 2
@@ -234,7 +234,7 @@ def _items_then_boom():
 def test_read_ahead_hands_on_errors_and_stops_early(mode, monkeypatch):
     import threading
 
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
     from viewer import readahead
 
     monkeypatch.setenv(readahead.ENV, mode)

@@ -16,8 +16,8 @@ from mcap.records import DataEnd, MessageIndex
 from mcap.stream_reader import StreamReader
 
 from corraoi.engine.block import FIELDS
+from corraoi.errors import LogError
 from recorder import vocab
-from recorder.errors import LogError
 from recorder.slotlog.encode import slot_schema
 from recorder.slotlog.reader import open_log
 from recorder.sweeplog.log import read_sweep

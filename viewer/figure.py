@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import CorraoiError, UsageError
+from corraoi.errors import FigureUnavailable, UsageError
 from recorder.paths import open_partial, publish, unlink_partial
 from recorder.style import (
     DASH_AOI_AWARE,
@@ -52,12 +52,6 @@ FORMATS = {
 }
 YLABEL = f"pathwise AoI regret  sum (aoi - oracle aoi)  {REGRET_UNIT}"
 MISSING_MATPLOTLIB = "figures need matplotlib: pip install 'corraoi[plot]'"
-
-
-class FigureUnavailable(CorraoiError):
-    """matplotlib is not installed: the figure cannot be drawn (the logs are fine)."""
-
-    exit_code = 1
 
 
 def check_policies(sweep: SweepLog, policies: Sequence[str] | None) -> list[str]:

@@ -47,9 +47,9 @@ def replay(
     """Send every recorded slot of ``log`` to an ``.rrd`` file and/or a viewer (gRPC URL).
 
     ``on_block(n)`` is called after each block of ``n`` slots (for a progress bar). Raises
-    :class:`~recorder.errors.LogError` for an unreadable log -- then no file is left --,
-    :class:`~recorder.errors.OutputError` for an output that must not be written, and
-    :class:`~recorder.errors.ViewerError` when the viewer cannot be reached.
+    :class:`~corraoi.errors.LogError` for an unreadable log -- then no file is left --,
+    :class:`~corraoi.errors.OutputError` for an output that must not be written, and
+    :class:`~corraoi.errors.ViewerError` when the viewer cannot be reached.
 
     ``verify`` (a path given as ``log``): check every chunk before sending anything. By
     default only when sending to a viewer, which cannot take data back; a file is

@@ -37,7 +37,7 @@ def require_slots(log: RunLog, what: str) -> RunLog:
     slot: there is nothing to replay, compare or recover.
     """
     if log.n_slots == 0:
-        from recorder.errors import LogError
+        from corraoi.errors import LogError
 
         raise LogError(
             f"{log.path}: no complete slot in the log ({log.summary}); nothing to {what}"

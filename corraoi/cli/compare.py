@@ -122,10 +122,10 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> 
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
     a log already there with the same run and complete is used as it is)."""
     from corraoi.engine.simulation import set_workers
+    from corraoi.errors import LogError, OutputError
     from corraoi.experiments.drill import choose
     from corraoi.face.recording import record_run
     from corraoi.text import safe_name
-    from recorder.errors import LogError, OutputError
     from recorder.slotlog.reader import open_log
 
     drills = choose(folder, run, cells=cells, warn=warn)

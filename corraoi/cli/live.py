@@ -92,7 +92,7 @@ class ViewerChoice:
         """
         if not self.asked:
             return None
-        from recorder.errors import ViewerError
+        from corraoi.errors import ViewerError
         from recorder.live import viewers as live
 
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
@@ -190,7 +190,8 @@ class FoxgloveChoice:
         subscription to a channel added while the client was connecting."""
         if self.address is None:
             return None
-        from recorder.live.foxglove import FoxgloveError, FoxgloveServer
+        from corraoi.errors import FoxgloveError
+        from recorder.live.foxglove import FoxgloveServer
 
         try:
             self.server = FoxgloveServer(self.address)

@@ -149,7 +149,7 @@ def record(
         say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
-    from recorder.errors import OutputError
+    from corraoi.errors import OutputError
     from recorder.paths import check_output
 
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []

@@ -123,7 +123,7 @@ def _prepare_kernels(plans: list[Plan]) -> None:
 def _record_one(plan: Plan, result: Result, outlets: Outlets, stop: Stop, bar: Any) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
     from corraoi.engine import kernels
-    from corraoi.engine.pyengine import PolicyRuntimeError
+    from corraoi.errors import PolicyRuntimeError
 
     start = time.perf_counter()
     compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s

@@ -134,7 +134,7 @@ def say_where_from(drills: list[Any]) -> None:
 def up_to_date(plan: Plan) -> bool:
     """The plan's files exist, and its MCAP log is complete with the same configuration
     (the version of corraoi included): recording again would write the same bytes."""
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
     from recorder.slotlog.reader import open_log
 
     if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import CorraoiError
+from corraoi.errors import KernelError
 from corraoi.policies.api import CompiledPolicy
 
 #: Called with a one-line notice before a kernel is compiled (not when it loads from cache).
@@ -61,12 +61,6 @@ _HOOK_LINES = (
 compile_seconds = 0.0
 _LOADED: dict[str, Any] = {}
 _LOCK = threading.Lock()
-
-
-class KernelError(CorraoiError):
-    """A compiled policy whose hooks cannot be composed into a kernel."""
-
-    exit_code = 2
 
 
 def cache_dir() -> Path:

@@ -18,24 +18,10 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from corraoi.errors import CorraoiError
+from corraoi.errors import CorraoiError, PolicyRuntimeError
 from corraoi.rng import argmax_random, beta, integer, normal, uniform
 
 from ._kernel import draw_states
-
-
-class PolicyRuntimeError(CorraoiError):
-    """A policy that failed or returned something that is not one valid arm per run.
-
-    ``done``: slots completed before the failure; ``partial``: their columns (when recording).
-    """
-
-    exit_code = 1
-
-    def __init__(self, message: str) -> None:
-        super().__init__(message)
-        self.done = 0
-        self.partial: Any = None
 
 
 @njit(cache=True)

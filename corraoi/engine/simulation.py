@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, PolicyRuntimeError
 from corraoi.limits import check_seed
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
@@ -27,7 +27,7 @@ from corraoi.rng import streams_for_seed, streams_for_seeds
 from . import threads
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python
+from .pyengine import RunState, Streams, advance_python
 from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
 __all__ = ["RunsBlock", "Simulation", "Snapshot", "set_workers", "shutdown", "simulate",

@@ -17,18 +17,12 @@ from contextlib import contextmanager
 from typing import Any
 
 from corraoi._version import __version__
-from corraoi.errors import ConfigError, CorraoiError, MissingExtraError
+from corraoi.errors import ClusterError, ConfigError, CorraoiError, MissingExtraError
 
 #: Tries of a chunk whose worker died before it is given up.
 RETRIES = 3
 #: Seconds to wait for a scheduler to answer ($CORRAOI_CONNECT_TIMEOUT overrides).
 CONNECT_TIMEOUT = float(os.environ.get("CORRAOI_CONNECT_TIMEOUT", "10"))
-
-
-class ClusterError(CorraoiError):
-    """The cluster cannot run the sweep (unreachable, version mismatch, chunk failed)."""
-
-    exit_code = 1
 
 
 def _dask() -> Any:

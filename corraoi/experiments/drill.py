@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from corraoi.engine.block import RunConfig
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, DamagedPart
 from corraoi.policies.spec import PolicySpec
 
-from .folder import MANIFEST, CellRuns, DamagedPart, group_dirs, read_manifest, read_parts
+from .folder import MANIFEST, CellRuns, group_dirs, read_manifest, read_parts
 from .grid import Cell, Grid
 from .notable import CHOICES, notable_runs, pick_pair, well_formed
 
@@ -241,7 +241,8 @@ def _streams(grid: Grid, warn: Any) -> str:
         return "cpu"
     import os
 
-    from corraoi.gpu.device import DEVICE_ENV, GpuUnavailable, device_of
+    from corraoi.errors import GpuUnavailable
+    from corraoi.gpu.device import DEVICE_ENV, device_of
 
     if os.environ.get(DEVICE_ENV, "").strip().lower() != "emulate":
         try:

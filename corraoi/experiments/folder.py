@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, DamagedPart
 from corraoi.stats import Moments
 
 from .grid import Cell, Chunk, Grid
@@ -244,14 +244,6 @@ def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:
     return Grid(tuple(cells), runs=max(old.runs, new.runs), seed=old.seed, chunk=old.chunk,
                 checkpoints=old.checkpoints, baseline=new.baseline or old.baseline,
                 backend=old.backend)  # fmt: skip
-
-
-class DamagedPart(ConfigError):
-    """A part file that cannot be counted (its chunk is not finished)."""
-
-    def __init__(self, path: Path, why: str) -> None:
-        super().__init__(f"{path}: a damaged part file ({why})")
-        self.path = path
 
 
 def read_parts(

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, DamagedPart
 
 from . import backends
 from .folder import (
@@ -39,7 +39,6 @@ from .folder import (
     PARTS,
     CellRuns,
     ChunkResult,
-    DamagedPart,
     covered,
     group_dirs,
     merge_grids,

@@ -47,7 +47,7 @@ class FolderOutputs:
     def finish(self, *, warn: Callable[[str], None] | None) -> None:
         """Every figure written (waited for when a worker draws them); a figure that could
         not be drawn is a warning (without matplotlib) or its error."""
-        from viewer.figure import FigureUnavailable
+        from corraoi.errors import FigureUnavailable
 
         drawn, self._drawn = self._drawn, []
         if self._figures is not None:

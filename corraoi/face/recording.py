@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from recorder.errors import ViewerError, WriteError
+from corraoi.errors import ViewerError, WriteError
 from recorder.paths import Sink
 from recorder.slotlog.sink import McapSink
 

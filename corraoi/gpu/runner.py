@@ -21,13 +21,13 @@ import numpy as np
 
 from corraoi.engine.block import SlotBlock
 from corraoi.engine.problem import Problem
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, GpuUnavailable
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies import PolicySpec, gpu_form
 from corraoi.stats import Moments
 
-from .device import MAX_ARMS, Device, GpuUnavailable, get_device
+from .device import MAX_ARMS, Device, get_device
 
 if TYPE_CHECKING:
     from corraoi.experiments.folder import ChunkResult

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from corraoi.errors import CorraoiError, MissingExtraError, UsageError
+from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
 from recorder.paths import Sink
 from recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
 from recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
@@ -48,12 +48,6 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 BACKLOG = 1024
 #: Topic of the run metadata record.
 RUN_TOPIC = "/corraoi/run"
-
-
-class FoxgloveError(CorraoiError):
-    """The Foxglove server cannot be started (port taken, host unknown, ...)."""
-
-    exit_code = 1
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,7 @@ from pathlib import Path
 from types import TracebackType
 from urllib.parse import quote, urlsplit
 
-from corraoi.errors import UsageError
-from recorder.errors import ViewerError
+from corraoi.errors import UsageError, ViewerError
 
 DEFAULT_GRPC_PORT = 9876
 DEFAULT_WEB_PORT = 9090

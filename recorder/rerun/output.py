@@ -11,7 +11,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from corraoi.engine.block import RunConfig
-from recorder.errors import ViewerError, WriteError
+from corraoi.errors import ViewerError, WriteError
 from recorder.paths import (
     Sink,
     check_output,

@@ -12,8 +12,8 @@ in-process recording uses: the file is the same, only the process differs.
 ``with RerunWorker.start() as worker: rec = worker.open(config, rrd_path=...)``, then
 ``rec.write(block)`` for each block and ``rec.close()`` (or ``rec.abort()``) with
 :class:`RrdOutput`'s meaning: the file is renamed into place only when complete; a
-problem raises the same :class:`~recorder.errors.WriteError` or
-:class:`~recorder.errors.ViewerError`. :meth:`RerunWorker.start` returns None where
+problem raises the same :class:`~corraoi.errors.WriteError` or
+:class:`~corraoi.errors.ViewerError`. :meth:`RerunWorker.start` returns None where
 ``fork`` is not available (then record in-process).
 
 The worker ignores Ctrl-C, SIGTERM and SIGHUP (the terminal sends them to the whole
@@ -34,7 +34,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from recorder.errors import ViewerError, WriteError
+from corraoi.errors import ViewerError, WriteError
 from recorder.paths import Sink, check_output
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush

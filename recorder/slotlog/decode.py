@@ -19,7 +19,7 @@ import numpy as np
 import orjson
 
 from corraoi.engine.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
-from recorder.errors import LogError
+from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
 from recorder.vocab import (

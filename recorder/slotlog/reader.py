@@ -21,8 +21,7 @@ import numpy as np
 from mcap.records import Header, Metadata
 
 from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
-from corraoi.errors import CorraoiError
-from recorder.errors import LogError
+from corraoi.errors import CorraoiError, LogError
 from recorder.paths import lock_holder
 from recorder.vocab import (
     MESSAGE_ENCODING,
@@ -202,7 +201,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
 
     With ``verify`` (the default) every chunk is decompressed and its CRC checked now, so
     a damaged file is refused here rather than half-way through a replay. Raises
-    :class:`~recorder.errors.LogError` with a one-line message when the file cannot be used:
+    :class:`~corraoi.errors.LogError` with a one-line message when the file cannot be used:
     a finished file with a record that does not fit, a bad CRC, a bad size or an invalid
     slot is *damaged* (file, byte offset, what is wrong), which is told apart from a file
     whose writer was killed (*cut short*: no footer, a torn last record).

@@ -21,8 +21,7 @@ import numpy as np
 from mcap.records import Channel, Schema
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from corraoi.errors import ConfigError, CorraoiError
-from recorder.errors import WriteError
+from corraoi.errors import ConfigError, CorraoiError, WriteError
 from recorder.paths import (
     Sink,
     check_output,

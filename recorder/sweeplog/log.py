@@ -27,7 +27,7 @@ import orjson
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
-from recorder.errors import WriteError
+from corraoi.errors import SweepLogError, WriteError
 from recorder.paths import Sink, open_partial, partial_path, publish, reason
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
@@ -59,7 +59,7 @@ from recorder.vocab import (
     library_name,
 )
 
-from .read import SweepCurve, SweepLog, SweepLogError, read_sweep, sweep_arms
+from .read import SweepCurve, SweepLog, read_sweep, sweep_arms
 
 # corraoi.experiments.montecarlo imports the numba engine: readers need not pay for it
 if TYPE_CHECKING:

@@ -19,7 +19,7 @@ import numpy as np
 import orjson
 from mcap.records import Channel, Header, Message, Metadata, Schema
 
-from recorder.errors import LogError
+from corraoi.errors import LogError, SweepLogError
 from recorder.paths import PARTIAL_SUFFIX, partial_path, reason
 from recorder.vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
 from recorder.vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
@@ -29,10 +29,6 @@ from recorder.vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
 from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
 from recorder.vocab import SWEEP_TOPIC as TOPIC
 from recorder.walk import Walker
-
-
-class SweepLogError(LogError):
-    """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
 
 
 def sweep_arms(config: dict[str, Any]) -> int:

@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
-from recorder.errors import WriteError
 from recorder.paths import Sink, partial_path, publish, reason
 from recorder.style import (
     MARKER_AOI_AWARE,

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from corraoi._version import __version__
-from recorder.errors import LogError, WriteError
+from corraoi.errors import ResultsError, WriteError
 from recorder.paths import partial_path, reason
 from recorder.slotlog.decode import SWEEP_METADATA
 
@@ -52,10 +52,6 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("estimator", "float64"),
     ("best_arm_pulls", "int64"),
 )
-
-
-class ResultsError(LogError):
-    """A results file that cannot be read (missing, not Parquet, not ours, newer)."""
 
 
 def results_schema(metadata: dict[str, str] | None = None) -> pa.Schema:
