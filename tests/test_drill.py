@@ -20,6 +20,7 @@ import corraoi  # noqa: E402
 from corraoi.experiments.grid import build_grid  # noqa: E402
 from corraoi.experiments.notable import MAX_PAIRED_CELLS, cell_runs, notable_runs  # noqa: E402
 from corraoi.experiments.sweeps import sweep  # noqa: E402
+from corraoi.face.outputs import FolderOutputs  # noqa: E402
 from recorder.slotlog.reader import open_log  # noqa: E402
 from recorder.sweeplog.log import read_sweep  # noqa: E402
 
@@ -33,7 +34,7 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("drill") / "sw"
     grid = build_grid(instances=["I2"], policies=POLICIES, horizons=[1500], runs=RUNS,
                       seed=SEED, chunk=16, checkpoints=25)  # fmt: skip
-    sweep(grid, out=out, workers=1)
+    sweep(grid, out=out, workers=1, outputs=FolderOutputs())
     return out
 
 

@@ -149,11 +149,12 @@ def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path:
     from corraoi.errors import CorraoiError
     from corraoi.experiments.grid import build_grid
     from corraoi.experiments.sweeps import sweep
+    from corraoi.face.outputs import FolderOutputs
     from recorder.sweeplog.log import read_sweep
     from viewer.figure import draw_figure
 
     grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[200], runs=4)
-    sweep(grid, out=tmp_path / "sw", workers=1)
+    sweep(grid, out=tmp_path / "sw", workers=1, outputs=FolderOutputs())
     log = read_sweep(tmp_path / "sw" / "sweep.mcap")
     out = tmp_path / "fig.png"
     holder = subprocess.Popen(

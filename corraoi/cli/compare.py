@@ -125,10 +125,11 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> 
     from corraoi.errors import LogError, OutputError
     from corraoi.experiments.drill import choose
     from corraoi.face.recording import record_run
+    from corraoi.face.resolve import TRACE_READERS
     from corraoi.text import safe_name
     from recorder.slotlog.reader import open_log
 
-    drills = choose(folder, run, cells=cells, warn=warn)
+    drills = choose(folder, run, cells=cells, warn=warn, trace_readers=TRACE_READERS)
     plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
     todo = []
     for d, path in plans:

@@ -115,7 +115,7 @@ def record(
       corraoi record --from sweeps/I2 --run worst -p cts   # a sweep's worst run
     """  # noqa: D301
     from corraoi.engine.block import RunConfig
-    from corraoi.model.channels import parse_channel
+    from corraoi.face.resolve import channel as resolve_channel
 
     if backend == "gpu":
         raise ConfigError(
@@ -141,7 +141,7 @@ def record(
             raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
         inst = load_instance(instance)
         specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
-        chan = parse_channel(channel, inst)
+        chan = resolve_channel(channel, inst)
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
     plans = plan_files(configs, output, rrd, no_rrd, drills)

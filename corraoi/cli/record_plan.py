@@ -119,7 +119,10 @@ def from_sweep(
                          "parameters (with --policy they set those of a policy added)")
     specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
              if given else [])  # fmt: skip
-    return choose(folder, run, cells=cells, policies=specs, warn=warn)
+    from corraoi.face.resolve import TRACE_READERS
+
+    return choose(folder, run, cells=cells, policies=specs, warn=warn,
+                  trace_readers=TRACE_READERS)  # fmt: skip
 
 
 def say_where_from(drills: list[Any]) -> None:

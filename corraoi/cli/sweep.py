@@ -157,8 +157,10 @@ def sweep(
     spec.setdefault("runs", 200)
     spec["params"] = {**spec.get("params", {}), **given_params}
     limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
+    from corraoi.face.resolve import TRACE_READERS
+
     try:
-        grid = build_grid(**spec)
+        grid = build_grid(**spec, trace_readers=TRACE_READERS)
     except CorraoiError as exc:
         if experiment is None:
             raise

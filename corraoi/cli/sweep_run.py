@@ -50,17 +50,21 @@ def run_grid(
         raise ConfigError(GPU_NOT_ON_CLUSTER)
     outputs = None
     with ExitStack() as stack:
-        if out is not None and scheduler is None:
-            keep_pandas_out()  # results.parquet is written with pyarrow alone (0.4 s saved)
-            # the figures are drawn by a process that imports matplotlib now, while this one
-            # runs the sweep and then writes the Rerun recordings (viewer/figure_worker.py)
-            from viewer.figure_worker import FigureWorker
+        if out is not None:
+            from corraoi.face.outputs import FolderOutputs
 
-            figures = FigureWorker.start()
-            if figures is not None:
-                from corraoi.face.outputs import FolderOutputs
+            figures = None
+            if scheduler is None:
+                keep_pandas_out()  # results.parquet is written with pyarrow alone (0.4 s saved)
+                # the figures are drawn by a process that imports matplotlib now, while this
+                # one runs the sweep and then writes the Rerun recordings
+                # (viewer/figure_worker.py)
+                from viewer.figure_worker import FigureWorker
 
-                outputs = FolderOutputs(stack.enter_context(figures))
+                figures = FigureWorker.start()
+                if figures is not None:
+                    stack.enter_context(figures)
+            outputs = FolderOutputs(figures)
         client = None
         if scheduler is not None:
             from corraoi.experiments.cluster import connect

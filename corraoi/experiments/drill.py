@@ -12,13 +12,14 @@ from before they were named, from its parts (the per-run finals, no simulation).
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from corraoi.engine.block import RunConfig
 from corraoi.errors import ConfigError, DamagedPart
+from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
 
 from .folder import MANIFEST, CellRuns, group_dirs, read_manifest, read_parts
@@ -90,13 +91,15 @@ def choose(
     cells: Sequence[str] = (),
     policies: Sequence[PolicySpec] = (),
     warn: Any = None,
+    trace_readers: Mapping[str, TraceReader] | None = None,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
 
     ``cells``: labels (``cucb``, ``cucb(c=2)``), instance names or ``INSTANCE/LABEL`` that
     restrict the sweep's cells. ``policies``: those the sweep ran select its cells; any
     other is added on the chosen run (paired: the same seed, so the same hidden path),
-    said through ``warn``.
+    said through ``warn``. ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel`
+    (a trace channel's file is read again).
     """
     root, grid, group = sweep_root(path)
     what = parse_run(run)
@@ -136,14 +139,15 @@ def choose(
     for key, members in chosen.items():
         picks = picked[key]
         for cell, r in picks:
-            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams))
+            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams,
+                                 trace_readers))  # fmt: skip
         runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])
         base = (members or groups[key])[0]
         for spec in extra:
             for r in runs:
                 drills.append(_drill(root, grid, Cell(base.instance, spec, base.horizon,
                                                       base.channel), None, r, what,
-                                     streams))  # fmt: skip
+                                     streams, trace_readers))  # fmt: skip
     return drills
 
 
@@ -265,23 +269,26 @@ def _streams(grid: Grid, warn: Any) -> str:
 
 
 def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
-           what: str | int, streams: str = "cpu") -> Drill:  # fmt: skip
+           what: str | int, streams: str = "cpu",
+           trace_readers: Mapping[str, TraceReader] | None = None) -> Drill:  # fmt: skip
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
-        channel = _reload_trace(cell, root)
+        channel = _reload_trace(cell, root, trace_readers)
     config = RunConfig(cell.instance, cell.policy, grid.seed + run, cell.horizon, channel=channel,
                        streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
     return Drill(config, run, choice, label, root)
 
 
-def _reload_trace(cell: Cell, root: Path) -> Any:
+def _reload_trace(
+    cell: Cell, root: Path, readers: Mapping[str, TraceReader] | None = None
+) -> Any:
     """A trace channel's states, read again from the file the sweep read them from."""
     from corraoi.model.channels import parse_channel
 
     ch = cell.channel
     try:
-        fresh = parse_channel(f"trace:{ch.source}", cell.instance)
+        fresh = parse_channel(f"trace:{ch.source}", cell.instance, readers=readers)
     except ConfigError as exc:
         raise ConfigError(f"{root}: the sweep's trace channel cannot be read again: "
                           f"{exc}") from None  # fmt: skip

@@ -39,7 +39,7 @@ from typing import Any
 
 from corraoi.errors import ConfigError
 from corraoi.limits import check_horizon, check_seed
-from corraoi.model.channels import Channel, parse_channel
+from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicySpec, make_policy, parse_policy_names, resolve
 
@@ -253,6 +253,7 @@ def build_grid(
     chunk: int = 0,
     checkpoints: int = 200,
     channel: str | None = None,
+    trace_readers: Mapping[str, TraceReader] | None = None,
     baseline: str | None = None,
     backend: str = "cpu",
 ) -> Grid:
@@ -288,7 +289,7 @@ def build_grid(
     cells = []
     for spec_text in instances:
         inst = load_instance(spec_text)
-        chan = parse_channel(channel, inst)
+        chan = parse_channel(channel, inst, readers=trace_readers)
         for h in horizons:
             chan.check(inst, int(h))
             for spec in specs:

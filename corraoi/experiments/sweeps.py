@@ -108,21 +108,6 @@ class SweepOutputs(Protocol):
         before the manifest says the folder is."""
 
 
-#: The outputs a sweep folder is written with unless the caller hands its own, named here
-#: and imported when a folder is written (the formats are the recorder's and the figure the
-#: viewer's: the core names them instead of importing the layers above it).
-DEFAULT_OUTPUTS = "corraoi.face.outputs:FolderOutputs"
-
-
-def default_outputs() -> SweepOutputs:
-    """An instance of :data:`DEFAULT_OUTPUTS`."""
-    import importlib
-
-    module, _, name = DEFAULT_OUTPUTS.partition(":")
-    made: SweepOutputs = getattr(importlib.import_module(module), name)()
-    return made
-
-
 @dataclass
 class SweepOutcome:
     grid: Grid
@@ -150,8 +135,9 @@ def sweep(
     """Run ``grid``; with ``out``, into a resumable folder (module docstring).
 
     ``outputs`` writes the folder's files beyond its parts, manifest and summaries
-    (:class:`SweepOutputs`; by default ``corraoi.face.outputs.FolderOutputs``: the sweep
-    logs, recordings, ``results.parquet`` and figures).
+    (:class:`SweepOutputs`: the sweep logs, recordings, ``results.parquet`` and figures are
+    ``corraoi.face.outputs.FolderOutputs``, which ``corraoi.sweep`` and ``corraoi sweep``
+    hand in); without, the folder holds the parts, the manifest and the summaries.
 
     ``backend``: "cpu", "gpu" or "auto" (docs/gpu.md), else the grid's own (``cpu`` unless
     set). "gpu" runs every cell on the GPU (:class:`corraoi.gpu.GpuUnavailable` says why
@@ -240,14 +226,16 @@ def _sweep(
         joined_groups.append((key, joined))
         summaries.append(group_summary(grid, joined, workers=runner.workers, wall_s=wall))
     if folder is not None:
-        writer = outputs if outputs is not None else default_outputs()
-        writer.write_results(folder, grid, parts, labels, warn=warn)
+        if outputs is not None:
+            outputs.write_results(folder, grid, parts, labels, warn=warn)
         for (key, joined), summary in zip(joined_groups, summaries, strict=True):
             dirs[key].mkdir(parents=True, exist_ok=True)
-            writer.write_group(dirs[key], grid, joined, summary, warn=warn)
+            if outputs is not None:
+                outputs.write_group(dirs[key], grid, joined, summary, warn=warn)
             write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
-        writer.finish(warn=warn)
+        if outputs is not None:
+            outputs.finish(warn=warn)
         write_manifest(folder, grid, "complete")
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip

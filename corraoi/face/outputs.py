@@ -1,6 +1,6 @@
 """A sweep folder's outputs, all of them: the recorder's (``results.parquet``, ``sweep.mcap``,
-``sweep.rrd``) and the figure (``figure.png``). :class:`FolderOutputs` is what
-``corraoi.experiments.sweeps.sweep`` writes a folder with unless its caller hands it other outputs.
+``sweep.rrd``) and the figure (``figure.png``). :class:`FolderOutputs` is what the top floor
+hands ``corraoi.experiments.sweeps.sweep`` to write a folder with.
 
 Handed a :class:`~viewer.figure_worker.FigureWorker` (``corraoi sweep -o`` starts one when
 the sweep starts), it has each group's figure drawn there while it writes the group's

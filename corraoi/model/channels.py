@@ -10,17 +10,16 @@
   (``.mcap``); every run of a batch replays the same path.
 
 A channel is data (logged with the run); :meth:`Channel.kernel_arrays` is what the engine needs.
-The core reads no log format: a slot log's states are read by the recorder
-(``recorder/slotlog/trace.py``), named in :data:`TRACE_READERS` and imported only when such a trace
-is
-asked for.
+The core reads text traces only: a reader of any other file is handed in by the caller
+(``readers``, by suffix), as the top floor hands the recorder's slot-log reader
+(``corraoi/face/resolve.py``).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,11 +35,9 @@ KINDS = ("iid", "markov", "trace")
 _CDF, _TRACE = 0, 1
 #: A text trace larger than this is refused before reading.
 MAX_TRACE_BYTES = 1 << 30
-#: Readers of trace files that are not text, by suffix: ``"module:function"`` names imported on
-#: first use (as fsspec names its file systems), each ``(path, instance, where) -> states``
-#: (0-based int64) raising ConfigError. The slot log is the recorder's format to read; the
-#: core names its reader here instead of importing the layer above it.
-TRACE_READERS = {".mcap": "recorder.slotlog.trace:states_of_log"}
+#: A reader of trace files that are not text: ``(path, instance, where) -> states`` (0-based
+#: int64), raising ConfigError.
+TraceReader = Callable[[Path, Instance, str], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,8 +135,11 @@ def default_channel(instance: Instance) -> Channel:
     return Channel("markov") if getattr(instance, "transition", None) is not None else Channel()
 
 
-def parse_channel(spec: str | None, instance: Instance) -> Channel:
-    """``--channel`` value: ``iid``, ``markov``, ``trace:PATH`` (or None for the default)."""
+def parse_channel(
+    spec: str | None, instance: Instance, *, readers: Mapping[str, TraceReader] | None = None
+) -> Channel:
+    """``--channel`` value: ``iid``, ``markov``, ``trace:PATH`` (or None for the default).
+    ``readers``: readers of trace files that are not text, by suffix (``.mcap``)."""
     if spec is None or not spec.strip():
         return default_channel(instance)
     text = spec.strip()
@@ -148,7 +148,7 @@ def parse_channel(spec: str | None, instance: Instance) -> Channel:
         ch.check(instance, 1)
         return ch
     if text.startswith("trace:"):
-        return load_trace(text[len("trace:") :], instance)
+        return load_trace(text[len("trace:") :], instance, readers=readers)
     raise ConfigError(
         f"--channel {spec!r}: expected iid, markov or trace:PATH (a .mcap slot log or a text "
         "file of 1-based states)"
@@ -169,15 +169,11 @@ def trace_channel(states: Any, source: str, instance: Instance) -> Channel:
     return ch
 
 
-def _reader(suffix: str) -> Any:
-    import importlib
-
-    module, _, function = TRACE_READERS[suffix].partition(":")
-    return getattr(importlib.import_module(module), function)
-
-
-def load_trace(path_text: str, instance: Instance) -> Channel:
-    """A trace channel from a text file of 1-based states or a corraoi slot log."""
+def load_trace(
+    path_text: str, instance: Instance, *, readers: Mapping[str, TraceReader] | None = None
+) -> Channel:
+    """A trace channel from a text file of 1-based states, or a file one of ``readers`` (by
+    suffix) reads: a corraoi slot log where the caller hands the recorder's reader."""
     path = Path(path_text).expanduser()
     where = f"channel trace:{path_text}"
     if not path_text:
@@ -187,8 +183,9 @@ def load_trace(path_text: str, instance: Instance) -> Channel:
     if not path.is_file():
         raise ConfigError(f"{where}: not a regular file")
     suffix = ".mcap" if path.name.endswith(".mcap.partial") else path.suffix
-    if suffix in TRACE_READERS:
-        states = _reader(suffix)(path, instance, where)
+    reader = (readers or {}).get(suffix)
+    if reader is not None:
+        states = reader(path, instance, where)
     else:
         states = _text_states(path, instance, where)
     if len(states) == 0:
@@ -200,14 +197,20 @@ def _text_states(path: Path, instance: Instance, where: str) -> np.ndarray:
     if os.path.getsize(path) > MAX_TRACE_BYTES:
         raise ConfigError(f"{where}: larger than {MAX_TRACE_BYTES} bytes")
     values: list[int] = []
-    with open(path, encoding="utf-8") as f:
-        for lineno, line in enumerate(f, start=1):
-            for tok in line.split("#", 1)[0].replace(",", " ").split():
-                try:
-                    values.append(int(tok) - 1)
-                except ValueError:
-                    raise ConfigError(
-                        f"{where}:{lineno}: state {tok!r} is not an integer "
-                        f"(expected 1..{instance.n_states})"
-                    ) from None
+    try:
+        with open(path, encoding="utf-8") as f:
+            for lineno, line in enumerate(f, start=1):
+                for tok in line.split("#", 1)[0].replace(",", " ").split():
+                    try:
+                        values.append(int(tok) - 1)
+                    except ValueError:
+                        raise ConfigError(
+                            f"{where}:{lineno}: state {tok!r} is not an integer "
+                            f"(expected 1..{instance.n_states})"
+                        ) from None
+    except UnicodeDecodeError:
+        raise ConfigError(
+            f"{where}: not a text file of 1-based states (a slot log is read by corraoi "
+            "record, corraoi sweep and corraoi.record)"
+        ) from None
     return np.asarray(values, dtype=np.int64)

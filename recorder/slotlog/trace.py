@@ -1,7 +1,7 @@
 """A slot log's hidden path as a trace channel's states (``--channel trace:RUN.mcap``).
 
-The core names this reader in ``corraoi.model.channels.TRACE_READERS``: reading the slot log is
-the recorder's job, replaying states is the core's.
+Reading the slot log is the recorder's job, replaying states the core's: the top floor
+hands this reader to the core (``corraoi.face.resolve.TRACE_READERS``).
 """
 
 from __future__ import annotations

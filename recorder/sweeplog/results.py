@@ -330,7 +330,10 @@ class SweepData:
         names = (policy,) if isinstance(policy, str) else tuple(policy)
         specs = make_policies(names) if names else []
         cells = (cell,) if isinstance(cell, str) else tuple(cell)
-        drills = choose(self.folder, run, cells=cells, policies=specs)
+        from recorder.slotlog.trace import states_of_log
+
+        drills = choose(self.folder, run, cells=cells, policies=specs,
+                        trace_readers={".mcap": states_of_log})  # fmt: skip
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         outcomes = []
