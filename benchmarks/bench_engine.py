@@ -33,7 +33,8 @@ COMPILED = f"{ROOT / 'tests' / 'plugins' / 'compiled_greedy.py'}:BonusUCB"
 
 
 def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
-    from corraoi.engine.simulation import Simulation, set_workers
+    from corraoi.engine.simulation import Simulation
+    from corraoi.engine.threads import set_workers
     from corraoi.model.instance import load_instance
     from corraoi.policies import builtins, make_policy, paper_names
 

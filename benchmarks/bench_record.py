@@ -86,13 +86,14 @@ def main() -> None:
     from mcap.writer import CompressionType, Writer
 
     from corraoi.engine.block import RunConfig
-    from corraoi.engine.simulation import set_workers, simulate_run
+    from corraoi.engine.simulation import simulate_run
+    from corraoi.engine.threads import set_workers
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
     from recorder.rerun.output import RrdOutput
     from recorder.rerun.sink import RerunSink
     from recorder.slotlog.chunks import ChunkWriter
-    from recorder.slotlog.decode import BlockEncoder
+    from recorder.slotlog.encode import BlockEncoder
     from recorder.slotlog.sink import McapSink
     from recorder.vocab import NS_PER_SLOT
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY

@@ -25,7 +25,7 @@ import time
 
 
 def paper_workload(repeat: int) -> float:
-    from corraoi.engine.simulation import set_workers
+    from corraoi.engine.threads import set_workers
     from corraoi.experiments.grid import build_grid
     from corraoi.experiments.montecarlo import default_checkpoints, run_sweep
     from corraoi.experiments.sweeps import sweep

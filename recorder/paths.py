@@ -27,7 +27,6 @@ if TYPE_CHECKING:
 
 from corraoi.errors import OutputError, WriteError
 from corraoi.locks import fcntl, is_regular, lock_holder, pid_of_lock
-from corraoi.text import safe_name
 
 PARTIAL_SUFFIX = ".partial"
 
@@ -70,12 +69,10 @@ __all__ = [
     "PARTIAL_SUFFIX",
     "Sink",
     "check_output",
-    "lock_holder",
     "open_partial",
     "partial_path",
     "publish",
     "reason",
-    "safe_name",
     "unlink_partial",
 ]
 

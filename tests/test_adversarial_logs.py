@@ -20,7 +20,7 @@ from corraoi.engine.simulation import simulate_run
 from corraoi.errors import LogError
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.decode import BlockEncoder
+from recorder.slotlog.encode import BlockEncoder
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 

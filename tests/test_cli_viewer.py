@@ -48,7 +48,7 @@ def _other_tool(path: Path) -> Path:
 
 
 def _newer(path: Path) -> Path:
-    from recorder.slotlog.decode import run_metadata
+    from recorder.slotlog.encode import run_metadata
     from recorder.vocab import RUN_METADATA
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 0, 100)
@@ -269,12 +269,14 @@ def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
     b, _, _ = record_mcap("cucb", horizon=2000)
     import corraoi.engine.kernels
     import corraoi.engine.simulation
+    import corraoi.rng
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the simulation engine was called")
 
-    for name in ("simulate", "simulate_run", "Simulation", "streams_for_seed"):
+    for name in ("simulate", "simulate_run", "Simulation"):
         monkeypatch.setattr(corraoi.engine.simulation, name, forbidden)
+    monkeypatch.setattr(corraoi.rng, "streams_for_seed", forbidden)
     monkeypatch.setattr(corraoi.engine.kernels, "kernel_for", forbidden)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(a.read_bytes()[:60_000])

@@ -8,16 +8,11 @@ import pytest
 
 from corraoi import rng
 from corraoi.engine.block import SlotBlock
-from corraoi.engine.simulation import (
-    RunsBlock,
-    Simulation,
-    simulate,
-    simulate_run,
-    streams_for_seed,
-)
+from corraoi.engine.simulation import RunsBlock, Simulation, simulate, simulate_run
 from corraoi.errors import ConfigError
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import make_policy, paper_names
+from corraoi.rng import streams_for_seed
 
 from .reference import check_run
 

@@ -51,7 +51,7 @@ def _run(how: str, out: Path) -> dict:
 
 def _drawn_here(folder: Path, tmp_path: Path) -> bytes:
     """The figure of a group's sweep log as drawn in this process."""
-    from recorder.sweeplog.log import read_sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     out = tmp_path / f"here-{folder.name}.png"
@@ -150,7 +150,7 @@ def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path:
     from corraoi.experiments.grid import build_grid
     from corraoi.experiments.sweeps import sweep
     from corraoi.face.outputs import FolderOutputs
-    from recorder.sweeplog.log import read_sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[200], runs=4)

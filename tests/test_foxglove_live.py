@@ -32,7 +32,6 @@ from corraoi.engine.block import SlotBlock  # noqa: E402
 from recorder.live.foxglove import (  # noqa: E402
     BACKLOG,
     RUN_TOPIC,
-    SWEEP_TOPIC,
     Address,
     FoxgloveServer,
     FoxgloveSweepSink,
@@ -41,10 +40,11 @@ from recorder.live.foxglove import (  # noqa: E402
     parse_address,
     stream_log,
 )
-from recorder.slotlog.decode import schema_bytes  # noqa: E402
+from recorder.slotlog.encode import schema_bytes  # noqa: E402
 from recorder.slotlog.reader import open_log  # noqa: E402
 from recorder.slotlog.sink import McapSink  # noqa: E402
 from recorder.vocab import SLOT_TOPIC as TOPIC  # noqa: E402
+from recorder.vocab import SWEEP_TOPIC  # noqa: E402
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) must be used:DeprecationWarning")

@@ -138,7 +138,7 @@ def test_appending_runs_policies_and_values_equals_running_them_all_at_once(tmp_
             tmp_path / "once" / inst / "sweep.mcap"
         ).read_bytes()
     from recorder.style import config_colors, policy_color
-    from recorder.sweeplog.log import read_sweep
+    from recorder.sweeplog.read import read_sweep
 
     colors = config_colors(read_sweep(tmp_path / "once" / "I1" / "sweep.mcap").config)
     shades = [rgb for name, rgb in colors.items() if name.startswith("sw-ucb(")]

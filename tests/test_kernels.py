@@ -15,7 +15,8 @@ import pytest
 from numba import njit
 
 from corraoi.engine import kernels
-from corraoi.engine.simulation import Simulation, set_workers
+from corraoi.engine.simulation import Simulation
+from corraoi.engine.threads import set_workers
 from corraoi.model.instance import load_instance
 from corraoi.policies import builtins, make_policy
 

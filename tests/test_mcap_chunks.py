@@ -15,7 +15,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 
 from corraoi.engine.block import SlotBlock
 from recorder.slotlog.chunks import ZSTD_LEVEL, ChunkWriter
-from recorder.slotlog.decode import BlockEncoder
+from recorder.slotlog.encode import BlockEncoder
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT

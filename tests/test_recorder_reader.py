@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from corraoi.errors import LogError, UsageError
-from recorder.slotlog.decode import run_metadata
+from recorder.slotlog.encode import run_metadata
 from recorder.slotlog.reader import open_log
 from recorder.vocab import RUN_METADATA
 

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-import recorder.sweeplog.log as sweep_log
 from corraoi.model.theory import analyse
 from recorder import style
 from recorder.rerun.names import run_path
@@ -43,12 +42,6 @@ def static_styles(path: Path) -> dict[str, dict]:
 
 def line_color(styles: dict[str, dict], entity: str) -> int:
     return styles[entity]["SeriesLines:colors"][0][0]
-
-
-def test_sweep_log_reexports_the_style_objects_themselves():
-    for name in ("POLICY_COLORS", "ARM_COLORS", "policy_color", "arm_color", "lighter",
-                 "is_aoi_aware", "base_policy"):  # fmt: skip
-        assert getattr(sweep_log, name) is getattr(style, name), name
 
 
 def test_policy_colours_names_and_explicit_colours():
@@ -112,7 +105,8 @@ def test_one_policy_one_colour_in_record_compare_sweep_and_figure(
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweeplog.log import SweepMcapSink, read_sweep
+    from recorder.sweeplog.log import SweepMcapSink
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     with SweepMcapSink(tmp_path / "s.mcap", config_s, fsync=False) as log:
@@ -144,7 +138,8 @@ def test_a_sweep_policy_with_its_own_colour_keeps_it_in_the_recording_and_figure
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweeplog.log import SweepMcapSink, read_sweep
+    from recorder.sweeplog.log import SweepMcapSink
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     config, points = small_sweep(("cucb", "ucb"), runs=2, horizon=300)

@@ -18,12 +18,13 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from corraoi._version import __version__
-from corraoi.errors import LogError, UsageError
+from corraoi.errors import LogError, SweepLogError, UsageError
 from corraoi.experiments.montecarlo import SweepPoint, checkpoint_point, run_sweep, sweep_config
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
 from recorder.style import POLICY_COLORS, lighter, policy_color
-from recorder.sweeplog.log import SweepLogError, SweepMcapSink, read_sweep
+from recorder.sweeplog.log import SweepMcapSink
+from recorder.sweeplog.read import read_sweep
 from recorder.vocab import NS_PER_SLOT, SWEEP_METADATA
 from recorder.vocab import SWEEP_END_METADATA as END_METADATA
 from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME

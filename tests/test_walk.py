@@ -20,7 +20,7 @@ from corraoi.errors import LogError
 from recorder import vocab
 from recorder.slotlog.encode import slot_schema
 from recorder.slotlog.reader import open_log
-from recorder.sweeplog.log import read_sweep
+from recorder.sweeplog.read import read_sweep
 from recorder.sweeplog.results import is_sweep_path
 from recorder.walk import Walker, records_in
 from tests.test_sweep_log import small_sweep, write_log

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from recorder.style import AOI_UNIT, REGRET_UNIT, RGB, run_colors, spec_color
+from corraoi.policies import RGB
+from recorder.style import AOI_UNIT, REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead

@@ -206,9 +206,6 @@ __all__ = [
     "DIFF_FIELDS",
     "FLOAT_FIELDS",
     "NOTE_KEYS",
-    "ConfigDifference",
-    "DiffReport",
-    "FieldDiff",
     "diff",
     "parse_fields",
 ]

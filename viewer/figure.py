@@ -21,17 +21,17 @@ from typing import Any
 import numpy as np
 
 from corraoi.errors import FigureUnavailable, UsageError
+from corraoi.policies import RGB
 from recorder.paths import open_partial, publish, unlink_partial
 from recorder.style import (
     DASH_AOI_AWARE,
     REGRET_UNIT,
-    RGB,
     config_colors,
     is_aoi_aware,
     mpl,
     policy_color,
 )
-from recorder.sweeplog.log import SweepCurve, SweepLog
+from recorder.sweeplog.read import SweepCurve, SweepLog
 
 #: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
 FIGSIZE = (10.0, 6.0)
@@ -251,7 +251,6 @@ def _metadata(fmt: str) -> dict[str, str | None] | None:
 
 __all__ = [
     "FORMATS",
-    "FigureUnavailable",
     "MISSING_MATPLOTLIB",
     "check_dpi",
     "check_policies",

@@ -118,7 +118,7 @@ _LOST = object()
 
 def draw_from_log(log: str, out: str) -> BaseException | None:
     """draw_figure(read_sweep(log), out): None, or the exception it raised."""
-    from recorder.sweeplog.log import read_sweep
+    from recorder.sweeplog.read import read_sweep
 
     from .figure import draw_figure
 

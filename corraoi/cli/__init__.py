@@ -223,10 +223,13 @@ def policies_cmd(as_json: bool) -> None:
 
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
+from .compare import compare  # noqa: E402
 from .figure import figure  # noqa: E402
 from .record import record  # noqa: E402
-from .sweep import reproduce, sweep  # noqa: E402
-from .viewer import compare, diff, info, recover, replay  # noqa: E402
+from .replay import replay  # noqa: E402
+from .reproduce import reproduce  # noqa: E402
+from .sweep import sweep  # noqa: E402
+from .viewer import diff, info, recover  # noqa: E402
 
 main.add_command(sweep)
 main.add_command(reproduce)
@@ -264,9 +267,9 @@ def run() -> None:
         code = exc.code
     import atexit
 
-    engine = sys.modules.get("corraoi.engine.simulation")
-    if engine is not None:
-        engine.shutdown()  # its idle threads: the command is done with them
+    threads = sys.modules.get("corraoi.engine.threads")
+    if threads is not None:
+        threads.shutdown()  # the engine's idle threads: the command is done with them
     run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since 3.0
     # A live Foxglove server may still be sending its last messages from its own (native)
     # threads after stop(): the normal exit gives them the time (tests/test_foxglove_live.py).

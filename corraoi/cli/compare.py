@@ -121,7 +121,7 @@ def compare(
 def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
     a log already there with the same run and complete is used as it is)."""
-    from corraoi.engine.simulation import set_workers
+    from corraoi.engine.threads import set_workers
     from corraoi.errors import LogError, OutputError
     from corraoi.experiments.drill import choose
     from corraoi.face.recording import record_run

@@ -62,7 +62,7 @@ def figure(
       corraoi figure sweeps/I1/sweep.mcap -o i1.png --log-x --policies ucb,cucb,ts,cts
       corraoi figure sweeps/I1/sweep.mcap -o i1.pdf --split --log-y
     """
-    from recorder.sweeplog.log import read_sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
 
     if output.is_dir():

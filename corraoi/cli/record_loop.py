@@ -79,7 +79,7 @@ def record_all(
     plans: list[Plan], outlets: Outlets
 ) -> tuple[list[Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from corraoi.engine.simulation import set_workers
+    from corraoi.engine.threads import set_workers
     from corraoi.progress import Progress
 
     # One run has nothing to spread over threads, and idle numba workers compete with

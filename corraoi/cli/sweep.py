@@ -31,7 +31,6 @@ from .options import (
     policy_option,
     seed_option,
 )
-from .reproduce import reproduce
 from .sweep_run import run_grid, settle_backend
 from .sweep_table import print_table
 
@@ -232,4 +231,8 @@ def _notes(grid: Any) -> list[str]:
     return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
 
 
-__all__ = ["SAY_SIZE_FROM", "SWEEP_FILES", "print_table", "reproduce", "sweep"]
+__all__ = [
+    "SAY_SIZE_FROM",
+    "SWEEP_FILES",
+    "sweep",
+]

@@ -16,10 +16,8 @@ import click
 from corraoi.text import safe_text
 
 from .common import errors_exit, handle_errors, say, warn
-from .compare import compare
 from .options import output_option
 from .reading import LOG
-from .replay import replay
 
 # ---------------------------------------------------------------------------- diff
 
@@ -141,4 +139,8 @@ def recover(log: Path, output: Path | None, force: bool, as_json: bool) -> None:
     )
 
 
-__all__ = ["compare", "diff", "info", "recover", "replay"]
+__all__ = [
+    "diff",
+    "info",
+    "recover",
+]

@@ -22,16 +22,20 @@ from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies.spec import PolicySpec
-from corraoi.rng import streams_for_seed, streams_for_seeds
+from corraoi.rng import streams_for_seeds
 
 from . import threads
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
 from .pyengine import RunState, Streams, advance_python
-from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
-__all__ = ["RunsBlock", "Simulation", "Snapshot", "set_workers", "shutdown", "simulate",
-           "simulate_run", "streams_for_seed"]
+__all__ = [
+    "RunsBlock",
+    "Simulation",
+    "Snapshot",
+    "simulate",
+    "simulate_run",
+]
 
 DEFAULT_BLOCK = 1000
 

@@ -52,7 +52,7 @@ def chunk_task(
 def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = None) -> ChunkResult:
     """Run one chunk from its :func:`chunk_task` data (in this process or on a worker)."""
     from corraoi.engine.block import RunConfig
-    from corraoi.engine.simulation import set_workers
+    from corraoi.engine.threads import set_workers
     from corraoi.model.channels import Channel
     from corraoi.model.theory import analyse
 

@@ -43,7 +43,7 @@ def _worker_version() -> str:
 
 def _worker_setup(threads: int) -> str:
     """Run on every worker: limit the engine's threads so workers do not oversubscribe cores."""
-    from corraoi.engine.simulation import set_workers
+    from corraoi.engine.threads import set_workers
 
     set_workers(threads)
     return _worker_version()

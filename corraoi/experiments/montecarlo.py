@@ -14,7 +14,7 @@ from corraoi.errors import ConfigError
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies import PolicySpec
-from corraoi.stats import Moments, finite, mean_ci95, t975  # noqa: F401 (t975: re-exported)
+from corraoi.stats import Moments, finite, mean_ci95
 
 
 @dataclass

@@ -20,18 +20,12 @@ from corraoi.model.theory import analyse
 from recorder import style
 from recorder.paths import Sink
 
-from .layout import WINDOW, TimeWindows, one_run_blueprint, time_windows
 from .names import (
-    APPLICATION_ID,
-    ENTITIES,
-    ROOT,
     TIMELINE,
-    new_recording,
     run_path,
-    run_recording_id,
 )
-from .output import RrdOutput, first_line
-from .static import about_markdown, log_static
+from .output import first_line
+from .static import log_static
 
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
@@ -155,19 +149,6 @@ class RerunSink(Sink):
 
 
 __all__ = [
-    "APPLICATION_ID",
     "BATCH",
-    "ENTITIES",
-    "ROOT",
-    "TIMELINE",
-    "WINDOW",
     "RerunSink",
-    "RrdOutput",
-    "TimeWindows",
-    "about_markdown",
-    "new_recording",
-    "one_run_blueprint",
-    "run_path",
-    "run_recording_id",
-    "time_windows",
 ]

@@ -270,4 +270,7 @@ class ChunkWriter:
         self._stream.flush()
 
 
-__all__ = ["ZSTD_LEVEL", "ChunkWriter", "MAGIC"]
+__all__ = [
+    "ZSTD_LEVEL",
+    "ChunkWriter",
+]

@@ -18,24 +18,15 @@ from typing import Any
 import numpy as np
 import orjson
 
-from corraoi.engine.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
 from recorder.vocab import (
-    MAX_SLOT,
-    MCAP_INDEX_TYPES,
-    MESSAGE_ENCODING,
-    NS_PER_SLOT,
     RUN_METADATA,
-    SCHEMA_ENCODING,
     SLOT_FORMAT_NAME,
     SLOT_FORMAT_VERSION,
-    SWEEP_METADATA,
-    library_name,
 )
-
-from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, slot_schema
 
 #: Message keys in the order the encoder writes them.
 MESSAGE_KEYS = FIELDS
@@ -354,25 +345,10 @@ def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
 
 
 __all__ = [
-    "ARM_FIELDS",
-    "BlockEncoder",
-    "MAX_SLOT",
-    "MCAP_INDEX_TYPES",
-    "MESSAGE_ENCODING",
     "MESSAGE_KEYS",
-    "NS_PER_SLOT",
-    "RUN_METADATA",
-    "SCALAR_FIELDS",
-    "SCHEMA_ENCODING",
-    "SWEEP_METADATA",
     "check_agrees",
     "check_run_metadata",
     "decode_messages",
     "empty_block",
-    "end_metadata",
-    "library_name",
     "not_a_run_log",
-    "run_metadata",
-    "schema_bytes",
-    "slot_schema",
 ]

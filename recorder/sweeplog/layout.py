@@ -148,7 +148,6 @@ __all__ = [
     "NOTABLE_KINDS",
     "ROOT",
     "SMALL_MULTIPLES_FROM",
-    "TIMELINE",
     "entity_part",
     "estimator_path",
     "policy_names",

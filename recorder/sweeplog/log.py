@@ -27,20 +27,10 @@ import orjson
 from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
-from corraoi.errors import SweepLogError, WriteError
+from corraoi.errors import WriteError
 from recorder.paths import Sink, open_partial, partial_path, publish, reason
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
-from recorder.style import (
-    ARM_COLORS,
-    POLICY_COLORS,
-    arm_color,
-    base_policy,
-    is_aoi_aware,
-    lighter,
-    policy_color,
-)
-
 # The sweep log's names (recorder.vocab)
 from recorder.vocab import (
     MCAP_INDEX_TYPES,
@@ -59,7 +49,7 @@ from recorder.vocab import (
     library_name,
 )
 
-from .read import SweepCurve, SweepLog, read_sweep, sweep_arms
+from .read import sweep_arms
 
 # corraoi.experiments.montecarlo imports the numba engine: readers need not pay for it
 if TYPE_CHECKING:
@@ -320,20 +310,7 @@ def _opt(v: float | None) -> float | None:
 
 
 __all__ = [
-    "ARM_COLORS",
-    "NS_PER_SLOT",
-    "POLICY_COLORS",
-    "SWEEP_METADATA",
-    "arm_color",
-    "base_policy",
-    "is_aoi_aware",
-    "lighter",
-    "policy_color",
-    "SweepCurve",
-    "SweepLog",
-    "SweepLogError",
     "SweepMcapSink",
-    "read_sweep",
     "sweep_metadata",
     "sweep_schema",
 ]

@@ -270,7 +270,6 @@ def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve
 __all__ = [
     "SweepCurve",
     "SweepLog",
-    "SweepLogError",
     "read_sweep",
     "sweep_arms",
 ]

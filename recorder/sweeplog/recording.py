@@ -27,6 +27,7 @@ import rerun as rr
 from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
 from recorder.paths import Sink, partial_path, publish, reason
+from recorder.rerun.names import TIMELINE
 from recorder.style import (
     MARKER_AOI_AWARE,
     WIDTH_AOI_AWARE,
@@ -43,7 +44,6 @@ from recorder.style import (
 from recorder.vocab import SWEEP_FLUSH_EVERY
 
 from .layout import (
-    TIMELINE,
     entity_part,
     estimator_path,
     policy_names,
@@ -277,12 +277,6 @@ class SweepRerunSink(Sink):
 
 
 __all__ = [
-    "TIMELINE",
     "SweepRerunSink",
-    "estimator_path",
     "open_sweep_recording",
-    "pulls_path",
-    "regret_path",
-    "sweep_blueprint",
-    "sweep_recording_id",
 ]

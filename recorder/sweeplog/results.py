@@ -24,7 +24,7 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.errors import ResultsError, WriteError
 from recorder.paths import partial_path, reason
-from recorder.slotlog.decode import SWEEP_METADATA
+from recorder.vocab import SWEEP_METADATA
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -299,7 +299,7 @@ class SweepData:
     @cached_property
     def config(self) -> dict[str, Any]:
         """The sweep configuration (from the sweep log, else the results' metadata: a grid)."""
-        from .log import read_sweep
+        from .read import read_sweep
 
         if self.log_path.exists():
             return read_sweep(self.log_path).config
@@ -349,7 +349,7 @@ class SweepData:
         """The sweep log's aggregated curves: policy, t, means, CI half-widths, shares."""
         import pandas as pd
 
-        from .log import read_sweep
+        from .read import read_sweep
 
         log = read_sweep(self.log_path)
         parts = []
@@ -376,7 +376,6 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "RESULTS_FILE",
-    "ResultsError",
     "SweepData",
     "is_sweep_path",
     "params_json",
