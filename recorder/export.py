@@ -48,11 +48,11 @@ def export(
     source: str | os.PathLike[str], out: str | os.PathLike[str], *, overwrite: bool = False
 ) -> Exported:
     """Write the table of ``source`` (slot log, sweep folder or sweep log) to ``out``."""
-    from corraoi.face.tables import require_analysis
+    from corraoi.extras import require
 
     out_p = Path(out)
     fmt = export_format(out_p)
-    require_analysis(("pyarrow",))
+    require("analysis", "corraoi export", ("pyarrow",))
     from recorder.slotlog.frames import RunData
     from recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
 

@@ -12,32 +12,12 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from corraoi.errors import MissingExtraError, UsageError
+from corraoi.errors import UsageError
+from corraoi.extras import require
 
 if TYPE_CHECKING:
     from recorder.slotlog.frames import RunData
     from recorder.sweeplog.results import SweepData
-
-#: What to install for the tables.
-EXTRA = 'pip install "corraoi[analysis]"'
-
-
-def require_analysis(names: tuple[str, ...] = ("pandas", "pyarrow")) -> None:
-    """Raise :class:`MissingExtraError` naming the extra unless ``names`` are installed (found,
-    not imported: pandas costs 0.3 s and is imported only where a DataFrame is made)."""
-    import importlib.util
-
-    for name in names:
-        try:
-            found = importlib.util.find_spec(name) is not None
-        except (ImportError, ValueError):
-            found = False
-        if not found:
-            raise MissingExtraError(
-                f"{name} is not installed: corraoi.load and corraoi export need the analysis "
-                f"extra, {EXTRA}"
-            ) from None
-
 
 def load(
     path: str | os.PathLike[str], *, slots: tuple[int, int] | None = None
@@ -52,7 +32,7 @@ def load(
       ``results.parquet``): ``.runs`` is the per-run results table, ``.summary`` the
       ``summary.json`` object, ``.curves`` the aggregated curves of the sweep log.
     """
-    require_analysis()
+    require("analysis", "corraoi.load")
     from recorder.sweeplog.results import SweepData, is_sweep_path
 
     p = Path(path)
@@ -65,4 +45,4 @@ def load(
     return RunData(p, slots=slots)
 
 
-__all__ = ["EXTRA", "load", "require_analysis"]
+__all__ = ["load"]
