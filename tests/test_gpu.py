@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -25,11 +26,14 @@ from corraoi.errors import ConfigError
 from corraoi.gpu import GpuUnavailable, choose_backend
 from corraoi.gpu.device import (
     DEVICE_ENV,
+    FAMILIES,
     MAX_ARMS,
     SOURCE_PATH,
     CudaDevice,
     Device,
     EmulatedDevice,
+    entry_names,
+    family_id,
     host_compiler,
 )
 from corraoi.gpu.runner import gpu_problem, simulate
@@ -314,6 +318,7 @@ def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not installed here")
+@pytest.mark.slow
 def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     out = tmp_path / "kernel.ptx"
     cmd = ["nvcc", "-arch=sm_90", "-std=c++17", "-ptx", "-DKARMS=4", "-x", "cu",
@@ -322,7 +327,7 @@ def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     assert done.returncode == 0, done.stderr
     entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
                if ".entry" in ln}  # fmt: skip
-    assert {f"advance_{k}" for k in ("ucb", "ts_beta", "d_ts")} <= entries
+    assert entries == {*entry_names(), "philox_kat"}
 
 
 def _nvrtc():  # type: ignore[no-untyped-def]
@@ -335,13 +340,60 @@ def _nvrtc():  # type: ignore[no-untyped-def]
         return None
 
 
-@pytest.mark.skipif(_nvrtc() is None, reason="CuPy with the NVRTC library is not installed here")
+def _ptxas_report(log: str) -> dict[str, dict[str, int]]:
+    """ptxas's -v report in an NVRTC log: entry -> registers, stack frame and spill bytes."""
+    out: dict[str, dict[str, int]] = {}
+    name = ""
+    for line in log.splitlines():
+        if m := re.search(r"Function properties for (\w+)", line):
+            name = m.group(1)
+            out[name] = {}
+        elif m := re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, "
+                            r"(\d+) bytes spill loads", line):  # fmt: skip
+            out[name].update(stack=int(m.group(1)), spills=int(m.group(2)) + int(m.group(3)))
+        elif m := re.search(r"Used (\d+) registers", line):
+            out[name]["registers"] = int(m.group(1))
+    return out
+
+
+needs_nvrtc = pytest.mark.skipif(_nvrtc() is None,
+                                 reason="CuPy with the NVRTC library is not installed here")
+
+
+@needs_nvrtc
+@pytest.mark.slow
 def test_the_kernels_compile_with_nvrtc_as_cupy_compiles_them():
-    """CuPy's RawModule compiles with NVRTC, which has no host headers (unlike nvcc)."""
+    """CuPy's RawModule compiles with NVRTC, which has no host headers (unlike nvcc): every
+    entry point at 64 arms, the most a run may have (per-arm arrays in local memory there)."""
     nvrtc = _nvrtc()
     prog = nvrtc.createProgram(SOURCE_PATH.read_text(), "kernel.cu", [], [])
     nvrtc.compileProgram(prog, ["-std=c++17", "-DKARMS=64", "-arch=compute_90"])
-    assert b".entry advance_sw_ucb" in nvrtc.getPTX(prog)
+    ptx = nvrtc.getPTX(prog).decode()
+    entries = {ln.split()[-1].rstrip("(") for ln in ptx.splitlines() if ".entry" in ln}
+    assert entries == {*entry_names(), "philox_kat"}
+
+
+@needs_nvrtc
+@pytest.mark.slow
+@pytest.mark.parametrize("K", [4])
+def test_every_entry_point_keeps_a_run_in_registers_on_hopper(K: int):
+    """Compiled as CuPy compiles them on an H100/H200 (NVRTC, one family a module, sm_90
+    machine code), ptxas reports no stack frame and no spills for any entry point: a run's
+    per-arm values stay in registers (docs/gpu.md, "How the kernel is written")."""
+    nvrtc = _nvrtc()
+    report: dict[str, dict[str, int]] = {}
+    for family in FAMILIES:
+        prog = nvrtc.createProgram(SOURCE_PATH.read_text(), "kernel.cu", [], [])
+        nvrtc.compileProgram(prog, ["-std=c++17", f"-DKARMS={K}",
+                                    f"-DCAI_FAMILY={family_id(family)}", "-arch=sm_90",
+                                    "--ptxas-options=-v"])  # fmt: skip
+        got = _ptxas_report(nvrtc.getProgramLog(prog))
+        assert set(got) == {*entry_names(family), "philox_kat"}, family
+        assert nvrtc.getCUBIN(prog)[:4] == b"\x7fELF"  # machine code, not PTX
+        report.update(got)
+    for name, r in report.items():
+        assert r["stack"] == 0 and r["spills"] == 0, (name, r)
+        assert 0 < r["registers"] <= 255, (name, r)
 
 
 def test_a_plug_in_that_replaces_a_hook_has_no_gpu_form():
