@@ -356,8 +356,9 @@ def _ptxas_report(log: str) -> dict[str, dict[str, int]]:
     return out
 
 
-needs_nvrtc = pytest.mark.skipif(_nvrtc() is None,
-                                 reason="CuPy with the NVRTC library is not installed here")
+needs_nvrtc = pytest.mark.skipif(
+    _nvrtc() is None, reason="CuPy with the NVRTC library is not installed here"
+)
 
 
 @needs_nvrtc
@@ -498,6 +499,7 @@ def test_the_backend_is_an_experiment_file_key(tmp_path: Path):
 
 
 def test_a_gpu_sweep_writes_the_same_outputs_as_a_cpu_sweep(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     out = tmp_path / "g"
     res = run("sweep", "-p", "ucb,cucb,cts", "-n", "300", "-T", "1500", "--backend", "gpu",
               "--baseline", "ucb", "-o", out, "--json")  # fmt: skip
@@ -534,6 +536,7 @@ def test_a_gpu_sweep_writes_the_same_outputs_as_a_cpu_sweep(emulate_env: None, t
 
 
 def test_a_gpu_sweep_resumes_and_grows_like_one_sweep(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     a, b = tmp_path / "a", tmp_path / "b"
     common = ["-p", "ucb,cts", "-T", "800", "--backend", "gpu", "--baseline", "ucb"]
     assert run("sweep", *common, "-n", "100", "-o", a).exit_code == 0
@@ -554,6 +557,7 @@ def test_a_gpu_sweep_resumes_and_grows_like_one_sweep(emulate_env: None, tmp_pat
 
 
 def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     res = run("reproduce", "-o", tmp_path / "p", "-n", "40", "-T", "600", "--backend", "gpu")
     assert res.exit_code == 0, res.output
     for inst in ("I1", "I2"):
@@ -564,6 +568,7 @@ def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
 @pytest.mark.slow
 def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """docs/gpu.md's commands and Python example, on the emulated device."""
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     import os
     import re
 
@@ -582,7 +587,60 @@ def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: py
     exec(compile(example, "gpu.md", "exec"), {})
 
 
+ROOT = Path(__file__).resolve().parent.parent
+DEVICE_RUN = ROOT / "benchmarks" / "gpu_device_run.sh"
+
+
+@needs_cxx
+@pytest.mark.slow
+def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
+    """benchmarks/gpu_device_run.sh --emulate: the steps of the GPU machine's one run, small,
+    on the emulated device: each ends well, and each file under $OUT holds its figures."""
+    import os
+
+    out = tmp_path / "out"
+    env = {**os.environ, "OUT": str(out), "PYTHON": sys.executable}
+    env.pop(DEVICE_ENV, None)
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "asymptotics.json", "asymptotics.png", "bench.json", "env.txt", "log.txt",
+        "means.json", "summary.txt"]  # fmt: skip
+    summary = (out / "summary.txt").read_text()
+    for step in ("1 tests", "2 bench", "4 means", "3 asymp"):
+        assert re.search(rf"^\| {step} \| ok \| \d+ \|$", summary, flags=re.M), summary
+    assert done.stdout.rstrip().splitlines()[-1].startswith("total ")
+    assert "1 passed" in (out / "log.txt").read_text()
+    bench = json.loads((out / "bench.json").read_text())
+    assert bench["device"] == "emulated on the CPU"
+    assert set(bench["rates"]) == {"ucb", "cts"}
+    assert all(len(r) == 2 and min(r.values()) > 1e5 for r in bench["rates"].values())
+    assert 0 < bench["paper_workload_s"]["best"] <= bench["paper_workload_s"]["median"]
+    means = json.loads((out / "means.json").read_text())
+    assert [r["policy"] for r in means["rows"]] == ["ucb", "cucb", "ts", "cts"]
+    for r in means["rows"]:
+        assert r["gpu_runs"] == 1000 and r["cpu_runs"] == 500 and r["cpu_mean"] > 0
+        assert r["within"] == (abs(r["z"]) <= 4.0)
+    asym = json.loads((out / "asymptotics.json").read_text())
+    assert asym["runs"] == 100 and asym["horizon"] >= 500
+    ucb = asym["curves"]["ucb"]
+    assert ucb["t"][-1] == asym["horizon"] and ucb["mean"][-1] > ucb["mean"][0]
+    assert (out / "asymptotics.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| GPU vs CPU means, largest |z|" in summary
+
+
+def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--fast"], capture_output=True, text=True,
+                          env={"PATH": "/usr/bin:/bin", "OUT": str(tmp_path)})  # fmt: skip
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "gpu_device_run.sh: unknown argument '--fast' (expected --emulate or nothing)"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     pytest.importorskip("pyarrow")
     out = tmp_path / "c"
     res = run("sweep", "-p", "ucb,cucb", "-n", "30", "-T", "400", "--baseline", "ucb", "-o", out)
