@@ -35,8 +35,10 @@ from typing import Any
 
 POLICIES = ("ucb", "cucb", "aoi-aware-ucb", "aoi-aware-cucb", "ts", "cts", "aoi-aware-ts",
             "aoi-aware-cts", "ts-gauss", "q-ucb", "q-ts", "sw-ucb", "d-ts")  # fmt: skip
-#: (threads a block, register cap) measured by --variants; the first is the device's default.
-VARIANTS = ((128, None), (256, None), (128, 128), (128, 96))
+#: (threads a block, register cap, kernel.cu switches) measured by --variants; the first is
+#: the device's default.
+VARIANTS = ((128, None, ()), (256, None, ()), (128, 128, ()), (128, 96, ()),
+            (128, None, ("CAI_LOG_BATCH=1",)), (128, 168, ("CAI_LOG_BATCH=1",)))  # fmt: skip
 
 
 def main() -> None:
@@ -155,24 +157,32 @@ def _variants_table(args: argparse.Namespace, out: _Figures) -> None:
     sms = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)["multiProcessorCount"]
     runs, T = (4096, 500) if args.quick else (1_000_000, 2_000)
     rows = []
-    print(f"\n| threads a block | register cap | entry | registers | local bytes | "
+    print(f"\n| threads a block | register cap | switches | entry | registers | local bytes | "
           f"blocks / SM | run-slots/s ({runs:.0e} runs x T {T}) |")  # fmt: skip
-    print("|---:|---:|---|---:|---:|---:|---:|")
-    for block, cap in VARIANTS:
-        dev = CudaDevice(block=block, maxrregcount=cap)
-        for policy, family, corr in (("ucb", "ucb", False), ("cucb", "ucb", True),
-                                     ("ts", "ts_beta", False), ("cts", "ts_beta", True)):
+    print("|---:|---:|---|---|---:|---:|---:|---:|")
+    for block, cap, defines in VARIANTS:
+        dev = CudaDevice(block=block, maxrregcount=cap, defines=defines)
+        pairs = (("ucb", "ucb", False), ("cucb", "ucb", True), ("ts", "ts_beta", False),
+                 ("cts", "ts_beta", True))  # fmt: skip
+        if defines:  # the switches are the sampling families'
+            pairs = pairs[2:]
+        for policy, family, corr in pairs:
             entry = entry_name(family, corr, False)
             func = dev.module(4, family).get_function(entry)
-            regs = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_NUM_REGS, func.ptr)
-            local = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_LOCAL_SIZE_BYTES, func.ptr)
-            per_sm = drv.occupancyMaxActiveBlocksPerMultiprocessor(func.ptr, block, 0)
+            try:
+                regs = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_NUM_REGS, func.ptr)
+                local = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_LOCAL_SIZE_BYTES, func.ptr)
+                per_sm = drv.occupancyMaxActiveBlocksPerMultiprocessor(func.ptr, block, 0)
+            except Exception as exc:  # the figures below matter more than these
+                print(f"(attributes of {entry} not read: {type(exc).__name__}: {exc})")
+                regs = local = per_sm = -1
             rate = _rate(dev, policy, runs, T, repeat=args.repeat)
-            rows.append({"block": block, "maxrregcount": cap, "entry": entry, "registers": regs,
-                         "local_bytes": local, "blocks_per_sm": per_sm, "sms": sms,
+            rows.append({"block": block, "maxrregcount": cap, "defines": list(defines),
+                         "entry": entry, "registers": regs, "local_bytes": local,
+                         "blocks_per_sm": per_sm, "sms": sms,
                          "run_slots_per_s": rate})  # fmt: skip
-            print(f"| {block} | {cap or '-'} | {entry} | {regs} | {local} | {per_sm} | "
-                  f"{rate:.3g} |", flush=True)  # fmt: skip
+            print(f"| {block} | {cap or '-'} | {' '.join(defines) or '-'} | {entry} | {regs} | "
+                  f"{local} | {per_sm} | {rate:.3g} |", flush=True)  # fmt: skip
         out["variants"] = rows
         out.save()
 

@@ -158,6 +158,12 @@ def test_every_built_in_agrees_with_the_cpu_engine(emulated: Device, family: str
     _agree(emulated, GROUPS[family])
 
 
+def test_the_batched_log_tests_agree_with_the_cpu_engine(emulated: Device):
+    """kernel.cu with CAI_LOG_BATCH=1 (the gamma draws' log tests after the arms, a variant
+    benchmarks/bench_gpu.py times): the Beta-sampling families still agree."""
+    _agree(EmulatedDevice(defines=("CAI_LOG_BATCH=1",)), ["ts", "cts", "aoi-aware-q-ts", "d-ts"])
+
+
 def test_markov_channel_agrees_with_the_cpu_engine(emulated: Device):
     _agree(emulated, ["ucb", "cts", "aoi-aware-q-ts", "d-ts"], instance="GE")
 

@@ -147,17 +147,19 @@ class Device(ABC):
 class CudaDevice(Device):
     """The current CUDA device, through CuPy (the ``gpu`` extra). ``block``: threads a block;
     ``maxrregcount``: a cap on registers per thread (NVRTC's ``--maxrregcount``; None: the
-    compiler's choice). Both are there to be measured (benchmarks/bench_gpu.py)."""
+    compiler's choice); ``defines``: kernel.cu's compile-time switches (``CAI_LOG_BATCH=1``).
+    All three are there to be measured (benchmarks/bench_gpu.py)."""
 
     launch_work = 1 << 31
     checkpoint_bytes = 1 << 30
     in_flight = 1
     BLOCK = 128
 
-    def __init__(self, *, block: int = BLOCK, maxrregcount: int | None = None) -> None:
+    def __init__(self, *, block: int = BLOCK, maxrregcount: int | None = None,
+                 defines: Sequence[str] = ()) -> None:  # fmt: skip
         super().__init__()
         self.block = int(block)
-        self.options: tuple[str, ...] = ("-std=c++17",)
+        self.options: tuple[str, ...] = ("-std=c++17", *(f"-D{d}" for d in defines))
         if maxrregcount is not None:
             self.options += (f"--maxrregcount={int(maxrregcount)}",)
         try:
@@ -235,12 +237,13 @@ class EmulatedDevice(Device):
     name = "emulated on the CPU"
     FLAGS = ("-O2", "-std=c++17", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
-    def __init__(self) -> None:
+    def __init__(self, *, defines: Sequence[str] = ()) -> None:
         super().__init__()
         cxx = host_compiler()
         if cxx is None:
             raise GpuUnavailable(f"{DEVICE_ENV}=emulate needs a C++ compiler (g++ or $CXX)")
         self._cxx = cxx
+        self._defines = tuple(f"-D{d}" for d in defines)
 
     def _module_key(self, K: int, family: str) -> Any:
         return K  # one library per K holds every family
@@ -252,7 +255,7 @@ class EmulatedDevice(Device):
         from ..kernels import _locked, _writable, cache_dir
 
         text = source()
-        flags = (*self.FLAGS, f"-DKARMS={K}")
+        flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}")
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
         folder = _writable(cache_dir() / "gpu-emulation")  # else the system's temp folder
         lib = folder / f"kernel-K{K}-{digest}.so"

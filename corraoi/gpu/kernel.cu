@@ -16,7 +16,8 @@
 // seed. The counter names the purpose: (slot, HIDDEN) draws the hidden state of a slot, so
 // every policy sees the same path for a seed and nothing depends on the launch shape; the
 // policy's draws come from (position, POLICY), a stream whose position is saved between
-// launches. Counts and sums are 64-bit (AoI sums pass 2^31 near T = 1.3e9).
+// launches. Sums are 64-bit (AoI sums pass 2^31 near T = 1.3e9); pulls and successes of an
+// arm, at most T < 2^32, are 32-bit in registers and 64-bit in memory.
 //
 // Written for the GPU's habits (docs/gpu.md, "How the kernel is written"): a run's per-arm
 // values live in registers (every loop over the arms is unrolled and an arm chosen at run
@@ -154,12 +155,12 @@ CAI_FN void cai_sincospi(double x, double* s, double* c) {
 }
 
 // The policy's stream of one run: uniforms two per Philox block, at position `pos` (in
-// uniforms), and the spare normal of the last Box-Muller pair of cai_normal.
+// uniforms), and the spare normal of the last Box-Muller pair of cai_normal. A block is
+// computed again for each uniform taken from it: no cache (six registers fewer, and no
+// branch that threads out of step would take apart).
 struct CaiRng {
     u32 k0, k1;
     u64 pos;
-    u64 blk;
-    double d0, d1;
     int has_spare;
     double spare;
 };
@@ -169,16 +170,10 @@ CAI_FN CaiWords cai_block_at(const CaiRng& g, u64 blk) {
 }
 
 CAI_FN double cai_uniform(CaiRng& g) {
-    u64 blk = g.pos >> 1;
-    if (blk != g.blk) {
-        CaiWords w = cai_block_at(g, blk);
-        g.d0 = cai_u53(w.w0, w.w1);
-        g.d1 = cai_u53(w.w2, w.w3);
-        g.blk = blk;
-    }
-    double u = (g.pos & 1ull) ? g.d1 : g.d0;
+    CaiWords w = cai_block_at(g, g.pos >> 1);
+    bool second = (g.pos & 1ull) != 0ull;
     g.pos += 1;
-    return u;
+    return cai_u53(second ? w.w2 : w.w0, second ? w.w3 : w.w1);
 }
 
 // The next whole block of the stream (its two uniforms' worth of words), skipping the second
@@ -271,24 +266,89 @@ struct CaiBetaDC {
     CaiGammaDC a, b;
 };
 
+// A gamma trial's squeeze (Marsaglia and Tsang): v^3 of the trial, and *state 0 when the
+// squeeze accepts it (the value is d v^3), 1 when only the log test can tell (then *rhs is
+// 0.5 x^2 + d (1 - v^3): it accepts when log u < *rhs + d log v^3), 2 when it is rejected.
+CAI_FN double cai_gamma_squeeze(double d, double c, double x, double u, double* rhs,
+                                int* state) {
+    double v = 1.0 + c * x;
+    if (v <= 0.0) {
+        *state = 2;
+        *rhs = 0.0;
+        return 0.0;
+    }
+    v = v * v * v;
+    double x2 = x * x;
+    *state = u < 1.0 - 0.0331 * x2 * x2 ? 0 : 1;
+    *rhs = 0.5 * x2 + d * (1.0 - v);
+    return v;
+}
+
+#ifndef CAI_LOG_BATCH
+#define CAI_LOG_BATCH 0
+#endif
+
 // Beta(a_k, b_k) for every arm, as Ga / (Ga + Gb). Each gamma's first trial comes from two
 // whole blocks per arm (two normals, two uniforms), so that every thread runs the same
 // instructions; the rare rejected trials go on from the stream afterwards, one loop for all
-// of them (one copy of the rejection loop in the code, not one per arm).
+// of them (one copy of the rejection loop in the code, not one per arm). CAI_LOG_BATCH=1:
+// the squeeze's undecided trials (about one in ten) take their two logs in one loop after
+// the arms too, so that a warp runs as many log tests as its busiest thread needs, not one
+// for each gamma that any of its threads left undecided (benchmarks/bench_gpu.py times both).
 template <class Arm>
 CAI_FN void cai_betas(const Arm* arm, double* vals, CaiRng& g) {
     double ga[KARMS], gb[KARMS];
     u64 bad_a = 0, bad_b = 0;
+#if CAI_LOG_BATCH
+    double ua[KARMS], ub[KARMS], ra[KARMS], rb[KARMS];
+    u64 log_a = 0, log_b = 0;
+#endif
     CAI_FOR_ARMS(k) {
         CaiWords w = cai_block(g);
         CaiWords v = cai_block(g);
         double x1, x2;
         cai_normal2(w, &x1, &x2);
-        ga[k] = cai_gamma_try(arm[k].a.d, arm[k].a.c, x1, cai_u53(v.w0, v.w1));
-        gb[k] = cai_gamma_try(arm[k].b.d, arm[k].b.c, x2, cai_u53(v.w2, v.w3));
+        double u1 = cai_u53(v.w0, v.w1), u2 = cai_u53(v.w2, v.w3);
+#if CAI_LOG_BATCH
+        int sa, sb;
+        ga[k] = cai_gamma_squeeze(arm[k].a.d, arm[k].a.c, x1, u1, &ra[k], &sa);
+        gb[k] = cai_gamma_squeeze(arm[k].b.d, arm[k].b.c, x2, u2, &rb[k], &sb);
+        ua[k] = u1;
+        ub[k] = u2;
+        if (sa == 0) ga[k] *= arm[k].a.d;
+        if (sb == 0) gb[k] *= arm[k].b.d;
+        log_a |= (u64)(sa == 1) << k;
+        log_b |= (u64)(sb == 1) << k;
+        bad_a |= (u64)(sa == 2) << k;
+        bad_b |= (u64)(sb == 2) << k;
+#else
+        ga[k] = cai_gamma_try(arm[k].a.d, arm[k].a.c, x1, u1);
+        gb[k] = cai_gamma_try(arm[k].b.d, arm[k].b.c, x2, u2);
         bad_a |= (u64)(ga[k] < 0.0) << k;
         bad_b |= (u64)(gb[k] < 0.0) << k;
+#endif
     }
+#if CAI_LOG_BATCH
+    while ((log_a | log_b) != 0ull) {
+        bool is_a = log_a != 0ull;
+        int k = cai_lowest(is_a ? log_a : log_b);
+        if (is_a) log_a &= log_a - 1ull;
+        else log_b &= log_b - 1ull;
+        Arm dc = cai_get(arm, k);
+        double d = is_a ? dc.a.d : dc.b.d;
+        double v3 = is_a ? cai_get(ga, k) : cai_get(gb, k);
+        double u = is_a ? cai_get(ua, k) : cai_get(ub, k);
+        double rhs = is_a ? cai_get(ra, k) : cai_get(rb, k);
+        bool ok = log(u) < rhs + d * log(v3);
+        if (is_a) {
+            cai_set(ga, k, d * v3);
+            bad_a |= (u64)(!ok) << k;
+        } else {
+            cai_set(gb, k, d * v3);
+            bad_b |= (u64)(!ok) << k;
+        }
+    }
+#endif
     while ((bad_a | bad_b) != 0ull) {
         bool is_a = bad_a != 0ull;
         int k = cai_lowest(is_a ? bad_a : bad_b);
@@ -364,13 +424,13 @@ struct CaiNoState {
     CAI_METHOD void store(CaiState) const {}
 };
 
-#define CAI_FORCED_ARGS const CaiSlot &sl, const i64 *np, const double *prm, St &st, CaiRng &g
+#define CAI_FORCED_ARGS const CaiSlot &sl, const u32 *np, const double *prm, St &st, CaiRng &g
 #define CAI_SCORE_ARGS                                                                        \
-    const CaiSlot &sl, const i64 *np, const double *mu, const Arm *arm, double *vals,          \
+    const CaiSlot &sl, const u32 *np, const double *mu, const Arm *arm, double *vals,          \
         const double *prm, St &st, CaiRng &g
 #define CAI_UPDATE_ARGS const CaiSlot &sl, int played, int rew, const double *prm, St &st, CaiState ps
 
-CAI_FN int cai_first_unpulled(const i64* np) {
+CAI_FN int cai_first_unpulled(const u32* np) {
     int first = -1;
     CAI_FOR_ARMS(k) if (first < 0 && np[k] == 0) first = k;
     return first;
@@ -600,19 +660,17 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
     g.k0 = k0;
     g.k1 = k1;
     g.pos = rpos[r];
-    g.blk = ~0ull;
-    g.d0 = g.d1 = 0.0;
     g.has_spare = nhas[r];
     g.spare = nspare[r];
     CaiState ps = {pstate + r, (i64)R};
     St st;
     st.load(ps);
-    i64 np[KARMS], ns[KARMS];
+    u32 np[KARMS], ns[KARMS];  // pulls and successes: at most T < 2^32 (limits.MAX_HORIZON)
     double mu[KARMS], fr[KARMS], vals[KARMS];
     Arm arm_of[KARMS];
     CAI_FOR_ARMS(k) {
-        np[k] = pulls[(i64)k * R + r];
-        ns[k] = succ[(i64)k * R + r];
+        np[k] = (u32)pulls[(i64)k * R + r];
+        ns[k] = (u32)succ[(i64)k * R + r];
         mu[k] = np[k] > 0 ? (double)ns[k] / (double)np[k] : 0.0;
         fr[k] = np[k] > 0 ? (double)(np[k] - ns[k]) / (double)np[k] : 0.0;
         arm_of[k].set(np[k], ns[k], prm);
@@ -637,7 +695,7 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
             // mu_hat[k_emp]: the arms a pulled l of S_t rules out are comb[l][code], code
             // saying which of 0, l's failure rate and l's success rate fall below the target
             u64 in_s = 0;
-            CAI_FOR_ARMS(k) if (np[k] * KARMS >= t - 1) in_s |= 1ull << k;
+            CAI_FOR_ARMS(k) if ((i64)np[k] * KARMS >= t - 1) in_s |= 1ull << k;
             double target;
             int kemp = cai_argmax(mu, in_s, g, &target);
             u64 out = 0;
@@ -668,8 +726,8 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
         }
         int rew = Y[arm * n + x];
         {  // the played arm's values, recomputed for it alone
-            i64 n1 = cai_get(np, arm) + 1;
-            i64 s1 = cai_get(ns, arm) + rew;
+            u32 n1 = cai_get(np, arm) + 1u;
+            u32 s1 = cai_get(ns, arm) + (u32)rew;
             double m1 = (double)s1 / (double)n1;
             double f1 = CORR ? (double)(n1 - s1) / (double)n1 : 0.0;
             Arm a1;
@@ -700,14 +758,14 @@ CAI_FN void cai_run(int r, CAI_PARAMS) {
         if (t == next_ck) {
             ck_reg[(i64)ci * R + r] = (double)reg;
             ck_est[(i64)ci * R + r] = (double)asum - (double)t / mu_star;
-            CAI_FOR_ARMS(k) ck_pulls[((i64)ci * KARMS + k) * R + r] = np[k];
+            CAI_FOR_ARMS(k) ck_pulls[((i64)ci * KARMS + k) * R + r] = (i64)np[k];
             ++ci;
             next_ck = ci < nck ? ck_t[ci] : -1;
         }
     }
     CAI_FOR_ARMS(k) {
-        pulls[(i64)k * R + r] = np[k];
-        succ[(i64)k * R + r] = ns[k];
+        pulls[(i64)k * R + r] = (i64)np[k];
+        succ[(i64)k * R + r] = (i64)ns[k];
     }
     st.store(ps);
     age_a[r] = age;

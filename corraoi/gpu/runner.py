@@ -56,7 +56,9 @@ def gpu_problem(policy: PolicySpec, K: int) -> str | None:
     """Why ``policy`` cannot run on the GPU backend with K arms, or None when it can."""
     cls = policy.resolve()
     form = gpu_form(cls)
-    if form is None or entry_name(form.kernel, cls.correlated, cls.aoi_aware) not in entry_names():
+    entry = None if form is None else entry_name(form.kernel, getattr(cls, "correlated", False),
+                                                 getattr(cls, "aoi_aware", False))  # fmt: skip
+    if entry is None or entry not in entry_names():
         kind = "a plain-Python policy" if cls.tier == "python" else "no GPU form"
         return f"policy {policy.name} has {kind} (the GPU backend runs the built-ins)"
     if K > MAX_ARMS:
