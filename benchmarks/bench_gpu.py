@@ -192,10 +192,10 @@ def _variants_table(args: argparse.Namespace, out: _Figures) -> None:
 
 def _rate(dev: Any, name: str, runs: int, T: int, *, repeat: int) -> float:
     """Run-slots per second of ``name`` on I1, best of ``repeat`` after one warm-up run."""
+    from corraoi.experiments.montecarlo import default_checkpoints
     from corraoi.gpu.runner import simulate
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from corraoi.sweep import default_checkpoints
 
     inst, spec, stops = load_instance("I1"), make_policy(name), default_checkpoints(T)
     simulate(inst, spec, seed0=0, runs=min(runs, 256), horizon=min(T, 100), device=dev)
@@ -225,8 +225,8 @@ def _rates_table(args: argparse.Namespace, out: _Figures, dev: Any,
 
 
 def _paper_table(args: argparse.Namespace, out: _Figures) -> None:
-    from corraoi.experiments import sweep
-    from corraoi.grid import build_grid
+    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.sweeps import sweep
 
     grid = build_grid(instances=["I1"], policies=["all"], horizons=[10_000],
                       runs=args.paper_runs, backend="gpu")  # fmt: skip

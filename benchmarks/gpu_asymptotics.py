@@ -47,12 +47,12 @@ def main() -> None:
         ap.error("give --horizon or --budget, not both")
     os.environ["CORRAOI_GPU_DEVICE"] = args.device
 
-    from corraoi.bounds import cts_bound, cucb_bound
+    from corraoi.experiments.montecarlo import default_checkpoints
     from corraoi.gpu import get_device
     from corraoi.gpu.runner import simulate
-    from corraoi.instance import load_instance
+    from corraoi.model.bounds import cts_bound, cucb_bound
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from corraoi.sweep import default_checkpoints
 
     dev = get_device()
     inst = load_instance("I2")
@@ -110,6 +110,8 @@ def main() -> None:
 def _choose_horizon(run, budget: float, pilot: int) -> tuple[int, str]:  # type: ignore[no-untyped-def]
     """The longest 1, 2 or 5 x 10^k slots that the pilot's seconds per slot (the three
     policies together, modules loaded) put within ``budget`` seconds, and how it was found."""
+    from corraoi.limits import MAX_HORIZON
+
     for name in POLICIES:
         run(name, 100)  # modules compiled or loaded, outside the timing
     start = time.perf_counter()
@@ -119,7 +121,7 @@ def _choose_horizon(run, budget: float, pilot: int) -> tuple[int, str]:  # type:
     T = pilot
     for k in range(int(math.log10(pilot)), 13):
         for m in (1, 2, 5):
-            if pilot <= m * 10**k and m * 10**k * per_slot <= budget:
+            if pilot <= m * 10**k <= MAX_HORIZON and m * 10**k * per_slot <= budget:
                 T = m * 10**k
     return T, (f"the longest 1-2-5 horizon within {budget:g} s at the pilot's "
                f"{per_slot * 1e6:.3g} us a slot for the three policies (pilot: {pilot} slots)")
@@ -131,7 +133,7 @@ def _draw(curves, path, T, cucb_bound, cts_bound, *, title):  # type: ignore[no-
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import builtins
 
     inst = load_instance("I2")

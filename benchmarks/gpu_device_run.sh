@@ -16,7 +16,8 @@
 #            against the CPU engine's means at 4,000 runs (benchmarks/gpu_cpu_reference.json)
 #   3 asymp  benchmarks/gpu_asymptotics.py on I2, 10,000 runs, the horizon that the time left
 #            (at most 60 s) allows, chosen from a pilot run; its figure
-# (4 runs before 3: it is short, and 3 takes whatever time is left.)
+# (4 runs before 3: it is short, and 3 takes whatever time is left.) STEPS="2 4" runs only
+# those steps (after the install), for a rerun of what failed.
 #
 # $OUT gets at most 7 files: env.txt, log.txt (every step's output), summary.txt (the table
 # printed last), bench.json, means.json, asymptotics.json, asymptotics.png. Exit status 0
@@ -40,6 +41,8 @@ DEADLINE=$((T0 + 290)) # the asymptotic check takes what is left of this
 export PYTHONUNBUFFERED=1
 ROWS=()
 FAILED=0
+STEPS=${STEPS:-1 2 3 4}
+want() { [[ " $STEPS " == *" $1 "* ]]; }
 
 # step NAME LIMIT CMD...: CMD under `timeout LIMIT`, its output into the log as it comes;
 # a row for the summary.
@@ -94,8 +97,8 @@ if bench:
                          worst >= target))
     paper = bench.get("paper_workload_s")
     if paper:
-        rows.append(("paper workload warm, s (best)", "<= 1.0", f"{paper['best']:.3f}",
-                     paper["best"] <= 1.0))
+        rows.append((f"paper workload ({paper['runs']} runs) warm, s (best)", "<= 1.0",
+                     f"{paper['best']:.3f}", paper["best"] <= 1.0))
 if means:
     worst = max(means["rows"], key=lambda r: abs(r["z"]))
     rows.append((f"GPU vs CPU means, largest |z| ({worst['policy']})", f"<= {means['z_limit']}",
@@ -143,29 +146,31 @@ EOF
     } >"$OUT/env.txt" 2>&1
     cat "$OUT/env.txt" >>"$LOG"
     export CORRAOI_GPU_DEVICE=cuda
-    step "1 tests" 110 "$PY" -m pytest -q -p no:cacheprovider -n 8 tests/test_gpu.py \
+    want 1 && step "1 tests" 110 "$PY" -m pytest -q -p no:cacheprovider -n 8 tests/test_gpu.py \
         tests/test_drill_gpu.py
-    step "2 bench" 80 "$PY" benchmarks/bench_gpu.py --startup --variants --repeat 2 \
+    want 2 && step "2 bench" 80 "$PY" benchmarks/bench_gpu.py --startup --variants --repeat 2 \
         --json "$OUT/bench.json"
-    step "4 means" 40 "$PY" benchmarks/gpu_means.py --json "$OUT/means.json"
+    want 4 && step "4 means" 40 "$PY" benchmarks/gpu_means.py --json "$OUT/means.json"
     RUNS=10000 PILOT=20000
-    BUDGET=$((DEADLINE - $(date +%s) - 25)) # seconds of simulation left for step 3
+    BUDGET=$((DEADLINE - $(date +%s) - 30)) # seconds of simulation left for step 3
     ((BUDGET > 60)) && BUDGET=60
 else
     export PYTHONPATH=$PWD${PYTHONPATH:+:$PYTHONPATH}
     "$PY" -c "import sys, numpy; print('python', sys.version.split()[0], 'numpy',
 numpy.__version__, '(emulated GPU device)')" >"$OUT/env.txt" 2>&1
     export CORRAOI_GPU_DEVICE=emulate
-    step "1 tests" 120 "$PY" -m pytest -q -p no:cacheprovider tests/test_gpu.py \
+    want 1 && step "1 tests" 120 "$PY" -m pytest -q -p no:cacheprovider tests/test_gpu.py \
         -k "known_answers and not on_the_gpu"
-    step "2 bench" 120 "$PY" benchmarks/bench_gpu.py --device emulate --quick --startup \
+    want 2 && step "2 bench" 120 "$PY" benchmarks/bench_gpu.py --device emulate --quick --startup \
         --repeat 1 --policies ucb,cts --paper-runs 4 --json "$OUT/bench.json"
-    step "4 means" 120 "$PY" benchmarks/gpu_means.py --device emulate --gpu-runs 1000 \
+    want 4 && step "4 means" 120 "$PY" benchmarks/gpu_means.py --device emulate --gpu-runs 1000 \
         --cpu-runs 500 --horizon 500 --json "$OUT/means.json"
     RUNS=100 PILOT=500 BUDGET=1
 fi
-if ((BUDGET >= 1)); then
-    step "3 asymp" $((BUDGET + 40)) "$PY" benchmarks/gpu_asymptotics.py \
+if ! want 3; then
+    :
+elif ((BUDGET >= 1)); then
+    step "3 asymp" $((BUDGET + 30)) "$PY" benchmarks/gpu_asymptotics.py \
         --device "$CORRAOI_GPU_DEVICE" --runs "$RUNS" --budget "$BUDGET" --pilot "$PILOT" \
         -o "$OUT/asymptotics.png" --json "$OUT/asymptotics.json"
 else

@@ -36,10 +36,10 @@ def _key(instance: str, horizon: int, runs: int) -> str:
 
 def cpu_reference(instance: str, names: list[str], horizon: int, runs: int) -> dict[str, Any]:
     """The CPU engine's regret at ``horizon`` over seeds 0 .. runs - 1: n, mean, m2 per policy."""
-    from corraoi.instance import load_instance
+    from corraoi.experiments.montecarlo import run_policy
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
     from corraoi.stats import Moments
-    from corraoi.sweep import run_policy
 
     inst = load_instance(instance)
     out = {}
@@ -82,7 +82,7 @@ def main() -> None:
     os.environ["CORRAOI_GPU_DEVICE"] = args.device
     from corraoi.gpu import get_device
     from corraoi.gpu.runner import simulate
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
 
     held = stored.get(key, {}).get("policies", {})

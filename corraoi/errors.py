@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 
 class CorraoiError(Exception):
     """Base class of every error corraoi raises on purpose.
@@ -38,3 +41,79 @@ class MissingExtraError(CorraoiError):
 class OutputError(UsageError):
     """An output path that cannot be used: it exists (without --force), is a directory, is
     being written by another process, ..."""
+
+
+class LogError(UsageError):
+    """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
+
+
+class WriteError(CorraoiError):
+    """An I/O failure while writing a log (disk full, file too large, device gone, ...)."""
+
+    exit_code = 1
+
+
+class ViewerError(CorraoiError):
+    """A Rerun viewer that cannot be reached or started. The files are still written."""
+
+    exit_code = 1
+
+
+class ResultsError(LogError):
+    """A results file that cannot be read (missing, not Parquet, not ours, newer)."""
+
+
+class SweepLogError(LogError):
+    """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
+
+
+class PolicyRuntimeError(CorraoiError):
+    """A policy that failed or returned something that is not one valid arm per run.
+
+    ``done``: slots completed before the failure; ``partial``: their columns (when recording).
+    """
+
+    exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.done = 0
+        self.partial: Any = None
+
+
+class KernelError(CorraoiError):
+    """A compiled policy whose hooks cannot be composed into a kernel."""
+
+    exit_code = 2
+
+
+class ClusterError(CorraoiError):
+    """The cluster cannot run the sweep (unreachable, version mismatch, chunk failed)."""
+
+    exit_code = 1
+
+
+class DamagedPart(ConfigError):
+    """A part file that cannot be counted (its chunk is not finished)."""
+
+    def __init__(self, path: Path, why: str) -> None:
+        super().__init__(f"{path}: a damaged part file ({why})")
+        self.path = path
+
+
+class GpuUnavailable(CorraoiError):
+    """No device can run the GPU backend here (the message says why and what to do)."""
+
+    exit_code = 2
+
+
+class FoxgloveError(CorraoiError):
+    """The Foxglove server cannot be started (port taken, host unknown, ...)."""
+
+    exit_code = 1
+
+
+class FigureUnavailable(CorraoiError):
+    """matplotlib is not installed: the figure cannot be drawn (the logs are fine)."""
+
+    exit_code = 1

@@ -1,7 +1,7 @@
 """Locks that die with their process: ``flock`` on the file or folder being written, no lock
 file beside it. A second writer is refused at once, naming the holder's PID (from
 ``/proc/locks``). Used by the recorder's writers (``recorder/paths.py``) and by a sweep for its
-folder (``corraoi/experiments.py``).
+folder (``corraoi/experiments/sweeps.py``).
 """
 
 from __future__ import annotations

@@ -14,9 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from corraoi.errors import UsageError
+from corraoi.errors import UsageError, WriteError
 
-from .errors import WriteError
 from .paths import check_output, partial_path, publish, reason
 
 if TYPE_CHECKING:
@@ -49,13 +48,13 @@ def export(
     source: str | os.PathLike[str], out: str | os.PathLike[str], *, overwrite: bool = False
 ) -> Exported:
     """Write the table of ``source`` (slot log, sweep folder or sweep log) to ``out``."""
-    from corraoi.analysis import require_analysis
+    from corraoi.face.tables import require_analysis
 
     out_p = Path(out)
     fmt = export_format(out_p)
     require_analysis(("pyarrow",))
-    from .frames import RunData
-    from .results import SweepData, is_sweep_path, read_results_table
+    from recorder.slotlog.frames import RunData
+    from recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
     check_output(out_p, overwrite=overwrite, what=f"{fmt} export")

@@ -25,10 +25,9 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 if TYPE_CHECKING:
     from typing_extensions import Self
 
+from corraoi.errors import OutputError, WriteError
 from corraoi.locks import fcntl, is_regular, lock_holder, pid_of_lock
 from corraoi.text import safe_name
-
-from .errors import OutputError, WriteError
 
 PARTIAL_SUFFIX = ".partial"
 

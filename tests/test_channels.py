@@ -12,13 +12,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from corraoi.channels import Channel, parse_channel, trace_channel
 from corraoi.cli import main
-from corraoi.engine import simulate
+from corraoi.engine.simulation import simulate
 from corraoi.errors import ConfigError
-from corraoi.instance import load_instance
+from corraoi.face.resolve import channel as resolve_channel
+from corraoi.model.channels import Channel, parse_channel, trace_channel
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 I1 = load_instance("I1")
 
@@ -40,9 +41,26 @@ def test_a_trace_channel_reproduces_a_recorded_hidden_path(tmp_path: Path):
     assert b.config.channel is not None and b.config.channel.kind == "trace"
     assert json.loads(b.metadata["config"])["channel"]["length"] == 2500
     # every run of a batch replays the same path
-    chan = parse_channel(f"trace:{src}", I1)
+    chan = resolve_channel(f"trace:{src}", I1)
     blk = next(simulate(I1, make_policy("ts"), [0, 1, 2], 2500, block=2500, channel=chan))
     assert all(np.array_equal(blk.x[i], a.read_all().x) for i in range(3))
+
+
+def test_the_core_reads_text_traces_and_the_readers_it_is_handed(tmp_path: Path):
+    """The core names no reader of the layers above: a slot log's states are read by the
+    reader the top floor hands it (``readers``); without one, one line says what is read."""
+    src = tmp_path / "ucb.mcap"
+    assert run("record", "-p", "ucb", "-T", "300", "--no-rrd", "-o", src).exit_code == 0
+    with pytest.raises(ConfigError, match="not a text file of 1-based states"):
+        parse_channel(f"trace:{src}", I1)
+    seen = []
+
+    def reader(path: Path, instance: object, where: str) -> np.ndarray:
+        seen.append((path, where))
+        return np.array([3, 2, 1, 0])
+
+    chan = parse_channel(f"trace:{src}", I1, readers={".mcap": reader})
+    assert chan.trace.tolist() == [3, 2, 1, 0] and seen == [(src, f"channel trace:{src}")]
 
 
 def test_a_text_trace(tmp_path: Path):

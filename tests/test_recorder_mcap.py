@@ -11,12 +11,12 @@ import pytest
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
-from corraoi.block import RunConfig, SlotBlock
-from recorder import mcap_sink as mcap_sink_module
-from recorder.errors import OutputError, WriteError
-from recorder.mcap_sink import McapSink
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.errors import OutputError, WriteError
 from recorder.paths import partial_path
-from recorder.reader import open_log
+from recorder.slotlog import sink as mcap_sink_module
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_TOPIC as TOPIC
 

@@ -13,8 +13,8 @@ import pytest
 from numba import njit
 
 from corraoi import rng
-from corraoi.engine import Simulation, streams_for_seed
-from corraoi.instance import Instance
+from corraoi.engine.simulation import Simulation, streams_for_seed
+from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
 
 N = 40_000

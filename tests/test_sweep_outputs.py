@@ -1,15 +1,16 @@
 """A sweep folder's files beyond the core's are written by the outputs its caller hands the
 sweep (issue 23): the core writes the parts, manifest and summaries, and calls the outputs
-with the finished groups; by default they are the viewer's FolderOutputs (every file)."""
+with the finished groups: the top floor's FolderOutputs writes every file; without outputs
+the folder holds the parts, the manifest and the summaries."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from corraoi.experiments import DEFAULT_OUTPUTS, default_outputs, sweep
-from corraoi.grid import build_grid
-from viewer.sweep_outputs import FolderOutputs
+from corraoi.experiments.grid import build_grid
+from corraoi.experiments.sweeps import sweep
+from corraoi.face.outputs import FolderOutputs
 
 
 class Recorded:
@@ -45,11 +46,17 @@ def test_the_callers_outputs_get_every_group_and_the_core_writes_the_summaries(t
     assert json.loads((tmp_path / "s" / "manifest.json").read_text())["status"] == "complete"
 
 
-def test_by_default_every_file_is_written(tmp_path: Path):
-    assert DEFAULT_OUTPUTS == "viewer.sweep_outputs:FolderOutputs"
-    assert isinstance(default_outputs(), FolderOutputs)
-    outcome = sweep(_grid(), out=tmp_path / "s", workers=1)
+def test_folder_outputs_write_every_file(tmp_path: Path):
+    outcome = sweep(_grid(), out=tmp_path / "s", workers=1, outputs=FolderOutputs())
     for folder in outcome.folders:
         names = {p.name for p in folder.iterdir()}
         assert {"sweep.mcap", "sweep.rrd", "summary.json", "summary.md"} <= names
     assert (tmp_path / "s" / "results.parquet").is_dir()
+
+
+def test_without_outputs_the_folder_holds_parts_manifest_and_summaries(tmp_path: Path):
+    outcome = sweep(_grid(), out=tmp_path / "s", workers=1)
+    for folder in outcome.folders:
+        assert {p.name for p in folder.iterdir()} == {"summary.json", "summary.md"}
+    assert not (tmp_path / "s" / "results.parquet").exists()
+    assert json.loads((tmp_path / "s" / "manifest.json").read_text())["status"] == "complete"

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
+from corraoi.engine.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
 from corraoi.errors import UsageError
 
 from .diff_report import ConfigDifference, DiffReport, FieldDiff
@@ -74,7 +74,7 @@ def diff(
     ``a`` and ``b`` are paths of corraoi logs or opened ``RunLog`` objects. ``fields``
     restricts the comparison (default: every logged field); ``atol`` is the absolute
     tolerance of the float fields (``estimator``, ``mu_hat``). Raises
-    :class:`recorder.errors.LogError` for a file that is not a readable corraoi log.
+    :class:`corraoi.errors.LogError` for a file that is not a readable corraoi log.
     """
     if not (atol >= 0 and math.isfinite(atol)):
         raise UsageError(f"atol must be a finite number >= 0, got {atol!r}")

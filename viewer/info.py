@@ -8,9 +8,9 @@ import shlex
 from pathlib import Path
 from typing import Any
 
-from corraoi.notable import well_formed
+from corraoi.experiments.notable import well_formed
+from corraoi.model.theory import analyse
 from corraoi.text import safe_text
-from corraoi.theory import analyse
 
 from .runs import LogLike, as_log
 from .summary import RunSummary, summarize_blocks
@@ -114,7 +114,7 @@ def sweep_info(folder: Path) -> dict[str, Any]:
     """``corraoi info DIR`` of a sweep folder (or one group's folder in it): its grid, status
     and, per group, the runs worth watching with the ``corraoi record --from`` line of each.
     Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
-    from corraoi.drill import sweep_root
+    from corraoi.experiments.drill import sweep_root
 
     root, grid, only = sweep_root(folder, option="")
     manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))

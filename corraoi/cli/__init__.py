@@ -11,7 +11,8 @@ from typing import Any
 
 import click
 
-from .._version import __version__
+from corraoi._version import __version__
+
 from .common import OneLineGroup, handle_errors
 from .options import HORIZON
 
@@ -40,7 +41,7 @@ def main() -> None:
       corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
       corraoi sweep ... --backend gpu   built-in policies on a CUDA GPU (docs/gpu.md)
     """
-    from .. import kernels
+    from corraoi.engine import kernels
 
     # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
     kernels.on_compile = lambda message: click.echo(
@@ -60,8 +61,8 @@ def instance() -> None:
 @handle_errors
 def instance_list() -> None:
     """List the built-in instances."""
-    from ..instance import BUILTINS, load_instance
-    from ..theory import analyse
+    from corraoi.model.instance import BUILTINS, load_instance
+    from corraoi.model.theory import analyse
 
     for name in BUILTINS:
         inst = load_instance(name)
@@ -88,9 +89,9 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     Arms and states are numbered from 1. phi is the expected pseudo-reward of each arm with
     respect to the best arm k*; an arm l != k* is competitive when mu* - phi_{l,k*} <= 0.
     """
-    from ..bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
-    from ..instance import load_instance
-    from ..theory import analyse
+    from corraoi.model.bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
+    from corraoi.model.instance import load_instance
+    from corraoi.model.theory import analyse
 
     inst = load_instance(spec)
     th = analyse(inst)
@@ -100,7 +101,7 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     }
     chain = None
     if inst.transition is not None:
-        from ..markov import mixing
+        from corraoi.model.markov import mixing
 
         chain = mixing(inst.transition, inst.p)
     if as_json:
@@ -172,7 +173,7 @@ def policies_cmd(as_json: bool) -> None:
     (see docs/extending.md). A broken entry point is listed with its error; the rest work.
     --param NAME=VALUE sets a parameter of every listed policy that declares NAME.
     """
-    from ..policies import available, paper_names
+    from corraoi.policies import available, paper_names
 
     paper = set(paper_names())
     entries = []
@@ -263,7 +264,7 @@ def run() -> None:
         code = exc.code
     import atexit
 
-    engine = sys.modules.get("corraoi.engine")
+    engine = sys.modules.get("corraoi.engine.simulation")
     if engine is not None:
         engine.shutdown()  # its idle threads: the command is done with them
     run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since 3.0

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import UsageError
-from ..text import safe_text
+from corraoi.errors import UsageError
+from corraoi.text import safe_text
+
 from .common import handle_errors, keep_pandas_out, say, warn
 from .live import ViewerChoice, viewer_options
 from .options import output_option
@@ -109,7 +110,7 @@ def compare(
         if result.path is not None:
             click.echo(f"Rerun recording: {safe_text(result.path)}")
             if not viewer.asked:
-                from recorder.live import view_command
+                from recorder.live.viewers import view_command
 
                 click.echo(
                     f"open in the Rerun viewer:  {safe_text(view_command([str(result.path)]))}"
@@ -120,14 +121,15 @@ def compare(
 def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
     a log already there with the same run and complete is used as it is)."""
-    from corraoi.drill import choose
-    from corraoi.engine import set_workers
+    from corraoi.engine.simulation import set_workers
+    from corraoi.errors import LogError, OutputError
+    from corraoi.experiments.drill import choose
+    from corraoi.face.recording import record_run
+    from corraoi.face.resolve import TRACE_READERS
     from corraoi.text import safe_name
-    from recorder.errors import LogError, OutputError
-    from recorder.reader import open_log
-    from recorder.record import record_run
+    from recorder.slotlog.reader import open_log
 
-    drills = choose(folder, run, cells=cells, warn=warn)
+    drills = choose(folder, run, cells=cells, warn=warn, trace_readers=TRACE_READERS)
     plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
     todo = []
     for d, path in plans:

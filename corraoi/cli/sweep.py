@@ -1,4 +1,5 @@
-"""``corraoi sweep``: grids of Monte Carlo runs (corraoi.experiments), in this process or on a
+"""``corraoi sweep``: grids of Monte Carlo runs (corraoi.experiments.sweeps), in this process or on
+a
 Dask cluster, optionally into a resumable results folder.
 
 Running the grid is :mod:`corraoi.cli.sweep_run`'s, the printed tables
@@ -16,8 +17,9 @@ from typing import Any
 
 import click
 
-from .. import limits
-from ..errors import ConfigError, CorraoiError
+from corraoi import limits
+from corraoi.errors import ConfigError, CorraoiError
+
 from .common import handle_errors, warn
 from .options import (
     CHECKPOINTS,
@@ -36,7 +38,7 @@ from .sweep_table import print_table
 #: From this many run-slots (about a minute here) a sweep states its size before it starts.
 SAY_SIZE_FROM = 10**9
 
-#: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments).
+#: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments.sweeps).
 SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
                "summary.md", "figure.png")  # fmt: skip
 
@@ -126,7 +128,7 @@ def sweep(
       corraoi sweep -p ucb,cucb -n 1000000 -T 10000 --backend gpu -o big
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from ..grid import build_grid, parse_param_lists, read_experiment, split_list
+    from corraoi.experiments.grid import build_grid, parse_param_lists, read_experiment, split_list
 
     out = output
     if resume and out is None:
@@ -155,14 +157,16 @@ def sweep(
     spec.setdefault("runs", 200)
     spec["params"] = {**spec.get("params", {}), **given_params}
     limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
+    from corraoi.face.resolve import TRACE_READERS
+
     try:
-        grid = build_grid(**spec)
+        grid = build_grid(**spec, trace_readers=TRACE_READERS)
     except CorraoiError as exc:
         if experiment is None:
             raise
         raise type(exc)(f"{experiment}: {exc}") from None
     for cell in grid.cells:
-        from ..problem import check_instance
+        from corraoi.engine.problem import check_instance
 
         check_instance(cell.instance)
     grid = settle_backend(grid)
@@ -202,7 +206,7 @@ def sweep(
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
-    from ..grid import split_list
+    from corraoi.experiments.grid import split_list
 
     out = []
     for item in split_list(values):
@@ -219,7 +223,7 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
 
 
 def _notes(grid: Any) -> list[str]:
-    from ..summary import instance_notes
+    from corraoi.experiments.summary import instance_notes
 
     seen: dict[str, list[str]] = {}
     for cell in grid.cells:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import click
 
-from ..text import safe_text
+from corraoi.text import safe_text
+
 from .common import errors_exit, handle_errors, say, warn
 from .compare import compare
 from .options import output_option

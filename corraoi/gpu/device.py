@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CorraoiError
+from corraoi.errors import GpuUnavailable
 
 SOURCE_PATH = Path(__file__).with_name("kernel.cu")
 #: The policy families of kernel.cu, in its order (CAI_FAMILY is the place here, from 1).
@@ -46,12 +46,6 @@ DEVICE_ENV = "CORRAOI_GPU_DEVICE"
 
 #: Argument kinds of an entry point: int32, int64, uint64, float64, array.
 ArgList = Sequence[tuple[str, Any]]
-
-
-class GpuUnavailable(CorraoiError):
-    """No device can run the GPU backend here (the message says why and what to do)."""
-
-    exit_code = 2
 
 
 def source() -> str:
@@ -252,7 +246,7 @@ class EmulatedDevice(Device):
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
-        from ..kernels import _locked, _writable, cache_dir
+        from corraoi.engine.kernels import _locked, _writable, cache_dir
 
         text = source()
         flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}")

@@ -6,7 +6,7 @@
 // optionally, CAI_FAMILY (compile one family's entry points only: its index in FAMILIES of
 // device.py, plus one; 0 or unset: all).
 //
-// Per run, per slot (the CPU kernel corraoi/_kernel.py does the same in the same order):
+// Per run, per slot (the CPU kernel corraoi/engine/_kernel.py does the same in the same order):
 // draw the hidden state from the run's hidden stream, let the policy force an arm, restrict
 // to the correlated candidate set (correlated forms), apply the AoI-aware override (aware
 // forms), else play the argmax of the policy's score over the candidates (ties uniformly at

@@ -20,7 +20,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from ..errors import PolicyError
+from corraoi.errors import PolicyError
+
 from .api import CompiledPolicy, Policy, PolicyBase
 
 PLUGIN_MODULE_PREFIX = "corraoi_plugin_"

@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from .._version import __version__
-from ..errors import PolicyError
+from corraoi._version import __version__
+from corraoi.errors import PolicyError
+
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
 from .registry import builtins, held, paper_names, policy_name, resolve
 
