@@ -38,7 +38,7 @@ POLICIES = ("ucb", "cucb", "aoi-aware-ucb", "aoi-aware-cucb", "ts", "cts", "aoi-
 #: (threads a block, register cap, kernel.cu switches) measured by --variants; the first is
 #: the device's default.
 VARIANTS = ((128, None, ()), (256, None, ()), (128, 128, ()), (128, 96, ()),
-            (128, None, ("CAI_LOG_BATCH=1",)), (128, 168, ("CAI_LOG_BATCH=1",)))  # fmt: skip
+            (128, None, ("CAI_LOG_BATCH=1",)))  # fmt: skip
 
 
 def main() -> None:
