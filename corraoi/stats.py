@@ -38,17 +38,21 @@ class Moments:
     m2: np.ndarray
 
     @classmethod
-    def of(cls, values: Any, axis: int = 0, *, host: Callable[[Any], Any] = np.asarray) -> Moments:
+    def of(cls, values: Any, axis: int = 0, *,
+           host: Callable[[Any], Any] | None = np.asarray) -> Moments:  # fmt: skip
         """The moments along ``axis`` of a NumPy array, or of a device array (CuPy) reduced on
-        its device and brought over by ``host``."""
+        its device and brought over by ``host`` (None: left on the device, for the caller to
+        bring over later without waiting now)."""
         if not hasattr(values, "__cuda_array_interface__"):
             values = np.asarray(values, dtype=np.float64)
         mean = values.mean(axis=axis)
         at: list[Any] = [slice(None)] * values.ndim
         at[axis] = None
         dev = values - mean[tuple(at)]
-        return cls(int(values.shape[axis]), np.asarray(host(mean)),
-                   np.asarray(host((dev * dev).sum(axis=axis))))  # fmt: skip
+        m2 = (dev * dev).sum(axis=axis)
+        if host is None:
+            return cls(int(values.shape[axis]), mean, m2)
+        return cls(int(values.shape[axis]), np.asarray(host(mean)), np.asarray(host(m2)))
 
     def merge(self, other: Moments) -> Moments:
         n = self.n + other.n

@@ -1,6 +1,6 @@
 """A GPU sweep's runs recorded again, slot by slot, with the GPU kernel's own streams and rule
-(issue 20, item 3), on the emulated device (kernel.cu compiled for the host): what the
-kernel captures is the run the sweep counted."""
+(issue 20, item 3), on the emulated device (kernel.cu compiled for the host) and, where there
+is one, on a CUDA GPU: what the kernel captures is the run the sweep counted."""
 
 from __future__ import annotations
 
@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 from corraoi.engine.block import RunConfig
-from corraoi.gpu.device import DEVICE_ENV, EmulatedDevice, host_compiler
+from corraoi.errors import GpuUnavailable
+from corraoi.gpu.device import DEVICE_ENV, CudaDevice, Device, EmulatedDevice, host_compiler
 from corraoi.gpu.runner import capture_run, simulate
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 from recorder.slotlog.reader import open_log
 
-pytestmark = pytest.mark.skipif(
+needs_cxx = pytest.mark.skipif(
     host_compiler() is None, reason="no C++ compiler: the emulated GPU device cannot be built"
 )
 
@@ -27,14 +28,22 @@ I2 = load_instance("I2")
 POLICIES = ("ucb", "cucb", "aoi-aware-cts", "ts-gauss")
 
 
-@pytest.fixture(scope="module")
-def device() -> EmulatedDevice:
-    return EmulatedDevice()
+@pytest.fixture(scope="module", params=["emulate", "cuda"])
+def device(request: pytest.FixtureRequest) -> Device:
+    """The emulated device, then a CUDA GPU (skipped, with the reason, where there is none)."""
+    if request.param == "emulate":
+        if host_compiler() is None:
+            pytest.skip("no C++ compiler: the emulated GPU device cannot be built")
+        return EmulatedDevice()
+    try:
+        return CudaDevice()
+    except GpuUnavailable as exc:
+        pytest.skip(f"no CUDA GPU with CuPy here ({exc})")
 
 
 @pytest.mark.parametrize("name", POLICIES)
 def test_every_captured_run_ends_where_the_device_sweep_counted_it(
-    device: EmulatedDevice, name: str
+    device: Device, name: str
 ) -> None:
     """1,000 runs of each of 4 policies: the captured final regret, estimator and best-arm
     pulls equal the device's per-run finals."""
@@ -54,7 +63,7 @@ def test_every_captured_run_ends_where_the_device_sweep_counted_it(
     np.testing.assert_array_equal(best, swept.best_pulls_final)
 
 
-def test_a_captured_run_holds_together_slot_by_slot(device: EmulatedDevice) -> None:
+def test_a_captured_run_holds_together_slot_by_slot(device: Device) -> None:
     """The columns obey the model: ages, regret, pulls and means agree with the arms and
     successes captured; the arm is a candidate unless the AoI-aware rule overrode."""
     blocks = list(capture_run(I2, make_policy("aoi-aware-cucb"), seed=7, horizon=2500,
@@ -77,7 +86,7 @@ def test_a_captured_run_holds_together_slot_by_slot(device: EmulatedDevice) -> N
     assert (~b.candidates.all(axis=1)).any()  # the correlated set left arms out
 
 
-def test_two_policies_on_one_seed_share_the_hidden_path(device: EmulatedDevice) -> None:
+def test_two_policies_on_one_seed_share_the_hidden_path(device: Device) -> None:
     runs = [list(capture_run(I2, make_policy(n), seed=11, horizon=800, device=device))
             for n in ("ucb", "cts")]  # fmt: skip
     assert np.array_equal(runs[0][0].x, runs[1][0].x)
@@ -102,7 +111,9 @@ def _corraoi(*args: object, cwd: Path) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, timeout=300)  # fmt: skip
 
 
+@needs_cxx
 def test_record_from_a_gpu_sweep_is_the_run_it_counted(tmp_path: Path) -> None:
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     pytest.importorskip("pyarrow")
     import corraoi
 
@@ -130,7 +141,9 @@ def test_record_from_a_gpu_sweep_is_the_run_it_counted(tmp_path: Path) -> None:
     assert "streams                gpu-emulated: a GPU sweep's run" in info.stdout
 
 
+@needs_cxx
 def test_bad_requests_on_a_gpu_sweep_are_one_line(tmp_path: Path) -> None:
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     sweep = _corraoi("sweep", "-i", "I1", "-p", "ucb", "--runs", "20", "-T", "100", "--backend",
                      "gpu", "-o", "g", cwd=tmp_path)  # fmt: skip
     assert sweep.returncode == 0, sweep.stderr

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -27,11 +28,14 @@ from corraoi.experiments.montecarlo import run_policy
 from corraoi.gpu import GpuUnavailable, choose_backend
 from corraoi.gpu.device import (
     DEVICE_ENV,
+    FAMILIES,
     MAX_ARMS,
     SOURCE_PATH,
     CudaDevice,
     Device,
     EmulatedDevice,
+    entry_names,
+    family_id,
     host_compiler,
 )
 from corraoi.gpu.runner import gpu_problem, simulate
@@ -152,6 +156,12 @@ def _agree(device: Device, names: list[str], *, instance: str = "I1", runs: int 
 @pytest.mark.parametrize("family", sorted(GROUPS))
 def test_every_built_in_agrees_with_the_cpu_engine(emulated: Device, family: str):
     _agree(emulated, GROUPS[family])
+
+
+def test_the_batched_log_tests_agree_with_the_cpu_engine(emulated: Device):
+    """kernel.cu with CAI_LOG_BATCH=1 (the gamma draws' log tests after the arms, a variant
+    benchmarks/bench_gpu.py times): the Beta-sampling families still agree."""
+    _agree(EmulatedDevice(defines=("CAI_LOG_BATCH=1",)), ["ts", "cts", "aoi-aware-q-ts", "d-ts"])
 
 
 def test_markov_channel_agrees_with_the_cpu_engine(emulated: Device):
@@ -314,6 +324,7 @@ def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not installed here")
+@pytest.mark.slow
 def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     out = tmp_path / "kernel.ptx"
     cmd = ["nvcc", "-arch=sm_90", "-std=c++17", "-ptx", "-DKARMS=4", "-x", "cu",
@@ -322,7 +333,7 @@ def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     assert done.returncode == 0, done.stderr
     entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
                if ".entry" in ln}  # fmt: skip
-    assert {f"advance_{k}" for k in ("ucb", "ts_beta", "d_ts")} <= entries
+    assert entries == {*entry_names(), "philox_kat"}
 
 
 def _nvrtc():  # type: ignore[no-untyped-def]
@@ -335,13 +346,61 @@ def _nvrtc():  # type: ignore[no-untyped-def]
         return None
 
 
-@pytest.mark.skipif(_nvrtc() is None, reason="CuPy with the NVRTC library is not installed here")
+def _ptxas_report(log: str) -> dict[str, dict[str, int]]:
+    """ptxas's -v report in an NVRTC log: entry -> registers, stack frame and spill bytes."""
+    out: dict[str, dict[str, int]] = {}
+    name = ""
+    for line in log.splitlines():
+        if m := re.search(r"Function properties for (\w+)", line):
+            name = m.group(1)
+            out[name] = {}
+        elif m := re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, "
+                            r"(\d+) bytes spill loads", line):  # fmt: skip
+            out[name].update(stack=int(m.group(1)), spills=int(m.group(2)) + int(m.group(3)))
+        elif m := re.search(r"Used (\d+) registers", line):
+            out[name]["registers"] = int(m.group(1))
+    return out
+
+
+needs_nvrtc = pytest.mark.skipif(
+    _nvrtc() is None, reason="CuPy with the NVRTC library is not installed here"
+)
+
+
+@needs_nvrtc
+@pytest.mark.slow
 def test_the_kernels_compile_with_nvrtc_as_cupy_compiles_them():
-    """CuPy's RawModule compiles with NVRTC, which has no host headers (unlike nvcc)."""
+    """CuPy's RawModule compiles with NVRTC, which has no host headers (unlike nvcc): every
+    entry point at 64 arms, the most a run may have (per-arm arrays in local memory there)."""
     nvrtc = _nvrtc()
     prog = nvrtc.createProgram(SOURCE_PATH.read_text(), "kernel.cu", [], [])
     nvrtc.compileProgram(prog, ["-std=c++17", "-DKARMS=64", "-arch=compute_90"])
-    assert b".entry advance_sw_ucb" in nvrtc.getPTX(prog)
+    ptx = nvrtc.getPTX(prog).decode()
+    entries = {ln.split()[-1].rstrip("(") for ln in ptx.splitlines() if ".entry" in ln}
+    assert entries == {*entry_names(), "philox_kat"}
+
+
+@needs_nvrtc
+@pytest.mark.slow
+@pytest.mark.parametrize("K", [4])
+def test_every_entry_point_keeps_a_run_in_registers_on_hopper(K: int):
+    """Compiled as CuPy compiles them on an H100/H200 (NVRTC, one family a module, sm_90
+    machine code), ptxas reports no stack frame and no spills for any entry point: a run's
+    per-arm values stay in registers (docs/gpu.md, "How the kernel is written")."""
+    nvrtc = _nvrtc()
+    report: dict[str, dict[str, int]] = {}
+    for family in FAMILIES:
+        prog = nvrtc.createProgram(SOURCE_PATH.read_text(), "kernel.cu", [], [])
+        nvrtc.compileProgram(prog, ["-std=c++17", f"-DKARMS={K}",
+                                    f"-DCAI_FAMILY={family_id(family)}", "-arch=sm_90",
+                                    "--ptxas-options=-v"])  # fmt: skip
+        got = _ptxas_report(nvrtc.getProgramLog(prog))
+        assert set(got) == {*entry_names(family), "philox_kat"}, family
+        assert nvrtc.getCUBIN(prog)[:4] == b"\x7fELF"  # machine code, not PTX
+        report.update(got)
+    for name, r in report.items():
+        assert r["stack"] == 0 and r["spills"] == 0, (name, r)
+        assert 0 < r["registers"] <= 255, (name, r)
 
 
 def test_a_plug_in_that_replaces_a_hook_has_no_gpu_form():
@@ -446,6 +505,7 @@ def test_the_backend_is_an_experiment_file_key(tmp_path: Path):
 
 
 def test_a_gpu_sweep_writes_the_same_outputs_as_a_cpu_sweep(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     out = tmp_path / "g"
     res = run("sweep", "-p", "ucb,cucb,cts", "-n", "300", "-T", "1500", "--backend", "gpu",
               "--baseline", "ucb", "-o", out, "--json")  # fmt: skip
@@ -482,6 +542,7 @@ def test_a_gpu_sweep_writes_the_same_outputs_as_a_cpu_sweep(emulate_env: None, t
 
 
 def test_a_gpu_sweep_resumes_and_grows_like_one_sweep(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     a, b = tmp_path / "a", tmp_path / "b"
     common = ["-p", "ucb,cts", "-T", "800", "--backend", "gpu", "--baseline", "ucb"]
     assert run("sweep", *common, "-n", "100", "-o", a).exit_code == 0
@@ -502,6 +563,7 @@ def test_a_gpu_sweep_resumes_and_grows_like_one_sweep(emulate_env: None, tmp_pat
 
 
 def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     res = run("reproduce", "-o", tmp_path / "p", "-n", "40", "-T", "600", "--backend", "gpu")
     assert res.exit_code == 0, res.output
     for inst in ("I1", "I2"):
@@ -512,6 +574,7 @@ def test_reproduce_runs_on_the_gpu_backend(emulate_env: None, tmp_path: Path):
 @pytest.mark.slow
 def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """docs/gpu.md's commands and Python example, on the emulated device."""
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     import os
     import re
 
@@ -530,7 +593,60 @@ def test_gpu_md_runs_as_shown(emulate_env: None, tmp_path: Path, monkeypatch: py
     exec(compile(example, "gpu.md", "exec"), {})
 
 
+ROOT = Path(__file__).resolve().parent.parent
+DEVICE_RUN = ROOT / "benchmarks" / "gpu_device_run.sh"
+
+
+@needs_cxx
+@pytest.mark.slow
+def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
+    """benchmarks/gpu_device_run.sh --emulate: the steps of the GPU machine's one run, small,
+    on the emulated device: each ends well, and each file under $OUT holds its figures."""
+    import os
+
+    out = tmp_path / "out"
+    env = {**os.environ, "OUT": str(out), "PYTHON": sys.executable}
+    env.pop(DEVICE_ENV, None)
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "asymptotics.json", "asymptotics.png", "bench.json", "env.txt", "log.txt",
+        "means.json", "summary.txt"]  # fmt: skip
+    summary = (out / "summary.txt").read_text()
+    for step in ("1 tests", "2 bench", "4 means", "3 asymp"):
+        assert re.search(rf"^\| {step} \| ok \| \d+ \|$", summary, flags=re.M), summary
+    assert done.stdout.rstrip().splitlines()[-1].startswith("total ")
+    assert "1 passed" in (out / "log.txt").read_text()
+    bench = json.loads((out / "bench.json").read_text())
+    assert bench["device"] == "emulated on the CPU"
+    assert set(bench["rates"]) == {"ucb", "cts"}
+    assert all(len(r) == 2 and min(r.values()) > 1e5 for r in bench["rates"].values())
+    assert 0 < bench["paper_workload_s"]["best"] <= bench["paper_workload_s"]["median"]
+    means = json.loads((out / "means.json").read_text())
+    assert [r["policy"] for r in means["rows"]] == ["ucb", "cucb", "ts", "cts"]
+    for r in means["rows"]:
+        assert r["gpu_runs"] == 1000 and r["cpu_runs"] == 500 and r["cpu_mean"] > 0
+        assert r["within"] == (abs(r["z"]) <= 4.0)
+    asym = json.loads((out / "asymptotics.json").read_text())
+    assert asym["runs"] == 100 and asym["horizon"] >= 500
+    ucb = asym["curves"]["ucb"]
+    assert ucb["t"][-1] == asym["horizon"] and ucb["mean"][-1] > ucb["mean"][0]
+    assert (out / "asymptotics.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| GPU vs CPU means, largest |z|" in summary
+
+
+def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--fast"], capture_output=True, text=True,
+                          env={"PATH": "/usr/bin:/bin", "OUT": str(tmp_path)})  # fmt: skip
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "gpu_device_run.sh: unknown argument '--fast' (expected --emulate or nothing)"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     pytest.importorskip("pyarrow")
     out = tmp_path / "c"
     res = run("sweep", "-p", "ucb,cucb", "-n", "30", "-T", "400", "--baseline", "ucb", "-o", out)

@@ -1,11 +1,14 @@
 """Where the GPU kernels run: a CUDA device through CuPy, or the host CPU (emulation).
 
 Both compile ``kernel.cu`` for a number of arms K (``-DKARMS=K``) and call its entry points
-``advance_<family>`` with the same arguments (:data:`corraoi.gpu.runner` builds them):
+``advance_<family>_<c><a>`` (``c``: the correlated form, ``a``: the AoI-aware form) with the
+same arguments (:data:`corraoi.gpu.runner` builds them):
 
-* :class:`CudaDevice` -- CuPy's NVRTC compiles the source once per K; CuPy caches the binary
-  on disk (``$CUPY_CACHE_DIR``, by default ``~/.cupy/kernel_cache``), so a new process only
-  loads it. One CUDA thread per run, 128 threads a block.
+* :class:`CudaDevice` -- CuPy's NVRTC compiles the source once per K and family (one family's
+  entry points a module, ``-DCAI_FAMILY``); CuPy caches the binary on disk
+  (``$CUPY_CACHE_DIR``, by default ``~/.cupy/kernel_cache``), so a new process only loads it.
+  One CUDA thread per run, 128 threads a block. Launches are queued on CuPy's current stream
+  and return at once; :meth:`Device.mark` and :meth:`Device.wait` follow them.
 * :class:`EmulatedDevice` -- the same source compiled by the host C++ compiler (``$CXX``, else
   g++ or c++) into a shared library in corraoi's cache folder, its runs spread over the cores
   with OpenMP. It runs the GPU code where no GPU is (tests, development); it is not fast.
@@ -32,8 +35,10 @@ import numpy as np
 from corraoi.errors import GpuUnavailable
 
 SOURCE_PATH = Path(__file__).with_name("kernel.cu")
-#: The entry points of kernel.cu (``advance_<name>``), one per built-in policy family.
+#: The policy families of kernel.cu, in its order (CAI_FAMILY is the place here, from 1).
 FAMILIES = ("ucb", "ts_beta", "ts_gauss", "q_ucb", "q_ts", "sw_ucb", "d_ts")
+#: Families without a correlated form: kernel.cu has their plain and AoI-aware entries only.
+UNCORRELATED = ("sw_ucb", "d_ts")
 #: Per-run arrays live in registers up to about this many arms; beyond, use the CPU engine.
 MAX_ARMS = 64
 #: The environment variable that picks the emulated device for ``--backend gpu``.
@@ -47,6 +52,23 @@ def source() -> str:
     return SOURCE_PATH.read_text(encoding="utf-8")
 
 
+def family_id(family: str) -> int:
+    """kernel.cu's CAI_FAMILY for ``family``: its place in FAMILIES, from 1."""
+    return FAMILIES.index(family) + 1
+
+
+def entry_name(family: str, correlated: bool, aware: bool) -> str:
+    """kernel.cu's entry point for a family's form: ``advance_<family>_<c><a>``."""
+    return f"advance_{family}_{int(bool(correlated))}{int(bool(aware))}"
+
+
+def entry_names(family: str | None = None) -> list[str]:
+    """Every entry point kernel.cu defines (of ``family``, or of all), philox_kat aside."""
+    return [entry_name(f, c, a) for f in (FAMILIES if family is None else (family,))
+            for c in ((False,) if f in UNCORRELATED else (False, True))
+            for a in (False, True)]  # fmt: skip
+
+
 class Device(ABC):
     """A place to run kernel.cu: arrays of its module ``xp`` (NumPy or CuPy) and launches."""
 
@@ -56,6 +78,10 @@ class Device(ABC):
     xp: Any = np
     #: Run-slots per launch: bounds each call, so that progress moves and Ctrl-C is heard.
     launch_work: int = 1 << 24
+    #: Slots per launch at most, whatever the runs (the launch's table of ln t has one each).
+    launch_slots: int = 1 << 20
+    #: Launches queued beyond the one the host waits for (0: each call returns when done).
+    in_flight: int = 0
     #: Bytes for the per-run values captured at checkpoints between two reductions.
     checkpoint_bytes: int = 256 << 20
     #: Seconds spent compiling (or loading) modules in this process.
@@ -66,23 +92,37 @@ class Device(ABC):
         self._lock = threading.Lock()
 
     @abstractmethod
-    def _compile(self, K: int) -> Any:
-        """Build (or load from a cache) kernel.cu for K arms: a CuPy module or a library."""
+    def _compile(self, K: int, family: str) -> Any:
+        """Build (or load from a cache) kernel.cu for K arms with (at least) ``family``'s entry
+        points: a CuPy module or a library."""
 
-    def module(self, K: int) -> Any:
-        """The K-arm module, compiled once per process (the time goes to compile_seconds)."""
+    def _module_key(self, K: int, family: str) -> Any:
+        return (K, family)
+
+    def module(self, K: int, family: str) -> Any:
+        """The K-arm module of ``family``, compiled once per process (the time goes to
+        compile_seconds)."""
+        key = self._module_key(K, family)
         with self._lock:
-            mod = self._compiled.get(K)
+            mod = self._compiled.get(key)
             if mod is None:
                 start = time.perf_counter()
-                mod = self._compile(K)
+                mod = self._compile(K, family)
                 self.compile_seconds += time.perf_counter() - start
-                self._compiled[K] = mod
+                self._compiled[key] = mod
             return mod
 
     @abstractmethod
-    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
-        """Run ``advance_<family>`` of the K-arm module over ``runs`` runs."""
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
+        """Run ``entry`` (``advance_<family>_<c><a>``) of the K-arm module of ``family`` over
+        ``runs`` runs."""
+
+    def mark(self) -> Any:
+        """A mark after the launches queued so far (None where calls return when done)."""
+        return None
+
+    def wait(self, mark: Any) -> None:  # noqa: B027 (a no-op where calls return when done)
+        """Wait until the launches before ``mark`` are done."""
 
     @abstractmethod
     def philox(self, words: np.ndarray) -> np.ndarray:
@@ -99,14 +139,23 @@ class Device(ABC):
 
 
 class CudaDevice(Device):
-    """The current CUDA device, through CuPy (the ``gpu`` extra)."""
+    """The current CUDA device, through CuPy (the ``gpu`` extra). ``block``: threads a block;
+    ``maxrregcount``: a cap on registers per thread (NVRTC's ``--maxrregcount``; None: the
+    compiler's choice); ``defines``: kernel.cu's compile-time switches (``CAI_LOG_BATCH=1``).
+    All three are there to be measured (benchmarks/bench_gpu.py)."""
 
     launch_work = 1 << 31
     checkpoint_bytes = 1 << 30
+    in_flight = 1
     BLOCK = 128
 
-    def __init__(self) -> None:
+    def __init__(self, *, block: int = BLOCK, maxrregcount: int | None = None,
+                 defines: Sequence[str] = ()) -> None:  # fmt: skip
         super().__init__()
+        self.block = int(block)
+        self.options: tuple[str, ...] = ("-std=c++17", *(f"-D{d}" for d in defines))
+        if maxrregcount is not None:
+            self.options += (f"--maxrregcount={int(maxrregcount)}",)
         try:
             import cupy
         except ImportError:
@@ -125,10 +174,11 @@ class CudaDevice(Device):
         raw = props.get("name", b"CUDA device")
         self.name = raw.decode() if isinstance(raw, bytes) else str(raw)
 
-    def _compile(self, K: int) -> Any:
+    def _compile(self, K: int, family: str) -> Any:
         import cupy
 
-        mod = cupy.RawModule(code=source(), options=("-std=c++17", f"-DKARMS={K}"))
+        options = (*self.options, f"-DKARMS={K}", f"-DCAI_FAMILY={family_id(family)}")
+        mod = cupy.RawModule(code=source(), options=options)
         mod.compile()  # NVRTC, or CuPy's on-disk cache
         return mod
 
@@ -136,10 +186,16 @@ class CudaDevice(Device):
         conv = {"i": np.int32, "q": np.int64, "Q": np.uint64, "d": np.float64}
         return tuple(v if kind == "p" else conv[kind](v) for kind, v in args)
 
-    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
-        func = self.module(K).get_function(f"advance_{family}")
-        blocks = (runs + self.BLOCK - 1) // self.BLOCK
-        func((blocks,), (self.BLOCK,), self._args(args))
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
+        func = self.module(K, family).get_function(entry)
+        blocks = (runs + self.block - 1) // self.block
+        func((blocks,), (self.block,), self._args(args))
+
+    def mark(self) -> Any:
+        return self.xp.cuda.get_current_stream().record()
+
+    def wait(self, mark: Any) -> None:
+        mark.synchronize()
 
     def philox(self, words: np.ndarray) -> np.ndarray:
         import cupy
@@ -147,7 +203,7 @@ class CudaDevice(Device):
         count = int(words.shape[0])
         inp = cupy.asarray(np.ascontiguousarray(words, dtype=np.uint32))
         out = cupy.zeros((count, 4), dtype=cupy.uint32)
-        func = self.module(1).get_function("philox_kat")
+        func = self.module(1, FAMILIES[0]).get_function("philox_kat")
         func(((count + 127) // 128,), (128,), (inp, out, np.int32(count)))
         return cupy.asnumpy(out)
 
@@ -175,21 +231,25 @@ class EmulatedDevice(Device):
     name = "emulated on the CPU"
     FLAGS = ("-O2", "-std=c++17", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
-    def __init__(self) -> None:
+    def __init__(self, *, defines: Sequence[str] = ()) -> None:
         super().__init__()
         cxx = host_compiler()
         if cxx is None:
             raise GpuUnavailable(f"{DEVICE_ENV}=emulate needs a C++ compiler (g++ or $CXX)")
         self._cxx = cxx
+        self._defines = tuple(f"-D{d}" for d in defines)
 
-    def _compile(self, K: int) -> Any:
+    def _module_key(self, K: int, family: str) -> Any:
+        return K  # one library per K holds every family
+
+    def _compile(self, K: int, family: str) -> Any:
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
         from corraoi.engine.kernels import _locked, _writable, cache_dir
 
         text = source()
-        flags = (*self.FLAGS, f"-DKARMS={K}")
+        flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}")
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
         folder = _writable(cache_dir() / "gpu-emulation")  # else the system's temp folder
         lib = folder / f"kernel-K{K}-{digest}.so"
@@ -230,15 +290,15 @@ class EmulatedDevice(Device):
                 out.append(conv[kind](v))
         return out
 
-    def launch(self, K: int, family: str, runs: int, args: ArgList) -> None:
-        func = getattr(self.module(K), f"advance_{family}")
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
+        func = getattr(self.module(K, family), entry)
         func.restype = None
         func(*self._args(args))
 
     def philox(self, words: np.ndarray) -> np.ndarray:
         inp = np.ascontiguousarray(words, dtype=np.uint32)
         out = np.zeros((inp.shape[0], 4), dtype=np.uint32)
-        func = self.module(1).philox_kat
+        func = self.module(1, FAMILIES[0]).philox_kat
         func.restype = None
         func(*self._args([("p", inp), ("p", out), ("i", inp.shape[0])]))
         return out

@@ -6,13 +6,16 @@ the device to :class:`corraoi.experiments.montecarlo.Moments` (count, mean, sum 
 deviations) and,
 with a baseline, to the moments of the run-by-run difference against it. What comes back to
 the host: those aggregates per checkpoint and every run's final values -- never every run's
-checkpoints (a million runs x 200 checkpoints would be gigabytes).
+checkpoints (a million runs x 200 checkpoints would be gigabytes). The aggregates stay on the
+device until the last launch, and the host keeps the next launch queued while it waits for
+one (``Device.in_flight``), so that the device never waits for the host between launches.
 """
 
 from __future__ import annotations
 
 import bisect
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -22,12 +25,13 @@ import numpy as np
 from corraoi.engine.block import SlotBlock
 from corraoi.engine.problem import Problem
 from corraoi.errors import ConfigError, GpuUnavailable
+from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies import PolicySpec, gpu_form
 from corraoi.stats import Moments
 
-from .device import MAX_ARMS, Device, get_device
+from .device import MAX_ARMS, Device, entry_name, entry_names, get_device
 
 if TYPE_CHECKING:
     from corraoi.experiments.folder import ChunkResult
@@ -53,7 +57,10 @@ class DeviceRun:
 def gpu_problem(policy: PolicySpec, K: int) -> str | None:
     """Why ``policy`` cannot run on the GPU backend with K arms, or None when it can."""
     cls = policy.resolve()
-    if gpu_form(cls) is None:
+    form = gpu_form(cls)
+    entry = None if form is None else entry_name(form.kernel, getattr(cls, "correlated", False),
+                                                 getattr(cls, "aoi_aware", False))  # fmt: skip
+    if entry is None or entry not in entry_names():
         kind = "a plain-Python policy" if cls.tier == "python" else "no GPU form"
         return f"policy {policy.name} has {kind} (the GPU backend runs the built-ins)"
     if K > MAX_ARMS:
@@ -82,7 +89,8 @@ class _Problem:
         self.cls = cls
         form = gpu_form(cls)
         assert form is not None
-        self.kernel = form.kernel
+        self.family = form.kernel
+        self.entry = entry_name(form.kernel, cls.correlated, cls.aoi_aware)
         self.theory = pb.theory
         self.cdf, self.kind = pb.cdf_rows, pb.kind
         self.S_state = pb.state_size if form.uses_state else 0
@@ -96,7 +104,7 @@ class _Problem:
         try:
             self.consts = {
                 "cdf": arr(pb.cdf_rows), "trace": arr(pb.trace), "Y": arr(pb.Y),
-                "pclass": arr(pb.pclass),
+                "comb": arr(candidate_bitsets(pb.pclass).reshape(K * 8)),
                 "prm": arr(pb.params if pb.params.size else np.zeros(1)),
                 "none": xp.zeros(1, dtype=np.int64), "none_d": xp.zeros(1),
             }  # fmt: skip
@@ -118,12 +126,13 @@ class _Problem:
         """Advance every run from slot ``t`` by ``nslots`` (capturing the checkpoints in
         ``ck_t`` it passes, and every slot of run ``cap_run`` into ``cap``)."""
         c, st, none = self.consts, self.st, self.consts["none"]
+        xp = self.dev.xp
+        lnt = xp.log(xp.arange(t + 1, t + nslots + 1, dtype=np.float64))  # the same for every run
         args = [
-            ("i", self.R), ("Q", int(seed0)), ("q", t), ("q", nslots),
+            ("i", self.R), ("Q", int(seed0)), ("q", t), ("q", nslots), ("p", lnt),
             ("i", int(self.cdf.shape[1])), ("i", int(self.cdf.shape[0])), ("i", int(self.kind)),
-            ("p", c["cdf"]), ("p", c["trace"]), ("p", c["Y"]), ("p", c["pclass"]),
+            ("p", c["cdf"]), ("p", c["trace"]), ("p", c["Y"]), ("p", c["comb"]),
             ("i", int(self.theory.best_arm)), ("d", float(self.theory.mu_star)),
-            ("i", int(bool(self.cls.correlated))), ("i", int(bool(self.cls.aoi_aware))),
             ("p", c["prm"]), ("i", self.S_state),
             *(("p", st[k]) for k in ("pulls", "succ", "pstate", "rpos", "nspare", "nhas",
                                      "xprev", "age", "oage", "reg", "asum")),
@@ -133,7 +142,7 @@ class _Problem:
             ("p", none if ck_pulls is None else ck_pulls),
             ("i", int(cap_run)), ("p", none if cap is None else cap),
         ]  # fmt: skip
-        self.dev.launch(self.K, self.kernel, self.R, args)
+        self.dev.launch(self.K, self.family, self.entry, self.R, args)
 
 
 def simulate(
@@ -174,11 +183,20 @@ def simulate(
         kept = xp.zeros((S, R)) if keep else None
     except Exception as exc:  # CuPy's OutOfMemoryError (no CuPy import needed here)
         raise _memory_error(exc, R, policy) from None
-    regret_parts: list[Moments] = []
+    regret_parts: list[Moments] = []  # their arrays on the device until the end
     est_parts: list[Moments] = []
     paired_parts: list[Moments] = []
-    pulls_sum = np.zeros((S, K), dtype=np.int64)
-    per_launch = max(1, dev.launch_work // R)
+    pulls_parts: list[Any] = []
+    per_launch = max(1, min(dev.launch_work // R, dev.launch_slots))
+    queued: deque[tuple[Any, int]] = deque()  # (mark after a launch, its slots)
+
+    def done(pending: int) -> None:  # wait until at most `pending` launches are queued
+        while len(queued) > pending:
+            mark, slots = queued.popleft()
+            dev.wait(mark)
+            if on_slots is not None:
+                on_slots(slots)
+
     t = 0
     ci = 0
     while t < horizon:
@@ -187,31 +205,34 @@ def simulate(
         try:
             prob.launch(seed0, t, end - t, nck=nck, ck_t=ck_t[ci:], ck_reg=ck_reg,
                         ck_est=ck_est, ck_pulls=ck_pulls)  # fmt: skip
+            if nck:
+                reg = ck_reg[:nck]
+                regret_parts.append(Moments.of(reg, axis=1, host=None))
+                est_parts.append(Moments.of(ck_est[:nck], axis=1, host=None))
+                pulls_parts.append(ck_pulls[:nck].sum(axis=2))
+                if baseline is not None:
+                    diff = reg - baseline[ci : ci + nck]
+                    paired_parts.append(Moments.of(diff, axis=1, host=None))
+                if kept is not None:
+                    kept[ci : ci + nck] = reg
+            queued.append((dev.mark(), end - t))
+            done(dev.in_flight)
         except Exception as exc:
             raise _memory_error(exc, R, policy) from None
-        if nck:
-            reg = ck_reg[:nck]
-            regret_parts.append(Moments.of(reg, axis=1, host=dev.asnumpy))
-            est_parts.append(Moments.of(ck_est[:nck], axis=1, host=dev.asnumpy))
-            pulls_sum[ci : ci + nck] = dev.asnumpy(ck_pulls[:nck].sum(axis=2))
-            if baseline is not None:
-                diff = reg - baseline[ci : ci + nck]
-                paired_parts.append(Moments.of(diff, axis=1, host=dev.asnumpy))
-            if kept is not None:
-                kept[ci : ci + nck] = reg
-        if on_slots is not None:
-            on_slots(end - t)
         ci += nck
         t = end
+    done(0)
     dev.synchronize()
     st = prob.st
     best = int(theory.best_arm)
     regret_final = dev.asnumpy(st["reg"]).astype(np.float64)
     est_final = dev.asnumpy(st["asum"]).astype(np.float64) - horizon / float(theory.mu_star)
+    host = dev.asnumpy
     return DeviceRun(
-        t=np.asarray(stops, dtype=np.int64), regret=_concat(regret_parts),
-        estimator=_concat(est_parts), pulls_sum=pulls_sum,
-        paired=_concat(paired_parts) if paired_parts else None,
+        t=np.asarray(stops, dtype=np.int64), regret=_concat(regret_parts, xp, host),
+        estimator=_concat(est_parts, xp, host),
+        pulls_sum=np.asarray(host(xp.concatenate(pulls_parts)), dtype=np.int64),
+        paired=_concat(paired_parts, xp, host) if paired_parts else None,
         regret_final=regret_final, estimator_final=est_final,
         best_pulls_final=dev.asnumpy(st["pulls"][best]).astype(np.int64), kept=kept,
         wall_s=time.perf_counter() - start,
@@ -268,10 +289,11 @@ def capture_run(
         t += n
 
 
-def _concat(parts: list[Moments]) -> Moments:
-    """Moments of consecutive checkpoint groups (same runs) as one."""
-    return Moments(parts[0].n, np.concatenate([p.mean for p in parts]),
-                   np.concatenate([p.m2 for p in parts]))  # fmt: skip
+def _concat(parts: list[Moments], xp: Any, host: Callable[[Any], np.ndarray]) -> Moments:
+    """Moments of consecutive checkpoint groups (same runs, arrays on the device) as one,
+    on the host."""
+    return Moments(parts[0].n, np.asarray(host(xp.concatenate([p.mean for p in parts]))),
+                   np.asarray(host(xp.concatenate([p.m2 for p in parts]))))  # fmt: skip
 
 
 def _memory_error(exc: Exception, R: int, policy: PolicySpec) -> Exception:
