@@ -38,3 +38,9 @@ class MissingExtraError(CorraoiError):
 class OutputError(UsageError):
     """An output path that cannot be used: it exists (without --force), is a directory, is
     being written by another process, ..."""
+
+
+class WriteError(CorraoiError):
+    """An I/O failure while writing a file (disk full, file too large, device gone, ...)."""
+
+    exit_code = 1

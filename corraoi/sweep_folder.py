@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -22,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .errors import ConfigError
+from .errors import ConfigError, WriteError
 from .grid import Cell, Chunk, Grid
+from .partial_file import PartialFile, reason
 from .stats import Moments
 
 MANIFEST = "manifest.json"
@@ -106,19 +106,24 @@ class ChunkResult:
     agg: DeviceAggregates | None = None
 
     def save(self, path: Path) -> None:
-        """Write atomically (``.partial`` then rename): a part exists only when complete."""
-        tmp = path.with_name(path.name + ".partial")
+        """Write through the ``.partial`` protocol: a part exists only when complete."""
         extra = self.agg.arrays() if self.agg is not None else {}
-        with open(tmp, "wb") as f:
+        target = PartialFile(path, overwrite=True, what="part file").create()
+        try:
             np.savez(
-                f, cell=np.array(self.chunk.cell), start=self.chunk.start, stop=self.chunk.stop,
-                t=self.t, regret=self.regret, estimator=self.estimator,
+                target.file, cell=np.array(self.chunk.cell), start=self.chunk.start,
+                stop=self.chunk.stop, t=self.t, regret=self.regret, estimator=self.estimator,
                 best_pulls=self.best_pulls, pulls_sum=self.pulls_sum, wall_s=self.wall_s,
                 **extra,
             )  # fmt: skip
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        except OSError as exc:
+            target.discard()
+            raise WriteError(f"{target.partial}: cannot write the part file: "
+                             f"{reason(exc)}") from None  # fmt: skip
+        except BaseException:
+            target.discard()
+            raise
+        target.publish()
 
     @classmethod
     def load(cls, path: Path) -> ChunkResult:
@@ -206,14 +211,12 @@ def write_manifest(out: Path, grid: Grid, status: str) -> None:
         "groups": {str(p.relative_to(out)) or ".": {"instance": name, "horizon": h}
                    for (name, h), p in group_dirs(grid, out).items()},  # fmt: skip
     }
-    write_text(out / MANIFEST, json.dumps(data, indent=1, sort_keys=True) + "\n")
+    write_text(out / MANIFEST, json.dumps(data, indent=1, sort_keys=True) + "\n", "manifest")
 
 
-def write_text(path: Path, text: str) -> None:
-    """Write ``path`` atomically: ``.partial`` first, renamed when complete."""
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+def write_text(path: Path, text: str, what: str = "file") -> None:
+    """Write ``path`` through the ``.partial`` protocol (:class:`~corraoi.locks.PartialFile`)."""
+    PartialFile.write_bytes(path, text.encode("utf-8"), overwrite=True, what=what)
 
 
 def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:

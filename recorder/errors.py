@@ -6,19 +6,13 @@ Each carries a one-line message that names the file; the CLI prints it as
 
 from __future__ import annotations
 
-from corraoi.errors import CorraoiError, OutputError, UsageError
+from corraoi.errors import CorraoiError, OutputError, UsageError, WriteError
 
 __all__ = ["LogError", "OutputError", "ViewerError", "WriteError"]
 
 
 class LogError(UsageError):
     """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
-
-
-class WriteError(CorraoiError):
-    """An I/O failure while writing a log (disk full, file too large, device gone, ...)."""
-
-    exit_code = 1
 
 
 class ViewerError(CorraoiError):

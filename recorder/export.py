@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 from corraoi.errors import UsageError
 
 from .errors import WriteError
-from .paths import check_output, partial_path, publish, reason
+from .paths import PartialFile, reason
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -58,25 +58,26 @@ def export(
     from .results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
-    check_output(out_p, overwrite=overwrite, what=f"{fmt} export")
+    target = PartialFile(out_p, overwrite=overwrite, what=f"{fmt} export")
     if is_sweep_path(src):
         sweep = SweepData(src)
         table = read_results_table(sweep.results_path)
-        rows = _write(out_p, fmt, table.schema, table.to_batches())
+        rows = _write(target, fmt, table.schema, table.to_batches())
         return Exported(out_p, "runs", rows, fmt)
     run = RunData(src)
-    rows = _write(out_p, fmt, run.arrow_schema(), run.to_arrow())
+    rows = _write(target, fmt, run.arrow_schema(), run.to_arrow())
     return Exported(out_p, "slots", rows, fmt)
 
 
-def _write(out: Path, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBatch]) -> int:
+def _write(
+    target: PartialFile, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBatch]
+) -> int:
     import pyarrow.csv as pcsv
     import pyarrow.parquet as pq
 
-    part = partial_path(out)
+    part = target.create().partial
     rows = 0
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
         writer: pq.ParquetWriter | pcsv.CSVWriter
         if fmt == "parquet":
             writer = pq.ParquetWriter(str(part), schema, compression="zstd")
@@ -89,11 +90,12 @@ def _write(out: Path, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBa
         finally:
             writer.close()
     except OSError as exc:
+        target.discard()
         raise WriteError(f"{part}: cannot write the export: {reason(exc)}") from None
     except BaseException:
-        part.unlink(missing_ok=True)
+        target.discard()
         raise
-    publish(out, overwrite=True)
+    target.publish()
     return rows
 
 

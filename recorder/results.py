@@ -25,7 +25,7 @@ from corraoi._version import __version__
 
 from .errors import LogError, WriteError
 from .format import SWEEP_METADATA
-from .paths import partial_path, reason
+from .paths import PartialFile, partial_path, reason
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -87,16 +87,13 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     """Compact a grid's finished chunks into ``path`` (``results.parquet``), a dataset
     partitioned by instance: ``instance=<name>/part-0.parquet``, rows in grid order (cell,
     checkpoint, run). Written to ``<path>.partial`` and swapped in when complete."""
-    import shutil
     from urllib.parse import quote
 
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    target = Path(path)
-    tmp = partial_path(target)
-    if tmp.exists():
-        shutil.rmtree(tmp) if tmp.is_dir() else tmp.unlink()
+    out = PartialFile(path, overwrite=True, what="results", folder=True).create()
+    tmp = out.partial
     full = results_schema()
     schema = pa.schema([f for f in full if f.name != "instance"],
                        metadata=results_metadata({**grid.to_dict(), "version": __version__}))
@@ -130,14 +127,13 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
                         pa.array(best.T.reshape(-1).astype(np.int64)),
                     ]
                     writer.write_table(pa.Table.from_arrays(cols, schema=schema))
-        if target.is_dir():
-            shutil.rmtree(target)
-        elif target.exists():
-            target.unlink()
-        os.replace(tmp, target)
     except OSError as exc:
+        out.discard()
         raise WriteError(f"{tmp}: cannot write the results: {reason(exc)}") from None
-    return target
+    except BaseException:
+        out.discard()
+        raise
+    return out.publish()
 
 
 # ---------------------------------------------------------------------------- reading

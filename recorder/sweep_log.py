@@ -29,7 +29,7 @@ from mcap.writer import CompressionType, Writer
 from corraoi._version import __version__
 
 from .errors import WriteError
-from .paths import Sink, open_partial, partial_path, publish, reason
+from .paths import PartialFile, Sink, reason
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
 from .style import (
@@ -177,7 +177,8 @@ class SweepMcapSink(Sink):
         self._policy: str | None = None
         self._closed = False
         metadata = sweep_metadata(config, flush_every=self.flush_every)
-        self._stream: BinaryIO = open_partial(self.path, overwrite=overwrite, what="sweep log")
+        self._out = PartialFile(self.path, overwrite=overwrite, what="sweep log")
+        self._stream: BinaryIO = self._out.create().file
         try:
             self._writer = Writer(
                 self._stream, compression=CompressionType.ZSTD, index_types=MCAP_INDEX_TYPES
@@ -198,13 +199,13 @@ class SweepMcapSink(Sink):
             )
             self._writer.flush()
         except OSError as exc:
-            self._stream.close()
+            self._out.leave()
             raise WriteError(f"{self.part}: cannot write the sweep log: {reason(exc)}") from None
 
     @property
     def part(self) -> Path:
         """Where the file lives until it is closed."""
-        return partial_path(self.path)
+        return self._out.partial
 
     @property
     def count(self) -> int:
@@ -292,22 +293,25 @@ class SweepMcapSink(Sink):
             if self._fsync:
                 os.fsync(self._stream.fileno())
         except OSError as exc:
+            self._out.leave()
             raise WriteError(f"{self.part}: cannot finish the sweep log: {reason(exc)}") from None
-        finally:
-            self._stream.close()
 
     def close(self) -> None:
-        """Finish the file and rename it into place. Safe to call twice."""
+        """Finish the file and rename it into place (while its lock is held). Safe to call
+        twice."""
         if self._closed:
             return
         self._finish("complete")
-        publish(self.path, overwrite=self._overwrite)
+        self._out.publish(sync=False)  # synced by _finish
 
     def abort(self) -> None:
         """Finish the file as interrupted and leave it at ``<path>.partial``."""
         if self._closed:
             return
-        self._finish("interrupted")
+        try:
+            self._finish("interrupted")
+        finally:
+            self._out.leave()
 
 
 def _opt(v: float | None) -> float | None:

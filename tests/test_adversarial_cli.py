@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from corraoi import limits
+from corraoi import limits, partial_file
 from corraoi.block import RunConfig
 from corraoi.cli import main
 from corraoi.engine import simulate_run
@@ -211,8 +211,8 @@ def test_force_never_touches_a_file_another_writer_holds(tmp_path):
 def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path):
     part = tmp_path / "run.mcap.partial"
     code = (
-        "import sys, time; from pathlib import Path; from recorder.paths import open_partial;"
-        f"f = open_partial(Path({str(tmp_path / 'run.mcap')!r}), overwrite=False);"
+        "import sys, time; from recorder.paths import PartialFile;"
+        f"f = PartialFile({str(tmp_path / 'run.mcap')!r}).create();"
         "print('locked', flush=True); time.sleep(60)"
     )
     holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
@@ -276,8 +276,8 @@ class _FullDisk:
 
 @pytest.mark.parametrize("room", [30_000, 120_000])
 def test_a_full_disk_is_one_line_and_keeps_the_partial_readable(tmp_path, monkeypatch, room):
-    real = paths._fdopen
-    monkeypatch.setattr(paths, "_fdopen", lambda fd: _FullDisk(real(fd), room))
+    real = partial_file._fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), room))
     out = tmp_path / "run.mcap"
     err = one_line_error(cli("record", "-T", 6000, "--no-rrd", "-o", out), code=1)
     part = tmp_path / "run.mcap.partial"
@@ -410,7 +410,7 @@ def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
     out = tmp_path / "sw"
     out.mkdir()
     (out / "summary.json").write_text("{}")
-    held = paths.open_partial(out / "sweep.mcap", overwrite=False)
+    held = paths.PartialFile(out / "sweep.mcap").create()
     try:
         err = one_line_error(cli("sweep", "-n", 2, "-T", 10, "-p", "ucb", "-o", out, "--force"))
         assert err == (
@@ -420,7 +420,7 @@ def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
         )
         assert sorted(os.listdir(out)) == ["summary.json", "sweep.mcap.partial"]
     finally:
-        held.close()
+        held.leave()
 
 
 def test_only_the_runs_that_are_not_up_to_date_are_recorded(tmp_path, monkeypatch):

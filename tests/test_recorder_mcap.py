@@ -11,8 +11,8 @@ import pytest
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
+from corraoi import partial_file
 from corraoi.block import RunConfig, SlotBlock
-from recorder import mcap_sink as mcap_sink_module
 from recorder.errors import OutputError, WriteError
 from recorder.mcap_sink import McapSink
 from recorder.paths import partial_path
@@ -222,10 +222,8 @@ class _FullDisk:
 def test_a_full_disk_is_one_clear_error_and_no_finished_file(
     tmp_path, make_config, engine, monkeypatch
 ):
-    real = mcap_sink_module.open_partial
-    monkeypatch.setattr(
-        mcap_sink_module, "open_partial", lambda *a, **k: _FullDisk(real(*a, **k), 150_000)
-    )
+    real = partial_file._fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), 150_000))
     config = make_config(horizon=20_000)
     path = tmp_path / "full.mcap"
     with pytest.raises(WriteError) as info:

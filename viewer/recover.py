@@ -15,14 +15,18 @@ RUN.mcap`` is the usual call; the source is never modified.
 
 from __future__ import annotations
 
-import errno
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
+from corraoi.partial_file import PARTIAL_SUFFIX, PartialFile, partial_path
+
 from .runs import require_slots
+
+#: The name a recovered copy is written under while it is made, when ``.partial`` would be
+#: the source itself (``recover RUN.mcap.partial -o RUN.mcap``).
+RECOVER_SUFFIX = ".recovering"
 
 if TYPE_CHECKING:
     from recorder.reader import RunLog
@@ -90,18 +94,16 @@ def recover(
     src = Path(source)
     log = require_slots(open_log(src, salvage=True), "recover")
     dest = _check_dest(src, Path(out), overwrite=overwrite)
+    # RUN.mcap.partial -> RUN.mcap: the copy cannot be written under the source's name
+    suffix = RECOVER_SUFFIX if partial_path(dest).resolve() == src.resolve() else PARTIAL_SUFFIX
+    # a copy left by a recover that was stopped is made again from the source: never in the way
+    target = PartialFile(dest, overwrite=overwrite, what="recovered log", suffix=suffix,
+                         replaceable=lambda _: True).create()  # fmt: skip
+    tmp = target.partial
     try:
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".recover", dir=dest.parent)
-    except OSError as exc:
-        raise OutputError(f"{dest}: cannot create the recovered log: {_reason(exc)}") from None
-    tmp = Path(name)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with src.open("rb") as fin, os.fdopen(fd, "wb") as fout:
-            consumed = _copy(log, fin, fout)
-            fout.flush()
-            os.fsync(fout.fileno())
+        with src.open("rb") as fin:
+            consumed = _copy(log, fin, target.file)
+        target.sync()
         if log.damage:
             consumed = log._data_end
         size = src.stat().st_size
@@ -110,10 +112,13 @@ def recover(
             from recorder.errors import LogError
 
             raise LogError(f"{src}: the rewritten log does not read back ({check.summary})")
-        _publish(tmp, dest, overwrite=overwrite)
+    except OSError as exc:
+        target.discard()
+        raise OutputError(f"{dest}: cannot write the recovered log: {_reason(exc)}") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        target.discard()
         raise
+    target.publish(sync=False)
     return Recovered(
         source=src,
         path=dest,
@@ -258,33 +263,6 @@ def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
                 raise OutputError(f"{dest}: directory {up} is not writable")
             break
     return dest
-
-
-def _publish(tmp: Path, dest: Path, *, overwrite: bool) -> None:
-    """Move the finished copy into place; without ``overwrite`` never replace a file."""
-    from recorder.errors import OutputError
-
-    if overwrite:
-        os.replace(tmp, dest)
-        return
-    try:
-        os.link(tmp, dest)
-    except FileExistsError:
-        raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
-    except OSError as exc:
-        if exc.errno not in (errno.EPERM, errno.EXDEV, errno.ENOTSUP, errno.EOPNOTSUPP):
-            raise
-        if dest.exists():
-            raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
-        os.replace(tmp, dest)
-        return
-    tmp.unlink()
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _reason(exc: OSError) -> str:
