@@ -42,9 +42,13 @@ def chunk_task(
     if cell.channel.kind == "trace" and cell.channel.trace is not None:
         task["trace"] = [int(v) for v in cell.channel.trace]
     qual = cell.policy.qualname
-    if qual.startswith("file:"):
+    if qual.startswith("file:"):  # the bytes this process loaded (and hashed), not the file now
+        from .provenance import loaded_source
+
         path = qual[len("file:") :].rpartition(":")[0]
-        task["plugin_source"] = {"path": path, "source": Path(path).read_text(encoding="utf-8")}
+        loaded = loaded_source(cell.policy.resolve().__module__)
+        source = loaded[1] if loaded is not None else Path(path).read_bytes()
+        task["plugin_source"] = {"path": path, "source": source}
     return task
 
 

@@ -17,11 +17,27 @@ from pathlib import Path
 from typing import Any
 
 from .block import RunConfig
-from .errors import ConfigError
+from .errors import ConfigError, CorraoiError
 from .grid import Cell, Grid
 from .notable import CHOICES, notable_runs, pick_pair, well_formed
 from .policies.spec import PolicySpec
-from .sweep_folder import MANIFEST, CellRuns, DamagedPart, group_dirs, read_manifest, read_parts
+from .sweep_code import (
+    changed_note,
+    check_code,
+    current_spec,
+    read_manifest_dict,
+    use_kept_code,
+)
+from .sweep_folder import (
+    MANIFEST,
+    PARTS,
+    CellRuns,
+    ChunkResult,
+    DamagedPart,
+    group_dirs,
+    read_manifest,
+    read_parts,
+)
 
 
 @dataclass(frozen=True)
@@ -35,6 +51,11 @@ class Drill:
     #: the cell's label in its group (None for a policy added on the run, not swept)
     cell: str | None
     folder: Path
+    #: (checkpoint slot, regret) of this run in the sweep's part: what the recording must
+    #: give again (empty: nothing to check -- a policy added, a part missing, other code)
+    expect: tuple[tuple[int, float], ...] = ()
+    #: what the log says beside the run (recorded with code other than the sweep's)
+    notes: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -42,6 +63,26 @@ class Drill:
         label = self.cell if self.cell is not None else self.config.policy.label
         what = "" if self.choice == "run" else f"-{self.choice}"
         return f"{self.folder.name}-{self.config.instance.name}-{label}-run{self.run}{what}"
+
+
+class SweepMismatch(CorraoiError):
+    """A run recorded again from a sweep whose regret differs from the sweep's row (the
+    engine or the code changed since the sweep): the log is finished as failed, saying so."""
+
+    exit_code = 1
+
+
+def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
+    """Where the regret of ``block`` (a SlotBlock) differs from the sweep's row ``expect``
+    ((checkpoint, regret) pairs): a one-line account of the first difference, or None."""
+    first, last = int(block.t[0]), int(block.t[-1])
+    for t, want in expect:
+        if first <= t <= last:
+            got = float(block.regret[t - first])
+            if got != want:
+                return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
+                        f"says {want:g}: the engine or the code changed since the sweep")
+    return None
 
 
 def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, str | None]:
@@ -88,6 +129,8 @@ def choose(
     cells: Sequence[str] = (),
     policies: Sequence[PolicySpec] = (),
     warn: Any = None,
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
 
@@ -95,8 +138,18 @@ def choose(
     restrict the sweep's cells. ``policies``: those the sweep ran select its cells; any
     other is added on the chosen run (paired: the same seed, so the same hidden path),
     said through ``warn``.
+
+    A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
+    hashes, the way out; :mod:`corraoi.sweep_code`), unless ``kept_code`` (the sweep's copy
+    runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
     """
     root, grid, group = sweep_root(path)
+    manifest = read_manifest_dict(root)
+    if kept_code and allow_changed_code:
+        raise ConfigError("--kept-code and --allow-changed-code: choose one")
+    if kept_code:
+        use_kept_code(root, manifest)
     what = parse_run(run)
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
@@ -125,6 +178,10 @@ def choose(
             if problem is not None:
                 raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
                                   "kernel; leave it out of --policy")  # fmt: skip
+    swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
+    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+        if warn is not None:
+            warn(note)
     streams = _streams(grid, warn)  # after every check: a refusal stays one line
     if extra and warn is not None:
         added = ", ".join(s.label for s in extra)
@@ -134,7 +191,8 @@ def choose(
     for key, members in chosen.items():
         picks = picked[key]
         for cell, r in picks:
-            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams))
+            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams,
+                                 allow_changed_code))  # fmt: skip
         runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])
         base = (members or groups[key])[0]
         for spec in extra:
@@ -262,14 +320,46 @@ def _streams(grid: Grid, warn: Any) -> str:
 
 
 def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
-           what: str | int, streams: str = "cpu") -> Drill:  # fmt: skip
+           what: str | int, streams: str = "cpu", allow_changed: bool = False) -> Drill:
+    """With ``allow_changed`` (--allow-changed-code) a plug-in whose code changed runs as it
+    is now: the spec names that code, the log says so, and nothing is checked against the
+    sweep's row; otherwise the run must give the sweep's regret again (``expect``)."""
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
         channel = _reload_trace(cell, root)
-    config = RunConfig(cell.instance, cell.policy, grid.seed + run, cell.horizon, channel=channel,
+    spec = cell.policy
+    expect: tuple[tuple[int, float], ...] = ()
+    notes: tuple[str, ...] = ()
+    if allow_changed and label is not None and not spec.builtin and spec.digest:
+        now = current_spec(spec)
+        if not now.digest.startswith(spec.digest):
+            where = spec.qualname.removeprefix("file:").rpartition(":")[0] or spec.qualname
+            notes = (changed_note(where, spec.digest, now.digest),)
+            spec = now
+    if label is not None and not notes:
+        expect = expected_row(root, grid, cell, run)
+    config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
                        streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
-    return Drill(config, run, choice, label, root)
+    return Drill(config, run, choice, label, root, expect, notes)
+
+
+def expected_row(root: Path, grid: Grid, cell: Cell, run: int) -> tuple[tuple[int, float], ...]:
+    """(checkpoint, regret) of run ``run`` of ``cell`` in its part file (only the part that
+    holds it is read; () when it is missing or damaged: nothing to check against)."""
+    for f in sorted((root / PARTS).glob(f"{cell.key}-*.npz")):
+        try:
+            start, stop = (int(v) for v in f.stem.rsplit("-", 2)[1:])
+        except ValueError:
+            continue
+        if start <= run < stop:
+            try:
+                part = ChunkResult.load(f)
+            except DamagedPart:
+                return ()
+            row = part.regret[run - start]
+            return tuple((int(t), float(v)) for t, v in zip(part.t, row, strict=True))
+    return ()
 
 
 def _reload_trace(cell: Cell, root: Path) -> Any:

@@ -44,3 +44,17 @@ class WriteError(CorraoiError):
     """An I/O failure while writing a file (disk full, file too large, device gone, ...)."""
 
     exit_code = 1
+
+
+class CodeChanged(PolicyError):
+    """A plug-in file whose bytes are not those a run or sweep recorded (its sha256 differs):
+    never run under the old hash. ``path``, ``expected`` and ``found`` (hex digests)."""
+
+    def __init__(self, path: str, expected: str, found: str, way_out: str = "") -> None:
+        self.path, self.expected, self.found = path, expected, found
+        text = (f"{path}: the plug-in's code has changed (sha256:{expected[:16]} recorded, "
+                f"sha256:{found[:16]} now)")  # fmt: skip
+        super().__init__(text + (f"; {way_out}" if way_out else ""))
+
+    def with_way_out(self, way_out: str) -> CodeChanged:
+        return CodeChanged(self.path, self.expected, self.found, way_out)

@@ -34,6 +34,7 @@ from . import backends
 from .errors import ConfigError
 from .grid import Cell, Chunk, Grid
 from .summary import group_summary, summary_markdown
+from .sweep_code import check_code, keep_sources, read_manifest_dict
 from .sweep_folder import (
     GROUP_FILES,
     MANIFEST,
@@ -248,7 +249,7 @@ def _sweep(
             write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
         writer.finish(warn=warn)
-        write_manifest(folder, grid, "complete")
+        write_manifest(folder, grid, "complete", folder_provenance(folder, grid))
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip
 
@@ -273,6 +274,8 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     if resume:
         if old is None:
             raise ConfigError(f"{folder}: no sweep to resume (no {MANIFEST}); drop --resume")
+        # the code that will run is the code the sweep ran, or one line says which is not
+        check_code([c.policy for c in old.cells], folder, read_manifest_dict(folder))
         grid = merge_grids(old, grid, folder)
     elif old is not None or legacy:
         if not force:
@@ -285,8 +288,17 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ConfigError(f"{folder}: directory is not writable")
     (folder / PARTS).mkdir(exist_ok=True)
-    write_manifest(folder, grid, "running")
+    write_manifest(folder, grid, "running", folder_provenance(folder, grid))
     return grid
+
+
+def folder_provenance(folder: Path, grid: Grid) -> dict[str, Any]:
+    """What a sweep folder's manifest says made its numbers: the versions, the backend and
+    each plug-in's source, a copy of which it keeps beside its hash (corraoi.sweep_code)."""
+    from .provenance import Provenance, sweep_backend
+
+    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+    return {**prov.to_dict(), "plugins": keep_sources(folder, prov)}
 
 
 def _clear(folder: Path, old: Grid | None) -> None:

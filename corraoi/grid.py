@@ -32,6 +32,7 @@ import itertools
 import json
 import math
 import os
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,8 +76,12 @@ class Cell:
 
     @property
     def key(self) -> str:
-        """A stable identifier of the cell (a hash of what determines its runs)."""
-        text = json.dumps(self.to_dict(), sort_keys=True)
+        """A stable identifier of the cell (a hash of what determines its runs; a plug-in's
+        full sha256 is left out, so that folders swept before it was recorded keep their
+        keys: its version holds the first 16 digits)."""
+        d = self.to_dict()
+        d["policy"].get("plugin", {}).pop("sha256", None)
+        text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     @property
@@ -163,18 +168,18 @@ class Grid:
 
     def labels(self) -> dict[str, str]:
         """A display label per cell key, unique within its group: the policy name, with its
-        parameter values when one policy runs with several in the group."""
+        parameter values when one policy runs with several in the group, and the start of
+        the cell's key when two cells still read alike (one name from two files, say)."""
         out: dict[str, str] = {}
         for cells in self.groups().values():
-            counts: dict[str, int] = {}
+            counts = Counter(c.policy.name for c in cells)
             for c in cells:
-                counts[c.policy.name] = counts.get(c.policy.name, 0) + 1
+                ps, name = ",".join(f"{k}={v:g}" for k, v in c.policy.params.items()), c.policy.name
+                out[c.key] = f"{name}({ps})" if counts[name] > 1 else name
+            alike = Counter(out[c.key] for c in cells)
             for c in cells:
-                if counts[c.policy.name] > 1:
-                    ps = ",".join(f"{k}={v:g}" for k, v in c.policy.params.items())
-                    out[c.key] = f"{c.policy.name}({ps})"
-                else:
-                    out[c.key] = c.policy.name
+                if alike[out[c.key]] > 1:
+                    out[c.key] += f"@{c.key[:8]}"
         return out
 
     def to_dict(self) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from typing import Any
 
 from . import kernels
 from .policies.api import CompiledPolicy
+from .policies.loading import PLUGIN_MODULE_PREFIX
 
 # A worker: compile one generated kernel module into the shared cache. A failure is left to
 # the parent (module docstring).
@@ -104,7 +105,7 @@ def _importable(ref: Any) -> bool:
     else:
         func = getattr(ref, "py_func", None)
         modname = getattr(func, "__module__", "") if func is not None else ""
-    if not modname:
+    if not modname or modname.startswith(PLUGIN_MODULE_PREFIX):  # a file plug-in: this process
         return False
     module = sys.modules.get(modname)
     file = getattr(module, "__file__", None) if module is not None else None

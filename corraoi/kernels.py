@@ -152,7 +152,12 @@ def kernel_source(policy: type[CompiledPolicy], *, record: bool) -> tuple[str, s
             raise KernelError(f"kernel template {_TEMPLATE}: hook line missing: {line}")
         text = text.replace(line, f"from {modname} import {attr} as {alias}  # HOOKS")
         digest.update(f"{modname}:{attr}".encode())
-        if file is not None and file.is_file():
+        # the bytes the hook's module was loaded from (a plug-in's exact source: the file
+        # may have changed since, or a sweep's kept copy runs): never the file read again
+        loaded = getattr(sys.modules.get(modname), "__corraoi_source__", None)
+        if isinstance(loaded, bytes):
+            digest.update(loaded)
+        elif file is not None and file.is_file():
             digest.update(file.read_bytes())
     if not record:
         text = _sweep_variant(text)

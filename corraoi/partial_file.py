@@ -43,7 +43,7 @@ def reason(exc: OSError) -> str:
 
 def check_target(path: str | os.PathLike[str], *, overwrite: bool, what: str = "output",
                  replaceable: Callable[[Path], bool] | None = None, folder: bool = False,
-                 suffix: str = PARTIAL_SUFFIX) -> Path:  # fmt: skip
+                 suffix: str = PARTIAL_SUFFIX, sweep: bool = False) -> Path:  # fmt: skip
     """Refuse an output path that cannot or must not be written (one line: what, where, what
     to do); returns it as a Path. Nothing is created.
 
@@ -52,13 +52,18 @@ def check_target(path: str | os.PathLike[str], *, overwrite: bool, what: str = "
     or not writable, a ``.partial`` that another process is writing (even with
     ``overwrite``), an existing target without ``overwrite``, and a ``.partial`` left by an
     earlier writer that stopped, unless ``overwrite`` or ``replaceable(partial)`` says that
-    nothing is lost by writing over it (the same run, recorded again).
+    nothing is lost by writing over it (the same run, recorded again); and one of a sweep
+    folder's own files unless ``sweep`` (the sweep's writers; :mod:`corraoi.sweep_guard`).
     """
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
         raise OutputError(f"{path!s}: not a file name for the {what}")
     if "\0" in str(path):
         raise OutputError(f"{path!r}: a NUL byte in the path of the {what}")
+    if not sweep:
+        from .sweep_guard import refuse_sweep_file
+
+        refuse_sweep_file(p, what)
     _no_dangling_link(p, what)
     if folder and p.exists() and not p.is_dir():
         raise OutputError(f"{p}: exists and is not a directory; cannot write the {what} there")
@@ -132,25 +137,22 @@ class PartialFile:
 
     As a context manager, ``with PartialFile(...) as out:`` creates it, publishes it when the
     block ends normally and discards it when it ends through an exception. ``folder=True``
-    makes ``<path>.partial/`` a directory (a dataset such as ``results.parquet``);
-    ``suffix`` another name than ``.partial`` (``recover``, whose source is often that name).
-    Every failure is one :class:`~corraoi.errors.OutputError` or
-    :class:`~corraoi.errors.WriteError` line naming the file.
+    makes ``<path>.partial/`` a directory (``results.parquet``); ``suffix`` another name than
+    ``.partial`` (``recover``, whose source is often that name). Every failure is one
+    OutputError or WriteError line naming the file.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, overwrite: bool = False,
                  what: str = "output", replaceable: Callable[[Path], bool] | None = None,
-                 folder: bool = False, suffix: str = PARTIAL_SUFFIX) -> None:  # fmt: skip
-        self.path: Path = check_target(path, overwrite=overwrite, what=what,
-                                       replaceable=replaceable, folder=folder,
-                                       suffix=suffix)  # fmt: skip
+                 folder: bool = False, suffix: str = PARTIAL_SUFFIX, sweep: bool = False) -> None:
+        self.path: Path = check_target(path, overwrite=overwrite, what=what, sweep=sweep,
+                                       replaceable=replaceable, folder=folder, suffix=suffix)
         self.partial: Path = partial_path(self.path, suffix)
         self.overwrite, self.what, self.folder = overwrite, what, folder
         self._replaceable = replaceable
         self._fd: int | None = None
         self._file: BinaryIO | None = None
-        #: "checked", "open", "published", "left" or "discarded"
-        self.state = "checked"
+        self.state = "checked"  # then "open", and "published", "left" or "discarded"
 
     # ------------------------------------------------------------------ create
 
@@ -379,12 +381,10 @@ class PartialFile:
             self.publish() if exc_type is None else self.discard()
 
     @classmethod
-    def write_bytes(
-        cls, path: str | os.PathLike[str], data: bytes, *, overwrite: bool = True,
-        what: str = "file", sync: bool = True,
-    ) -> Path:  # fmt: skip
+    def write_bytes(cls, path: str | os.PathLike[str], data: bytes, *, overwrite: bool = True,
+                    what: str = "file", sync: bool = True, sweep: bool = False) -> Path:
         """Write ``data`` to ``path`` through the protocol (a small file in one go)."""
-        out = cls(path, overwrite=overwrite, what=what).create()
+        out = cls(path, overwrite=overwrite, what=what, sweep=sweep).create()
         try:
             out.file.write(data)
             return out.publish(sync=sync)

@@ -23,6 +23,7 @@ from mcap.records import Channel, Schema
 
 from corraoi.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError
+from corraoi.provenance import Provenance
 
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes
 from .errors import WriteError
@@ -32,6 +33,8 @@ from .vocab import (
     MAX_SLOT,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
+    PLUGIN_MEDIA_TYPE,
+    PROVENANCE_METADATA,
     RUN_METADATA,
     SCHEMA_ENCODING,
     library_name,
@@ -78,6 +81,7 @@ class McapSink(Sink):
         overwrite: bool = False,
         flush_every: int = FLUSH_EVERY,
         fsync: bool = True,
+        provenance: Provenance | None = None,
     ) -> None:
         if flush_every < 1:
             raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
@@ -86,6 +90,9 @@ class McapSink(Sink):
                 f"horizon {config.horizon} is too long for an MCAP log (at most {MAX_SLOT} "
                 "slots, since log_time is t seconds in nanoseconds)"
             )
+        # what made the numbers: versions, backend, each plug-in's source as it ran (the
+        # plug-in resolved before any file is made: a refusal leaves nothing behind)
+        self.provenance = provenance or Provenance.of([config.policy], backend=config.streams)
         self._out = PartialFile(path, overwrite=overwrite, what="MCAP log",
                                 replaceable=same_run_partial(config))  # fmt: skip
         self.path: Path = self._out.path
@@ -118,6 +125,9 @@ class McapSink(Sink):
             )
             self._writer.start()
             self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
+            self._writer.add_metadata(PROVENANCE_METADATA, self.provenance.metadata())
+            for src in self.provenance.sources:
+                self._writer.add_attachment(src.name, PLUGIN_MEDIA_TYPE, src.data)
             self._file.flush()
         except OSError as exc:
             self._torn = True

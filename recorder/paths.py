@@ -14,6 +14,7 @@ they cannot leave the output folder.
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
@@ -26,6 +27,13 @@ from corraoi.text import safe_name
 
 #: The check of an output path before anything runs (the first step of PartialFile).
 check_output = check_target
+
+
+def made_again(part: Path) -> bool:
+    """A Rerun recording cut short (its ``.partial``, whose writer stopped) is made again
+    from its run's log: nothing is lost by writing over it, so it never blocks the next
+    attempt (the ``replaceable`` of every ``.rrd``)."""
+    return True
 
 
 class Sink:
@@ -68,6 +76,7 @@ __all__ = [
     "Sink",
     "check_output",
     "lock_holder",
+    "made_again",
     "partial_path",
     "reason",
     "safe_name",

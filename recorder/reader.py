@@ -18,23 +18,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Header, Metadata
+from mcap.records import Attachment, Header, Metadata
 
 from corraoi.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import CorraoiError
 
 from .errors import LogError
-from .format import (
-    check_agrees,
-    check_run_metadata,
-    decode_messages,
-    empty_block,
-    not_a_run_log,
-)
+from .format import check_agrees, check_run_metadata, decode_messages, empty_block, not_a_run_log
 from .paths import lock_holder
 from .vocab import (
     MESSAGE_ENCODING,
     NS_PER_SLOT,
+    PROVENANCE_METADATA,
     RUN_END_METADATA,
     RUN_METADATA,
     SLOT_SCHEMA_NAME,
@@ -75,15 +70,17 @@ class RunLog:
     damage: str = ""
     #: PID of the process writing the file right now (it holds the writer's lock), if any.
     writer: int | None = None
+    #: The ``corraoi.provenance`` metadata ({} in an older log; Provenance.read parses it)
+    provenance: dict[str, str] = field(default_factory=dict)
+    #: (name, media type, bytes) of each file the log carries: each plug-in's source
+    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
 
     def __repr__(self) -> str:
-        return (
-            f"RunLog({str(self.path)!r}, {self.config.label}, "
-            f"{self.n_slots}/{self.config.horizon} slots, {self.status})"
-        )
+        return (f"RunLog({str(self.path)!r}, {self.config.label}, "
+                f"{self.n_slots}/{self.config.horizon} slots, {self.status})")  # fmt: skip
 
     @property
     def label(self) -> str:
@@ -233,6 +230,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         library = ""
         run_md: dict[str, str] | None = None
         end_md: dict[str, str] = {}
+        prov_md: dict[str, str] = {}
+        attachments: list[tuple[str, str, bytes]] = []
         channel_id = 0
         n_chunks = 0
         n_slots = 0
@@ -260,8 +259,13 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                     check_run_metadata(p, run_md, library)
                 elif item.name == RUN_END_METADATA:
                     end_md = dict(item.metadata)
+                elif item.name == PROVENANCE_METADATA:
+                    prov_md = dict(item.metadata)
                 elif item.name == SWEEP_METADATA:
                     sweep = True
+            elif kind == "attachment":
+                assert isinstance(item, Attachment)
+                attachments.append((item.name, item.media_type, bytes(item.data)))
             elif kind == "chunk":
                 assert isinstance(item, ChunkData)
                 if run_md is None:
@@ -341,6 +345,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         n_chunks=n_chunks,
         damage=damage,
         writer=None if finished else lock_holder(p),
+        provenance=prov_md,
+        attachments=attachments,
         _channel_id=channel_id or 1,
         _data_end=data_end,
     )

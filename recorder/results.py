@@ -92,7 +92,7 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    out = PartialFile(path, overwrite=True, what="results", folder=True).create()
+    out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True).create()
     tmp = out.partial
     full = results_schema()
     schema = pa.schema([f for f in full if f.name != "instance"],
@@ -327,7 +327,7 @@ class SweepData:
         from corraoi.policies import make_policies
         from corraoi.text import safe_name
 
-        from .record import record_run
+        from .record import record_drill
 
         names = (policy,) if isinstance(policy, str) else tuple(policy)
         specs = make_policies(names) if names else []
@@ -338,9 +338,9 @@ class SweepData:
         outcomes = []
         for d in drills:
             stem = folder / safe_name(d.name)
-            outcomes.append(record_run(d.config, Path(f"{stem}.mcap"),
-                                       rrd=Path(f"{stem}.rrd") if rrd else None,
-                                       overwrite=overwrite))  # fmt: skip
+            outcomes.append(record_drill(d, Path(f"{stem}.mcap"),
+                                         rrd=Path(f"{stem}.rrd") if rrd else None,
+                                         overwrite=overwrite))  # fmt: skip
         return outcomes
 
     @cached_property

@@ -13,7 +13,7 @@ import rerun.blueprint as rrb
 from corraoi.block import RunConfig
 
 from .errors import ViewerError, WriteError
-from .paths import PartialFile, Sink, reason
+from .paths import PartialFile, Sink, made_again, reason
 from .rerun_layout import one_run_blueprint
 from .rerun_names import new_recording
 
@@ -64,7 +64,8 @@ class RrdOutput(Sink):
             # create (or truncate) the .partial file here, so that an unwritable place is
             # one clear error now rather than a log line from Rerun's writer thread later;
             # kept open (locked) until the file is in place, so no other writer takes it
-            self._out = PartialFile(rrd_path, overwrite=overwrite, what="Rerun recording")
+            self._out = PartialFile(rrd_path, overwrite=overwrite, what="Rerun recording",
+                                    replaceable=made_again)  # fmt: skip
             self.path = self._out.path
             self._out.create()
             sinks.append(rr.FileSink(str(self._out.partial)))

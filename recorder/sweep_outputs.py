@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from corraoi.grid import Grid
+from corraoi.provenance import Provenance, sweep_backend
 from corraoi.sweep import sweep_config
 from corraoi.sweep_folder import CellRuns, ChunkResult
 
@@ -72,10 +73,12 @@ def write_group_log(
     folder.mkdir(parents=True, exist_ok=True)
     config = group_config(grid, cells)
     config["notable"] = summary["notable"]  # read back by SweepLog.notable
-    with SweepMcapSink(folder / "sweep.mcap", config) as log:
-        for c in cells:
-            for point in c.points():
-                log.write(point)
+    prov = Provenance.of([c.cell.policy for c in cells], backend=sweep_backend(grid.backend))
+    # in log-time order: each checkpoint's points, the cells in grid order (a stable sort)
+    points = sorted((p for c in cells for p in c.points()), key=lambda p: int(p.t))
+    with SweepMcapSink(folder / "sweep.mcap", config, provenance=prov) as log:
+        for point in points:
+            log.write(point)
     return config
 
 

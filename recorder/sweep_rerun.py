@@ -130,7 +130,7 @@ class SweepRerunSink(Sink):
     ) -> SweepRerunSink:
         """A sink that owns its recording: saved to ``<path>.partial`` with the default
         blueprint, disconnected and renamed to ``path`` on :meth:`close`."""
-        out = PartialFile(path, overwrite=overwrite, what="sweep recording").create()
+        out = PartialFile(path, overwrite=overwrite, what="sweep recording", sweep=True).create()
         rec = rr.RecordingStream(
             application_id, recording_id=recording_id or sweep_recording_id(config)
         )

@@ -3,12 +3,15 @@ and what a sweep folder holds, with its runs worth watching and the command that
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shlex
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from corraoi.notable import well_formed
+from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
 from corraoi.theory import analyse
 
@@ -36,6 +39,7 @@ def log_info(log: LogLike) -> dict[str, Any]:
         "chunks": run.n_chunks,
         "description": run.summary,
         "config": cfg.to_dict(),
+        "provenance": provenance_info(run.provenance, run.attachments),
         "theory": {
             "mu": [float(v) for v in theory.mu],
             "best_arm": theory.best_arm + 1,
@@ -87,9 +91,49 @@ def info_text(info: dict[str, Any]) -> str:
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
         f"  {'corraoi version':<22} {cfg['version']}",
     ]
+    lines += provenance_rows(info.get("provenance"))
     lines += ["summary figures:"] + [f"  {k:<22} {v}" for k, v in summary_rows(s)]
     # names and paths come from the file: one line each, no control codes
     return "\n".join(safe_text(line) for line in lines)
+
+
+def provenance_info(
+    metadata: dict[str, str], attachments: Sequence[tuple[str, str, bytes]]
+) -> dict[str, Any] | None:
+    """What made a log's numbers (its ``corraoi.provenance`` record), with each plug-in's
+    attached source checked against the hash the record names (None: an older log)."""
+    if not metadata:
+        return None
+    prov = Provenance.read(metadata)
+    carried: dict[str, list[str]] = {}
+    for name, _, data in attachments:
+        carried.setdefault(name, []).append(hashlib.sha256(data).hexdigest())
+    for p in prov["plugins"]:
+        p["attached"] = p["sha256"] in carried.get(p["file"], [])
+    return prov
+
+
+def provenance_rows(prov: dict[str, Any] | None) -> list[str]:
+    """The lines ``info`` prints about what made the numbers (log or sweep folder)."""
+    if not prov:
+        return [f"  {'provenance':<22} not recorded (written before corraoi recorded it)"]
+    v = dict(prov.get("versions", {}))
+    corraoi = f"corraoi {v.pop('corraoi', '?')}"
+    if "git" in v:
+        commit = str(v.pop("git"))
+        corraoi += f" (git {commit[:12]}{', dirty' if commit.endswith('+dirty') else ''})"
+    kernel = v.pop("kernel_sources", "?")
+    others = ", ".join(f"{k.replace('python', 'Python')} {val}" for k, val in v.items())
+    lines = [f"  {'code':<22} {corraoi}, kernel sources {short(str(kernel))}",
+             f"  {'versions':<22} {others}",
+             f"  {'backend':<22} {prov.get('backend') or '?'}"]  # fmt: skip
+    for p in prov.get("plugins", []):
+        where = ("its source attached, byte for byte" if p.get("attached", True)
+                 else "its source NOT attached")  # fmt: skip
+        lines.append(f"  {'plug-in source':<22} {p['file']} {short(p['sha256'])} ({where})")
+    for note in prov.get("notes", []):
+        lines.append(f"  {'note':<22} {note}")
+    return lines
 
 
 def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:

@@ -136,13 +136,13 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
 
     Returns the byte offset after the last complete record read from the source.
     """
-    from mcap.records import Channel, Header, Message, Metadata, Schema
+    from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
     from recorder.encode import end_metadata as make_end
     from recorder.errors import LogError
     from recorder.format import decode_messages
-    from recorder.vocab import MCAP_INDEX_TYPES, NS_PER_SLOT
+    from recorder.vocab import MCAP_INDEX_TYPES, MCAP_INDEX_TYPES_WITH_ATTACHMENTS, NS_PER_SLOT
     from recorder.vocab import RUN_END_METADATA as END_METADATA
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
     from recorder.vocab import SLOT_TOPIC as TOPIC
@@ -159,7 +159,7 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     fin.seek(0)
     writer = Writer(
         fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD,
-        index_types=MCAP_INDEX_TYPES,
+        index_types=MCAP_INDEX_TYPES_WITH_ATTACHMENTS if log.attachments else MCAP_INDEX_TYPES,
     )  # fmt: skip
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
@@ -176,6 +176,9 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
         elif isinstance(rec, Metadata):
             if rec.name != END_METADATA:
                 writer.add_metadata(rec.name, dict(rec.metadata))
+        elif isinstance(rec, Attachment):  # a plug-in's source, byte for byte
+            writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
+                                  rec.data)  # fmt: skip
         elif isinstance(rec, Schema):
             if rec.id not in schemas:
                 schemas[rec.id] = writer.register_schema(

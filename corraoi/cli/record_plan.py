@@ -29,6 +29,8 @@ class Plan:
     config: Any  # RunConfig
     mcap: Path
     rrd: Path | None
+    #: where it came from (a corraoi.drill.Drill, --from): what it must give again
+    drill: Any = None
 
 
 def _expand(template: str, config: Any, drill: Any = None) -> Path:
@@ -74,7 +76,7 @@ def plan_files(
         drill = drills[i] if drills else None
         mcap = _expand(out or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
         path = None if no_rrd else (_expand(rrd, config, drill) if rrd else _rrd_beside(mcap))
-        plans.append(Plan(config, mcap, path))
+        plans.append(Plan(config, mcap, path, drill))
     seen: dict[str, str] = {}
     for plan in plans:
         for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
@@ -96,6 +98,8 @@ def from_sweep(
     *,
     c: float | None,
     beta: float | None,
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
 ) -> list[Any]:
     """The runs ``--from`` names (corraoi.drill); what the sweep fixed cannot be given too."""
     from click.core import ParameterSource
@@ -116,7 +120,8 @@ def from_sweep(
                          "parameters (with --policy they set those of a policy added)")
     specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
              if given else [])  # fmt: skip
-    return choose(folder, run, cells=cells, policies=specs, warn=warn)
+    return choose(folder, run, cells=cells, policies=specs, warn=warn, kept_code=kept_code,
+                  allow_changed_code=allow_changed_code)  # fmt: skip
 
 
 def say_where_from(drills: list[Any]) -> None:

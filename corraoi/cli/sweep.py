@@ -76,6 +76,9 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--checkpoints", type=CHECKPOINTS, default=None,
               help="About this many checkpoint slots per curve [default: 200].")  # fmt: skip
 @click.option("--force", is_flag=True, help="With -o: start over in a DIR that holds a sweep.")
+@click.option("--kept-code", "kept_code", is_flag=True,
+              help="With --resume: run the copy of each plug-in's source the folder kept "
+              "(plugins/), whatever the file holds now.")  # fmt: skip
 @click.option("--baseline", default=None, metavar="POLICY",
               help="Also report, for every other policy, the mean and 95% CI of the per-run "
               "regret difference against POLICY on the same hidden paths (paired).")  # fmt: skip
@@ -109,6 +112,7 @@ def sweep(
     backend: str | None,
     allow_huge: bool,
     as_json: bool,
+    kept_code: bool,
 ) -> None:
     """Run a grid of policies over paired seeds and report the AoI regret at the horizon.
 
@@ -131,6 +135,13 @@ def sweep(
     out = output
     if resume and out is None:
         raise ConfigError("--resume needs -o DIR (the folder of the sweep to continue)")
+    if kept_code:
+        if not resume or out is None:
+            raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
+                              "of its plug-ins run)")  # fmt: skip
+        from ..sweep_code import use_kept_code
+
+        use_kept_code(out)  # before the grid is built: its plug-ins load from the copies
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
     given_params = parse_param_lists(param)
     for key, value in (("c", c), ("beta", beta)):

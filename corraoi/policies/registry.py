@@ -33,6 +33,7 @@ from .loading import (
     guarded_load,
     has_source,
     is_file_ref,
+    module_digest,
     module_version,
     one_line,
 )
@@ -150,6 +151,8 @@ class Resolved:
     cls: type[PolicyBase]
     qualname: str  # "corraoi:cucb", "file:/abs/eps.py:EpsilonGreedy", "pkg.mod:Class"
     version: str
+    #: sha256 (hex) of the source the class was loaded from ("" for a built-in or unknown)
+    sha256: str = ""
 
 
 def _registered(cls: type[PolicyBase]) -> Resolved:
@@ -159,12 +162,16 @@ def _registered(cls: type[PolicyBase]) -> Resolved:
     module = cls.__module__
     if module.startswith(PLUGIN_MODULE_PREFIX):
         file_version = getattr(sys.modules.get(module), "__corraoi_digest__", "")
-        return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "")
-    return Resolved(cls, qual, module_version(module))
+        return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "",
+                        file_version)  # fmt: skip
+    return Resolved(cls, qual, module_version(module), module_digest(module))
 
 
-def resolve(token: str) -> Resolved:
-    """The policy class a ``--policy`` word names (PolicyError with a hint if none)."""
+def resolve(token: str, *, expect: str = "") -> Resolved:
+    """The policy class a ``--policy`` word names (PolicyError with a hint if none).
+
+    ``expect``: the sha256 (hex or a prefix) of the source a run recorded: a plug-in file
+    is loaded from that source or refused (:class:`~corraoi.errors.CodeChanged`)."""
     raw = token.strip()
     if not raw:
         raise PolicyError("empty policy name (expected a name, FILE.py:Class or module:Class)")
@@ -179,16 +186,19 @@ def resolve(token: str) -> Resolved:
             path = Path(left).expanduser()
             if not path.is_file() and not has_source(path):
                 raise PolicyError(f"policy {raw!r}: no such file {left}")
-            module, version = file_module(path, f"policy {raw!r}")
+            module, version = file_module(path, f"policy {raw!r}", expect)
             qual = f"file:{path.resolve()}:{attr}"
+            digest = str(getattr(module, "__corraoi_digest__", ""))
         else:
             with guarded_load(f"policy {raw!r}", f"module {left}", f"cannot import module {left}"):
                 module = importlib.import_module(left)
             version = module_version(left)
             qual = f"{left}:{attr}"
+            digest = module_digest(left)
         if not hasattr(module, attr):
             raise PolicyError(f"policy {raw!r}: {left} has no class {attr}")
-        return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version)
+        return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version,
+                        digest)  # fmt: skip
     for ep in _entry_points():
         if ep.name == raw or ep.name.lower() == name:
             broken = f"its entry point {ep.value} is broken"
@@ -196,7 +206,8 @@ def resolve(token: str) -> Resolved:
                 loaded = ep.load()
             cls = check_class(loaded, f"policy {raw!r} (entry point {ep.value})")
             modname = ep.value.split(":")[0]
-            return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname))
+            return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname),
+                            module_digest(modname))  # fmt: skip
     raise PolicyError(unknown_policy_message(raw))
 
 
@@ -208,6 +219,16 @@ def unknown_policy_message(name: str) -> str:
         f"unknown policy {name!r}{hint} (see 'corraoi policies'; a plug-in is FILE.py:Class "
         "or package.module:Class)"
     )
+
+
+def registered_digest(cls: type[PolicyBase]) -> str:
+    """The sha256 (hex) of the source a registered class was loaded from ("" if unknown)."""
+    return _registered(cls).sha256
+
+
+def source_path(cls: type[PolicyBase]) -> str:
+    """The file a plug-in class was loaded from (its module's name if it has none)."""
+    return str(getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__)
 
 
 def held(name: str, qualname: str) -> type[PolicyBase] | None:

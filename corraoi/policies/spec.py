@@ -15,9 +15,17 @@ from typing import Any
 import numpy as np
 
 from .._version import __version__
-from ..errors import PolicyError
+from ..errors import CodeChanged, PolicyError
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
-from .registry import builtins, held, paper_names, policy_name, resolve
+from .registry import (
+    builtins,
+    held,
+    paper_names,
+    policy_name,
+    registered_digest,
+    resolve,
+    source_path,
+)
 
 
 @dataclass(frozen=True)
@@ -36,6 +44,9 @@ class PolicySpec:
     tier: str = field(default="compiled", compare=False)
     label: str = field(default="", compare=False)
     color: RGB | None = field(default=None, compare=False)
+    #: sha256 (hex) of the plug-in's source as loaded ("" for a built-in, or a log written
+    #: before corraoi recorded it): a spec names the code it ran, and resolves only to it
+    sha256: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", dict(self.params))
@@ -61,6 +72,8 @@ class PolicySpec:
                 "label": self.label,
                 "color": list(self.color) if self.color is not None else None,
             }
+            if self.sha256:
+                out["plugin"]["sha256"] = self.sha256
         return out
 
     @classmethod
@@ -86,6 +99,10 @@ class PolicySpec:
         rgb: RGB | None = None
         if isinstance(color, list) and len(color) == 3 and all(isinstance(c, int) for c in color):
             rgb = (int(color[0]), int(color[1]), int(color[2]))
+        sha = plugin.get("sha256", "")
+        if not (isinstance(sha, str) and len(sha) == 64
+                and all(c in "0123456789abcdef" for c in sha)):  # fmt: skip
+            sha = ""
         return cls(
             name=data["name"],
             params={k: float(v) for k, v in params.items()},
@@ -94,24 +111,43 @@ class PolicySpec:
             tier=str(plugin.get("tier", "compiled")),
             label=str(plugin.get("label", "") or data["name"]),
             color=rgb,
+            sha256=sha,
         )
 
+    @property
+    def digest(self) -> str:
+        """The sha256 (hex, or the 16 digits an older log's version holds) of the source
+        this spec ran with; "" when it names none (a built-in, a versioned package)."""
+        if self.sha256:
+            return self.sha256
+        tail = self.version.removeprefix("sha256:")
+        if tail != self.version and len(tail) >= 16 and all(c in "0123456789abcdef" for c in tail):
+            return tail
+        return ""
+
     def resolve(self) -> type[PolicyBase]:
-        """The policy class (importing the plug-in); PolicyError when it cannot be had."""
+        """The policy class (importing the plug-in); PolicyError when it cannot be had, and
+        :class:`~corraoi.errors.CodeChanged` when its source is not the one this spec names
+        (a run never goes under another code's hash)."""
         if self.builtin:
             cls = builtins().get(self.name)
             if cls is None:
                 raise PolicyError(f"policy {self.name}: not a built-in of corraoi {__version__}")
             return cls
+        expect = self.digest
         here = held(self.name, self.qualname)
         if here is not None:
+            found = registered_digest(here)
+            if expect and found and not found.startswith(expect):
+                raise CodeChanged(source_path(here), expect, found)
             return here
         qual = self.qualname
         if qual.startswith("file:"):
-            return resolve(qual[len("file:") :]).cls
-        if ":" in qual and not qual.startswith("plugin:"):
-            return resolve(qual).cls
-        return resolve(self.name).cls
+            return resolve(qual[len("file:") :], expect=expect).cls
+        res = resolve(qual if ":" in qual and not qual.startswith("plugin:") else self.name)
+        if expect and res.sha256 and not res.sha256.startswith(expect):
+            raise CodeChanged(source_path(res.cls), expect, res.sha256)
+        return res.cls
 
     def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
         """The parameters in the class's declared order (what compiled hooks receive)."""
@@ -144,6 +180,7 @@ def make_policy(token: str, **params: float | None) -> PolicySpec:
         tier=cls.tier,
         label=cls.label or policy_name(cls),
         color=cls.color,
+        sha256=res.sha256,
     )
 
 
