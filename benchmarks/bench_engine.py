@@ -14,15 +14,25 @@ Prints four tables:
 then peak memory (max RSS of a fresh process) at T = 10,000 and 1,000,000.
 
     python benchmarks/bench_engine.py [--runs 200] [--horizon 10000] [--repeat 5]
+
+With ``--against REV`` it prints one table instead: table 1's rows (the paper's twelve, their
+total, and the compiled plug-in) for the code at REV (``git archive`` into a temporary
+folder, its own kernel cache) and for this checkout, each side in fresh processes that
+alternate (before, after, after, before, ...), ``--repeat`` of each, best per row: what a
+change to the engine costs (docs/performance.md, the hook checks of issue 32).
+
+    python benchmarks/bench_engine.py --against HEAD~1 --repeat 7
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -59,6 +69,66 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
     paper = [best[n] for n in paper_names()]
     print(f"{'total (paper twelve)':22s} {sum(paper):8.3f} "
           f"{run_slots * len(paper) / sum(paper):14,.0f}")  # fmt: skip
+
+
+#: One side's timings, in a fresh process: each policy's ``advance`` over every run (its
+#: kernel loaded first, so that neither compiling nor loading is counted).
+_SIDE = (
+    "import json, sys, time\n"
+    "from corraoi.engine import Simulation, set_workers\n"
+    "from corraoi.instance import load_instance\n"
+    "from corraoi.policies import make_policy\n"
+    "names, runs, horizon = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])\n"
+    "inst = load_instance('I1')\n"
+    "set_workers(None)\n"
+    "out = {}\n"
+    "for name in names:\n"
+    "    Simulation(inst, make_policy(name), range(2), 2).advance(2, record=False)\n"
+    "    sim = Simulation(inst, make_policy(name), range(runs), horizon)\n"
+    "    s = time.perf_counter()\n"
+    "    sim.advance(horizon, record=False)\n"
+    "    out[name] = time.perf_counter() - s\n"
+    "print(json.dumps(out))\n"
+)
+
+
+def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
+    """Table 1 for the code at ``rev`` and for this checkout, alternated (module docstring)."""
+    from corraoi.policies import paper_names
+
+    names = [*paper_names(), COMPILED]
+    tmp = Path(tempfile.mkdtemp(prefix="corraoi-bench-"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi"],
+                             capture_output=True, check=True)  # fmt: skip
+    subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
+    sides = {"before": (tmp, tmp / "cache"), "after": (ROOT, ROOT / ".cache-corraoi")}
+
+    def run(side: str) -> dict[str, float]:
+        path, cache = sides[side]
+        env = {**os.environ, "PYTHONPATH": str(path), "CORRAOI_CACHE_DIR": str(cache)}
+        out = subprocess.run([sys.executable, "-c", _SIDE, json.dumps(names), str(runs),
+                              str(horizon)], env=env, capture_output=True, text=True,
+                             check=True, cwd=tmp)  # fmt: skip
+        return {k: float(v) for k, v in json.loads(out.stdout.splitlines()[-1]).items()}
+
+    run("before")  # both kernel caches warm: nothing below compiles
+    run("after")
+    times: dict[str, dict[str, list[float]]] = {s: {n: [] for n in names} for s in sides}
+    for i in range(repeat):
+        for side in ("before", "after") if i % 2 == 0 else ("after", "before"):
+            for name, dt in run(side).items():
+                times[side][name].append(dt)
+    best = {s: {n: min(v) for n, v in t.items()} for s, t in times.items()}
+    print(f"\nthe engine at {rev} (before) and this checkout (after): I1, {runs} runs, horizon "
+          f"{horizon}, fresh processes alternated, best of {repeat} each")  # fmt: skip
+    print(f"{'policy':22s} {'before s':>9} {'after s':>9} {'after/before':>13}")
+    rows = [(n, best["before"][n], best["after"][n]) for n in names if n != COMPILED]
+    for name, b, a in rows:
+        print(f"{name:22s} {b:9.3f} {a:9.3f} {a / b:13.3f}")
+    b, a = sum(r[1] for r in rows), sum(r[2] for r in rows)
+    print(f"{'paper workload (total)':22s} {b:9.3f} {a:9.3f} {a / b:13.3f}")
+    b, a = best["before"][COMPILED], best["after"][COMPILED]
+    print(f"{'compiled plug-in':22s} {b:9.3f} {a:9.3f} {a / b:13.3f}")
 
 
 def whole_process(runs: int, horizon: int, repeat: int) -> None:
@@ -146,10 +216,16 @@ def main() -> None:
     ap.add_argument("--all-builtins", action="store_true", help="table 1 for every built-in")
     ap.add_argument("--memory-policies", default="ucb,cts")
     ap.add_argument("--skip-memory", action="store_true")
+    ap.add_argument("--against", metavar="REV", default=None,
+                    help="only: table 1 for the code at REV and this checkout, alternated")
     args = ap.parse_args()
     load = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
           f"load average {load:.2f} at start")  # fmt: skip
+    if args.against is not None:
+        against(args.against, args.runs, args.horizon, args.repeat)
+        print(f"load average {os.getloadavg()[0]:.2f} at the end")
+        return
     per_policy(args.runs, args.horizon, args.repeat, args.all_builtins)
     whole_process(args.runs, args.horizon, args.repeat)
     wide(args.repeat)

@@ -74,6 +74,8 @@ _score = inlined(_score)
 _update = inlined(_update)
 
 CHANNEL_CDF, CHANNEL_TRACE = 0, 1
+#: A hook's fault, in ``err[r, 1]``: forced returned an arm >= K; score gave a candidate NaN.
+FAULT_ARM, FAULT_NAN = 1, 2
 #: The sweep kernel's decorator (see the module's docstring).
 SWEEP_DECORATOR = (
     '@njit(cache=True, nogil=True, parallel=True, error_model="numpy", '
@@ -169,6 +171,7 @@ def advance(
     oaoi,  # (R,) int64 oracle's current age
     regret,  # (R,) int64 pathwise regret so far
     aoisum,  # (R,) int64 sum of ages so far
+    err,  # (R, 3) int64: a hook's fault (slot, what: 1 arm out of range, 2 NaN score, value)
     record,  # bool: write the per-slot columns below
     o_x,  # (R, B) int32
     o_arm,  # (R, B) int32
@@ -232,6 +235,11 @@ def advance(
                     maxmu = m
                 cand[k] = True
             forced = _forced(t, K, npull, nsucc, params, ps, pst)
+            if forced >= K:  # a hook's arm out of range: the run stops before this slot
+                err[r, 0] = t
+                err[r, 1] = FAULT_ARM
+                err[r, 2] = forced
+                break
             if correlated and forced < 0:
                 # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
                 for k in range(K):
@@ -289,6 +297,15 @@ def advance(
                 else:
                     _score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
                     mask = cand
+                    nan = -1
+                    for k in range(K):  # NaN on a candidate: no argmax (+inf is a score)
+                        if cand[k] and vals[k] != vals[k]:
+                            nan = k
+                    if nan >= 0:
+                        err[r, 0] = t
+                        err[r, 1] = FAULT_NAN
+                        err[r, 2] = nan
+                        break
                 arm = argmax_random(vals, mask, pst, K)
             else:
                 arm = forced

@@ -98,7 +98,7 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
     seed0 = int(task["seed"]) + int(task["start"])
     run_policy(inst, cfg.policy, seeds=range(seed0, seed0 + n), horizon=cfg.horizon,
                checkpoints=stops, on_checkpoint=keep, on_slots=on_slots,
-               channel=channel)  # fmt: skip
+               channel=channel, first_run=int(task["start"]))  # fmt: skip
     return ChunkResult(
         chunk=Chunk(str(task["key"]), int(task["start"]), int(task["stop"])),
         t=np.asarray(stops, dtype=np.int64), regret=regret, estimator=estimator,

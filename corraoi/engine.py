@@ -25,7 +25,7 @@ from .instance import Instance
 from .limits import check_seed
 from .policies.spec import PolicySpec
 from .problem import Problem
-from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python
+from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python, construct
 from .rng import streams_for_seed, streams_for_seeds
 from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
@@ -83,8 +83,9 @@ class Simulation:
         horizon: int,
         *,
         channel: Channel | None = None,
+        first_run: int = 0,
     ) -> None:
-        self._setup(Problem.of(instance, policy, horizon, channel), seeds)
+        self._setup(Problem.of(instance, policy, horizon, channel), seeds, first_run)
 
     @classmethod
     def of(cls, problem: Problem, seeds: Sequence[int] | np.ndarray) -> Simulation:
@@ -93,8 +94,10 @@ class Simulation:
         sim._setup(problem, seeds)
         return sim
 
-    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray) -> None:
+    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray, first_run: int = 0) -> None:
         seed_arr = check_seeds(seeds)
+        #: the number of run 0 of this batch where a failure names a run (a sweep's chunk)
+        self.first_run = int(first_run)
         self.problem = pb
         self.instance = pb.instance
         self.policy = pb.policy
@@ -118,6 +121,7 @@ class Simulation:
         self.t = 0
         if pb.compiled:
             self._kernels: dict[bool, Any] = {}
+            self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
             self._params = pb.params
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
             self._pclass = pb.pclass
@@ -125,7 +129,7 @@ class Simulation:
             self._py: Any = None
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
-            self._py = self.cls(**pb.policy.params)
+            self._py = construct(self.cls, pb.policy)
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 
@@ -149,10 +153,14 @@ class Simulation:
         s_regret: np.ndarray,
         s_aoisum: np.ndarray,
         s_pulls: np.ndarray,
-    ) -> None:
+    ) -> tuple[int, PolicyRuntimeError | None]:
         """Advance every run ``nslots`` slots in kernel calls of at most about
         ``threads.PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
-        signal is handled between two calls within that time, however large the work."""
+        signal is handled between two calls within that time, however large the work.
+
+        Returns (slots done, None), or, when a hook returned an arm out of range or a NaN
+        score for a candidate (the kernel stops that run there: never an array read out of
+        bounds), the slots before the first such slot and its PolicyRuntimeError."""
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
@@ -177,7 +185,34 @@ class Simulation:
                         getattr(out, name)[:, done : done + n] = value
                 for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
                     full[:, i0:i1] = part
+            if self._err[:, 0].any():
+                return self._fault(K)
             done += n
+        return nslots, None
+
+    def _fault(self, K: int) -> tuple[int, PolicyRuntimeError]:
+        """The first slot at which a compiled hook failed (the kernel's ``err``), as the
+        plain-Python tier reports a bad arm: one line naming the policy, the run and the
+        slot, with the slots before it."""
+        err = self._err
+        hit = np.flatnonzero(err[:, 0])
+        r = int(hit[np.argmin(err[hit, 0])])
+        t, what, value = (int(v) for v in err[r])
+        err[:] = 0
+        who = self.run_name(r)
+        from ._kernel import FAULT_ARM
+
+        if what == FAULT_ARM:
+            text = (f"its forced hook returned arm {value} for {who}; expected 0..{K - 1}, or a "
+                    "negative number for none (0-based; arm k+1 in logs)")
+        else:
+            text = (f"its score hook gave NaN to arm {value + 1}, a candidate, for {who}; a "
+                    "score must be a number (+inf is one)")
+        return t - 1 - self.t, PolicyRuntimeError(f"policy {self.policy.name}, slot {t}: {text}")
+
+    def run_name(self, r: int) -> str:
+        """How a failure names run ``r`` of this batch: its number and its seed."""
+        return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
 
     def _call_kernel(
         self,
@@ -191,7 +226,8 @@ class Simulation:
         slices: list[tuple[int, int]],
     ) -> None:
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
-                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum)  # fmt: skip
+                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+                   self._err)  # fmt: skip
         outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
                    out.cand, out.pulls, out.muhat)  # fmt: skip
         common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
@@ -245,17 +281,17 @@ class Simulation:
         B = nslots if record else 0
         out = _Outputs(R, B, K)
         aoisum_before = self.aoisum.copy() if record else None
-        failure: PolicyRuntimeError | None = None
         if self._py is None:
-            self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
+            done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
+                                               s_pulls)  # fmt: skip
         else:
             done, failure = advance_python(
                 self, nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
             )
-            if failure is not None:  # keep the slots before the failing one
-                nslots = done
-                out.trim(done)
-                snap_t = snap_t[snap_t <= self.t + done]
+        if failure is not None:  # keep the slots before the failing one
+            nslots = done
+            out.trim(done)
+            snap_t = snap_t[snap_t <= self.t + done]
         snaps = [
             Snapshot(
                 t=int(ts),

@@ -234,7 +234,7 @@ def warm_args(K: int = 2) -> tuple[Any, ...]:
         np.zeros(0, f8), 0, 0,
         np.zeros((R, 4), np.uint64), np.zeros((R, 4), np.uint64), np.zeros((R, 2), f8),
         np.zeros((R, 1), f8), np.full(R, -1, i8), np.zeros((R, K), i8), np.zeros((R, K), i8),
-        np.ones(R, i8), np.ones(R, i8), np.zeros(R, i8), np.zeros(R, i8),
+        np.ones(R, i8), np.ones(R, i8), np.zeros(R, i8), np.zeros(R, i8), np.zeros((R, 3), i8),
         False, np.empty((R, 0), np.int32), np.empty((R, 0), np.int32),
         np.empty((R, 0), np.bool_), np.empty((R, 0), i8), np.empty((R, 0), i8),
         np.empty((R, 0), i8), np.empty((R, 0), np.bool_), np.empty((R, 0, K), np.bool_),
