@@ -34,7 +34,7 @@ from . import backends
 from .errors import ConfigError
 from .grid import Cell, Chunk, Grid
 from .summary import group_summary, summary_markdown
-from .sweep_code import check_code, keep_sources, read_manifest_dict
+from .sweep_code import check_code, keep_sources, kept_copy, read_manifest_dict
 from .sweep_folder import (
     GROUP_FILES,
     MANIFEST,
@@ -249,7 +249,9 @@ def _sweep(
             write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
         writer.finish(warn=warn)
-        write_manifest(folder, grid, "complete", folder_provenance(folder, grid))
+        prov = folder_provenance(grid)
+        keep_sources(folder, prov)
+        write_manifest(folder, grid, "complete", provenance_entry(folder, prov))
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip
 
@@ -287,18 +289,25 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     folder.mkdir(parents=True, exist_ok=True)
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ConfigError(f"{folder}: directory is not writable")
+    prov = folder_provenance(grid)  # plug-ins loaded, versions asked: before any file
+    write_manifest(folder, grid, "running", provenance_entry(folder, prov))  # first: resumable
+    keep_sources(folder, prov)
     (folder / PARTS).mkdir(exist_ok=True)
-    write_manifest(folder, grid, "running", folder_provenance(folder, grid))
     return grid
 
 
-def folder_provenance(folder: Path, grid: Grid) -> dict[str, Any]:
-    """What a sweep folder's manifest says made its numbers: the versions, the backend and
-    each plug-in's source, a copy of which it keeps beside its hash (corraoi.sweep_code)."""
+def folder_provenance(grid: Grid) -> Any:
+    """What made a sweep's numbers: the versions, the backend and each plug-in's source."""
     from .provenance import Provenance, sweep_backend
 
-    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
-    return {**prov.to_dict(), "plugins": keep_sources(folder, prov)}
+    return Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+
+
+def provenance_entry(folder: Path, prov: Any) -> dict[str, Any]:
+    """The manifest's ``provenance``: :func:`folder_provenance` with where the folder keeps
+    the copy of each plug-in's source (corraoi.sweep_code)."""
+    return {**prov.to_dict(), "plugins": [{**s.to_dict(), "copy": kept_copy(s)}
+                                          for s in prov.sources]}  # fmt: skip
 
 
 def _clear(folder: Path, old: Grid | None) -> None:

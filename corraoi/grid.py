@@ -33,7 +33,7 @@ import json
 import math
 import os
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +43,7 @@ from .errors import ConfigError
 from .instance import Instance, load_instance
 from .limits import check_horizon, check_seed
 from .policies import PolicySpec, make_policy, parse_policy_names, resolve
+from .policies.spec import assign_params, param_key
 
 #: Keys an experiment file may hold.
 FILE_KEYS = ("instances", "policies", "horizons", "runs", "seed", "chunk", "checkpoints",
@@ -233,9 +234,9 @@ def parse_param_lists(items: Iterable[str]) -> dict[str, list[float]]:
     out: dict[str, list[float]] = {}
     for item in items:
         name, sep, text = str(item).partition("=")
-        name = name.strip()
-        if not sep or not name.isidentifier():
+        if not sep:
             raise ConfigError(f"--param {item!r}: expected NAME=VALUE[,VALUE...] (e.g. c=1,2)")
+        name = param_key(str(item), name, "c=1,2")
         values = []
         for tok in text.split(","):
             try:
@@ -260,12 +261,14 @@ def build_grid(
     channel: str | None = None,
     baseline: str | None = None,
     backend: str = "cpu",
+    warn: Callable[[str], None] | None = None,
 ) -> Grid:
     """The grid of every instance x policy x parameter combination x horizon.
 
-    Each parameter list goes to every policy that declares the parameter (the product over
-    the parameters a policy declares); a parameter that no listed policy declares is an
-    error, as is a value outside its declared range.
+    Each parameter list goes to every policy that declares the parameter, or to one policy
+    for ``POLICY.NAME`` (:func:`~corraoi.policies.spec.assign_params`; the product over the
+    parameters a policy takes); a parameter that no listed policy declares is an error, as
+    is a value outside its declared range.
     """
     if not instances:
         raise ConfigError("no instance given (expected a name, a file, or a comma list)")
@@ -279,16 +282,11 @@ def build_grid(
             raise ConfigError(f"parameter {name}: no value given")
     tokens = parse_policy_names(policies)
     classes = {t: resolve(t).cls for t in tokens}
-    for pname in params:
-        if not any(pname in cls.params for cls in classes.values()):
-            raise ConfigError(
-                f"parameter {pname} does not apply to "
-                f"{', '.join(cls.name for cls in classes.values())}"
-            )
+    each = assign_params(tokens, classes, params, warn=warn)  # NAME or POLICY.NAME
     specs: list[PolicySpec] = []
     for t in tokens:
-        declared = [p for p in params if p in classes[t].params]
-        for combo in itertools.product(*(params[p] for p in declared)):
+        declared = list(each[t])
+        for combo in itertools.product(*(each[t][p] for p in declared)):
             specs.append(make_policy(t, **dict(zip(declared, combo, strict=True))))
     cells = []
     for spec_text in instances:

@@ -31,13 +31,18 @@ def keep_sources(folder: Path, provenance: Any) -> list[dict[str, str]]:
     path in the folder). A copy already there with the right bytes is kept as it is."""
     entries = []
     for src in provenance.sources:
-        rel = f"{PLUGINS}/{src.sha256[:16]}/{safe_file_name(src.name)}"
+        rel = kept_copy(src)
         target = folder / rel
         if not (target.is_file() and not target.is_symlink() and _sha(target) == src.sha256):
             target.parent.mkdir(parents=True, exist_ok=True)
             PartialFile.write_bytes(target, src.data, what="plug-in copy", sweep=True)
         entries.append({**src.to_dict(), "copy": rel})
     return entries
+
+
+def kept_copy(source: Any) -> str:
+    """Where in a sweep folder the copy of ``source`` (a provenance Source) is kept."""
+    return f"{PLUGINS}/{source.sha256[:16]}/{safe_file_name(source.name)}"
 
 
 def kept_sources(folder: Path, manifest: dict[str, Any]) -> list[dict[str, Any]]:
@@ -146,5 +151,5 @@ def _sha(path: Path) -> str:
         return ""
 
 
-__all__ = ["PLUGINS", "changed_note", "check_code", "current_spec", "keep_sources",
+__all__ = ["PLUGINS", "changed_note", "check_code", "current_spec", "keep_sources", "kept_copy",
            "kept_sources", "read_manifest_dict", "use_kept_code", "way_out"]  # fmt: skip

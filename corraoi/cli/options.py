@@ -57,9 +57,10 @@ def param_options(func: F) -> F:
         "--param",
         "param",
         multiple=True,
-        metavar="NAME=VALUE",
-        help="Set a policy parameter (repeatable); it applies to every listed policy that "
-        "declares NAME and is checked against its range ('corraoi policies' lists them).",
+        metavar="[POLICY.]NAME=VALUE",
+        help="Set a policy parameter (repeatable): NAME=VALUE applies to every listed policy "
+        "that declares NAME (a warning when that is more than one), POLICY.NAME=VALUE to that "
+        "policy only; checked against its range ('corraoi policies' lists them).",
     )(func)
     func = click.option(
         "--beta",

@@ -146,7 +146,7 @@ def record(
             raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
                              "--from SWEEP")  # fmt: skip
         inst = load_instance(instance)
-        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
         chan = parse_channel(channel, inst)
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]

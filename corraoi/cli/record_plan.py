@@ -118,7 +118,7 @@ def from_sweep(
     if not given and (param or c is not None or beta is not None):
         raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
                          "parameters (with --policy they set those of a policy added)")
-    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
              if given else [])  # fmt: skip
     return choose(folder, run, cells=cells, policies=specs, warn=warn, kept_code=kept_code,
                   allow_changed_code=allow_changed_code)  # fmt: skip

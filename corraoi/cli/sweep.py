@@ -54,9 +54,10 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--horizon", "-T", "horizon", multiple=True, metavar="T[,T...]",
               help="Horizons (slots); a comma list sweeps each [default: 10000].")  # fmt: skip
 @seed_option
-@click.option("--param", "param", multiple=True, metavar="NAME=V[,V...]",
+@click.option("--param", "param", multiple=True, metavar="[POLICY.]NAME=V[,V...]",
               help="Sweep a policy parameter over values (repeatable): each value goes to every "
-              "listed policy that declares NAME ('corraoi policies').")  # fmt: skip
+              "listed policy that declares NAME (a warning when that is more than one), or with "
+              "POLICY.NAME to that policy only ('corraoi policies').")  # fmt: skip
 @click.option("--c", "c", type=float, default=None, help="Shorthand for --param c=VALUE.")
 @click.option("--beta", type=float, default=None, help="Shorthand for --param beta=VALUE.")
 @channel_option
@@ -167,7 +168,7 @@ def sweep(
     spec["params"] = {**spec.get("params", {}), **given_params}
     limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
     try:
-        grid = build_grid(**spec)
+        grid = build_grid(**spec, warn=warn)
     except CorraoiError as exc:
         if experiment is None:
             raise

@@ -199,6 +199,8 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
             raise PolicyError(f"policy {raw!r}: {left} has no class {attr}")
         return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version,
                         digest)  # fmt: skip
+    if ":" not in raw and raw.endswith(".py"):  # FILE.py without its class: say which it holds
+        raise PolicyError(_file_without_class(raw))
     for ep in _entry_points():
         if ep.name == raw or ep.name.lower() == name:
             broken = f"its entry point {ep.value} is broken"
@@ -209,6 +211,30 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
             return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname),
                             module_digest(modname))  # fmt: skip
     raise PolicyError(unknown_policy_message(raw))
+
+
+def _file_without_class(raw: str) -> str:
+    """The one line for ``--policy FILE.py``: the policy classes the file holds."""
+    path = Path(raw).expanduser()
+    if not path.is_file() and not has_source(path):
+        return f"policy {raw!r}: no such file {raw} (a plug-in is FILE.py:Class)"
+    module, _ = file_module(path, f"policy {raw!r}")
+    found = [attr for attr, obj in vars(module).items()
+             if isinstance(obj, type) and issubclass(obj, PolicyBase) and obj.__module__ ==
+             module.__name__ and _is_policy(obj, attr)]  # fmt: skip
+    if not found:
+        return (f"policy {raw!r}: {raw} holds no policy class (a subclass of "
+                "corraoi.policies.Policy or CompiledPolicy); a plug-in is FILE.py:Class")
+    return (f"policy {raw!r}: name the class too, e.g. {raw}:{found[0]} (the policy classes "
+            f"{raw} holds: {', '.join(found)})")
+
+
+def _is_policy(obj: type[PolicyBase], where: str) -> bool:
+    try:
+        check_class(obj, where)
+    except PolicyError:
+        return False
+    return True
 
 
 def unknown_policy_message(name: str) -> str:
