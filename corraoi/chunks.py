@@ -57,6 +57,7 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
     from .block import RunConfig
     from .channels import Channel
     from .engine import set_workers
+    from .policies.api import CompiledPolicy
     from .sweep import run_policy
     from .theory import analyse
 
@@ -94,6 +95,11 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
         best_pulls[:, i] = snap.pulls[:, best]
         pulls_sum[i] = snap.pulls.sum(axis=0)
 
+    cls = cfg.policy.resolve()
+    if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+        from .kernels import kernel_for
+
+        kernel_for(cls, record=False)  # compiled or loaded now: a chunk's wall_s is its runs
     start = time.perf_counter()
     seed0 = int(task["seed"]) + int(task["start"])
     run_policy(inst, cfg.policy, seeds=range(seed0, seed0 + n), horizon=cfg.horizon,

@@ -241,7 +241,7 @@ def test_resume_of_a_folder_whose_manifest_predates_the_full_hash_keeps_its_cell
     res = _cli("sweep", "-i", "I1", "-p", "cucb,greedyish.py:Greedyish", "-n", 6, "-T", 400,
                "--chunk", 3, "-o", "sw", "--resume", cwd=swept.parent)  # fmt: skip
     assert res.returncode == 0, res.stderr
-    assert "(0 chunk(s) run, 4 already done)" in res.stdout + res.stderr
+    assert "(0 chunks run, 4 already done)" in res.stdout + res.stderr
     assert len(json.loads((swept / "manifest.json").read_text())["grid"]["cells"]) == 2
 
 

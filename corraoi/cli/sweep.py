@@ -202,15 +202,32 @@ def sweep(
                 click.echo("")
             print_table(summary, out)
     if out is not None:
-        done = f"{outcome.chunks_run} chunk(s) run"
-        if outcome.chunks_skipped:
-            done += f", {outcome.chunks_skipped} already done"
-        click.echo(f"wrote {out}/ ({done}): " + ", ".join(
-            str(p.relative_to(out)) + "/" if p != out else "." for p in outcome.folders
-        ), err=as_json)  # fmt: skip
+        click.echo(wrote_line(out, outcome), err=as_json)
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
 
+
+
+def wrote_line(out: Path, outcome: Any) -> str:
+    """What a sweep into ``out`` wrote, by name: ``wrote sw/: manifest.json, ...`` and, for a
+    grid of several groups, their folders with the files each holds; then the chunks run."""
+    from ..sweep_folder import GROUP_FILES
+
+    def n(count: int, what: str) -> str:
+        return f"{count} {what}{'' if count == 1 else 's'}"
+
+    done = n(outcome.chunks_run, "chunk") + " run"
+    if outcome.chunks_skipped:
+        done += f", {outcome.chunks_skipped} already done"
+    names = [f for f in ("manifest.json", "results.parquet", "plugins") if (out / f).exists()]
+    folders = [p for p in outcome.folders if p != out]
+    group = outcome.folders[0] if outcome.folders else out
+    files = [f for f in GROUP_FILES if (group / f).exists()]
+    if folders:
+        names += [f"{p.relative_to(out)}/" for p in folders]
+        return (f"wrote {out}/: {', '.join(names)}, each group folder with "
+                f"{', '.join(files)} ({done})")  # fmt: skip
+    return f"wrote {out}/: {', '.join(names + files)} ({done})"
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
