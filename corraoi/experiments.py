@@ -293,6 +293,11 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     write_manifest(folder, grid, "running", provenance_entry(folder, prov))  # first: resumable
     keep_sources(folder, prov)
     (folder / PARTS).mkdir(exist_ok=True)
+    from .locks import lock_holder
+
+    for stale in (folder / PARTS).glob("*.partial"):  # parts a killed sweep left half-written
+        if stale.is_file() and lock_holder(stale) is None:
+            stale.unlink(missing_ok=True)
     return grid
 
 

@@ -29,6 +29,7 @@ import fcntl
 import hashlib
 import importlib
 import importlib.util
+import json
 import os
 import sys
 import tempfile
@@ -211,6 +212,43 @@ def _is_cached(folder: Path, modname: str) -> bool:
     return any(p.suffix == ".nbi" for p in _index_files(folder, modname))
 
 
+def _sums_file(folder: Path, modname: str) -> Path:
+    return folder / f".{modname}.sha256"
+
+
+def _sums(folder: Path, modname: str) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(_index_files(folder, modname))}  # fmt: skip
+
+
+def _write_sums(folder: Path, modname: str) -> None:
+    """Record the sha256 of every file numba cached for a kernel just compiled."""
+    from .partial_file import PartialFile
+
+    data = json.dumps(_sums(folder, modname), sort_keys=True).encode()
+    PartialFile.write_bytes(_sums_file(folder, modname), data, what="kernel cache checksums")
+
+
+def _damaged(folder: Path, modname: str) -> str:
+    """Why a kernel's cached files cannot be trusted, as the end of a sentence ("" when they
+    can, or when there are none): integrity is checked before numba loads machine code, so a
+    truncated, altered or foreign file is rebuilt instead of being run."""
+    if not _index_files(folder, modname):
+        return ""
+    try:
+        want = json.loads(_sums_file(folder, modname).read_text(encoding="utf-8"))
+        have = _sums(folder, modname)
+    except (OSError, ValueError):
+        return "has no checksums (cached by an older corraoi, or its checksums were lost)"
+    return "" if want == have else "is damaged (its files do not match their checksums)"
+
+
+def _clear_index(folder: Path, modname: str) -> None:
+    for f in _index_files(folder, modname):
+        f.unlink(missing_ok=True)
+    _sums_file(folder, modname).unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def _locked(folder: Path, modname: str) -> Iterator[None]:
     """Hold an exclusive lock on one kernel's lock file: a second process that needs the
@@ -253,8 +291,13 @@ def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
     from numba.core.errors import NumbaPerformanceWarning
 
     with _locked(folder, modname):
+        damaged = _damaged(folder, modname)  # checked before numba loads any of it
+        if damaged:
+            if on_compile is not None:
+                on_compile(f"the cached engine for {what} {damaged}; rebuilding it")
+            _clear_index(folder, modname)
         compiling = not _is_cached(folder, modname)
-        if compiling and on_compile is not None:
+        if compiling and on_compile is not None and not damaged:  # said above if damaged
             on_compile(f"compiling the engine for {what} (first use; cached in {folder})")
         for attempt in (0, 1):
             sys.modules.pop(modname, None)
@@ -283,12 +326,12 @@ def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
                         f"the cached engine for {what} is damaged "
                         f"({type(exc).__name__}); rebuilding it"
                     )
-                for f in _index_files(folder, modname):
-                    f.unlink(missing_ok=True)
+                _clear_index(folder, modname)
                 compiling = True
                 continue
             if compiling:
                 compile_seconds += time.perf_counter() - start
+                _write_sums(folder, modname)
             return module.advance
     raise AssertionError("unreachable")
 

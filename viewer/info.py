@@ -128,7 +128,8 @@ def provenance_rows(prov: dict[str, Any] | None) -> list[str]:
              f"  {'versions':<22} {others}",
              f"  {'backend':<22} {prov.get('backend') or '?'}"]  # fmt: skip
     for p in prov.get("plugins", []):
-        where = ("its source attached, byte for byte" if p.get("attached", True)
+        where = ("a copy of its source kept in the folder" if p.get("kept") else
+                 "its source attached, byte for byte" if p.get("attached", True)
                  else "its source NOT attached")  # fmt: skip
         lines.append(f"  {'plug-in source':<22} {p['file']} {short(p['sha256'])} ({where})")
     for note in prov.get("notes", []):
@@ -159,15 +160,18 @@ def sweep_info(folder: Path) -> dict[str, Any]:
     and, per group, the runs worth watching with the ``corraoi record --from`` line of each.
     Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
     from corraoi.drill import sweep_root
+    from corraoi.sweep_code import read_manifest_dict
+    from corraoi.sweep_folder import group_dirs
 
     root, grid, only = sweep_root(folder, option="")
-    manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    manifest = read_manifest_dict(root)  # the grid read above is checked; the rest is shown
     groups = []
-    several = len(manifest.get("groups", {})) > 1
-    for sub, entry in sorted(manifest.get("groups", {}).items()):
-        if only is not None and entry.get("instance") != only:
+    dirs = group_dirs(grid, root)  # from the grid: the manifest's own list is not trusted
+    several = len(dirs) > 1
+    for (name, horizon), where in sorted(dirs.items(), key=lambda kv: str(kv[1])):
+        entry = {"instance": name, "horizon": horizon}
+        if only is not None and name != only:
             continue
-        where = root / sub
         summary_path = where / "summary.json"
         notable = None
         if summary_path.is_file():
@@ -178,16 +182,36 @@ def sweep_info(folder: Path) -> dict[str, Any]:
         named = _with_commands(notable, root, entry.get("instance"), several)
         groups.append({"folder": str(where), "instance": entry.get("instance"),
                        "horizon": entry.get("horizon"), "notable": named})  # fmt: skip
+    prov = manifest.get("provenance")
     return {
         "path": str(root),
-        "status": manifest.get("status"),
-        "corraoi_version": manifest.get("corraoi_version"),
+        "status": str(manifest.get("status")),
+        "corraoi_version": str(manifest.get("corraoi_version")),
+        "provenance": prov if isinstance(prov, dict) else None,
         "backend": grid.backend,
         "cells": len(grid.cells),
         "runs": grid.runs,
         "seeds": [grid.seed, grid.seed + grid.runs - 1],
         "groups": groups,
     }
+
+
+def _sweep_provenance(info: dict[str, Any]) -> dict[str, Any] | None:
+    """A manifest's provenance as provenance_rows reads it (whatever is malformed left out)."""
+    prov = info.get("provenance")
+    if not isinstance(prov, dict):
+        return None
+    versions = prov.get("versions")
+    plugins = prov.get("plugins")
+    return {
+        "versions": {str(k): str(v) for k, v in versions.items()}
+        if isinstance(versions, dict) else {},
+        "backend": str(prov.get("backend", "")),
+        "plugins": [{"file": str(p.get("copy") or p.get("file")), "sha256": p["sha256"],
+                     "kept": True} for p in plugins if isinstance(p, dict)
+                    and isinstance(p.get("sha256"), str)] if isinstance(plugins, list) else [],
+        "notes": [],
+    }  # fmt: skip
 
 
 def _with_commands(
@@ -215,9 +239,11 @@ def sweep_info_text(info: dict[str, Any]) -> str:
     """The lines ``corraoi info DIR`` prints from :func:`sweep_info`'s dict."""
     lo, hi = info["seeds"]
     lines = [
-        f"{safe_text(info['path'])}: corraoi sweep folder ({info['status']}), {info['cells']} "
-        f"cells x {info['runs']} runs (seeds {lo}..{hi}), backend {info['backend']}",
+        f"{safe_text(info['path'])}: corraoi sweep folder ({safe_text(info['status'])}), "
+        f"{info['cells']} cells x {info['runs']} runs (seeds {lo}..{hi}), backend "
+        f"{info['backend']}",
     ]
+    lines += [safe_text(line) for line in provenance_rows(_sweep_provenance(info))]
     for g in info["groups"]:
         lines.append(f"  {safe_text(g['instance'])}, T = {g['horizon']}: {safe_text(g['folder'])}")
         notable = g["notable"]

@@ -41,8 +41,13 @@ def main() -> None:
       corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
       corraoi sweep ... --backend gpu   built-in policies on a CUDA GPU (docs/gpu.md)
     """
+    import os
+
     from .. import kernels
 
+    # Rerun's own log lines (a file writer stopped by a full disk, ...) would come before our
+    # one line about the same thing: we report its problems ourselves.
+    os.environ.setdefault("RUST_LOG", "off")
     # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
     kernels.on_compile = lambda message: click.echo(
         f"corraoi: {message}" + ("" if message.startswith(" ") else " ..."), err=True
