@@ -20,7 +20,7 @@ from . import threads
 from .block import FIELDS, Columns, SlotBlock
 from .candidates import candidate_bitsets
 from .channels import Channel
-from .errors import ConfigError
+from .errors import ConfigError, CorraoiError
 from .instance import Instance
 from .limits import check_seed
 from .policies.spec import PolicySpec
@@ -176,7 +176,15 @@ class Simulation:
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
             start = time.perf_counter()
-            self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            try:
+                self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            except (CorraoiError, KeyboardInterrupt):
+                raise
+            except Exception as exc:  # noqa: BLE001 - a compiled hook raised (numba's raise)
+                detail = " ".join(str(exc).split())[:300]
+                return done, PolicyRuntimeError(
+                    f"policy {self.policy.name}, slots {t0 + 1}..{t0 + n}: a compiled hook "
+                    f"raised {type(exc).__name__}" + (f": {detail}" if detail else ""))
             self._rate = threads.rate(R * n, time.perf_counter() - start, len(slices),
                                       self._rate)  # fmt: skip
             if piece is not out:

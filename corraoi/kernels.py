@@ -317,10 +317,10 @@ def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
                 raise
             except Exception as exc:
                 if attempt == 1 or not _index_files(folder, modname):
-                    raise KernelError(
-                        f"the engine for {what} cannot be built in {folder}: "
-                        f"{type(exc).__name__}: {exc}"
-                    ) from exc
+                    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()][:2]
+                    why = " ".join(" ".join(lines).split())[:400]  # numba's errors run long
+                    raise KernelError(f"the engine for {what} cannot be built in {folder}: "
+                                      f"{type(exc).__name__}: {why}") from exc  # fmt: skip
                 if on_compile is not None:
                     on_compile(
                         f"the cached engine for {what} is damaged "

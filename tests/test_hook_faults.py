@@ -122,3 +122,25 @@ def test_a_plugin_class_that_raises_when_made_is_one_line(tmp_path: Path):
     line = _error(_cli("sweep", "-p", f"{PLUGINS}:RaisesInInit", "-n", 3, "-T", 50,
                        cwd=tmp_path))  # fmt: skip
     assert line == f"corraoi: error: {want}"
+
+
+@pytest.mark.parametrize(("ref", "code", "want"), [
+    ("RaisingScore", 1, "policy raising-score, slots 1..50: a compiled hook raised ValueError: "
+                        "score gave up"),
+    ("WrongSignature", 2, "the engine for wrong-signature cannot be built in "),
+    ("NegativeState", 2, "policy negative-state: its state_size returned -5; expected a whole "
+                         "number of float64 entries per run, 0..1048576"),
+    ("HugeState", 2, "policy huge-state: its state_size returned 1000000000000000; expected"),
+    ("RaisingState", 2, "policy raising-state: its state_size raised RuntimeError: state size "
+                        "unknown"),
+])  # fmt: skip
+def test_a_compiled_plugin_that_misbehaves_in_any_hook_is_one_line(tmp_path: Path, ref: str,
+                                                                   code: int, want: str):
+    line = _error(_cli("record", "-p", f"{PLUGINS}:{ref}", "-T", 50, "--no-rrd", "-o", "x.mcap",
+                       cwd=tmp_path), code)  # fmt: skip
+    assert line.startswith(f"corraoi: error: {want}"), line
+    assert not (tmp_path / "x.mcap").exists()
+    if ref == "RaisingScore":  # in a sweep too, its chunks on the engine's threads
+        line = _error(_cli("sweep", "-p", f"{PLUGINS}:{ref}", "-n", 40, "-T", 3000, "-j", 2,
+                           cwd=tmp_path))  # fmt: skip
+        assert "a compiled hook raised ValueError: score gave up" in line

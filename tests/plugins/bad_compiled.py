@@ -78,3 +78,54 @@ class RaisesInInit(Policy):
 
     def select(self, t, state):
         return np.zeros(state.runs, dtype=np.int64)
+
+
+@njit(cache=True)
+def raising_score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache):
+    if t > 5:
+        raise ValueError("score gave up")
+    for k in range(K):
+        vals[k] = muhat[k]
+
+
+@njit(cache=True)
+def two_argument_forced(t, K):
+    return 0
+
+
+class RaisingScore(CompiledPolicy):
+    name = "raising-score"
+    score = raising_score
+
+
+class WrongSignature(CompiledPolicy):
+    name = "wrong-signature"
+    forced = two_argument_forced
+    score = "corraoi.policies.hooks:score_none"
+
+
+class NegativeState(CompiledPolicy):
+    name = "negative-state"
+    score = "corraoi.policies.hooks:score_none"
+
+    @classmethod
+    def state_size(cls, K, params):
+        return -5
+
+
+class HugeState(CompiledPolicy):
+    name = "huge-state"
+    score = "corraoi.policies.hooks:score_none"
+
+    @classmethod
+    def state_size(cls, K, params):
+        return 10**15
+
+
+class RaisingState(CompiledPolicy):
+    name = "raising-state"
+    score = "corraoi.policies.hooks:score_none"
+
+    @classmethod
+    def state_size(cls, K, params):
+        raise RuntimeError("state size unknown")
