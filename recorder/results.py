@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from corraoi._version import __version__
+from corraoi.provenance import Provenance, sweep_backend
 
 from .errors import LogError, WriteError
 from .format import SWEEP_METADATA
@@ -95,8 +96,10 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True).create()
     tmp = out.partial
     full = results_schema()
-    schema = pa.schema([f for f in full if f.name != "instance"],
-                       metadata=results_metadata({**grid.to_dict(), "version": __version__}))
+    metadata = results_metadata({**grid.to_dict(), "version": __version__})
+    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+    metadata["provenance"] = json.dumps(prov.to_dict(), sort_keys=True)  # what made the rows
+    schema = pa.schema([f for f in full if f.name != "instance"], metadata=metadata)
     by_instance: dict[str, list[Any]] = {}
     for cell in grid.cells:
         by_instance.setdefault(cell.instance.name, []).append(cell)

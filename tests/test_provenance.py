@@ -337,3 +337,13 @@ def test_kept_code_of_a_compiled_plugin_runs_the_kept_kernel(tmp_path: Path):
     assert int(open_log(tmp_path / "k.mcap").end["regret"]) == _finals(tmp_path / "sw",
                                                                        "decay-eps")[3]
     assert open_log(tmp_path / "k.mcap").attachments[0][2] == COMPILED.encode()
+
+
+def test_results_parquet_says_what_made_its_rows(swept: Path):
+    pq = pytest.importorskip("pyarrow.parquet")
+
+    (part,) = (swept / "results.parquet").rglob("*.parquet")
+    meta = {k.decode(): v.decode() for k, v in pq.read_schema(part).metadata.items()}
+    prov = json.loads(meta["provenance"])
+    assert prov["plugins"][0]["sha256"] == _sha((swept.parent / "greedyish.py").read_bytes())
+    assert prov["backend"] == "cpu" and "kernel_sources" in prov["versions"]
