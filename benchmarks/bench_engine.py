@@ -17,9 +17,10 @@ then peak memory (max RSS of a fresh process) at T = 10,000 and 1,000,000.
 
 With ``--against REV`` it prints one table instead: table 1's rows (the paper's twelve, their
 total, and the compiled plug-in) for the code at REV (``git archive`` into a temporary
-folder, its own kernel cache) and for this checkout, each side in fresh processes that
-alternate (before, after, after, before, ...), ``--repeat`` of each, best per row: what a
-change to the engine costs (docs/performance.md, the hook checks of issue 32).
+folder, its own kernel cache; or REV a folder holding that code's ``corraoi/``) and for
+this checkout, each side in fresh processes that alternate (before, after, after, before,
+...), ``--repeat`` of each, best per row: what a change to the engine costs
+(docs/performance.md, the hook checks of issue 32).
 
     python benchmarks/bench_engine.py --against HEAD~1 --repeat 7
 """
@@ -29,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -98,9 +100,12 @@ def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
 
     names = [*paper_names(), COMPILED]
     tmp = Path(tempfile.mkdtemp(prefix="corraoi-bench-"))
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi"],
-                             capture_output=True, check=True)  # fmt: skip
-    subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
+    if Path(rev, "corraoi").is_dir():  # a folder that holds the other code's corraoi/
+        shutil.copytree(Path(rev, "corraoi"), tmp / "corraoi")
+    else:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi"],
+                                 capture_output=True, check=True)  # fmt: skip
+        subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
     sides = {"before": (tmp, tmp / "cache"), "after": (ROOT, ROOT / ".cache-corraoi")}
 
     def run(side: str) -> dict[str, float]:
