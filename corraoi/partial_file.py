@@ -136,7 +136,8 @@ class PartialFile:
         # or out.discard()               # 4. removed (ours only), or out.leave(): kept
 
     As a context manager, ``with PartialFile(...) as out:`` creates it, publishes it when the
-    block ends normally and discards it when it ends through an exception. ``folder=True``
+    block ends normally and discards it when it ends through an exception (an OSError, a
+    write that failed, becomes one WriteError line naming the file). ``folder=True``
     makes ``<path>.partial/`` a directory (``results.parquet``); ``suffix`` another name than
     ``.partial`` (``recover``, whose source is often that name). Every failure is one
     OutputError or WriteError line naming the file.
@@ -376,24 +377,25 @@ class PartialFile:
             self.create()
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, *rest: object) -> None:
-        if self.state == "open":
-            self.publish() if exc_type is None else self.discard()
+    def __exit__(self, exc_type: type[BaseException] | None, exc: object, tb: object) -> None:
+        if self.state != "open":
+            return
+        if exc_type is None:
+            self.publish()
+            return
+        self.discard()
+        if isinstance(exc, OSError):  # a write failed (disk full, ...): one line, the file named
+            raise WriteError(f"{self.partial}: cannot write the {self.what}: {reason(exc)}")
 
     @classmethod
     def write_bytes(cls, path: str | os.PathLike[str], data: bytes, *, overwrite: bool = True,
                     what: str = "file", sync: bool = True, sweep: bool = False) -> Path:
         """Write ``data`` to ``path`` through the protocol (a small file in one go)."""
-        out = cls(path, overwrite=overwrite, what=what, sweep=sweep).create()
-        try:
+        with cls(path, overwrite=overwrite, what=what, sweep=sweep) as out:
             out.file.write(data)
-            return out.publish(sync=sync)
-        except OSError as exc:
-            out.discard()
-            raise WriteError(f"{out.partial}: cannot write the {what}: {reason(exc)}") from None
-        except BaseException:
-            out.discard()
-            raise
+            if not sync:
+                out.publish(sync=False)
+        return out.path
 
 
 __all__ = ["PARTIAL_SUFFIX", "PartialFile", "check_target", "partial_path", "reason"]

@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .errors import ConfigError, WriteError
+from .errors import ConfigError
 from .grid import Cell, Chunk, Grid
-from .partial_file import PartialFile, reason
+from .partial_file import PartialFile
 from .stats import Moments
 from .sweep_guard import MANIFEST_FORMAT
 
@@ -108,16 +108,13 @@ class ChunkResult:
     def save(self, path: Path) -> None:
         """Write through the ``.partial`` protocol: a part exists only when complete."""
         extra = self.agg.arrays() if self.agg is not None else {}
-        try:
-            with PartialFile(path, overwrite=True, what="part file", sweep=True) as target:
-                np.savez(
-                    target.file, cell=np.array(self.chunk.cell), start=self.chunk.start,
-                    stop=self.chunk.stop, t=self.t, regret=self.regret, estimator=self.estimator,
-                    best_pulls=self.best_pulls, pulls_sum=self.pulls_sum, wall_s=self.wall_s,
-                    **extra,
-                )  # fmt: skip
-        except OSError as exc:
-            raise WriteError(f"{path}.partial: cannot write the part file: {reason(exc)}") from None
+        with PartialFile(path, overwrite=True, what="part file", sweep=True) as target:
+            np.savez(
+                target.file, cell=np.array(self.chunk.cell), start=self.chunk.start,
+                stop=self.chunk.stop, t=self.t, regret=self.regret, estimator=self.estimator,
+                best_pulls=self.best_pulls, pulls_sum=self.pulls_sum, wall_s=self.wall_s,
+                **extra,
+            )  # fmt: skip
 
     @classmethod
     def load(cls, path: Path) -> ChunkResult:

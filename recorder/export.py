@@ -16,8 +16,7 @@ from typing import TYPE_CHECKING
 
 from corraoi.errors import UsageError
 
-from .errors import WriteError
-from .paths import PartialFile, reason
+from .paths import PartialFile
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -75,27 +74,19 @@ def _write(
     import pyarrow.csv as pcsv
     import pyarrow.parquet as pq
 
-    part = target.create().partial
     rows = 0
-    try:
+    with target:  # published when whole; on an error discarded (a failed write: one line)
         writer: pq.ParquetWriter | pcsv.CSVWriter
         if fmt == "parquet":
-            writer = pq.ParquetWriter(str(part), schema, compression="zstd")
+            writer = pq.ParquetWriter(str(target.partial), schema, compression="zstd")
         else:
-            writer = pcsv.CSVWriter(str(part), schema)
+            writer = pcsv.CSVWriter(str(target.partial), schema)
         try:
             for batch in _nonempty(batches):
                 writer.write_batch(batch)
                 rows += batch.num_rows
         finally:
             writer.close()
-    except OSError as exc:
-        target.discard()
-        raise WriteError(f"{part}: cannot write the export: {reason(exc)}") from None
-    except BaseException:
-        target.discard()
-        raise
-    target.publish()
     return rows
 
 

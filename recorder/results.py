@@ -24,9 +24,9 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.provenance import Provenance, sweep_backend
 
-from .errors import LogError, WriteError
+from .errors import LogError
 from .format import SWEEP_METADATA
-from .paths import PartialFile, partial_path, reason
+from .paths import PartialFile, partial_path
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -93,8 +93,7 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True).create()
-    tmp = out.partial
+    out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True)
     full = results_schema()
     metadata = results_metadata({**grid.to_dict(), "version": __version__})
     prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
@@ -103,9 +102,9 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     by_instance: dict[str, list[Any]] = {}
     for cell in grid.cells:
         by_instance.setdefault(cell.instance.name, []).append(cell)
-    try:
+    with out:  # published when whole; on an error discarded (a failed write: one line)
         for name, cells in by_instance.items():
-            folder = tmp / f"instance={quote(name, safe='')}"
+            folder = out.partial / f"instance={quote(name, safe='')}"
             folder.mkdir(parents=True)
             with pq.ParquetWriter(str(folder / "part-0.parquet"), schema,
                                   compression="zstd") as writer:  # fmt: skip
@@ -130,13 +129,7 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
                         pa.array(best.T.reshape(-1).astype(np.int64)),
                     ]
                     writer.write_table(pa.Table.from_arrays(cols, schema=schema))
-    except OSError as exc:
-        out.discard()
-        raise WriteError(f"{tmp}: cannot write the results: {reason(exc)}") from None
-    except BaseException:
-        out.discard()
-        raise
-    return out.publish()
+    return out.path
 
 
 # ---------------------------------------------------------------------------- reading
@@ -319,13 +312,17 @@ class SweepData:
         out: str | os.PathLike[str] = "runs",
         rrd: bool = False,
         overwrite: bool = False,
+        kept_code: bool = False,
+        allow_changed_code: bool = False,
     ) -> list[Any]:
         """Record runs of this sweep slot by slot, as ``corraoi record --from`` does: ``run``
         an index or worst/best/median/widest-gap; ``policy`` restricts to the sweep's
         policies or adds others on the same run; ``cell`` selects cells by label. Writes
         ``out/<folder>-<instance>-<label>-run<N>[-<choice>].mcap`` (and ``.rrd`` with
         ``rrd``); returns each run's ``RecordOutcome`` (``.mcap``: what ``corraoi.load``
-        reads back)."""
+        reads back). A plug-in edited since the sweep is refused unless ``kept_code`` (run
+        the folder's copy) or ``allow_changed_code``; each run must give the sweep's regret
+        again (corraoi.drill.SweepMismatch where it does not)."""
         from corraoi.drill import choose
         from corraoi.policies import make_policies
         from corraoi.text import safe_name
@@ -335,7 +332,8 @@ class SweepData:
         names = (policy,) if isinstance(policy, str) else tuple(policy)
         specs = make_policies(names) if names else []
         cells = (cell,) if isinstance(cell, str) else tuple(cell)
-        drills = choose(self.folder, run, cells=cells, policies=specs)
+        drills = choose(self.folder, run, cells=cells, policies=specs, kept_code=kept_code,
+                        allow_changed_code=allow_changed_code)  # fmt: skip
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         outcomes = []
