@@ -271,8 +271,9 @@ def _notable(
     if path.is_file():
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"{path}: unreadable ({exc}); sweep again with --resume") from None
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ConfigError(f"{path}: unreadable ({why}); sweep again with --resume") from None
         notable = data.get("notable") if isinstance(data, dict) else None
         if well_formed(notable, want):
             return notable  # type: ignore[return-value]

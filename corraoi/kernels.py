@@ -238,7 +238,7 @@ def _damaged(folder: Path, modname: str) -> str:
     try:
         want = json.loads(_sums_file(folder, modname).read_text(encoding="utf-8"))
         have = _sums(folder, modname)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return "has no checksums (cached by an older corraoi, or its checksums were lost)"
     return "" if want == have else "is damaged (its files do not match their checksums)"
 

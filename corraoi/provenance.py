@@ -98,7 +98,7 @@ class Provenance:
         def listed(key: str) -> list[Any]:
             try:
                 value = json.loads(metadata.get(key, "[]"))
-            except ValueError:
+            except (ValueError, TypeError, RecursionError):
                 return []
             return value if isinstance(value, list) else []
 

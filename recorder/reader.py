@@ -97,17 +97,13 @@ class RunLog:
         if self.status == "complete":
             return f"complete: {self.n_slots} of {T} slots"
         if self.status == "failed":
-            return (
-                f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
-                f"{self.end.get('error', '(no message)')}"
-            )
+            return (f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
+                    f"{self.end.get('error', '(no message)')}")  # fmt: skip
         if self.status == "damaged":
             return f"damaged: {self.damage}; read {self.n_slots} of {T} slots before the damage"
         if self.status == "interrupted":
-            return (
-                f"cut short: the run was stopped after slot {self.n_slots} of {T} "
-                "(the file was finished properly)"
-            )
+            return (f"cut short: the run was stopped after slot {self.n_slots} of {T} "
+                    "(the file was finished properly)")  # fmt: skip
         if self.writer is not None:
             who = f"process {self.writer}" if self.writer else "another process"
             return (
@@ -309,10 +305,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {SLOT_TOPIC} channel with schema {SLOT_SCHEMA_NAME}")
-    try:
-        config = RunConfig.from_dict(json.loads(run_md["config"]))
-    except (CorraoiError, KeyError, TypeError, ValueError) as exc:
-        raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    config = _config(p, run_md)
     check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
@@ -361,6 +354,15 @@ def _strip_path(exc: LogError, p: Path) -> str:
     return text[len(prefix) :] if text.startswith(prefix) else text
 
 
+def _config(p: Path, run_md: dict[str, str]) -> RunConfig:
+    """The run configuration a log's metadata holds (LogError, one line, when unusable)."""
+    try:
+        return RunConfig.from_dict(json.loads(run_md["config"]))
+    except (CorraoiError, KeyError, TypeError, ValueError, AttributeError, RecursionError) as exc:
+        raise LogError(f"{p}: the run configuration in the log is unusable: "
+                       f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
+
+
 def _validate_chunk(
     chunk: ChunkData,
     run_md: dict[str, str] | None,
@@ -370,10 +372,7 @@ def _validate_chunk(
 ) -> int:
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
-    try:
-        config = RunConfig.from_dict(json.loads(run_md["config"]))
-    except (CorraoiError, KeyError, TypeError, ValueError) as exc:
-        raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    config = _config(p, run_md)
     part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 

@@ -256,7 +256,9 @@ class SweepData:
             return
         try:
             groups = json.loads(manifest.read_text(encoding="utf-8")).get("groups", {})
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError, AttributeError):
+            return
+        if not isinstance(groups, dict):
             return
         entry = groups.get(self.folder.name)
         if isinstance(entry, dict) and "instance" in entry:
@@ -289,8 +291,9 @@ class SweepData:
             return None
         try:
             out: dict[str, Any] = json.loads(f.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ResultsError(f"{f}: cannot read the summary ({exc})") from None
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ResultsError(f"{f}: cannot read the summary ({why})") from None
         return out
 
     @cached_property

@@ -205,7 +205,7 @@ def _build(
     try:
         config = json.loads(meta["config"])
         K = sweep_arms(config)
-    except (KeyError, ValueError) as exc:
+    except (KeyError, ValueError, TypeError, AttributeError, RecursionError) as exc:
         raise SweepLogError(f"{p}: the sweep metadata holds no valid config ({exc})") from None
     try:
         rows = orjson.loads(b"[" + b",".join(payloads) + b"]")

@@ -177,7 +177,7 @@ def sweep_info(folder: Path) -> dict[str, Any]:
         if summary_path.is_file():
             try:
                 notable = json.loads(summary_path.read_text(encoding="utf-8")).get("notable")
-            except (OSError, ValueError, AttributeError):
+            except (OSError, ValueError, AttributeError, RecursionError):
                 notable = None
         named = _with_commands(notable, root, entry.get("instance"), several)
         groups.append({"folder": str(where), "instance": entry.get("instance"),
