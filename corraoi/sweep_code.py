@@ -18,7 +18,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from .errors import CodeChanged, ConfigError
+from .errors import CodeChanged, ConfigError, PolicyError
 from .partial_file import PartialFile
 
 #: Where a sweep folder keeps its plug-ins' sources.
@@ -91,13 +91,18 @@ def check_code(specs: Iterable[Any], folder: Path, manifest: dict[str, Any], *,
     for spec in specs:
         if spec.builtin or not spec.digest:
             continue
+        copy = next((p for p in kept if p["sha256"].startswith(spec.digest)), {})
         try:
             spec.resolve()
         except CodeChanged as exc:
             if not allow_changed:
-                copy = next((p for p in kept if p["sha256"].startswith(exc.expected)), {})
                 raise exc.with_way_out(way_out(folder, copy)) from None
             notes.append(changed_note(exc.path, exc.expected, exc.found))
+        except PolicyError as exc:  # the file is gone (or no longer a plug-in): say so too
+            if copy.get("data") is None:
+                raise
+            raise PolicyError(f"{exc}; the sweep ran sha256:{spec.digest[:16]}: "
+                              f"{way_out(folder, copy)}") from None  # fmt: skip
     return notes
 
 

@@ -347,3 +347,17 @@ def test_results_parquet_says_what_made_its_rows(swept: Path):
     prov = json.loads(meta["provenance"])
     assert prov["plugins"][0]["sha256"] == _sha((swept.parent / "greedyish.py").read_bytes())
     assert prov["backend"] == "cpu" and "kernel_sources" in prov["versions"]
+
+
+def test_a_plugin_file_gone_since_the_sweep_points_to_its_kept_copy(swept: Path):
+    tmp = swept.parent
+    (tmp / "greedyish.py").unlink()
+    line = _one_line(_cli("record", "--from", "sw", "--cell", "greedyish", "--run", 1,
+                          "--no-rrd", "-o", "g.mcap", cwd=tmp), 2)  # fmt: skip
+    digest = _sha(PLUGIN.encode())[:16]
+    assert "no such file" in line and f"the sweep ran sha256:{digest}" in line
+    assert f"the sweep's copy is sw/plugins/{digest}/greedyish.py; --kept-code" in line
+    res = _cli("record", "--from", "sw", "--cell", "greedyish", "--run", 1, "--no-rrd", "-o",
+               "g.mcap", "--kept-code", cwd=tmp)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert int(open_log(tmp / "g.mcap").end["regret"]) == _finals(swept, "greedyish")[1]
