@@ -235,11 +235,12 @@ def advance(
                     maxmu = m
                 cand[k] = True
             forced = _forced(t, K, npull, nsucc, params, ps, pst)
-            if forced >= K:  # a hook's arm out of range: the run stops before this slot
-                err[r, 0] = t
-                err[r, 1] = FAULT_ARM
-                err[r, 2] = forced
-                break
+            if forced >= K:  # an arm out of range: noted (the engine ends the run at this
+                if err[r, 0] == 0:  # slot) and never played; the loop goes on unbranched
+                    err[r, 0] = t
+                    err[r, 1] = FAULT_ARM
+                    err[r, 2] = forced
+                forced = -1
             if correlated and forced < 0:
                 # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
                 for k in range(K):
@@ -297,16 +298,15 @@ def advance(
                 else:
                     _score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
                     mask = cand
-                    nan = -1
-                    for k in range(K):  # NaN on a candidate: no argmax (+inf is a score)
-                        if cand[k] and vals[k] != vals[k]:
+                    nan = K
+                    for k in range(K):  # a NaN score on a candidate (+inf is a score)
+                        if cand[k] and vals[k] != vals[k] and k < nan:
                             nan = k
-                    if nan >= 0:
+                    if nan < K and err[r, 0] == 0:  # noted: the engine ends the run here
                         err[r, 0] = t
                         err[r, 1] = FAULT_NAN
                         err[r, 2] = nan
-                        break
-                arm = argmax_random(vals, mask, pst, K)
+                arm = argmax_random(vals, mask, pst, K)  # in range even over NaN scores
             else:
                 arm = forced
             # ---- outcome and ages

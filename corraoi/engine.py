@@ -159,8 +159,9 @@ class Simulation:
         signal is handled between two calls within that time, however large the work.
 
         Returns (slots done, None), or, when a hook returned an arm out of range or a NaN
-        score for a candidate (the kernel stops that run there: never an array read out of
-        bounds), the slots before the first such slot and its PolicyRuntimeError."""
+        score for a candidate (the kernel notes the first such slot of each run and never
+        plays that arm: no array is read out of bounds), the slots before the first such
+        slot and its PolicyRuntimeError; what came after it is not kept."""
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
