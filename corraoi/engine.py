@@ -25,7 +25,15 @@ from .instance import Instance
 from .limits import check_seed
 from .policies.spec import PolicySpec
 from .problem import Problem
-from .pyengine import PolicyRuntimeError, RunState, Streams, advance_python, construct
+from .pyengine import (
+    PolicyRuntimeError,
+    RunState,
+    Streams,
+    advance_python,
+    construct,
+    hook_fault,
+    hook_raised,
+)
 from .rng import streams_for_seed, streams_for_seeds
 from .threads import set_workers, shutdown  # the engine's threads: part of its interface
 
@@ -144,16 +152,9 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
-    def _run_compiled(
-        self,
-        nslots: int,
-        record: bool,
-        out: _Outputs,
-        snap_t: np.ndarray,
-        s_regret: np.ndarray,
-        s_aoisum: np.ndarray,
-        s_pulls: np.ndarray,
-    ) -> tuple[int, PolicyRuntimeError | None]:
+    def _run_compiled(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+                      s_regret: np.ndarray, s_aoisum: np.ndarray,
+                      s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run ``nslots`` slots in kernel calls of at most about
         ``threads.PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
         signal is handled between two calls within that time, however large the work.
@@ -182,10 +183,7 @@ class Simulation:
             except (CorraoiError, KeyboardInterrupt):
                 raise
             except Exception as exc:  # noqa: BLE001 - a compiled hook raised (numba's raise)
-                detail = " ".join(str(exc).split())[:300]
-                return done, PolicyRuntimeError(
-                    f"policy {self.policy.name}, slots {t0 + 1}..{t0 + n}: a compiled hook "
-                    f"raised {type(exc).__name__}" + (f": {detail}" if detail else ""))
+                return done, hook_raised(self.policy.name, t0 + 1, t0 + n, exc)
             self._rate = threads.rate(R * n, time.perf_counter() - start, len(slices),
                                       self._rate)  # fmt: skip
             if piece is not out:
@@ -200,40 +198,21 @@ class Simulation:
         return nslots, None
 
     def _fault(self, K: int) -> tuple[int, PolicyRuntimeError]:
-        """The first slot at which a compiled hook failed (the kernel's ``err``), as the
-        plain-Python tier reports a bad arm: one line naming the policy, the run and the
-        slot, with the slots before it."""
-        err = self._err
-        hit = np.flatnonzero(err[:, 0])
-        r = int(hit[np.argmin(err[hit, 0])])
-        t, what, value = (int(v) for v in err[r])
-        err[:] = 0
-        who = self.run_name(r)
-        from ._kernel import FAULT_ARM
-
-        if what == FAULT_ARM:
-            text = (f"its forced hook returned arm {value} for {who}; expected 0..{K - 1}, or a "
-                    "negative number for none (0-based; arm k+1 in logs)")
-        else:
-            text = (f"its score hook gave NaN to arm {value + 1}, a candidate, for {who}; a "
-                    "score must be a number (+inf is one)")
-        return t - 1 - self.t, PolicyRuntimeError(f"policy {self.policy.name}, slot {t}: {text}")
+        """The first slot at which a compiled hook failed (the kernel's ``err``), with the
+        slots before it (corraoi.pyengine.hook_fault says what and where)."""
+        hit = np.flatnonzero(self._err[:, 0])
+        r = int(hit[np.argmin(self._err[hit, 0])])
+        t, what, value = (int(v) for v in self._err[r])
+        self._err[:] = 0
+        return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
 
     def run_name(self, r: int) -> str:
         """How a failure names run ``r`` of this batch: its number and its seed."""
         return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
 
-    def _call_kernel(
-        self,
-        kernel: Any,
-        t0: int,
-        nslots: int,
-        record: bool,
-        out: _Outputs,
-        snap_t: np.ndarray,
-        snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
-        slices: list[tuple[int, int]],
-    ) -> None:
+    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: _Outputs,
+                     snap_t: np.ndarray, snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     slices: list[tuple[int, int]]) -> None:  # fmt: skip
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
                    self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
                    self._err)  # fmt: skip

@@ -84,9 +84,8 @@ def cache_dir() -> Path:
 def _writable(folder: Path) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
+        with tempfile.TemporaryFile(dir=folder):  # a name of its own: threads probe at once
+            pass
         return folder
     except OSError:
         fallback = Path(tempfile.gettempdir()) / f"corraoi-kernels-{__version__}-{os.getuid()}"

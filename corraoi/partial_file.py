@@ -38,7 +38,7 @@ def partial_path(path: str | os.PathLike[str], suffix: str = PARTIAL_SUFFIX) -> 
 
 def reason(exc: OSError) -> str:
     """The short text of an OS error ("No space left on device")."""
-    return exc.strerror or str(exc)
+    return exc.strerror or str(exc)  # fmt: skip
 
 
 def check_target(path: str | os.PathLike[str], *, overwrite: bool, what: str = "output",
@@ -155,8 +155,6 @@ class PartialFile:
         self._file: BinaryIO | None = None
         self.state = "checked"  # then "open", and "published", "left" or "discarded"
 
-    # ------------------------------------------------------------------ create
-
     @property
     def file(self) -> BinaryIO:
         """The open ``.partial`` file (binary, locked)."""
@@ -254,8 +252,6 @@ class PartialFile:
             return os.path.samestat(os.fstat(fd), os.stat(self.partial, follow_symlinks=False))
         except FileNotFoundError:
             return False
-
-    # ------------------------------------------------------------------ finish
 
     def sync(self) -> None:
         """Flush and fsync what was written (raises OSError as the write would)."""

@@ -305,6 +305,27 @@ def advance_python(
     return nslots, None
 
 
+def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:
+    """A compiled hook's fault the kernel noted (``corraoi._kernel``'s ``err``), in the plain-
+    Python tier's words: one line naming the policy, the slot and the run."""
+    from ._kernel import FAULT_ARM
+
+    if what == FAULT_ARM:
+        text = (f"its forced hook returned arm {value} for {who}; expected 0..{K - 1}, or a "
+                "negative number for none (0-based; arm k+1 in logs)")  # fmt: skip
+    else:
+        text = (f"its score hook gave NaN to arm {value + 1}, a candidate, for {who}; a "
+                "score must be a number (+inf is one)")  # fmt: skip
+    return PolicyRuntimeError(f"policy {name}, slot {t}: {text}")
+
+
+def hook_raised(name: str, first: int, last: int, exc: BaseException) -> PolicyRuntimeError:
+    """A compiled hook that raised (numba's ``raise``) in slots ``first..last``."""
+    detail = " ".join(str(exc).split())[:300]
+    return PolicyRuntimeError(f"policy {name}, slots {first}..{last}: a compiled hook raised "
+                              f"{type(exc).__name__}" + (f": {detail}" if detail else ""))
+
+
 def construct(cls: Any, spec: Any) -> Any:
     """A plain-Python policy made with its parameters; whatever its ``__init__`` raises is
     one PolicyRuntimeError line naming the policy (before slot 1: no log is left)."""
