@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 from corraoi.errors import UsageError
 
-from .paths import PartialFile
+from .paths import PartialFile, made_again
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -57,7 +57,8 @@ def export(
     from .results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
-    target = PartialFile(out_p, overwrite=overwrite, what=f"{fmt} export")
+    # a .partial a killed export left is made again from the source: never in the way
+    target = PartialFile(out_p, overwrite=overwrite, what=f"{fmt} export", replaceable=made_again)
     if is_sweep_path(src):
         sweep = SweepData(src)
         table = read_results_table(sweep.results_path)

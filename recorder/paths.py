@@ -30,9 +30,9 @@ check_output = check_target
 
 
 def made_again(part: Path) -> bool:
-    """A Rerun recording cut short (its ``.partial``, whose writer stopped) is made again
-    from its run's log: nothing is lost by writing over it, so it never blocks the next
-    attempt (the ``replaceable`` of every ``.rrd``)."""
+    """A file made from another (a Rerun recording from its run's log, an export from its
+    source) cut short at its ``.partial`` is made again whole: nothing is lost by writing
+    over it, so it never blocks the next attempt (their ``replaceable``)."""
     return True
 
 

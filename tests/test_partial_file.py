@@ -193,3 +193,23 @@ def test_a_regular_file_under_a_folder_target_is_refused(tmp_path: Path):
     target.write_bytes(b"not a dataset")
     with pytest.raises(OutputError, match="exists and is not a directory"):
         PartialFile(target, overwrite=True, folder=True)
+
+
+def test_an_export_a_killed_export_left_is_made_again(tmp_path: Path):
+    """A killed export leaves its .partial: the next export writes over it (it is made again
+    from the source), while a file at the final name still needs --force."""
+    pytest.importorskip("pyarrow")
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+
+    log = tmp_path / "r.mcap"
+    assert CliRunner().invoke(main, ["record", "-T", "200", "--no-rrd", "-o",
+                                     str(log)]).exit_code == 0  # fmt: skip
+    out = tmp_path / "r.csv"
+    partial_path(out).write_bytes(b"t,x\n1,")  # cut short by a kill
+    res = CliRunner().invoke(main, ["export", str(log), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert out.read_text().count("\n") == 201 and not partial_path(out).exists()
+    res = CliRunner().invoke(main, ["export", str(log), "-o", str(out)])
+    assert res.exit_code == 2 and "already exists (use --force" in res.output
