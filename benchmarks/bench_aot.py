@@ -27,7 +27,7 @@ warnings.simplefilter("ignore")
 from numba.core import types
 from numba.core.typing import signature
 from numba.pycc import CC
-from corraoi import kernels
+from corraoi.engine import kernels
 from corraoi.policies import make_policy
 name, where = sys.argv[1], sys.argv[2]
 kernel = kernels.kernel_for(make_policy(name).resolve(), record=False)
@@ -52,14 +52,14 @@ if mode == "aot":
     numba_before = "numba" in sys.modules
 else:  # numba's import, its CPU target and the cache load
     import numba
-    from corraoi import kernels
+    from corraoi.engine import kernels
     from corraoi.policies import make_policy
     kernels.kernel_for(make_policy(name).resolve(), record=False)
     ready = time.perf_counter() - start
     numba_before = False
-from corraoi import threads
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine import threads
+from corraoi.engine.simulation import Simulation
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 out = {}
 for workers in (1, 2):

@@ -45,8 +45,9 @@ COMPILED = f"{ROOT / 'tests' / 'plugins' / 'compiled_greedy.py'}:BonusUCB"
 
 
 def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
-    from corraoi.engine import Simulation, set_workers
-    from corraoi.instance import load_instance
+    from corraoi.engine.simulation import Simulation
+    from corraoi.engine.threads import set_workers
+    from corraoi.model.instance import load_instance
     from corraoi.policies import builtins, make_policy, paper_names
 
     inst = load_instance("I1")
@@ -77,8 +78,8 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
 #: kernel loaded first, so that neither compiling nor loading is counted).
 _SIDE = (
     "import json, sys, time\n"
-    "from corraoi.engine import Simulation, set_workers\n"
-    "from corraoi.instance import load_instance\n"
+    "from corraoi.engine.simulation import Simulation, set_workers\n"
+    "from corraoi.model.instance import load_instance\n"
     "from corraoi.policies import make_policy\n"
     "names, runs, horizon = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])\n"
     "inst = load_instance('I1')\n"
@@ -168,8 +169,8 @@ def whole_process(runs: int, horizon: int, repeat: int) -> None:
 def wide(repeat: int) -> None:
     import numpy as np
 
-    from corraoi.engine import Simulation
-    from corraoi.instance import Instance
+    from corraoi.engine.simulation import Simulation
+    from corraoi.model.instance import Instance
     from corraoi.policies import make_policy
 
     rng = np.random.default_rng(1)
@@ -192,9 +193,9 @@ def wide(repeat: int) -> None:
 
 
 def python_tier(runs: int, horizon: int, repeat: int) -> None:
-    from corraoi.instance import load_instance
+    from corraoi.experiments.montecarlo import default_checkpoints, run_sweep
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies
-    from corraoi.sweep import default_checkpoints, run_sweep
 
     spec = make_policies([f"{PLUGIN}:EpsilonGreedy"])
     inst = load_instance("I1")
@@ -212,9 +213,9 @@ def python_tier(runs: int, horizon: int, repeat: int) -> None:
 def peak_rss(horizon: int, runs: int, policies: str) -> float:
     code = (
         "import resource, sys\n"
-        "from corraoi.instance import load_instance\n"
+        "from corraoi.model.instance import load_instance\n"
         "from corraoi.policies import make_policies\n"
-        "from corraoi.sweep import run_sweep\n"
+        "from corraoi.experiments.montecarlo import run_sweep\n"
         f"run_sweep(load_instance('I1'), make_policies([{policies!r}]), runs={runs}, "
         f"horizon={horizon}, checkpoints=range(0, {horizon} + 1, {max(horizon // 100, 1)}))\n"
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"

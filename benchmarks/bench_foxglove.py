@@ -23,11 +23,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 warnings.filterwarnings("ignore", "connect\\(\\) must be used", DeprecationWarning)
 
-from corraoi.block import RunConfig, SlotBlock  # noqa: E402
-from corraoi.engine import simulate_run  # noqa: E402
-from corraoi.instance import load_instance  # noqa: E402
+from corraoi.engine.block import RunConfig, SlotBlock  # noqa: E402
+from corraoi.engine.simulation import simulate_run  # noqa: E402
+from corraoi.model.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder.foxglove_live import TOPIC, Address, FoxgloveServer  # noqa: E402
+from recorder.live.foxglove import TOPIC, Address, FoxgloveServer  # noqa: E402
 
 
 def _rss_mib() -> float:

@@ -46,13 +46,13 @@ def main() -> None:
         t_context = time.perf_counter() - t1
     else:
         t_import = t_context = 0.0
-    from corraoi.experiments import sweep
+    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.montecarlo import default_checkpoints
+    from corraoi.experiments.sweeps import sweep
     from corraoi.gpu import get_device
     from corraoi.gpu.runner import simulate
-    from corraoi.grid import build_grid
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from corraoi.sweep import default_checkpoints
 
     dev = get_device()
     inst = load_instance("I1")

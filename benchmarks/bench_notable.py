@@ -5,7 +5,8 @@ Two measurements, printed as one table:
 * the paper's sweep of one instance (twelve policies, 200 runs, T = 10,000, into a folder),
   in this process, with the notable runs named and with the naming switched off, in
   alternation, best of ``--repeat``;
-* ``corraoi.notable.notable_runs`` alone on synthetic finals of 24 cells (every pair: 276)
+* ``corraoi.experiments.notable.notable_runs`` alone on synthetic finals of 24 cells (every pair:
+276)
   for 1e4, 1e5 and 1e6 runs, beside the time the engine needs for those runs at the paper's
   horizon at the rate measured in the first part.
 
@@ -25,9 +26,9 @@ import numpy as np
 
 
 def _sweep_once(out: Path, named: bool) -> float:
-    import corraoi.experiments as ex
-    import corraoi.summary as so
-    from corraoi.grid import build_grid
+    import corraoi.experiments.summary as so
+    import corraoi.experiments.sweeps as ex
+    from corraoi.experiments.grid import build_grid
 
     grid = build_grid(instances=["I1"], policies=["all"], horizons=[10_000], runs=200)
     real = so.group_notable
@@ -43,10 +44,10 @@ def _sweep_once(out: Path, named: bool) -> float:
 
 def _parts(tmp: Path) -> dict[str, float]:
     """The two costs inside one named sweep: computing the runs, drawing them in sweep.rrd."""
-    import corraoi.summary as so
-    from recorder.sweep_rerun import SweepRerunSink
+    import corraoi.experiments.summary as so
+    from recorder.sweeplog.recording import SweepRerunSink
 
-    took = {"naming (corraoi.notable)": 0.0, "drawing 36 runs into sweep.rrd": 0.0}
+    took = {"naming (corraoi.experiments.notable)": 0.0, "drawing 36 runs into sweep.rrd": 0.0}
     real_name, real_mark = so.group_notable, SweepRerunSink.mark
 
     def timed(key: str, fn: Any) -> Any:
@@ -59,7 +60,7 @@ def _parts(tmp: Path) -> dict[str, float]:
 
         return wrapper
 
-    so.group_notable = timed("naming (corraoi.notable)", real_name)  # type: ignore[assignment]
+    so.group_notable = timed("naming (corraoi.experiments.notable)", real_name)  # type: ignore[assignment]
     SweepRerunSink.mark = timed("drawing 36 runs into sweep.rrd", real_mark)  # type: ignore[method-assign]
     try:
         _sweep_once(tmp / "parts", True)
@@ -72,7 +73,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
-    from corraoi.notable import notable_runs
+    from corraoi.experiments.notable import notable_runs
 
     tmp = Path(tempfile.mkdtemp(prefix="corraoi-notable-"))
     try:

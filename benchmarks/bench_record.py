@@ -31,13 +31,13 @@ RECORD = """
 import resource, sys, os
 sys.path.insert(0, {root!r})
 os.environ.setdefault("RUST_LOG", "off")
-from corraoi.block import RunConfig
-from corraoi.engine import set_workers, simulate_run
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.engine.simulation import set_workers, simulate_run
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.mcap_sink import McapSink
-from recorder.rerun_sink import RerunSink
-from recorder.rrd_output import RrdOutput
+from recorder.slotlog.sink import McapSink
+from recorder.rerun.sink import RerunSink
+from recorder.rerun.output import RrdOutput
 set_workers(1)
 config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, {horizon})
 with McapSink({mcap!r}, config, overwrite=True) as mcap, \\
@@ -85,15 +85,16 @@ def main() -> None:
     from mcap.records import Channel, Schema
     from mcap.writer import CompressionType, Writer
 
-    from corraoi.block import RunConfig
-    from corraoi.engine import set_workers, simulate_run
-    from corraoi.instance import load_instance
+    from corraoi.engine.block import RunConfig
+    from corraoi.engine.simulation import simulate_run
+    from corraoi.engine.threads import set_workers
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.format import BlockEncoder
-    from recorder.mcap_chunks import ChunkWriter
-    from recorder.mcap_sink import McapSink
-    from recorder.rerun_sink import RerunSink
-    from recorder.rrd_output import RrdOutput
+    from recorder.rerun.output import RrdOutput
+    from recorder.rerun.sink import RerunSink
+    from recorder.slotlog.chunks import ChunkWriter
+    from recorder.slotlog.encode import BlockEncoder
+    from recorder.slotlog.sink import McapSink
     from recorder.vocab import NS_PER_SLOT
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 

@@ -41,11 +41,11 @@ POLICIES = (
 
 
 def record(path: Path, policy: str, horizon: int, seed: int = 0) -> Path:
-    from corraoi.block import RunConfig
-    from corraoi.engine import simulate_run
-    from corraoi.instance import load_instance
+    from corraoi.engine.block import RunConfig
+    from corraoi.engine.simulation import simulate_run
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     config = RunConfig(load_instance("I1"), make_policy(policy), seed, horizon)
     with McapSink(path, config, overwrite=True, fsync=False) as sink:

@@ -3,8 +3,9 @@
 Prints:
 
 1. the paper workload (I1, the twelve policies, 200 runs, T = 10,000) three ways, best of
-   --repeat in one warm process: the engine alone (``corraoi.sweep.run_sweep``, what a sweep
-   cost before grids), the grid in-process (``corraoi.experiments.sweep``), and the grid on a
+   --repeat in one warm process: the engine alone (``corraoi.experiments.montecarlo.run_sweep``,
+   what a sweep
+   cost before grids), the grid in-process (``corraoi.experiments.sweeps.sweep``), and the grid on a
    LocalCluster of 2 workers (its start-up reported separately);
 2. the per-core rate, and the model of docs/scaling.md: 5 instances x 16 policies x 10,000 runs
    x T = 1e5 on 1, 16 and 256 cores;
@@ -24,12 +25,12 @@ import time
 
 
 def paper_workload(repeat: int) -> float:
-    from corraoi.engine import set_workers
-    from corraoi.experiments import sweep
-    from corraoi.grid import build_grid
-    from corraoi.instance import load_instance
+    from corraoi.engine.threads import set_workers
+    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.montecarlo import default_checkpoints, run_sweep
+    from corraoi.experiments.sweeps import sweep
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies
-    from corraoi.sweep import default_checkpoints, run_sweep
 
     runs, T = 200, 10_000
     set_workers(None)

@@ -36,10 +36,10 @@ def main() -> None:
     os.environ["CORRAOI_GPU_DEVICE"] = args.device
 
     import corraoi
-    from corraoi.bounds import cts_bound, cucb_bound
-    from corraoi.experiments import sweep
+    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.sweeps import sweep
     from corraoi.gpu import get_device
-    from corraoi.grid import build_grid
+    from corraoi.model.bounds import cts_bound, cucb_bound
 
     T = args.horizon
     grid = build_grid(instances=["I2"], policies=list(POLICIES), horizons=[T], runs=args.runs,
@@ -85,7 +85,7 @@ def _draw(curves, path, T, cucb_bound, cts_bound, *, title):  # type: ignore[no-
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import builtins
 
     inst = load_instance("I2")

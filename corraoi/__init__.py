@@ -16,13 +16,13 @@ from ._version import __version__  # noqa: E402
 from .errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError  # noqa: E402
 
 if TYPE_CHECKING:
-    from .analysis import load
+    from corraoi.face.tables import load
 
 
 def __getattr__(name: str) -> Any:
     # corraoi.load imports pandas/pyarrow and the recorder only when it is first used
     if name == "load":
-        from .analysis import load
+        from corraoi.face.tables import load
 
         return load
     raise AttributeError(f"module 'corraoi' has no attribute {name!r}")

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import signal
+from pathlib import Path
+from typing import Any
+
 
 class CorraoiError(Exception):
     """Base class of every error corraoi raises on purpose.
@@ -58,3 +62,94 @@ class CodeChanged(PolicyError):
 
     def with_way_out(self, way_out: str) -> CodeChanged:
         return CodeChanged(self.path, self.expected, self.found, way_out)
+
+
+class LogError(UsageError):
+    """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
+
+
+class ViewerError(CorraoiError):
+    """A Rerun viewer that cannot be reached or started. The files are still written."""
+
+    exit_code = 1
+
+
+class SweepMismatch(CorraoiError):
+    """A run recorded again from a sweep whose regret differs from the sweep's row (the
+    engine or the code changed since the sweep): the log is finished as failed, saying so."""
+
+    exit_code = 1
+
+
+class ReaderStopped(CorraoiError):
+    """The forked log reader died (killed, out of memory): one line, exit 1, what was sent
+    so far stays with the consumer."""
+
+    exit_code = 1
+
+    def __init__(self, exitcode: int | None) -> None:
+        how = (f"killed by {signal.Signals(-exitcode).name}" if exitcode is not None
+               and exitcode < 0 and -exitcode in signal.valid_signals()
+               else f"exit {exitcode}")  # fmt: skip
+        super().__init__(f"the log reader process stopped unexpectedly ({how}); nothing was "
+                         "written as complete (run the command again)")
+
+
+class ResultsError(LogError):
+    """A results file that cannot be read (missing, not Parquet, not ours, newer)."""
+
+
+class SweepLogError(LogError):
+    """A sweep log that cannot be read (missing, not MCAP, not a sweep log, damaged)."""
+
+
+class PolicyRuntimeError(CorraoiError):
+    """A policy that failed or returned something that is not one valid arm per run.
+
+    ``done``: slots completed before the failure; ``partial``: their columns (when recording).
+    """
+
+    exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.done = 0
+        self.partial: Any = None
+
+
+class KernelError(CorraoiError):
+    """A compiled policy whose hooks cannot be composed into a kernel."""
+
+    exit_code = 2
+
+
+class ClusterError(CorraoiError):
+    """The cluster cannot run the sweep (unreachable, version mismatch, chunk failed)."""
+
+    exit_code = 1
+
+
+class DamagedPart(ConfigError):
+    """A part file that cannot be counted (its chunk is not finished)."""
+
+    def __init__(self, path: Path, why: str) -> None:
+        super().__init__(f"{path}: a damaged part file ({why})")
+        self.path = path
+
+
+class GpuUnavailable(CorraoiError):
+    """No device can run the GPU backend here (the message says why and what to do)."""
+
+    exit_code = 2
+
+
+class FoxgloveError(CorraoiError):
+    """The Foxglove server cannot be started (port taken, host unknown, ...)."""
+
+    exit_code = 1
+
+
+class FigureUnavailable(CorraoiError):
+    """matplotlib is not installed: the figure cannot be drawn (the logs are fine)."""
+
+    exit_code = 1

@@ -1,7 +1,7 @@
 """Locks that die with their process: ``flock`` on the file or folder being written, no lock
 file beside it. A second writer is refused at once, naming the holder's PID (from
 ``/proc/locks``). Used by :class:`corraoi.partial_file.PartialFile` (every writer's
-``.partial`` file) and by a sweep for its folder (``corraoi/experiments.py``).
+``.partial`` file) and by a sweep for its folder (``corraoi/experiments/sweeps.py``).
 """
 
 from __future__ import annotations

@@ -212,7 +212,7 @@ def sweep_backend(grid_backend: str) -> str:
     """The backend a sweep's runs came from: ``cpu``, or the GPU backend's device kind."""
     if grid_backend != "gpu":
         return "cpu"
-    from .gpu.device import EmulatedDevice, get_device
+    from corraoi.gpu.device import EmulatedDevice, get_device
 
     return "gpu-emulated" if isinstance(get_device(), EmulatedDevice) else "gpu-cuda"
 

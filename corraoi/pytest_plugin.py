@@ -33,7 +33,7 @@ def corraoi_run(tmp_path: Path) -> Callable[..., Path]:
         policy: str = "cucb", *, seed: int = 0, horizon: int = 1000, instance: str = "I1"
     ) -> Path:
         nonlocal count
-        from corraoi.testing import record_run
+        from .testing import record_run
 
         count += 1
         name = f"{policy}-{Path(instance).stem}-s{seed}-{count}.mcap"

@@ -68,7 +68,7 @@ def use_kept_code(folder: Path, manifest: dict[str, Any] | None = None) -> list[
     """``--kept-code``: every plug-in file the sweep ran loads from its kept copy in this
     process (the file on disk, changed or gone, is not read); returns the files so pinned.
     A copy that is missing or does not hash to the manifest's sha256 is refused."""
-    from .policies.loading import pin_plugin_source
+    from corraoi.policies.loading import pin_plugin_source
 
     pinned = []
     for p in kept_sources(folder, read_manifest_dict(folder) if manifest is None else manifest):
@@ -118,7 +118,7 @@ def current_spec(spec: Any) -> Any:
     log names the code that ran, never the sweep's hash)."""
     import dataclasses
 
-    from .policies.registry import resolve
+    from corraoi.policies.registry import resolve
 
     qual = spec.qualname
     res = resolve(qual[len("file:"):] if qual.startswith("file:") else qual)

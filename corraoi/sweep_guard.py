@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .errors import OutputError
 
-#: The ``format`` of a sweep folder's manifest (corraoi.sweep_folder writes it).
+#: The ``format`` of a sweep folder's manifest (corraoi.experiments.folder writes it).
 MANIFEST_FORMAT = "corraoi.sweep-folder"
 #: Folders of a sweep whose every file is the sweep's own.
 OWN_FOLDERS = ("parts", "plugins", "results.parquet")

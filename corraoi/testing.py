@@ -30,12 +30,12 @@ def record_run(
     overwrite: bool = False,
 ) -> Path:
     """Simulate one run and record it to the slot log ``path`` (as ``corraoi record``)."""
-    from recorder.record import record_run
+    from corraoi.engine.block import RunConfig
+    from corraoi.engine.problem import check_instance
+    from corraoi.face.recording import record_run
+    from corraoi.model.instance import load_instance
 
-    from .block import RunConfig
-    from .instance import load_instance
     from .policies import make_policy
-    from .problem import check_instance
 
     inst = load_instance(instance)
     check_instance(inst)
@@ -124,7 +124,7 @@ class PolicyCase:
     @cached_property
     def batch(self) -> Any:
         """Every run of the case in one block (``RunsBlock``)."""
-        from .engine import simulate
+        from corraoi.engine.simulation import simulate
 
         return next(simulate(self.instance, self.spec, self.seeds, self.horizon,
                              block=self.horizon))  # fmt: skip
@@ -146,7 +146,8 @@ def policy_cases(
     (some arm always has a positive mean)."""
     import numpy as np
 
-    from .instance import Instance
+    from corraoi.model.instance import Instance
+
     from .policies import make_policies
 
     spec = make_policies([policy], params or {})[0]
@@ -166,7 +167,7 @@ def check_deterministic(case: PolicyCase, tmp_path: Any = None) -> None:
     """Two simulations of the same seeds are equal slot by slot, whatever the block size."""
     import numpy as np
 
-    from .engine import RunsBlock, simulate
+    from corraoi.engine.simulation import RunsBlock, simulate
 
     again = RunsBlock.concat(list(simulate(case.instance, case.spec, case.seeds, case.horizon,
                                            block=max(1, case.horizon // 3))))  # fmt: skip
@@ -199,7 +200,7 @@ def check_runs_use_their_own_streams(case: PolicyCase, tmp_path: Any = None) -> 
     mixes runs fails here)."""
     import numpy as np
 
-    from .engine import simulate
+    from corraoi.engine.simulation import simulate
 
     last = case.seeds[-1]
     single = next(simulate(case.instance, case.spec, [last], case.horizon, block=case.horizon))
@@ -213,7 +214,8 @@ def check_hidden_path(case: PolicyCase, tmp_path: Any = None) -> None:
     """The policy sees the hidden path the built-ins see on the same seeds."""
     import numpy as np
 
-    from .engine import simulate
+    from corraoi.engine.simulation import simulate
+
     from .policies import make_policies
 
     ref = next(simulate(case.instance, make_policies(["ucb"])[0], case.seeds, case.horizon,
@@ -226,10 +228,9 @@ def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
     (nothing to do without ``tmp_path``)."""
     if tmp_path is None:
         return
-    from recorder.mcap_sink import McapSink
-    from recorder.reader import open_log
-
-    from .block import RunConfig
+    from corraoi.engine.block import RunConfig
+    from recorder.slotlog.reader import open_log
+    from recorder.slotlog.sink import McapSink
 
     path = Path(tmp_path) / f"check-{case.spec.name}-K{case.instance.K}.mcap"
     config = RunConfig(case.instance, case.spec, case.seeds[0], case.horizon)

@@ -12,17 +12,18 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from .errors import LogError, OutputError, ViewerError, WriteError
-from .mcap_sink import McapSink
-from .reader import RunLog, open_log
+from corraoi.errors import LogError, OutputError, ViewerError, WriteError
+from recorder.slotlog.reader import RunLog, open_log
+from recorder.slotlog.sink import McapSink
+
 from .vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION  # the slot log's, as always
 from .vocab import SLOT_TOPIC as TOPIC
 
 if TYPE_CHECKING:
-    from .rerun_layout import one_run_blueprint
-    from .rerun_names import new_recording
-    from .rerun_sink import RerunSink
-    from .rrd_output import RrdOutput
+    from recorder.rerun.layout import one_run_blueprint
+    from recorder.rerun.names import new_recording
+    from recorder.rerun.output import RrdOutput
+    from recorder.rerun.sink import RerunSink
 
 #: the Rerun parts, by the module that defines each (imported on first use)
 _LAZY = {"RerunSink": "rerun_sink", "RrdOutput": "rrd_output", "new_recording": "rerun_names",

@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from corraoi.errors import UsageError
+from corraoi.partial_file import PartialFile
 
-from .paths import PartialFile, made_again
+from .paths import made_again
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -48,13 +49,13 @@ def export(
     source: str | os.PathLike[str], out: str | os.PathLike[str], *, overwrite: bool = False
 ) -> Exported:
     """Write the table of ``source`` (slot log, sweep folder or sweep log) to ``out``."""
-    from corraoi.analysis import require_analysis
+    from corraoi.face.tables import require_analysis
 
     out_p = Path(out)
     fmt = export_format(out_p)
     require_analysis(("pyarrow",))
-    from .frames import RunData
-    from .results import SweepData, is_sweep_path, read_results_table
+    from recorder.slotlog.frames import RunData
+    from recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
     # a .partial a killed export left is made again from the source: never in the way

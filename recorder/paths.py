@@ -21,9 +21,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from typing_extensions import Self
 
-from corraoi.locks import lock_holder
-from corraoi.partial_file import PARTIAL_SUFFIX, PartialFile, check_target, partial_path, reason
-from corraoi.text import safe_name
+from corraoi.partial_file import check_target
 
 #: The check of an output path before anything runs (the first step of PartialFile).
 check_output = check_target
@@ -71,13 +69,7 @@ class Sink:
 
 
 __all__ = [
-    "PARTIAL_SUFFIX",
-    "PartialFile",
     "Sink",
     "check_output",
-    "lock_holder",
     "made_again",
-    "partial_path",
-    "reason",
-    "safe_name",
 ]

@@ -198,7 +198,6 @@ __all__ = [
     "ORACLE_COLOR",
     "POLICY_COLORS",
     "REGRET_UNIT",
-    "RGB",
     "arm_color",
     "arm_label",
     "base_policy",

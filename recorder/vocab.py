@@ -2,7 +2,7 @@
 sweep log, defined once.
 
 Writers, readers, the walker (:mod:`recorder.walk`), ``corraoi recover`` and the live
-viewers import these; ``recorder.format`` and ``recorder.sweep_log`` re-export them under
+viewers import these; ``recorder.slotlog.decode`` and ``recorder.sweeplog.log`` re-export them under
 their older short names (``TOPIC``, ``FORMAT_VERSION``, ...), each for its own format.
 ``docs/log-format.md`` is the human description. Nothing here imports corraoi's core.
 """

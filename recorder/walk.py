@@ -1,7 +1,7 @@
 """The one MCAP walker: every reader of corraoi's MCAP files walks their records here.
 
-The slot-log reader (:mod:`recorder.reader`), the sweep-log reader, the sweep sniffing of
-:mod:`recorder.results` and ``corraoi recover`` (:mod:`viewer.recover`) read through
+The slot-log reader (:mod:`recorder.slotlog.reader`), the sweep-log reader, the sweep sniffing of
+:mod:`recorder.sweeplog.results` and ``corraoi recover`` (:mod:`viewer.recover`) read through
 :class:`Walker`, as ``mcap``'s ``reader.py`` builds on its ``stream_reader.py``. Record
 bodies are parsed by ``mcap``'s record classes (:mod:`mcap.records`) over its
 :class:`~mcap.data_stream.ReadDataStream`; a finished file's chunk index is read by
@@ -40,7 +40,8 @@ from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Header, McapRecord, Message, Metadata, Schema
 
-from .errors import LogError
+from corraoi.errors import LogError
+
 from .vocab import MAGIC
 
 #: The largest uncompressed chunk the walker accepts (writers close chunks at 64 MiB).

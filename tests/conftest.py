@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from corraoi.block import RunConfig, SlotBlock
-from corraoi.engine import simulate_run
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.simulation import simulate_run
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 
 Recorded = tuple[Path, RunConfig, SlotBlock]
@@ -31,7 +31,7 @@ def pytest_configure(config: pytest.Config) -> None:
     if hasattr(config, "workerinput"):
         return
     _compile_bytecode()
-    from corraoi import kernel_pool, kernels
+    from corraoi.engine import kernel_pool, kernels
     from corraoi.policies import builtins
 
     classes = [make_policy(name).resolve() for name in builtins()]
@@ -112,7 +112,7 @@ def engine() -> Callable[..., list[SlotBlock]]:
 @pytest.fixture
 def record_mcap(tmp_path: Path) -> Callable[..., Recorded]:
     """record_mcap(policy, horizon=, seed=, name=, block=) -> (path, config, engine output)."""
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     def record(
         policy: str = "cucb",

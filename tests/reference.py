@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 
-from corraoi.block import SlotBlock
-from corraoi.instance import Instance
+from corraoi.engine.block import SlotBlock
+from corraoi.model.instance import Instance
+from corraoi.model.theory import analyse, policy_pseudo_rewards
 from corraoi.policies import PolicySpec
-from corraoi.theory import analyse, policy_pseudo_rewards
 
 
 def expected_candidates(

@@ -17,15 +17,15 @@ import pytest
 from click.testing import CliRunner
 
 from corraoi import limits, partial_file
-from corraoi.block import RunConfig
 from corraoi.cli import main
-from corraoi.engine import simulate_run
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.engine.simulation import simulate_run
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 from corraoi.text import safe_name, safe_text
 from recorder import paths
-from recorder.mcap_sink import McapSink
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 
 T = 1500
 
@@ -479,7 +479,7 @@ def test_a_reader_that_stops_reading_is_not_an_error(tmp_path, args):
     err = proc.stderr.read().decode()
     assert (proc.wait(timeout=120), err) == (141, "")
     if args[0] == "record":
-        from recorder.reader import open_log
+        from recorder.slotlog.reader import open_log
 
         assert open_log(tmp_path / "p.mcap").status == "complete"
 

@@ -14,15 +14,15 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from corraoi.block import RunConfig
 from corraoi.cli import main
-from corraoi.engine import simulate_run
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.engine.simulation import simulate_run
+from corraoi.errors import LogError
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.errors import LogError
-from recorder.format import BlockEncoder
-from recorder.mcap_sink import McapSink
-from recorder.reader import open_log
+from recorder.slotlog.encode import BlockEncoder
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 
 T = 2500
 EDIT_SLOT = 1500  # in the second chunk (slots 1001..2000)

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from corraoi.block import RunConfig
-from corraoi.engine import simulate_run
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.engine.simulation import simulate_run
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.mcap_sink import McapSink
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import corraoi.theory as theory
-from corraoi.block import RunConfig
-from corraoi.instance import Instance, load_instance
+import corraoi.model.theory as theory
+from corraoi.engine.block import RunConfig
+from corraoi.face.recording import record_run
+from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import make_policies
-from recorder.record import record_run
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ pytest.importorskip("pyarrow")
 
 import corraoi  # noqa: E402
 from corraoi.errors import MissingExtraError, UsageError  # noqa: E402
-from recorder.frames import slot_columns  # noqa: E402
-from recorder.mcap_sink import McapSink  # noqa: E402
+from recorder.slotlog.frames import slot_columns  # noqa: E402
+from recorder.slotlog.sink import McapSink  # noqa: E402
 
 from .conftest import Recorded  # noqa: E402
 
@@ -68,7 +68,7 @@ def test_a_window_equals_the_same_rows_of_a_full_load(
 ):
     path, _, _ = cucb_log
     full = corraoi.load(path).slots
-    import recorder.reader as reader
+    import recorder.slotlog.reader as reader
 
     decoded: list[int] = []
     real = reader.decode_messages
@@ -125,7 +125,7 @@ def test_import_corraoi_stays_light():
         "heavy = [m for m in ('pandas', 'pyarrow', 'recorder', 'numba') if m in sys.modules]; "
         "print(heavy)"
     )
-    # accessing corraoi.load imports corraoi.analysis, which imports neither pandas nor recorder
+    # accessing corraoi.load imports corraoi.face.tables, which imports neither pandas nor recorder
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
@@ -152,7 +152,7 @@ def test_results_reader_takes_a_partitioned_dataset(tmp_path: Path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from recorder.results import read_results, results_metadata, results_schema
+    from recorder.sweeplog.results import read_results, results_metadata, results_schema
 
     md = results_metadata({"horizon": 10, "seed": 0, "instance": {"name": "I1"}})
     schema = results_schema(md)

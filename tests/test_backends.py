@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from corraoi import backends
-from corraoi.engine import Simulation
+from corraoi.engine.simulation import Simulation
 from corraoi.errors import ConfigError
+from corraoi.experiments import backends
+from corraoi.experiments.grid import build_grid
 from corraoi.gpu.device import DEVICE_ENV, host_compiler
-from corraoi.grid import build_grid
 
 
 def _grid(**kw):  # type: ignore[no-untyped-def]

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from corraoi.bounds import _first_tau, cts_bound, cucb_bound
-from corraoi.instance import Instance, load_instance
+from corraoi.model.bounds import _first_tau, cts_bound, cucb_bound
+from corraoi.model.instance import Instance, load_instance
 
 
 def test_t0_is_the_first_slot_meeting_the_condition():
@@ -116,7 +116,7 @@ def test_i2_cts_bound_log_regime_by_hand():
 
 
 def test_hurwitz_zeta_is_exact():
-    from corraoi.bounds import hurwitz_zeta
+    from corraoi.model.bounds import hurwitz_zeta
 
     # against a direct sum plus its integral tail bounds, and against scipy when installed
     for s in (1.5, 2.0, 3.0, 7.0):
@@ -154,7 +154,7 @@ def test_a_bound_above_the_linear_one_is_capped_and_says_so():
 
 
 def test_bound_texts_are_clean():
-    from corraoi.summary import bound_text
+    from corraoi.experiments.summary import bound_text
 
     assert bound_text({"value": None, "theorem": "Theorem 3 (CTS)", "regime": "n/a",
                        "note": "stated for beta > 1"}) == "n/a: stated for beta > 1"  # fmt: skip

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corraoi.engine import simulate
-from corraoi.instance import load_instance
+from corraoi.engine.simulation import simulate
+from corraoi.model.instance import load_instance
 from corraoi.policies import builtins, make_policy
 from corraoi.testing import check_policy
 

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from corraoi.channels import Channel, parse_channel, trace_channel
 from corraoi.cli import main
-from corraoi.engine import simulate
+from corraoi.engine.simulation import simulate
 from corraoi.errors import ConfigError
-from corraoi.instance import load_instance
+from corraoi.model.channels import Channel, parse_channel, trace_channel
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 I1 = load_instance("I1")
 

@@ -88,8 +88,8 @@ def test_sweep_json_fields_and_pairing():
 def test_sweep_values_match_library():
     import numpy as np
 
-    from corraoi.engine import Simulation
-    from corraoi.instance import load_instance
+    from corraoi.engine.simulation import Simulation
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
 
     d = json.loads(run("sweep", "-p", "cts", "-n", "5", "-T", "300", "--json").stdout)

@@ -9,10 +9,10 @@ import numpy as np
 from click.testing import CliRunner
 
 from corraoi.cli import main
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine.simulation import Simulation
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.sweep_log import read_sweep
+from recorder.sweeplog.read import read_sweep
 
 
 def run(*args: str):
@@ -105,14 +105,14 @@ def test_empty_instance_name():
 
 
 def test_an_interrupted_forced_sweep_keeps_its_chunks_and_resumes(tmp_path: Path, monkeypatch):
-    import corraoi.chunks
+    import corraoi.experiments.chunks
 
     out = tmp_path / "s"
     args = ["sweep", "-p", "ucb,cts", "-n", "4", "-T", "300", "-o", str(out), "--checkpoints", "10",
             "--chunk", "2"]  # fmt: skip
     assert run(*args).exit_code == 0
     complete = (out / "sweep.mcap").read_bytes()
-    real = corraoi.chunks.run_chunk
+    real = corraoi.experiments.chunks.run_chunk
     calls = []
 
     def stop_midway(task, on_slots=None):  # type: ignore[no-untyped-def]
@@ -121,7 +121,7 @@ def test_an_interrupted_forced_sweep_keeps_its_chunks_and_resumes(tmp_path: Path
             raise KeyboardInterrupt
         return real(task, on_slots)
 
-    monkeypatch.setattr(corraoi.chunks, "run_chunk", stop_midway)
+    monkeypatch.setattr(corraoi.experiments.chunks, "run_chunk", stop_midway)
     res = run(*args, "--force")
     assert res.exit_code == 130
     assert f"finished chunks are saved in {out}: --resume continues" in res.stderr
@@ -129,7 +129,7 @@ def test_an_interrupted_forced_sweep_keeps_its_chunks_and_resumes(tmp_path: Path
     assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "parts"]
     assert len(list((out / "parts").glob("*.npz"))) == 2
     # an unfinished sweep is a sweep: refused without --force or --resume
-    monkeypatch.setattr(corraoi.chunks, "run_chunk", real)
+    monkeypatch.setattr(corraoi.experiments.chunks, "run_chunk", real)
     again = run(*args)
     assert again.exit_code == 2 and "--resume to continue" in again.output
     resumed = run(*args, "--resume")

@@ -13,9 +13,9 @@ import pytest
 from click.testing import CliRunner
 from mcap.writer import Writer
 
-from corraoi.block import RunConfig
 from corraoi.cli import main
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 
 
@@ -48,7 +48,7 @@ def _other_tool(path: Path) -> Path:
 
 
 def _newer(path: Path) -> Path:
-    from recorder.format import run_metadata
+    from recorder.slotlog.encode import run_metadata
     from recorder.vocab import RUN_METADATA
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 0, 100)
@@ -267,15 +267,15 @@ def test_recover_cli(tmp_path, record_mcap):
 def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
     a, _, _ = record_mcap("ucb", horizon=2000)
     b, _, _ = record_mcap("cucb", horizon=2000)
-    import corraoi.engine
-    import corraoi.kernels
+    import corraoi.engine.kernels
+    import corraoi.engine.simulation
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the simulation engine was called")
 
     for name in ("simulate", "simulate_run", "Simulation", "streams_for_seed"):
-        monkeypatch.setattr(corraoi.engine, name, forbidden)
-    monkeypatch.setattr(corraoi.kernels, "kernel_for", forbidden)
+        monkeypatch.setattr(corraoi.engine.simulation, name, forbidden)
+    monkeypatch.setattr(corraoi.engine.kernels, "kernel_for", forbidden)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(a.read_bytes()[:60_000])
     for args in (
@@ -296,8 +296,8 @@ def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
 def test_the_viewer_does_not_import_the_engine():
     code = (
         "import sys, viewer, viewer.compare, viewer.replay, viewer.diffs, viewer.info, "
-        "viewer.recover, corraoi.cli.viewer, recorder.reader, recorder.rerun_sink\n"
-        "bad = sorted(m for m in ('corraoi.engine', 'corraoi.kernels', 'numba') "
+        "viewer.recover, corraoi.cli.viewer, recorder.slotlog.reader, recorder.rerun.sink\n"
+        "bad = sorted(m for m in ('corraoi.engine.simulation', 'corraoi.engine.kernels', 'numba') "
         "if m in sys.modules)\n"
         "print(','.join(bad))"
     )
@@ -327,7 +327,7 @@ def test_a_log_with_no_complete_slot_is_refused(tmp_path, record_mcap):
     path, _, _ = record_mcap("cucb", horizon=3000)
     empty = tmp_path / "empty.mcap.partial"
     empty.write_bytes(path.read_bytes()[:5000])  # killed before the first chunk was written
-    from recorder.reader import open_log
+    from recorder.slotlog.reader import open_log
 
     assert open_log(empty).n_slots == 0
     for cmd, out in (

@@ -48,7 +48,7 @@ def test_a_batch_mixing_policy_fails_only_the_own_stream_check(tmp_path: Path):
 
 def test_an_arm_out_of_range_is_refused_by_the_engine_with_its_slot(tmp_path: Path):
     """The engine stops a plain-Python policy's bad arm before any check sees it."""
-    from corraoi.pyengine import PolicyRuntimeError
+    from corraoi.errors import PolicyRuntimeError
 
     plugin = tmp_path / "wild.py"
     plugin.write_text(

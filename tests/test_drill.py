@@ -17,11 +17,11 @@ import pytest
 pytest.importorskip("pyarrow")
 
 import corraoi  # noqa: E402
-from corraoi.experiments import sweep  # noqa: E402
-from corraoi.grid import build_grid  # noqa: E402
-from corraoi.notable import MAX_PAIRED_CELLS, cell_runs, notable_runs  # noqa: E402
-from recorder.reader import open_log  # noqa: E402
-from recorder.sweep_log import read_sweep  # noqa: E402
+from corraoi.experiments.grid import build_grid  # noqa: E402
+from corraoi.experiments.notable import MAX_PAIRED_CELLS, cell_runs, notable_runs  # noqa: E402
+from corraoi.experiments.sweeps import sweep  # noqa: E402
+from recorder.slotlog.reader import open_log  # noqa: E402
+from recorder.sweeplog.read import read_sweep  # noqa: E402
 
 POLICIES = ["ucb", "cucb", "aoi-aware-cts"]
 SEED = 100
@@ -346,7 +346,7 @@ def test_the_sweeps_recording_draws_each_named_run_over_its_mean(folder: Path) -
 def test_info_of_a_folder_with_a_damaged_summary_names_no_runs(folder: Path, tmp_path: Path):
     import shutil
 
-    from corraoi.notable import well_formed
+    from corraoi.experiments.notable import well_formed
 
     copy = tmp_path / "sw"
     shutil.copytree(folder, copy)

@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corraoi.block import RunConfig
+from corraoi.engine.block import RunConfig
 from corraoi.gpu.device import DEVICE_ENV, EmulatedDevice, host_compiler
 from corraoi.gpu.runner import capture_run, simulate
-from corraoi.instance import load_instance
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 pytestmark = pytest.mark.skipif(
     host_compiler() is None, reason="no C++ compiler: the emulated GPU device cannot be built"

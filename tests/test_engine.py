@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from corraoi import rng
-from corraoi.block import SlotBlock
-from corraoi.engine import RunsBlock, Simulation, simulate, simulate_run, streams_for_seed
+from corraoi.engine.block import SlotBlock
+from corraoi.engine.simulation import RunsBlock, Simulation, simulate, simulate_run
 from corraoi.errors import ConfigError
-from corraoi.instance import Instance, load_instance
+from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import make_policy, paper_names
+from corraoi.rng import streams_for_seed
 
 from .reference import check_run
 
@@ -165,7 +166,7 @@ def test_bad_settings():
         Simulation(I1, make_policy("ucb"), [-1], 10)
     with pytest.raises(ConfigError, match=r"seed 9223372036854775808: out of range"):
         Simulation(I1, make_policy("ucb"), [2**63], 10)  # one check of seeds, in limits.py
-    from corraoi.grid import build_grid
+    from corraoi.experiments.grid import build_grid
 
     with pytest.raises(ConfigError, match=r"and 3 runs use seed \.\. seed\+2"):
         build_grid(instances=["I1"], policies=["ucb"], horizons=[10], runs=3, seed=2**63 - 2)

@@ -14,10 +14,11 @@ import pytest
 from click.testing import CliRunner
 
 from corraoi.cli import main
-from corraoi.errors import UsageError
+from corraoi.errors import FigureUnavailable, UsageError
 from recorder.style import POLICY_COLORS
-from recorder.sweep_log import SweepMcapSink, read_sweep
-from viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, FigureUnavailable, draw_figure
+from recorder.sweeplog.log import SweepMcapSink
+from recorder.sweeplog.read import read_sweep
+from viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, draw_figure
 
 from .test_sweep_log import POLICIES, small_sweep, write_log
 
@@ -240,7 +241,8 @@ def test_cli_figure_never_simulates(tmp_path: Path, log_path: Path):
         f"    main(['figure', {str(log_path)!r}, '-o', {str(tmp_path / 'f.png')!r}])\n"
         "except SystemExit as e:\n"
         "    assert not e.code, e.code\n"
-        "heavy = [m for m in ('corraoi.engine', 'corraoi._kernel', 'numba', 'rerun')"
+        "heavy = [m for m in ('corraoi.engine.simulation', 'corraoi.engine._kernel', 'numba',"
+        " 'rerun')"
         " if m in sys.modules]\n"
         "assert not heavy, heavy\n"
     )

@@ -22,10 +22,10 @@ from pathlib import Path
 how, out = sys.argv[1], Path(sys.argv[2])
 if how == "no-matplotlib":
     sys.modules["matplotlib"] = None  # as on a machine without the plot extra
-from corraoi.experiments import sweep
-from corraoi.grid import build_grid
+from corraoi.experiments.sweeps import sweep
+from corraoi.experiments.grid import build_grid
 from viewer.figure_worker import FigureWorker
-from viewer.sweep_outputs import FolderOutputs
+from corraoi.face.outputs import FolderOutputs
 
 grid = build_grid(instances=["I1", "I2"], policies=["ucb", "cts"], horizons=[300], runs=8)
 notes = []
@@ -51,7 +51,7 @@ def _run(how: str, out: Path) -> dict:
 
 def _drawn_here(folder: Path, tmp_path: Path) -> bytes:
     """The figure of a group's sweep log as drawn in this process."""
-    from recorder.sweep_log import read_sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     out = tmp_path / f"here-{folder.name}.png"
@@ -102,7 +102,7 @@ def test_without_matplotlib_the_worker_path_warns_once_per_figure(tmp_path: Path
 _ORPHAN = r"""
 import sys, time
 import viewer.figure_worker as fw
-from recorder.rerun_worker import RerunWorker
+from recorder.rerun.worker import RerunWorker
 fw.draw_from_log = lambda log, out: time.sleep(60)  # a figure that takes a minute
 figures = fw.FigureWorker.start()
 figures.draw("sweep.mcap", "figure.png")  # busy: it does not read the pipe meanwhile
@@ -147,9 +147,9 @@ def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path:
     """draw_figure writes through the recorder's locked .partial: a second writer of the same
     figure is told who holds it instead of renaming the other's file away."""
     from corraoi.errors import CorraoiError
-    from corraoi.experiments import sweep
-    from corraoi.grid import build_grid
-    from recorder.sweep_log import read_sweep
+    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.sweeps import sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[200], runs=4)

@@ -16,10 +16,10 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from corraoi.cli import main
-from corraoi.instance import load_instance
+from corraoi.experiments.montecarlo import sweep_config
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies, paper_names
-from corraoi.sweep import sweep_config
-from recorder.sweep_log import read_sweep
+from recorder.sweeplog.read import read_sweep
 from recorder.vocab import SWEEP_METADATA
 from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
 from recorder.vocab import SWEEP_TOPIC as TOPIC

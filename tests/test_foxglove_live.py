@@ -1,4 +1,4 @@
-"""Live in Foxglove (recorder.foxglove_live, record/replay --foxglove): a real protocol client
+"""Live in Foxglove (recorder.live.foxglove, record/replay --foxglove): a real protocol client
 over `websockets` gets the MCAP log's messages, late and slow clients, and the ways a run ends.
 
 Everything listens on 127.0.0.1, and every server is stopped by the test that started it.
@@ -28,12 +28,10 @@ pytest.importorskip("websockets")
 from mcap.reader import make_reader  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
-from corraoi.block import SlotBlock  # noqa: E402
-from recorder.format import schema_bytes  # noqa: E402
-from recorder.foxglove_live import (  # noqa: E402
+from corraoi.engine.block import SlotBlock  # noqa: E402
+from recorder.live.foxglove import (  # noqa: E402
     BACKLOG,
     RUN_TOPIC,
-    SWEEP_TOPIC,
     Address,
     FoxgloveServer,
     FoxgloveSweepSink,
@@ -42,9 +40,11 @@ from recorder.foxglove_live import (  # noqa: E402
     parse_address,
     stream_log,
 )
-from recorder.mcap_sink import McapSink  # noqa: E402
-from recorder.reader import open_log  # noqa: E402
+from recorder.slotlog.encode import schema_bytes  # noqa: E402
+from recorder.slotlog.reader import open_log  # noqa: E402
+from recorder.slotlog.sink import McapSink  # noqa: E402
 from recorder.vocab import SLOT_TOPIC as TOPIC  # noqa: E402
+from recorder.vocab import SWEEP_TOPIC  # noqa: E402
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) must be used:DeprecationWarning")

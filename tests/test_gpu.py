@@ -23,6 +23,8 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.errors import ConfigError
+from corraoi.experiments.grid import build_grid
+from corraoi.experiments.montecarlo import run_policy
 from corraoi.gpu import GpuUnavailable, choose_backend
 from corraoi.gpu.device import (
     DEVICE_ENV,
@@ -34,11 +36,9 @@ from corraoi.gpu.device import (
     host_compiler,
 )
 from corraoi.gpu.runner import gpu_problem, simulate
-from corraoi.grid import build_grid
-from corraoi.instance import load_instance
+from corraoi.model.instance import load_instance
 from corraoi.policies import builtins, gpu_form, make_policy
 from corraoi.stats import Moments
-from corraoi.sweep import run_policy
 
 PLUGINS = Path(__file__).parent / "plugins"
 I1 = load_instance("I1")
@@ -285,7 +285,7 @@ def test_device_moments_and_paired_moments_match_the_runs(emulated: Device):
 
 
 def test_a_trace_channel_replays_one_path_in_every_run(emulated: Device, tmp_path: Path):
-    from corraoi.channels import parse_channel
+    from corraoi.model.channels import parse_channel
 
     path = tmp_path / "states.txt"
     rng = np.random.default_rng(3)
@@ -300,7 +300,7 @@ def test_a_trace_channel_replays_one_path_in_every_run(emulated: Device, tmp_pat
 def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
     """AoI sums pass 2^31 near T = 1.3e9 on good instances; on this one (mu* = 1e-6, the age
     grows by one a slot) they pass it within 80,000 slots."""
-    from corraoi.instance import Instance
+    from corraoi.model.instance import Instance
 
     inst = Instance(name="slow", Y=np.array([[1, 0], [0, 0]], dtype=np.int8),
                     p=np.array([1e-6, 1 - 1e-6]))  # fmt: skip
@@ -423,7 +423,7 @@ def test_record_says_per_slot_logs_are_a_cpu_feature():
 
 
 def test_a_gpu_sweep_cannot_go_to_a_cluster(emulate_env: None):
-    from corraoi.experiments import sweep
+    from corraoi.experiments.sweeps import sweep
 
     with pytest.raises(ConfigError, match="leave out --scheduler"):
         sweep(_grid(["ucb"], "gpu"), client=object())
@@ -433,7 +433,7 @@ def test_a_gpu_sweep_cannot_go_to_a_cluster(emulate_env: None):
 
 
 def test_the_backend_is_an_experiment_file_key(tmp_path: Path):
-    from corraoi.grid import grid_from_file
+    from corraoi.experiments.grid import grid_from_file
 
     f = tmp_path / "e.toml"
     f.write_text('instances = ["I1"]\npolicies = ["ucb"]\nruns = 2\nbackend = "gpu"\n')

@@ -1,4 +1,5 @@
-"""Grid sweeps (corraoi.grid, corraoi.experiments, corraoi.cluster): the grid, experiment files,
+"""Grid sweeps (corraoi.experiments.grid, corraoi.experiments.sweeps, corraoi.experiments.cluster):
+the grid, experiment files,
 resume and append, a Dask LocalCluster on 127.0.0.1, and the failures each get one line."""
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.errors import ConfigError
-from corraoi.grid import build_grid, grid_from_file
+from corraoi.experiments.grid import build_grid, grid_from_file
 
 pd = pytest.importorskip("pandas")
 pytest.importorskip("pyarrow")
@@ -32,7 +33,7 @@ def run(*args: object):  # type: ignore[no-untyped-def]
 
 
 def results(folder: Path):  # type: ignore[no-untyped-def]
-    from recorder.results import read_results
+    from recorder.sweeplog.results import read_results
 
     return read_results(folder / "results.parquet")
 
@@ -137,7 +138,7 @@ def test_appending_runs_policies_and_values_equals_running_them_all_at_once(tmp_
             tmp_path / "once" / inst / "sweep.mcap"
         ).read_bytes()
     from recorder.style import config_colors, policy_color
-    from recorder.sweep_log import read_sweep
+    from recorder.sweeplog.read import read_sweep
 
     colors = config_colors(read_sweep(tmp_path / "once" / "I1" / "sweep.mcap").config)
     shades = [rgb for name, rgb in colors.items() if name.startswith("sw-ucb(")]
@@ -234,9 +235,9 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path, monkeypatch: pytes
     monkeypatch.setenv("CORRAOI_CONNECT_TIMEOUT", "2")
     import importlib
 
-    import corraoi.cluster
+    import corraoi.experiments.cluster
 
-    importlib.reload(corraoi.cluster)
+    importlib.reload(corraoi.experiments.cluster)
     res = run("sweep", "-p", "ucb", "-n", "2", "-T", "10", "--scheduler", f"tcp://127.0.0.1:{port}")
     assert "cannot reach the scheduler" in one_line(res, code=1)
     for bad, needle in (("local:0", "expected local:N"), ("nowhere", "expected tcp://HOST:PORT")):
@@ -247,8 +248,8 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path, monkeypatch: pytes
 def test_the_default_sweep_never_imports_dask():
     code = (
         "import sys\n"
-        "from corraoi.experiments import sweep\n"
-        "from corraoi.grid import build_grid\n"
+        "from corraoi.experiments.sweeps import sweep\n"
+        "from corraoi.experiments.grid import build_grid\n"
         "sweep(build_grid(instances=['I1'], policies=['ucb'], horizons=[50], runs=2))\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')))\n"
     )
@@ -259,7 +260,7 @@ def test_the_default_sweep_never_imports_dask():
 
 def test_library_sweep_with_a_client(tmp_path: Path):
     dd = pytest.importorskip("dask.distributed")
-    from corraoi.experiments import sweep
+    from corraoi.experiments.sweeps import sweep
 
     grid = build_grid(instances=["I2"], policies=["cucb"], horizons=[300], runs=6, chunk=2)
     # an in-process cluster (inproc:// transport: no socket at all)
@@ -272,7 +273,7 @@ def test_library_sweep_with_a_client(tmp_path: Path):
     for key in ("regret_mean", "regret_ci95", "estimator_mean", "best_arm_share", "pulls_mean"):
         assert a[key] == b[key], key
     with pytest.raises(ConfigError, match="grid has no cell"):
-        from corraoi.grid import Grid
+        from corraoi.experiments.grid import Grid
 
         Grid((), runs=1)
     assert np.isfinite(here.summaries[0]["policies"]["cucb"]["regret_mean"])

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine.simulation import Simulation
+from corraoi.errors import PolicyRuntimeError
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from corraoi.pyengine import PolicyRuntimeError
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 PLUGINS = Path(__file__).parent / "plugins" / "bad_compiled.py"
 

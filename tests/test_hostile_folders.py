@@ -20,8 +20,8 @@ import pytest
 from click.testing import CliRunner, Result
 
 from corraoi.cli import main
-from corraoi.experiments import sweep
-from corraoi.grid import build_grid
+from corraoi.experiments.grid import build_grid
+from corraoi.experiments.sweeps import sweep
 
 pytest.importorskip("pyarrow")
 
@@ -67,7 +67,7 @@ SWEEP = ["sweep", "-i", "I1", "-p", "ucb,cucb", "-n", 4, "-T", 300, "--seed", 7,
 
 
 def _results(folder: Path) -> Any:
-    from recorder.results import read_results
+    from recorder.sweeplog.results import read_results
 
     return read_results(folder / "results.parquet").sort_values(["policy", "run", "t"])
 

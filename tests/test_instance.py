@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from corraoi.errors import InstanceError
-from corraoi.instance import (
+from corraoi.model.instance import (
     Instance,
     format_text_instance,
     load_instance,

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.errors import InstanceError
-from corraoi.instance import MAX_ARMS, MAX_FILE_BYTES, Instance, load_instance
+from corraoi.model.instance import MAX_ARMS, MAX_FILE_BYTES, Instance, load_instance
 
 
 def one_line(*args: object) -> str:

@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 from numba import njit
 
-from corraoi import kernels
-from corraoi.engine import Simulation, set_workers
-from corraoi.instance import load_instance
+from corraoi.engine import kernels
+from corraoi.engine.simulation import Simulation
+from corraoi.engine.threads import set_workers
+from corraoi.model.instance import load_instance
 from corraoi.policies import builtins, make_policy
 
 GOLDEN = Path(__file__).parent / "golden"
@@ -86,9 +87,9 @@ def test_set_workers_rejects_zero():
 
 _RUN = """
 import sys, json
-from corraoi import kernels
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine import kernels
+from corraoi.engine.simulation import Simulation
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 notes = []
 kernels.on_compile = notes.append
@@ -164,7 +165,7 @@ def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which:
 
 _PREPARE = """
 import sys, json
-from corraoi import kernel_pool, kernels
+from corraoi.engine import kernel_pool, kernels
 from corraoi.policies import make_policy
 notes = []
 kernels.on_compile = notes.append
@@ -201,7 +202,7 @@ def test_kernel_source_variants_differ_only_where_they_should():
 def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path, monkeypatch):
     """A first test run's record and sweep kernels go to one pool (no core idles between two
     batches), the longer sweep kernels first; the notice counts families and kernels."""
-    from corraoi import kernel_pool
+    from corraoi.engine import kernel_pool
 
     monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(kernels, "_LOADED", {})  # as in a fresh process (whatever ran before)
@@ -243,7 +244,7 @@ def test_hooks_are_inlined_unless_their_options_change_their_code():
     """An out-of-line hook doubled a UCB plug-in's time per slot (docs/performance.md): the
     kernel re-declares a plain hook inline="always", the same function; a hook whose options
     change its code is called as declared."""
-    from corraoi import _kernel
+    from corraoi.engine import _kernel
 
     got = _kernel.inlined(_plain_hook)
     assert got is not _plain_hook and got.py_func is _plain_hook.py_func

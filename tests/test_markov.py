@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from corraoi.channels import Channel
 from corraoi.cli import main
-from corraoi.engine import simulate
-from corraoi.instance import Instance, load_instance
-from corraoi.markov import mixing, period
+from corraoi.engine.simulation import simulate
+from corraoi.model.channels import Channel
+from corraoi.model.instance import Instance, load_instance
+from corraoi.model.markov import mixing, period
 from corraoi.policies import make_policy
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 I1 = load_instance("I1")
 

@@ -1,4 +1,4 @@
-"""The hand-framed MCAP writer (recorder.mcap_chunks) against mcap's own writer and readers."""
+"""The hand-framed MCAP writer (recorder.slotlog.chunks) against mcap's own writer and readers."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, IndexType, Writer
 
-from corraoi.block import SlotBlock
-from recorder.format import BlockEncoder
-from recorder.mcap_chunks import ZSTD_LEVEL, ChunkWriter
-from recorder.mcap_sink import McapSink
-from recorder.reader import open_log
+from corraoi.engine.block import SlotBlock
+from recorder.slotlog.chunks import ZSTD_LEVEL, ChunkWriter
+from recorder.slotlog.encode import BlockEncoder
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 

@@ -11,10 +11,10 @@ import functools
 import numpy as np
 import pytest
 
-from corraoi.bounds import cts_bound, cucb_bound
-from corraoi.instance import load_instance
+from corraoi.experiments.montecarlo import PolicyResult, mean_ci95, run_policy, run_sweep
+from corraoi.model.bounds import cts_bound, cucb_bound
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies, make_policy, paper_names
-from corraoi.sweep import PolicyResult, mean_ci95, run_policy, run_sweep
 
 POLICY_NAMES = paper_names()
 

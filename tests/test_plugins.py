@@ -17,10 +17,10 @@ import pytest
 from click.testing import CliRunner
 
 from corraoi.cli import main
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine.simulation import Simulation
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies, make_policy
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 PLUGINS = Path(__file__).parent / "plugins"
 I1 = load_instance("I1")
@@ -87,7 +87,7 @@ def test_file_plugin_records_replays_diffs_and_reads_without_the_plugin(plugdir:
 
 
 def test_python_tier_values_greedy_and_uniform(plugdir: Path):
-    from corraoi.engine import simulate
+    from corraoi.engine.simulation import simulate
 
     # epsilon = 0: after the first K slots every arm is an argmax of mu_hat before the slot
     spec = make_policies(["eps_greedy.py:EpsilonGreedy"], {"epsilon": 0.0})[0]
@@ -234,9 +234,9 @@ def test_bad_plugins_and_parameters_get_one_line(plugdir: Path, args: list[str],
 def test_composed_kernels_load_from_the_disk_cache_in_a_new_process(tmp_path: Path):
     code = (
         "import sys\n"
-        "from corraoi import kernels\n"
-        "from corraoi.engine import Simulation\n"
-        "from corraoi.instance import load_instance\n"
+        "from corraoi.engine import kernels\n"
+        "from corraoi.engine.simulation import Simulation\n"
+        "from corraoi.model.instance import load_instance\n"
         "from corraoi.policies import make_policy\n"
         "notes = []\n"
         "kernels.on_compile = notes.append\n"

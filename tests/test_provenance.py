@@ -20,8 +20,8 @@ from mcap.reader import make_reader
 from corraoi.errors import CodeChanged
 from corraoi.policies import PolicySpec, make_policy
 from corraoi.provenance import KERNEL_SOURCES, Provenance, kernel_sources_hash
-from recorder.reader import open_log
-from recorder.sweep_log import read_sweep
+from recorder.slotlog.reader import open_log
+from recorder.sweeplog.read import read_sweep
 
 PLUGIN = '''"""A plain-Python plug-in: greedy after a forced first pull of every arm."""
 import numpy as np
@@ -183,7 +183,7 @@ def test_kept_code_records_the_sweeps_copy_and_its_row(swept: Path):
 
 
 def _finals(folder: Path, label: str) -> list[int]:
-    from corraoi.sweep_folder import CellRuns, read_manifest, read_parts
+    from corraoi.experiments.folder import CellRuns, read_manifest, read_parts
 
     grid = read_manifest(folder)
     assert grid is not None
@@ -254,10 +254,10 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
     name; once the engine agrees again, the next attempt is not blocked by that log."""
     from click.testing import CliRunner
 
-    import recorder.record
+    import corraoi.face.recording
     from corraoi.cli import main
 
-    real = recorder.record.slots_of
+    real = corraoi.face.recording.slots_of
 
     def changed_engine(config):
         for block in real(config):
@@ -266,7 +266,7 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
 
     out = swept.parent / "m.mcap"
     args = ["record", "--from", str(swept), "--cell", "cucb", "--run", 1, "--no-rrd", "-o", out]
-    monkeypatch.setattr(recorder.record, "slots_of", changed_engine)
+    monkeypatch.setattr(corraoi.face.recording, "slots_of", changed_engine)
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 1, res.output
     line = res.output.strip().splitlines()[-1]
@@ -279,7 +279,7 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
     assert not out.exists()
     log = open_log(f"{out}.partial")
     assert log.status == "failed" and "the sweep's row says" in log.end["error"]
-    monkeypatch.setattr(recorder.record, "slots_of", real)
+    monkeypatch.setattr(corraoi.face.recording, "slots_of", real)
     res = CliRunner().invoke(main, [str(a) for a in args])  # no --force needed: the same run
     assert res.exit_code == 0, res.output
     assert open_log(out).status == "complete" and not Path(f"{out}.partial").exists()
@@ -287,8 +287,8 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
 
 
 def _row(folder: Path, label: str, run: int) -> list[tuple[int, float]]:
-    from corraoi.drill import expected_row
-    from corraoi.sweep_folder import read_manifest
+    from corraoi.experiments.drill import expected_row
+    from corraoi.experiments.folder import read_manifest
 
     grid = read_manifest(folder)
     assert grid is not None

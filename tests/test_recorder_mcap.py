@@ -12,11 +12,11 @@ from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
 from corraoi import partial_file
-from corraoi.block import RunConfig, SlotBlock
-from recorder.errors import OutputError, WriteError
-from recorder.mcap_sink import McapSink
-from recorder.paths import partial_path
-from recorder.reader import open_log
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.errors import OutputError, WriteError
+from corraoi.partial_file import partial_path
+from recorder.slotlog.reader import open_log
+from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_TOPIC as TOPIC
 
@@ -260,7 +260,7 @@ def test_the_schema_id_says_the_runs_own_format_version(tmp_path, make_config, e
     the channel's and the run metadata's format_version now agree, for either version."""
     import dataclasses
 
-    from corraoi.channels import parse_channel
+    from corraoi.model.channels import parse_channel
 
     config = make_config(horizon=50, instance="GE")
     config = dataclasses.replace(config, channel=parse_channel(channel, config.instance))

@@ -9,10 +9,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from corraoi.errors import UsageError
-from recorder.errors import LogError
-from recorder.format import run_metadata
-from recorder.reader import open_log
+from corraoi.errors import LogError, UsageError
+from recorder.slotlog.encode import run_metadata
+from recorder.slotlog.reader import open_log
 from recorder.vocab import RUN_METADATA
 
 
@@ -63,7 +62,7 @@ def test_a_log_cut_anywhere_is_read_up_to_its_last_complete_chunk(record_mcap, t
 
 
 def _prefix(block, n):
-    from recorder.reader import _slice
+    from recorder.slotlog.reader import _slice
 
     return _slice(block, 0, n)
 

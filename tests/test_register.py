@@ -25,7 +25,7 @@ from corraoi.policies import (
 )
 from corraoi.policies.spec import PolicySpec
 from corraoi.testing import check_policy, record_run
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 MODULE = textwrap.dedent(
     """

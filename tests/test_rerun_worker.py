@@ -1,4 +1,4 @@
-"""The Rerun recording written by a forked worker (recorder/rerun_worker.py, issue 22): the
+"""The Rerun recording written by a forked worker (recorder/rerun/worker.py, issue 22): the
 same recording as in-process, bad paths refused before the run, a worker that dies or a
 parent that dies handled with one line or a ``.partial`` file, Ctrl-C to the whole process
 group, and no pandas in the worker either."""
@@ -15,14 +15,14 @@ from pathlib import Path
 
 import pytest
 
-from corraoi.block import RunConfig
-from corraoi.instance import load_instance
+from corraoi.engine.block import RunConfig
+from corraoi.errors import OutputError, WriteError
+from corraoi.face.recording import record_run
+from corraoi.model.instance import load_instance
+from corraoi.partial_file import partial_path
 from corraoi.policies import make_policies
-from recorder.errors import OutputError, WriteError
-from recorder.paths import partial_path
-from recorder.reader import open_log
-from recorder.record import record_run
-from recorder.rerun_worker import RerunWorker
+from recorder.rerun.worker import RerunWorker
+from recorder.slotlog.reader import open_log
 
 from .rrd_util import RERUN, read_rrd
 from .test_cli_record import _wait_for
@@ -153,7 +153,7 @@ def test_a_killed_record_leaves_no_worker_behind(tmp_path):
 
 _PROBE = """
 import json, os, sys
-import recorder.rerun_worker as w
+import recorder.rerun.worker as w
 serve = w._serve
 def spy(*args):
     try:

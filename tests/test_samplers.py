@@ -13,9 +13,10 @@ import pytest
 from numba import njit
 
 from corraoi import rng
-from corraoi.engine import Simulation, streams_for_seed
-from corraoi.instance import Instance
+from corraoi.engine.simulation import Simulation
+from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
+from corraoi.rng import streams_for_seed
 
 N = 40_000
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 import recorder
-from recorder.paths import Sink, partial_path
+from corraoi.partial_file import partial_path
+from recorder.paths import Sink
 
 
 def _writers() -> dict[str, type]:
@@ -40,11 +41,11 @@ def test_every_writer_of_the_recorder_is_a_sink():
 
 
 def test_an_error_inside_the_with_aborts_and_leaves_the_partial_file(tmp_path: Path):
-    from corraoi.block import RunConfig
-    from corraoi.instance import load_instance
+    from corraoi.engine.block import RunConfig
+    from corraoi.face.slots import slots_of
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from corraoi.slots import slots_of
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 3, 50)
     out = tmp_path / "a.mcap"
@@ -73,11 +74,11 @@ class _Collect(Sink):
 
 
 def test_record_run_hands_every_block_to_the_sinks_it_is_given(tmp_path: Path):
-    from corraoi.block import RunConfig
-    from corraoi.instance import load_instance
+    from corraoi.engine.block import RunConfig
+    from corraoi.face.recording import record_run
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.reader import open_log
-    from recorder.record import record_run
+    from recorder.slotlog.reader import open_log
 
     config = RunConfig(load_instance("I1"), make_policy("cucb"), 4, 2500)
     mine = _Collect()
@@ -91,11 +92,11 @@ def test_record_run_hands_every_block_to_the_sinks_it_is_given(tmp_path: Path):
 
 
 def test_a_failed_run_aborts_the_sinks(tmp_path: Path):
-    from corraoi.block import RunConfig
-    from corraoi.instance import load_instance
+    from corraoi.engine.block import RunConfig
+    from corraoi.errors import PolicyRuntimeError
+    from corraoi.face.recording import record_run
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from corraoi.pyengine import PolicyRuntimeError
-    from recorder.record import record_run
 
     plugin = tmp_path / "late.py"
     plugin.write_text(

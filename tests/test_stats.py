@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from corraoi.engine import Simulation
-from corraoi.instance import load_instance
+from corraoi.engine.simulation import Simulation
+from corraoi.experiments.montecarlo import run_policy
+from corraoi.stats import mean_ci95, t975
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from corraoi.sweep import mean_ci95, run_policy, t975
 
 
 def test_t_quantiles():

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-import recorder.sweep_log as sweep_log
-from corraoi.theory import analyse
+import recorder.sweeplog.log as sweep_log
+from corraoi.model.theory import analyse
 from recorder import style
-from recorder.rerun_names import run_path
-from recorder.rerun_sink import RerunSink
-from recorder.rrd_output import RrdOutput
-from recorder.sweep_rerun import SweepRerunSink
-from recorder.sweep_rerun_layout import regret_path
+from recorder.rerun.names import run_path
+from recorder.rerun.output import RrdOutput
+from recorder.rerun.sink import RerunSink
+from recorder.sweeplog.layout import regret_path
+from recorder.sweeplog.recording import SweepRerunSink
 from viewer.compare import compare
 
 from .rrd_util import read_rrd
@@ -112,7 +112,8 @@ def test_one_policy_one_colour_in_record_compare_sweep_and_figure(
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweep_log import SweepMcapSink, read_sweep
+    from recorder.sweeplog.log import SweepMcapSink
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     with SweepMcapSink(tmp_path / "s.mcap", config_s, fsync=False) as log:
@@ -144,7 +145,8 @@ def test_a_sweep_policy_with_its_own_colour_keeps_it_in_the_recording_and_figure
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweep_log import SweepMcapSink, read_sweep
+    from recorder.sweeplog.log import SweepMcapSink
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import draw_figure
 
     config, points = small_sweep(("cucb", "ucb"), runs=2, horizon=300)

@@ -19,13 +19,13 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from corraoi._version import __version__
-from corraoi.errors import UsageError
-from corraoi.instance import load_instance
+from corraoi.errors import LogError, SweepLogError, UsageError
+from corraoi.experiments.montecarlo import SweepPoint, checkpoint_point, run_sweep, sweep_config
+from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
-from corraoi.sweep import SweepPoint, checkpoint_point, run_sweep, sweep_config
-from recorder.errors import LogError
 from recorder.style import POLICY_COLORS, lighter, policy_color
-from recorder.sweep_log import SweepLogError, SweepMcapSink, read_sweep
+from recorder.sweeplog.log import SweepMcapSink
+from recorder.sweeplog.read import read_sweep
 from recorder.vocab import NS_PER_SLOT, SWEEP_METADATA
 from recorder.vocab import SWEEP_END_METADATA as END_METADATA
 from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
@@ -295,7 +295,7 @@ def test_reader_errors(tmp_path: Path, sweep: Sweep, record_mcap):
 
 
 def test_newer_format_is_refused(tmp_path: Path, sweep: Sweep, monkeypatch):
-    import recorder.sweep_log as sweep_log
+    import recorder.sweeplog.log as sweep_log
 
     real = sweep_log.sweep_metadata
     monkeypatch.setattr(
@@ -338,8 +338,8 @@ def _rgba(rgb: tuple[int, int, int]) -> int:
 def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
     from rerun.chunk import RrdReader
 
-    from recorder.sweep_rerun import open_sweep_recording
-    from recorder.sweep_rerun_layout import sweep_recording_id
+    from recorder.sweeplog.layout import sweep_recording_id
+    from recorder.sweeplog.recording import open_sweep_recording
 
     config, points = sweep
     path = tmp_path / "sweep.rrd"
@@ -379,8 +379,8 @@ def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
 def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
     import rerun as rr
 
-    from recorder.sweep_rerun import SweepRerunSink
-    from recorder.sweep_rerun_layout import sweep_blueprint
+    from recorder.sweeplog.layout import sweep_blueprint
+    from recorder.sweeplog.recording import SweepRerunSink
 
     config, points = small_sweep(("ts", "aoi-aware-ts"), runs=1, horizon=40)
     rec = rr.RecordingStream("corraoi", recording_id="test-sweep")
@@ -398,7 +398,7 @@ def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
 
 
 def test_rerun_recordings_compare_equal(tmp_path: Path, sweep: Sweep):
-    from recorder.sweep_rerun import open_sweep_recording
+    from recorder.sweeplog.recording import open_sweep_recording
 
     exe = Path(sys.executable).parent / "rerun"
     if not exe.exists():
@@ -418,9 +418,9 @@ def test_rerun_recordings_compare_equal(tmp_path: Path, sweep: Sweep):
 def test_channel_metadata_carries_the_format_version(tmp_path):
     from mcap.reader import make_reader
 
-    from corraoi.instance import load_instance
+    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies
-    from recorder.sweep_log import SweepMcapSink
+    from recorder.sweeplog.log import SweepMcapSink
     from recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
 
     specs = make_policies(["ucb"])

@@ -7,9 +7,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from corraoi.experiments import DEFAULT_OUTPUTS, default_outputs, sweep
-from corraoi.grid import build_grid
-from viewer.sweep_outputs import FolderOutputs
+from corraoi.experiments.grid import build_grid
+from corraoi.experiments.sweeps import DEFAULT_OUTPUTS, default_outputs, sweep
+from corraoi.face.outputs import FolderOutputs
 
 
 class Recorded:
@@ -46,7 +46,7 @@ def test_the_callers_outputs_get_every_group_and_the_core_writes_the_summaries(t
 
 
 def test_by_default_every_file_is_written(tmp_path: Path):
-    assert DEFAULT_OUTPUTS == "viewer.sweep_outputs:FolderOutputs"
+    assert DEFAULT_OUTPUTS == "corraoi.face.outputs:FolderOutputs"
     assert isinstance(default_outputs(), FolderOutputs)
     outcome = sweep(_grid(), out=tmp_path / "s", workers=1)
     for folder in outcome.folders:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from corraoi.testing import assert_runs_equal
-from recorder.reader import open_log
+from recorder.slotlog.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -75,7 +75,7 @@ def test_loaded_runs_compare_too(corraoi_run: Callable[..., Path]):
 def test_the_plugin_imports_nothing_heavy():
     code = (
         "import sys, corraoi.pytest_plugin; "
-        "print([m for m in ('numba', 'numpy', 'recorder', 'viewer', 'corraoi.engine') "
+        "print([m for m in ('numba', 'numpy', 'recorder', 'viewer', 'corraoi.engine.simulation') "
         "if m in sys.modules])"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from corraoi.instance import Instance, load_instance
-from corraoi.theory import analyse, policy_pseudo_rewards, pseudo_reward_table
+from corraoi.model.instance import Instance, load_instance
+from corraoi.model.theory import analyse, policy_pseudo_rewards, pseudo_reward_table
 
 
 def test_i1_exact():

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from corraoi.block import FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import UsageError
-from corraoi.instance import Instance
+from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
 from viewer import diff
 from viewer.diffs import DIFF_FIELDS, parse_fields
@@ -18,7 +18,7 @@ from viewer.summary import summarize_blocks
 
 
 def _write(path, config: RunConfig, block: SlotBlock):
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     with McapSink(path, config, fsync=False) as sink:
         for start in range(0, len(block), 1000):
@@ -117,7 +117,7 @@ def test_an_integer_change_is_not_forgiven_by_atol(tmp_path, make_config, engine
 
 def test_a_cut_short_log_against_the_full_one(tmp_path, record_mcap):
     full, config, ref = record_mcap("cucb", horizon=3000)
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     with McapSink(tmp_path / "short.mcap", config, fsync=False) as sink:
         for start in (0, 1000):
@@ -136,7 +136,7 @@ def test_runs_with_different_numbers_of_arms(tmp_path, record_mcap):
     a, _, _ = record_mcap("ucb", horizon=1000)
     three = Instance("three", np.array([0.5, 0.5]), np.array([[1, 0], [0, 1], [1, 1]]))
     config = RunConfig(three, make_policy("ucb"), 0, 1000)
-    from corraoi.engine import simulate_run
+    from corraoi.engine.simulation import simulate_run
 
     block = SlotBlock.concat(list(simulate_run(three, config.policy, 0, 1000)))
     b = _write(tmp_path / "three.mcap", config, block)

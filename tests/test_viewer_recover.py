@@ -13,9 +13,9 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
-from corraoi.block import FIELDS, SlotBlock
-from recorder.errors import LogError, OutputError
-from recorder.reader import open_log
+from corraoi.engine.block import FIELDS, SlotBlock
+from corraoi.errors import LogError, OutputError
+from recorder.slotlog.reader import open_log
 from viewer import diff, recover
 
 #: A chunk record (opcode 6) announcing 10,000 bytes, of which only a few were written.
@@ -24,7 +24,7 @@ TORN = bytes([0x06]) + struct.pack("<Q", 10_000) + b"\x00" * 37
 
 def _killed(tmp_path: Path, make_config, engine, *, slots: int = 3000, torn: bool = True):
     """A .partial log as a writer killed after ``slots`` slots leaves it."""
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     config = make_config("cts", horizon=5000, seed=9)
     ref = SlotBlock.concat(engine(config))

@@ -12,11 +12,11 @@ import pytest
 rr = pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
-from corraoi.block import FIELDS, RunConfig, SlotBlock  # noqa: E402
 from corraoi.cli import main  # noqa: E402
-from corraoi.instance import load_instance  # noqa: E402
+from corraoi.engine.block import FIELDS, RunConfig, SlotBlock  # noqa: E402
+from corraoi.model.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder.rerun_names import run_path  # noqa: E402
+from recorder.rerun.names import run_path  # noqa: E402
 from viewer import compare, replay  # noqa: E402
 from viewer.compare import (  # noqa: E402
     SUMMARY_ENTITY,
@@ -75,7 +75,7 @@ def test_a_replayed_rrd_equals_the_live_one(tmp_path):
 
 
 def test_replay_of_a_cut_short_log_renders_the_slots_it_holds(tmp_path, make_config, engine):
-    from recorder.mcap_sink import McapSink
+    from recorder.slotlog.sink import McapSink
 
     config = make_config("cucb", horizon=4000, seed=1)
     ref = SlotBlock.concat(engine(config))
@@ -198,7 +198,7 @@ def test_the_side_by_side_table_aligns_columns(record_mcap):
 def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
     import struct
 
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
 
     path, _, _ = record_mcap("ucb", horizon=5000)
     data = bytearray(path.read_bytes())
@@ -223,7 +223,7 @@ def test_a_damaged_chunk_found_mid_replay_leaves_no_file(tmp_path, record_mcap):
 
 
 def _items_then_boom():
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
 
     yield 1
     yield 2
@@ -234,7 +234,7 @@ def _items_then_boom():
 def test_read_ahead_hands_on_errors_and_stops_early(mode, monkeypatch):
     import threading
 
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
     from viewer import readahead
 
     monkeypatch.setenv(readahead.ENV, mode)
@@ -280,7 +280,7 @@ def test_replay_whose_reader_is_killed_is_one_line_and_no_rrd(tmp_path, monkeypa
     from click.testing import CliRunner
 
     from corraoi.cli import main
-    from recorder.reader import RunLog
+    from recorder.slotlog.reader import RunLog
     from viewer import readahead
 
     if not readahead._can_fork():

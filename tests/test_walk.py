@@ -15,13 +15,13 @@ from mcap.reader import make_reader
 from mcap.records import DataEnd, MessageIndex
 from mcap.stream_reader import StreamReader
 
-from corraoi.block import FIELDS
+from corraoi.engine.block import FIELDS
+from corraoi.errors import LogError
 from recorder import vocab
-from recorder.encode import slot_schema
-from recorder.errors import LogError
-from recorder.reader import open_log
-from recorder.results import is_sweep_path
-from recorder.sweep_log import read_sweep
+from recorder.slotlog.encode import slot_schema
+from recorder.slotlog.reader import open_log
+from recorder.sweeplog.read import read_sweep
+from recorder.sweeplog.results import is_sweep_path
 from recorder.walk import Walker, records_in
 from tests.test_sweep_log import small_sweep, write_log
 from viewer.recover import recover

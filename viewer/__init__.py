@@ -10,7 +10,8 @@
 from __future__ import annotations
 
 from .compare import Comparison, compare
-from .diffs import DiffReport, FieldDiff, diff
+from .diff_report import DiffReport, FieldDiff
+from .diffs import diff
 from .info import log_info
 from .recover import Recovered, recover
 from .replay import Replayed, replay

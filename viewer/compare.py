@@ -1,6 +1,6 @@
 """``corraoi compare``: several recorded runs in one Rerun recording, side by side.
 
-Each run goes through the same :class:`recorder.rerun_sink.RerunSink` as ``record`` and
+Each run goes through the same :class:`recorder.rerun.sink.RerunSink` as ``record`` and
 ``replay``, under ``runs/<label>/...`` (labels from the policy names, made unique with the
 instance, seed, horizon or parameters where needed). The embedded blueprint puts one
 column per run -- its AoI against the oracle's, the channel played, the empirical means
@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from recorder.style import AOI_UNIT, REGRET_UNIT, RGB, run_colors, spec_color
+from corraoi.policies import RGB
+from recorder.style import AOI_UNIT, REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
@@ -29,8 +30,8 @@ from .summary import RunSummary, SummaryAccumulator
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
-    from corraoi.block import SlotBlock
-    from recorder.reader import RunLog
+    from corraoi.engine.block import SlotBlock
+    from recorder.slotlog.reader import RunLog
 
 #: Slots per block handed to the sinks.
 BLOCK = 1000
@@ -133,8 +134,8 @@ def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> r
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from recorder.rerun_layout import time_windows
-    from recorder.rerun_names import TIMELINE, run_path
+    from recorder.rerun.layout import time_windows
+    from recorder.rerun.names import TIMELINE, run_path
 
     tw = time_windows(window)
     window_axis, window_query, whole = tw.window_axis, tw.window_query, tw.whole_axis
@@ -248,8 +249,8 @@ def compare(
 
     import rerun as rr
 
-    from recorder.rerun_sink import RerunSink
-    from recorder.rrd_output import RrdOutput
+    from recorder.rerun.output import RrdOutput
+    from recorder.rerun.sink import RerunSink
 
     with RrdOutput(
         runs[0].config,

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
+from corraoi.engine.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
 from corraoi.errors import UsageError
 
 from .diff_report import ConfigDifference, DiffReport, FieldDiff
@@ -206,9 +206,6 @@ __all__ = [
     "DIFF_FIELDS",
     "FLOAT_FIELDS",
     "NOTE_KEYS",
-    "ConfigDifference",
-    "DiffReport",
-    "FieldDiff",
     "diff",
     "parse_fields",
 ]

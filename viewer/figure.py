@@ -1,6 +1,6 @@
 """The sweep figure: AoI regret against t, one line per policy with its 95% band.
 
-Drawn from a sweep log alone (:func:`recorder.sweep_log.read_sweep`), never by simulating.
+Drawn from a sweep log alone (:func:`recorder.sweeplog.log.read_sweep`), never by simulating.
 Style of the paper's figures, from :mod:`recorder.style` (the colours of every view): a
 line per policy in its base policy's colour, AoI-aware variants dashed in the same colour,
 a shaded 95% confidence band, the legend outside the axes so that twelve curves never hide
@@ -20,18 +20,18 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import CorraoiError, UsageError
-from recorder.paths import PartialFile
+from corraoi.errors import FigureUnavailable, UsageError
+from corraoi.partial_file import PartialFile
+from corraoi.policies import RGB
 from recorder.style import (
     DASH_AOI_AWARE,
     REGRET_UNIT,
-    RGB,
     config_colors,
     is_aoi_aware,
     mpl,
     policy_color,
 )
-from recorder.sweep_log import SweepCurve, SweepLog
+from recorder.sweeplog.read import SweepCurve, SweepLog
 
 #: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
 FIGSIZE = (10.0, 6.0)
@@ -52,12 +52,6 @@ FORMATS = {
 }
 YLABEL = f"pathwise AoI regret  sum (aoi - oracle aoi)  {REGRET_UNIT}"
 MISSING_MATPLOTLIB = "figures need matplotlib: pip install 'corraoi[plot]'"
-
-
-class FigureUnavailable(CorraoiError):
-    """matplotlib is not installed: the figure cannot be drawn (the logs are fine)."""
-
-    exit_code = 1
 
 
 def check_policies(sweep: SweepLog, policies: Sequence[str] | None) -> list[str]:
@@ -252,7 +246,6 @@ def _metadata(fmt: str) -> dict[str, str | None] | None:
 
 __all__ = [
     "FORMATS",
-    "FigureUnavailable",
     "MISSING_MATPLOTLIB",
     "check_dpi",
     "check_policies",

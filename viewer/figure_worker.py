@@ -10,7 +10,7 @@ figure is the one :func:`viewer.figure.draw_figure` draws in-process: only the p
 differs.
 
 ``FigureWorker.start()`` returns None where a process cannot be forked safely (no ``fork``,
-or other threads running); :class:`viewer.sweep_outputs.FolderOutputs` then draws
+or other threads running); :class:`corraoi.face.outputs.FolderOutputs` then draws
 in-process. Nothing is lost when the worker fails: a figure it did not deliver (it died,
 did not answer, or its answer could not be read) is drawn in this process instead. The
 worker ignores Ctrl-C, SIGTERM and SIGHUP (the parent decides); a parent that dies
@@ -25,7 +25,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from recorder.rerun_worker import die_with_parent, fork_context
+from recorder.rerun.worker import die_with_parent, fork_context
 
 #: Seconds the parent waits for one figure before drawing it itself.
 _ANSWER = 120.0
@@ -84,7 +84,7 @@ class FigureWorker:
         if self._proc.is_alive():
             self._proc.kill()
             self._proc.join(1.0)
-        from recorder.paths import partial_path
+        from corraoi.partial_file import partial_path
 
         partial_path(out).unlink(missing_ok=True)  # a drawing cut short
 
@@ -97,7 +97,7 @@ class FigureWorker:
         if self._proc.is_alive():
             self._proc.kill()
         self._proc.join(1.0)
-        from recorder.paths import partial_path
+        from corraoi.partial_file import partial_path
 
         for _, out in self._pending:  # a drawing cut short
             partial_path(out).unlink(missing_ok=True)
@@ -118,7 +118,7 @@ _LOST = object()
 
 def draw_from_log(log: str, out: str) -> BaseException | None:
     """draw_figure(read_sweep(log), out): None, or the exception it raised."""
-    from recorder.sweep_log import read_sweep
+    from recorder.sweeplog.read import read_sweep
 
     from .figure import draw_figure
 

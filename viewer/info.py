@@ -10,10 +10,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from corraoi.notable import well_formed
+from corraoi.experiments.notable import well_formed
+from corraoi.model.theory import analyse
 from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
-from corraoi.theory import analyse
 
 from .runs import LogLike, as_log
 from .summary import RunSummary, summarize_blocks
@@ -159,9 +159,9 @@ def sweep_info(folder: Path) -> dict[str, Any]:
     """``corraoi info DIR`` of a sweep folder (or one group's folder in it): its grid, status
     and, per group, the runs worth watching with the ``corraoi record --from`` line of each.
     Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
-    from corraoi.drill import sweep_root
+    from corraoi.experiments.drill import sweep_root
+    from corraoi.experiments.folder import group_dirs
     from corraoi.sweep_code import read_manifest_dict
-    from corraoi.sweep_folder import group_dirs
 
     root, grid, only = sweep_root(folder, option="")
     manifest = read_manifest_dict(root)  # the grid read above is checked; the rest is shown

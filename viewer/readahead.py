@@ -19,26 +19,12 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any, TypeVar
 
-from corraoi.errors import CorraoiError
+from corraoi.errors import ReaderStopped
 
 T = TypeVar("T")
 
 #: ``fork`` (default on Linux with 2+ cores) or ``thread``.
 ENV = "CORRAOI_READ_AHEAD"
-
-
-class ReaderStopped(CorraoiError):
-    """The forked log reader died (killed, out of memory): one line, exit 1, what was sent
-    so far stays with the consumer."""
-
-    exit_code = 1
-
-    def __init__(self, exitcode: int | None) -> None:
-        how = (f"killed by {signal.Signals(-exitcode).name}" if exitcode is not None
-               and exitcode < 0 and -exitcode in signal.valid_signals()
-               else f"exit {exitcode}")  # fmt: skip
-        super().__init__(f"the log reader process stopped unexpectedly ({how}); nothing was "
-                         "written as complete (run the command again)")
 
 
 class _Raised:

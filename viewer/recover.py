@@ -29,7 +29,7 @@ from .runs import require_slots
 RECOVER_SUFFIX = ".recovering"
 
 if TYPE_CHECKING:
-    from recorder.reader import RunLog
+    from recorder.slotlog.reader import RunLog
 
 #: Chunks of the copy are closed by slot count like the writer's; this only caps a chunk.
 _CHUNK_BYTES = 64 * 1024 * 1024
@@ -88,8 +88,8 @@ def recover(
     :class:`~recorder.errors.OutputError` when ``out`` exists (unless ``overwrite``), is a
     directory, or is the source itself. Nothing is written on error.
     """
-    from recorder.errors import OutputError
-    from recorder.reader import open_log
+    from corraoi.errors import OutputError
+    from recorder.slotlog.reader import open_log
 
     src = Path(source)
     log = require_slots(open_log(src, salvage=True), "recover")
@@ -109,7 +109,7 @@ def recover(
         size = src.stat().st_size
         check = open_log(tmp)
         if check.n_slots != log.n_slots or not check.finished:
-            from recorder.errors import LogError
+            from corraoi.errors import LogError
 
             raise LogError(f"{src}: the rewritten log does not read back ({check.summary})")
     except OSError as exc:
@@ -139,9 +139,9 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
-    from recorder.encode import end_metadata as make_end
-    from recorder.errors import LogError
-    from recorder.format import decode_messages
+    from corraoi.errors import LogError
+    from recorder.slotlog.decode import decode_messages
+    from recorder.slotlog.encode import end_metadata as make_end
     from recorder.vocab import MCAP_INDEX_TYPES, MCAP_INDEX_TYPES_WITH_ATTACHMENTS, NS_PER_SLOT
     from recorder.vocab import RUN_END_METADATA as END_METADATA
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
@@ -229,7 +229,7 @@ def _complete_length(f: BinaryIO, path: Path) -> int:
     """Bytes from the start of the file to the end of its last complete record (with the
     closing magic after a footer), as the MCAP walker finds them; damage ends the count
     where it starts."""
-    from recorder.errors import LogError
+    from corraoi.errors import LogError
     from recorder.walk import Walker
 
     f.seek(0)
@@ -244,7 +244,7 @@ def _complete_length(f: BinaryIO, path: Path) -> int:
 
 def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
     """Refuse the source itself as the destination (the rest is PartialFile's check)."""
-    from recorder.errors import OutputError
+    from corraoi.errors import OutputError
 
     if dest.exists() or dest.is_symlink():
         try:

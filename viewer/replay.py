@@ -1,8 +1,8 @@
 """``corraoi replay``: re-render one log into Rerun, through the sink ``corraoi record`` uses.
 
 The log is read back into the SlotBlocks that were recorded and handed, block by block,
-to the very :class:`recorder.rerun_sink.RerunSink` that ``record`` streams into, with the
-same label, recording id and default blueprint (:class:`recorder.rrd_output.RrdOutput`).
+to the very :class:`recorder.rerun.sink.RerunSink` that ``record`` streams into, with the
+same label, recording id and default blueprint (:class:`recorder.rerun.output.RrdOutput`).
 So the replayed ``.rrd`` of a finished log equals the live one under ``rerun rrd
 compare``. Nothing is simulated.
 """
@@ -55,8 +55,8 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
-    from recorder.rerun_sink import RerunSink
-    from recorder.rrd_output import RrdOutput
+    from recorder.rerun.output import RrdOutput
+    from recorder.rerun.sink import RerunSink
 
     run = require_slots(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"

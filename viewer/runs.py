@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Union
 
 if TYPE_CHECKING:
-    from recorder.reader import RunLog
+    from recorder.slotlog.reader import RunLog
 
 #: What the viewer functions accept for a log: a path or an opened RunLog.
 LogLike = Union[str, "os.PathLike[str]", "RunLog"]
@@ -23,7 +23,7 @@ def as_log(log: LogLike, *, verify: bool = True) -> RunLog:
     ``verify`` checks every chunk (CRC, decompression) now; without it a damaged chunk is
     found when it is read.
     """
-    from recorder.reader import RunLog, open_log
+    from recorder.slotlog.reader import RunLog, open_log
 
     if isinstance(log, RunLog):
         return log
@@ -37,7 +37,7 @@ def require_slots(log: RunLog, what: str) -> RunLog:
     slot: there is nothing to replay, compare or recover.
     """
     if log.n_slots == 0:
-        from recorder.errors import LogError
+        from corraoi.errors import LogError
 
         raise LogError(
             f"{log.path}: no complete slot in the log ({log.summary}); nothing to {what}"

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.block import RunConfig, SlotBlock
-from corraoi.theory import analyse
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.model.theory import analyse
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,9 @@ from typing import Any
 
 import click
 
-from .._version import __version__
-from ..text import safe_text
+from corraoi._version import __version__
+from corraoi.text import safe_text
+
 from .common import OneLineGroup, handle_errors
 from .options import HORIZON
 
@@ -43,7 +44,7 @@ def main() -> None:
     """
     import os
 
-    from .. import kernels
+    from corraoi.engine import kernels
 
     # Rerun's own log lines (a file writer stopped by a full disk, ...) would come before our
     # one line about the same thing: we report its problems ourselves.
@@ -66,8 +67,8 @@ def instance() -> None:
 @handle_errors
 def instance_list() -> None:
     """List the built-in instances."""
-    from ..instance import BUILTINS, load_instance
-    from ..theory import analyse
+    from corraoi.model.instance import BUILTINS, load_instance
+    from corraoi.model.theory import analyse
 
     for name in BUILTINS:
         inst = load_instance(name)
@@ -94,9 +95,9 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     Arms and states are numbered from 1. phi is the expected pseudo-reward of each arm with
     respect to the best arm k*; an arm l != k* is competitive when mu* - phi_{l,k*} <= 0.
     """
-    from ..bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
-    from ..instance import load_instance
-    from ..theory import analyse
+    from corraoi.model.bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
+    from corraoi.model.instance import load_instance
+    from corraoi.model.theory import analyse
 
     inst = load_instance(spec)
     th = analyse(inst)
@@ -106,7 +107,7 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     }
     chain = None
     if inst.transition is not None:
-        from ..markov import mixing
+        from corraoi.model.markov import mixing
 
         chain = mixing(inst.transition, inst.p)
     if as_json:
@@ -180,7 +181,7 @@ def policies_cmd(as_json: bool) -> None:
     (see docs/extending.md). A broken entry point is listed with its error; the rest work.
     --param NAME=VALUE sets a parameter of every listed policy that declares NAME.
     """
-    from ..policies import available, paper_names
+    from corraoi.policies import available, paper_names
 
     paper = set(paper_names())
     entries = []
@@ -230,10 +231,13 @@ def policies_cmd(as_json: bool) -> None:
 
 # Commands defined in their own modules (they import recorder/viewer inside their bodies).
 # --- command registrations (keep this block at the end) ---
+from .compare import compare  # noqa: E402
 from .figure import figure  # noqa: E402
 from .record import record  # noqa: E402
-from .sweep import reproduce, sweep  # noqa: E402
-from .viewer import compare, diff, info, recover, replay  # noqa: E402
+from .replay import replay  # noqa: E402
+from .reproduce import reproduce  # noqa: E402
+from .sweep import sweep  # noqa: E402
+from .viewer import diff, info, recover  # noqa: E402
 
 main.add_command(sweep)
 main.add_command(reproduce)
@@ -271,7 +275,7 @@ def run() -> None:
         code = exc.code
     import atexit
 
-    engine = sys.modules.get("corraoi.engine")
+    engine = sys.modules.get("corraoi.engine.simulation")
     if engine is not None:
         engine.shutdown()  # its idle threads: the command is done with them
     run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since 3.0

@@ -14,8 +14,8 @@ from typing import Any, TypeVar
 
 import click
 
-from ..errors import CorraoiError
-from ..text import safe_text
+from corraoi.errors import CorraoiError
+from corraoi.text import safe_text
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -131,7 +131,7 @@ class OneLineGroup(click.Group):
         base = super().main
         if not standalone_mode:
             return base(*args, standalone_mode=False, **kwargs)  # type: ignore[call-overload]
-        from .. import _signals
+        from corraoi import _signals
 
         if not _signals.is_cli():  # in-process (tests, CliRunner): leave signals alone
             return self._main(base, args, kwargs)

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import UsageError
-from ..text import safe_text
+from corraoi.errors import UsageError
+from corraoi.text import safe_text
+
 from .common import handle_errors, keep_pandas_out, say, warn
 from .live import ViewerChoice, viewer_options
 from .options import code_options, from_only, output_option
@@ -114,7 +115,7 @@ def compare(
         if result.path is not None:
             click.echo(f"Rerun recording: {safe_text(result.path)}")
             if not viewer.asked:
-                from recorder.live import view_command
+                from recorder.live.viewers import view_command
 
                 click.echo(
                     f"open in the Rerun viewer:  {safe_text(view_command([str(result.path)]))}"
@@ -126,12 +127,12 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool, *,
                  kept_code: bool = False, allow_changed_code: bool = False) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
     a log already there with the same run and complete is used as it is)."""
-    from corraoi.drill import choose
-    from corraoi.engine import set_workers
+    from corraoi.engine.threads import set_workers
+    from corraoi.errors import LogError, OutputError
+    from corraoi.experiments.drill import choose
+    from corraoi.face.recording import record_drill
     from corraoi.text import safe_name
-    from recorder.errors import LogError, OutputError
-    from recorder.reader import open_log
-    from recorder.record import record_drill
+    from recorder.slotlog.reader import open_log
 
     drills = choose(folder, run, cells=cells, warn=warn, kept_code=kept_code,
                     allow_changed_code=allow_changed_code)  # fmt: skip

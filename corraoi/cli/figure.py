@@ -7,8 +7,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import UsageError
-from ..text import safe_text
+from corraoi.errors import UsageError
+from corraoi.text import safe_text
+
 from .common import handle_errors, say, warn
 
 
@@ -61,7 +62,7 @@ def figure(
       corraoi figure sweeps/I1/sweep.mcap -o i1.png --log-x --policies ucb,cucb,ts,cts
       corraoi figure sweeps/I1/sweep.mcap -o i1.pdf --split --log-y
     """
-    from recorder.sweep_log import read_sweep
+    from recorder.sweeplog.read import read_sweep
     from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
 
     if output.is_dir():

@@ -1,7 +1,7 @@
 """The live-viewer options that record, replay and compare share: --spawn, --connect,
 --serve-web (with --web-port), and the viewer they choose.
 
-recorder.live (and so rerun) is imported only when a viewer is asked for.
+recorder.live.viewers (and so rerun) is imported only when a viewer is asked for.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from typing import Any, TypeVar
 
 import click
 
-from ..errors import UsageError
+from corraoi.errors import UsageError
+
 from .options import PORT
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -74,7 +75,7 @@ class ViewerChoice:
         #: Why the viewer could not be reached (``start(tolerant=True)`` only).
         self.problem: str | None = None
         if connect is not None:
-            from recorder.live import normalize_url
+            from recorder.live.viewers import normalize_url
 
             self.connect = normalize_url(connect)  # a bad URL is a usage error: say it now
 
@@ -91,8 +92,8 @@ class ViewerChoice:
         """
         if not self.asked:
             return None
-        from recorder import live
-        from recorder.errors import ViewerError
+        from corraoi.errors import ViewerError
+        from recorder.live import viewers as live
 
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
         try:
@@ -144,7 +145,7 @@ class ViewerChoice:
 
 
 def foxglove_options(func: F) -> F:
-    """Add --foxglove [[HOST:]PORT] and --pace SLOTS_PER_S (recorder.foxglove_live)."""
+    """Add --foxglove [[HOST:]PORT] and --pace SLOTS_PER_S (recorder.live.foxglove)."""
     func = click.option(
         "--pace",
         type=click.FloatRange(min=0, min_open=True),
@@ -177,7 +178,7 @@ class FoxgloveChoice:
         self.problem: str | None = None
         self.address: Any = None
         if address is not None:
-            from recorder.foxglove_live import parse_address, require_foxglove
+            from recorder.live.foxglove import parse_address, require_foxglove
 
             self.address = parse_address(address)  # a bad value: one line, exit 2
             require_foxglove()  # no extra: name it before anything runs
@@ -189,7 +190,8 @@ class FoxgloveChoice:
         subscription to a channel added while the client was connecting."""
         if self.address is None:
             return None
-        from recorder.foxglove_live import FoxgloveError, FoxgloveServer
+        from corraoi.errors import FoxgloveError
+        from recorder.live.foxglove import FoxgloveServer
 
         try:
             self.server = FoxgloveServer(self.address)

@@ -12,8 +12,8 @@ from typing import Any, TypeVar
 
 import click
 
-from .. import limits
-from ..text import safe_text
+from corraoi import limits
+from corraoi.text import safe_text
 
 F = TypeVar("F", bound=Callable[..., Any])
 

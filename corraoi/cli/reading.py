@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from ..errors import UsageError
+from corraoi.errors import UsageError
 
 #: A log argument: a file or a folder; existence is checked by the reader.
 LOG = click.Path(dir_okay=True, path_type=Path)
@@ -28,7 +28,7 @@ def not_an_input(out: Path, inputs: tuple[Path, ...] | list[Path]) -> None:
 
 
 def progress(total: int, label: str) -> Any:
-    from ..progress import Progress
+    from corraoi.progress import Progress
 
     return Progress(total, label)
 

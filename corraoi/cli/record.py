@@ -14,8 +14,9 @@ import sys
 
 import click
 
-from ..errors import ConfigError, UsageError
-from ..text import safe_text
+from corraoi.errors import ConfigError, UsageError
+from corraoi.text import safe_text
+
 from .common import handle_errors, keep_pandas_out, warn
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 from .options import (
@@ -118,8 +119,8 @@ def record(
       corraoi record -p cucb --foxglove --pace 200   # live in Foxglove
       corraoi record --from sweeps/I2 --run worst -p cts   # a sweep's worst run
     """  # noqa: D301
-    from ..block import RunConfig
-    from ..channels import parse_channel
+    from corraoi.engine.block import RunConfig
+    from corraoi.model.channels import parse_channel
 
     if backend == "gpu":
         raise ConfigError(
@@ -128,8 +129,8 @@ def record(
         )
     if backend == "auto":
         warn("--backend auto: record runs on the CPU (per-slot logs are a CPU feature)")
-    from ..instance import load_instance
-    from ..policies import make_policies, parse_param_assignments
+    from corraoi.model.instance import load_instance
+    from corraoi.policies import make_policies, parse_param_assignments
 
     viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     live = FoxgloveChoice(foxglove, pace=pace)
@@ -155,9 +156,9 @@ def record(
         say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
-    from recorder.errors import OutputError
-    from recorder.mcap_sink import same_run_partial
+    from corraoi.errors import OutputError
     from recorder.paths import check_output, made_again
+    from recorder.slotlog.sink import same_run_partial
 
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
@@ -191,8 +192,8 @@ def record(
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
         if not viewer.asked:
             # the .rrd files are written by a process that imports Rerun now, while this
-            # one imports numba and loads the kernel (recorder/rerun_worker.py says why)
-            from recorder.rerun_worker import RerunWorker
+            # one imports numba and loads the kernel (recorder/rerun/worker.py says why)
+            from recorder.rerun.worker import RerunWorker
 
             worker = RerunWorker.start(before_import=keep_pandas_out)
     # A viewer that cannot be reached is one error line; the files are still written.

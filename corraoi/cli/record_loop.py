@@ -1,5 +1,5 @@
 """Running ``corraoi record``'s plans one after another: each run into its files (through
-recorder.record.record_run) with a progress bar, Ctrl-C/SIGTERM finishing the files at the
+corraoi.face.recording.record_run) with a progress bar, Ctrl-C/SIGTERM finishing the files at the
 next block, and the summary printed (or its JSON) once they are done.
 """
 
@@ -15,7 +15,8 @@ from typing import Any
 
 import click
 
-from ..text import safe_text
+from corraoi.text import safe_text
+
 from .common import keep_pandas_out
 from .record_plan import Plan
 
@@ -24,7 +25,7 @@ from .record_plan import Plan
 class Outlets:
     """Where every run of one ``record`` goes besides its files, decided once by the command:
     the Rerun viewer's URL, whether files may be overwritten, the Foxglove server
-    (``live.FoxgloveChoice``) and the forked Rerun worker (``recorder.rerun_worker``)."""
+    (``live.FoxgloveChoice``) and the forked Rerun worker (``recorder.rerun.worker``)."""
 
     viewer_url: str | None
     overwrite: bool
@@ -78,8 +79,8 @@ def record_all(
     plans: list[Plan], outlets: Outlets
 ) -> tuple[list[Result], str | None, str | None]:
     """Run every plan in turn; returns (results, signal that stopped us, viewer problem)."""
-    from ..engine import set_workers
-    from ..progress import Progress
+    from corraoi.engine.threads import set_workers
+    from corraoi.progress import Progress
 
     # One run has nothing to spread over threads, and idle numba workers compete with
     # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
@@ -106,8 +107,8 @@ def record_all(
 def _prepare_kernels(plans: list[Plan]) -> None:
     """Several policy families to record for the first time: compile their record kernels
     at once, one worker process per core, before the first run starts."""
-    from .. import kernel_pool
-    from ..policies.api import CompiledPolicy
+    from corraoi.engine import kernel_pool
+    from corraoi.policies.api import CompiledPolicy
 
     classes = {}
     for plan in plans:
@@ -121,15 +122,15 @@ def _prepare_kernels(plans: list[Plan]) -> None:
 
 def _record_one(plan: Plan, result: Result, outlets: Outlets, stop: Stop, bar: Any) -> str | None:
     """Record one run into its files; returns a problem with the viewer, if any."""
-    from .. import kernels
-    from ..pyengine import PolicyRuntimeError
+    from corraoi.engine import kernels
+    from corraoi.errors import PolicyRuntimeError
 
     start = time.perf_counter()
     compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
     try:
         return _record_into(plan, result, outlets, stop, bar, start, compiled_before)
     except PolicyRuntimeError as exc:
-        from recorder.paths import partial_path
+        from corraoi.partial_file import partial_path
 
         where = partial_path(plan.mcap)
         left = (f"; the log is left as {where}, marked failed" if where.exists()
@@ -146,9 +147,8 @@ def _record_into(
     start: float,
     compiled_before: float,
 ) -> str | None:
-    from recorder.record import record_run
-
-    from .. import kernels
+    from corraoi.engine import kernels
+    from corraoi.face.recording import record_run
 
     config = plan.config
     live = outlets.live
@@ -179,7 +179,7 @@ def _record_into(
 
 
 def report(results: list[Result], *, as_json: bool) -> None:
-    from recorder.live import view_command
+    from recorder.live.viewers import view_command
 
     rrds = [str(r.rrd) for r in results if r.rrd is not None]
     command = view_command(rrds) if rrds else None

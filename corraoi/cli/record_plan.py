@@ -1,5 +1,6 @@
 """What ``corraoi record`` records, and into which files: the runs named by the options or
-chosen from a sweep folder (``--from``, corraoi.drill), their MCAP and Rerun paths (templates
+chosen from a sweep folder (``--from``, corraoi.experiments.drill), their MCAP and Rerun paths
+(templates
 filled in, clashes refused), and whether a run's files already hold it (up to date).
 """
 
@@ -12,8 +13,9 @@ from typing import Any
 
 import click
 
-from ..errors import UsageError
-from ..text import safe_text
+from corraoi.errors import UsageError
+from corraoi.text import safe_text
+
 from .common import warn
 
 DEFAULT_OUT = "runs/{label}.mcap"
@@ -29,7 +31,7 @@ class Plan:
     config: Any  # RunConfig
     mcap: Path
     rrd: Path | None
-    #: where it came from (a corraoi.drill.Drill, --from): what it must give again
+    #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
     drill: Any = None
 
 
@@ -37,7 +39,7 @@ def _expand(template: str, config: Any, drill: Any = None) -> Path:
     """The path ``template`` names for ``config``. The names filled in are data (from an
     instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
     climb out of one (``../``) or carry control codes into the file name."""
-    from ..text import safe_name
+    from corraoi.text import safe_name
 
     values = {
         "{label}": config.label,
@@ -101,11 +103,12 @@ def from_sweep(
     kept_code: bool = False,
     allow_changed_code: bool = False,
 ) -> list[Any]:
-    """The runs ``--from`` names (corraoi.drill); what the sweep fixed cannot be given too."""
+    """The runs ``--from`` names (corraoi.experiments.drill); what the sweep fixed cannot be given
+    too."""
     from click.core import ParameterSource
 
-    from ..drill import choose
-    from ..policies import make_policies, parse_param_assignments
+    from corraoi.experiments.drill import choose
+    from corraoi.policies import make_policies, parse_param_assignments
 
     ctx = click.get_current_context()
     fixed = [("instance", "--instance"), ("horizon", "--horizon"), ("seed", "--seed"),
@@ -136,8 +139,8 @@ def say_where_from(drills: list[Any]) -> None:
 def up_to_date(plan: Plan) -> bool:
     """The plan's files exist, and its MCAP log is complete with the same configuration
     (the version of corraoi included): recording again would write the same bytes."""
-    from recorder.errors import LogError
-    from recorder.reader import open_log
+    from corraoi.errors import LogError
+    from recorder.slotlog.reader import open_log
 
     if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
         return False

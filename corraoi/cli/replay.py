@@ -10,8 +10,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import UsageError
-from ..text import safe_text
+from corraoi.errors import UsageError
+from corraoi.text import safe_text
+
 from .common import handle_errors, keep_pandas_out, warn
 from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 from .options import output_option
@@ -63,7 +64,7 @@ def replay(
       corraoi replay runs/cucb-I1-s0.mcap --serve-web      # then open the printed URL
       corraoi replay runs/cucb-I1-s0.mcap --foxglove --pace 100 --start 5000
     """
-    from recorder.reader import open_log
+    from recorder.slotlog.reader import open_log
     from viewer.replay import replay as do_replay
     from viewer.runs import require_slots
 
@@ -113,7 +114,7 @@ def replay(
     click.echo(f"replayed {safe_text(done.label)}: slots 1..{done.slots} of {done.horizon} "
                f"({done.status}) to {' and '.join(where)}")  # fmt: skip
     if done.path is not None and not viewer.asked:
-        from recorder.live import view_command
+        from recorder.live.viewers import view_command
 
         click.echo(f"open in the Rerun viewer:  {safe_text(view_command([str(done.path)]))}")
     viewer.serve_until_stopped()
@@ -122,8 +123,8 @@ def replay(
 def _replay_foxglove(log: Path, address: str, *, pace: float | None, start: int,
                      as_json: bool) -> None:  # fmt: skip
     """``replay --foxglove``: serve the log's slots from ``start`` on, then stop."""
-    from recorder.foxglove_live import stream_log
-    from recorder.reader import open_log
+    from recorder.live.foxglove import stream_log
+    from recorder.slotlog.reader import open_log
     from viewer.runs import require_slots
 
     live = FoxgloveChoice(address, pace=pace)

@@ -11,8 +11,9 @@ from typing import Any
 
 import click
 
-from .. import limits
-from ..text import safe_text
+from corraoi import limits
+from corraoi.text import safe_text
+
 from .common import handle_errors
 from .options import RUNS, WORKERS, backend_option, horizon_option, output_option, seed_option
 from .sweep_run import run_grid, settle_backend
@@ -52,9 +53,9 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from ..experiments import PAPER_INSTANCES, paper_grid
-    from ..summary import summary_markdown
-    from ..sweep_folder import write_text
+    from corraoi.experiments.folder import write_text
+    from corraoi.experiments.summary import summary_markdown
+    from corraoi.experiments.sweeps import PAPER_INSTANCES, paper_grid
 
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")

@@ -1,4 +1,5 @@
-"""``corraoi sweep``: grids of Monte Carlo runs (corraoi.experiments), in this process or on a
+"""``corraoi sweep``: grids of Monte Carlo runs (corraoi.experiments.sweeps), in this process or on
+a
 Dask cluster, optionally into a resumable results folder.
 
 Running the grid is :mod:`corraoi.cli.sweep_run`'s, the printed tables
@@ -16,8 +17,9 @@ from typing import Any
 
 import click
 
-from .. import limits
-from ..errors import ConfigError, CorraoiError
+from corraoi import limits
+from corraoi.errors import ConfigError, CorraoiError
+
 from .common import handle_errors, warn
 from .options import (
     CHECKPOINTS,
@@ -29,14 +31,13 @@ from .options import (
     policy_option,
     seed_option,
 )
-from .reproduce import reproduce
 from .sweep_run import run_grid, settle_backend
 from .sweep_table import print_table
 
 #: From this many run-slots (about a minute here) a sweep states its size before it starts.
 SAY_SIZE_FROM = 10**9
 
-#: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments).
+#: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments.sweeps).
 SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
                "summary.md", "figure.png")  # fmt: skip
 
@@ -131,7 +132,7 @@ def sweep(
       corraoi sweep -p ucb,cucb -n 1000000 -T 10000 --backend gpu -o big
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from ..grid import build_grid, parse_param_lists, read_experiment, split_list
+    from corraoi.experiments.grid import build_grid, parse_param_lists, read_experiment, split_list
 
     out = output
     if resume and out is None:
@@ -140,7 +141,7 @@ def sweep(
         if not resume or out is None:
             raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
                               "of its plug-ins run)")  # fmt: skip
-        from ..sweep_code import use_kept_code
+        from corraoi.sweep_code import use_kept_code
 
         use_kept_code(out)  # before the grid is built: its plug-ins load from the copies
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
@@ -174,7 +175,7 @@ def sweep(
             raise
         raise type(exc)(f"{experiment}: {exc}") from None
     for cell in grid.cells:
-        from ..problem import check_instance
+        from corraoi.engine.problem import check_instance
 
         check_instance(cell.instance)
     grid = settle_backend(grid)
@@ -211,7 +212,7 @@ def sweep(
 def wrote_line(out: Path, outcome: Any) -> str:
     """What a sweep into ``out`` wrote, by name: ``wrote sw/: manifest.json, ...`` and, for a
     grid of several groups, their folders with the files each holds; then the chunks run."""
-    from ..sweep_folder import GROUP_FILES
+    from corraoi.experiments.folder import GROUP_FILES
 
     def n(count: int, what: str) -> str:
         return f"{count} {what}{'' if count == 1 else 's'}"
@@ -231,7 +232,7 @@ def wrote_line(out: Path, outcome: Any) -> str:
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
-    from ..grid import split_list
+    from corraoi.experiments.grid import split_list
 
     out = []
     for item in split_list(values):
@@ -248,7 +249,7 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
 
 
 def _notes(grid: Any) -> list[str]:
-    from ..summary import instance_notes
+    from corraoi.experiments.summary import instance_notes
 
     seen: dict[str, list[str]] = {}
     for cell in grid.cells:
@@ -257,4 +258,8 @@ def _notes(grid: Any) -> list[str]:
     return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
 
 
-__all__ = ["SAY_SIZE_FROM", "SWEEP_FILES", "print_table", "reproduce", "sweep"]
+__all__ = [
+    "SAY_SIZE_FROM",
+    "SWEEP_FILES",
+    "sweep",
+]

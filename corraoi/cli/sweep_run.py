@@ -11,7 +11,8 @@ from typing import Any
 
 import click
 
-from ..errors import ConfigError
+from corraoi.errors import ConfigError
+
 from .common import keep_pandas_out, warn
 
 
@@ -20,7 +21,7 @@ def settle_backend(grid: Any) -> Any:
     checked; says which device runs it."""
     if grid.backend == "cpu":
         return grid
-    from ..gpu import choose_backend, get_device
+    from corraoi.gpu import choose_backend, get_device
 
     grid = choose_backend(grid, warn=warn)
     if grid.backend == "gpu":
@@ -41,9 +42,9 @@ def run_grid(
     """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
     from contextlib import ExitStack
 
-    from ..backends import GPU_NOT_ON_CLUSTER
-    from ..experiments import sweep as run_sweep
-    from ..progress import Progress
+    from corraoi.experiments.backends import GPU_NOT_ON_CLUSTER
+    from corraoi.experiments.sweeps import sweep as run_sweep
+    from corraoi.progress import Progress
 
     if scheduler is not None and grid.backend == "gpu":  # before a cluster is started
         raise ConfigError(GPU_NOT_ON_CLUSTER)
@@ -57,12 +58,12 @@ def run_grid(
 
             figures = FigureWorker.start()
             if figures is not None:
-                from viewer.sweep_outputs import FolderOutputs
+                from corraoi.face.outputs import FolderOutputs
 
                 outputs = FolderOutputs(stack.enter_context(figures))
         client = None
         if scheduler is not None:
-            from ..cluster import connect
+            from corraoi.experiments.cluster import connect
 
             client = stack.enter_context(connect(scheduler))
         if client is None:

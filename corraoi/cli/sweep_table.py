@@ -9,7 +9,8 @@ from typing import Any
 
 import click
 
-from ..text import safe_text
+from corraoi.text import safe_text
+
 from .common import say
 
 

@@ -13,12 +13,11 @@ from pathlib import Path
 
 import click
 
-from ..text import safe_text
+from corraoi.text import safe_text
+
 from .common import errors_exit, handle_errors, say, warn
-from .compare import compare
 from .options import output_option
 from .reading import LOG
-from .replay import replay
 
 # ---------------------------------------------------------------------------- diff
 
@@ -140,4 +139,8 @@ def recover(log: Path, output: Path | None, force: bool, as_json: bool) -> None:
     )
 
 
-__all__ = ["compare", "diff", "info", "recover", "replay"]
+__all__ = [
+    "diff",
+    "info",
+    "recover",
+]

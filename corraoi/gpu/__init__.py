@@ -11,10 +11,12 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from .device import DEVICE_ENV, MAX_ARMS, GpuUnavailable, get_device
+from corraoi.errors import GpuUnavailable
+
+from .device import DEVICE_ENV, MAX_ARMS, get_device
 
 if TYPE_CHECKING:
-    from ..grid import Grid
+    from corraoi.experiments.grid import Grid
 
 
 def gpu_problem_of(grid: Grid) -> str | None:

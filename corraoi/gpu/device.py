@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CorraoiError
+from corraoi.errors import GpuUnavailable
 
 SOURCE_PATH = Path(__file__).with_name("kernel.cu")
 #: The entry points of kernel.cu (``advance_<name>``), one per built-in policy family.
@@ -41,12 +41,6 @@ DEVICE_ENV = "CORRAOI_GPU_DEVICE"
 
 #: Argument kinds of an entry point: int32, int64, uint64, float64, array.
 ArgList = Sequence[tuple[str, Any]]
-
-
-class GpuUnavailable(CorraoiError):
-    """No device can run the GPU backend here (the message says why and what to do)."""
-
-    exit_code = 2
 
 
 def source() -> str:
@@ -192,7 +186,7 @@ class EmulatedDevice(Device):
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
-        from ..kernels import _locked, _writable, cache_dir
+        from corraoi.engine.kernels import _locked, _writable, cache_dir
 
         text = source()
         flags = (*self.FLAGS, f"-DKARMS={K}")
@@ -205,7 +199,7 @@ class EmulatedDevice(Device):
             if _intact(lib):
                 return lib
             if lib.exists():
-                from .. import kernels
+                from corraoi.engine import kernels
 
                 if kernels.on_compile is not None:
                     kernels.on_compile(f"the cached GPU-emulation library {lib.name} is damaged "

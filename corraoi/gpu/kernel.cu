@@ -4,7 +4,7 @@
 // plain C++ (corraoi/gpu/emulate.py, a loop over runs instead of a thread grid), so that the
 // policy logic is tested on machines without a GPU. Compile-time constant: KARMS (arms).
 //
-// Per run, per slot (the CPU kernel corraoi/_kernel.py does the same in the same order):
+// Per run, per slot (the CPU kernel corraoi/engine/_kernel.py does the same in the same order):
 // draw the hidden state from the run's hidden stream, compute the empirical means, let the
 // policy force an arm, restrict to the correlated candidate set (when `correlated`), apply the
 // AoI-aware override (when `aware`), else play the argmax of the policy's score over the

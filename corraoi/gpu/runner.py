@@ -2,7 +2,8 @@
 
 A policy's runs advance launch by launch; each launch captures every run's regret,
 estimator and pulls at the checkpoints it passes into device buffers, which are reduced on
-the device to :class:`corraoi.sweep.Moments` (count, mean, sum of squared deviations) and,
+the device to :class:`corraoi.experiments.montecarlo.Moments` (count, mean, sum of squared
+deviations) and,
 with a baseline, to the moments of the run-by-run difference against it. What comes back to
 the host: those aggregates per checkpoint and every run's final values -- never every run's
 checkpoints (a million runs x 200 checkpoints would be gigabytes).
@@ -18,18 +19,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..block import SlotBlock
-from ..channels import Channel
-from ..errors import ConfigError
-from ..instance import Instance
-from ..policies import PolicySpec, gpu_form
-from ..problem import Problem
-from ..stats import Moments
-from .device import MAX_ARMS, Device, GpuUnavailable, get_device
+from corraoi.engine.block import SlotBlock
+from corraoi.engine.problem import Problem
+from corraoi.errors import ConfigError, GpuUnavailable
+from corraoi.model.channels import Channel
+from corraoi.model.instance import Instance
+from corraoi.policies import PolicySpec, gpu_form
+from corraoi.stats import Moments
+
+from .device import MAX_ARMS, Device, get_device
 
 if TYPE_CHECKING:
-    from ..grid import Cell, Chunk, Grid
-    from ..sweep_folder import ChunkResult
+    from corraoi.experiments.folder import ChunkResult
+    from corraoi.experiments.grid import Cell, Chunk, Grid
 
 
 @dataclass
@@ -295,7 +297,7 @@ def execute(
     """Run the chunks ``todo`` of ``grid`` on the device, group by group. With a baseline,
     its runs of each chunk's range run first and stay on the device, so that every other
     policy's paired moments are computed there."""
-    from ..sweep_folder import ChunkResult
+    from corraoi.experiments.folder import ChunkResult
 
     dev = device if device is not None else get_device()
     for cells in grid.groups().values():
@@ -332,7 +334,7 @@ def _run_cell(
     on_slots: Callable[[int], None] | None = None,
 ) -> DeviceRun:
     """The runs of ``chunk``'s range of ``cell`` (seeds from the grid's)."""
-    from ..chunks import checkpoints_of
+    from corraoi.experiments.chunks import checkpoints_of
 
     return simulate(
         cell.instance, cell.policy, seed0=grid.seed + chunk.start, runs=chunk.stop - chunk.start,

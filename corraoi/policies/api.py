@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ..errors import PolicyError
+from corraoi.errors import PolicyError
 
 if TYPE_CHECKING:
-    from ..pyengine import RunState
+    from corraoi.engine.pyengine import RunState
 
 RGB = tuple[int, int, int]
 BUILTIN_PREFIX = "corraoi:"
@@ -167,7 +167,7 @@ class Policy(PolicyBase):
 
     Parameters arrive as attributes (``self.epsilon``). The engine calls :meth:`reset` once
     before slot 1, :meth:`select` every slot and :meth:`update` after it; ``state`` (a
-    :class:`corraoi.pyengine.RunState`) holds the history as arrays of shape (runs, K) and
+    :class:`corraoi.engine.pyengine.RunState`) holds the history as arrays of shape (runs, K) and
     the runs' own random streams (``state.rng``). Plain-Python policies log every arm as a
     candidate and no AoI-aware override unless ``select`` returns ``(arms, candidates)``.
     """

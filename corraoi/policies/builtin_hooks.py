@@ -12,7 +12,7 @@ import math
 
 from numba import njit
 
-from ..rng import gamma_dc, integer, normal, uniform
+from corraoi.rng import gamma_dc, integer, normal, uniform
 
 
 @njit(inline="always", cache=True)

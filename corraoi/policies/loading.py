@@ -20,7 +20,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from ..errors import CodeChanged, PolicyError
+from corraoi.errors import CodeChanged, PolicyError
+
 from .api import CompiledPolicy, Policy, PolicyBase
 
 PLUGIN_MODULE_PREFIX = "corraoi_plugin_"
@@ -203,7 +204,7 @@ def file_module(path: Path, where: str, expect: str = "") -> tuple[ModuleType, s
 
 def module_digest(modname: str) -> str:
     """The sha256 (hex) of the source module ``modname`` was loaded from ("" if unknown)."""
-    from ..provenance import loaded_source
+    from corraoi.provenance import loaded_source
 
     loaded = loaded_source(modname)
     return hashlib.sha256(loaded[1]).hexdigest() if loaded is not None else ""

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
-from .._version import __version__
-from ..errors import PolicyError
+from corraoi._version import __version__
+from corraoi.errors import PolicyError
+
 from .api import BUILTIN_PREFIX, PolicyBase
 from .loading import (
     PLUGIN_MODULE_PREFIX,

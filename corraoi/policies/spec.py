@@ -14,8 +14,9 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .._version import __version__
-from ..errors import CodeChanged, PolicyError
+from corraoi._version import __version__
+from corraoi.errors import CodeChanged, PolicyError
+
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
 from .registry import (
     builtins,

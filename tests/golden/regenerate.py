@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from corraoi.engine import simulate
-from corraoi.instance import Instance, load_instance
+from corraoi.engine.simulation import simulate
+from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import builtins, make_policy
 
 HERE = Path(__file__).parent

@@ -1,0 +1,343 @@
+"""The plain-Python tier: a :class:`corraoi.policies.Policy` driven slot by slot, vectorised
+over runs.
+
+Each slot: the hidden states of every run (drawn in blocks from the runs' latent streams by
+the same compiled function as the built-ins' kernel, so a plug-in run on seed s sees exactly
+the path built-ins see on seed s), then ``policy.select(t, state)`` -> one arm per run,
+checked (shape, integer, in range), then rewards, ages, regret and counts (numpy), then
+``policy.update``.
+
+Random numbers for the policy come from :class:`Streams`: each run's own policy stream (the
+one a built-in would use), so a run's decisions do not depend on which runs share the batch.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from corraoi.errors import CorraoiError, PolicyRuntimeError
+from corraoi.rng import argmax_random, beta, integer, normal, uniform
+
+from ._kernel import draw_states
+
+
+@njit(cache=True)
+def _uniforms(pol, out):
+    for r in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[r, j] = uniform(pol[r])
+
+
+@njit(cache=True)
+def _integers(pol, high, out):
+    for r in range(out.shape[0]):
+        out[r] = integer(pol[r], high[r])
+
+
+@njit(cache=True)
+def _integers_scalar(pol, high, out):
+    for r in range(out.shape[0]):
+        out[r] = integer(pol[r], high)
+
+
+@njit(cache=True)
+def apply_slot(arms, x, Y, best, pulls, succ, mu, aoi, oaoi, regret, aoisum, rewards):
+    """One slot of every run after the policy chose ``arms``: rewards, counts, empirical
+    means, ages and regret (in one compiled call; the Python tier's bookkeeping)."""
+    R, K = pulls.shape
+    for r in range(R):
+        a = arms[r]
+        rew = Y[a, x[r]]
+        rewards[r] = rew
+        pulls[r, a] += 1
+        succ[r, a] += rew
+        mu[r, a] = succ[r, a] / pulls[r, a]
+        aoi[r] = 1 if rew == 1 else aoi[r] + 1
+        oaoi[r] = 1 if Y[best, x[r]] == 1 else oaoi[r] + 1
+        regret[r] += aoi[r] - oaoi[r]
+        aoisum[r] += aoi[r]
+
+
+@njit(cache=True)
+def _argmax_all(pol, vals, out):
+    K = vals.shape[1]
+    mask = np.ones(K, dtype=np.bool_)
+    for r in range(vals.shape[0]):
+        out[r] = argmax_random(vals[r], mask, pol[r], K)
+
+
+@njit(cache=True)
+def _normals(pol, cache, out):
+    for r in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[r, j] = normal(pol[r], cache[r])
+
+
+@njit(cache=True)
+def _betas(pol, cache, a, b, out):
+    for r in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[r, j] = beta(pol[r], cache[r], a[r, j], b[r, j])
+
+
+@njit(cache=True)
+def _argmax(pol, vals, mask, out):
+    K = vals.shape[1]
+    for r in range(vals.shape[0]):
+        out[r] = argmax_random(vals[r], mask[r], pol[r], K)
+
+
+class Streams:
+    """The runs' own random streams, vectorised: every method returns one value (or row) per
+    run, drawn from that run's stream only."""
+
+    def __init__(self, pol: np.ndarray, cache: np.ndarray) -> None:
+        self._pol = pol
+        self._cache = cache
+
+    @property
+    def runs(self) -> int:
+        return int(self._pol.shape[0])
+
+    def random(self, size: int | None = None) -> np.ndarray:
+        """Uniforms in [0, 1): shape (runs,) or (runs, size)."""
+        out = np.empty((self._pol.shape[0], 1 if size is None else int(size)))
+        _uniforms(self._pol, out)
+        return out[:, 0] if size is None else out
+
+    def integers(self, high: int | np.ndarray) -> np.ndarray:
+        """A uniform integer in [0, high) per run (``high`` a scalar or (runs,), >= 1)."""
+        out = np.empty(self._pol.shape[0], dtype=np.int64)
+        if isinstance(high, (int, np.integer)):
+            if high < 1:
+                raise ValueError("integers: high must be >= 1")
+            _integers_scalar(self._pol, int(high), out)
+            return out
+        h = np.broadcast_to(np.asarray(high, dtype=np.int64), out.shape)
+        if (h < 1).any():
+            raise ValueError("integers: high must be >= 1")
+        _integers(self._pol, np.ascontiguousarray(h), out)
+        return out
+
+    def normal(self, size: int | None = None) -> np.ndarray:
+        """Standard normals: shape (runs,) or (runs, size)."""
+        out = np.empty((self.runs, 1 if size is None else int(size)))
+        _normals(self._pol, self._cache, out)
+        return out[:, 0] if size is None else out
+
+    def beta(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Beta(a, b) samples of shape (runs, K) for shape parameters >= 1 of that shape."""
+        a2 = np.ascontiguousarray(np.broadcast_to(a, np.broadcast(a, b).shape), dtype=np.float64)
+        b2 = np.ascontiguousarray(np.broadcast_to(b, a2.shape), dtype=np.float64)
+        if a2.ndim != 2 or a2.shape[0] != self.runs:
+            raise ValueError(f"beta: expected shapes (runs, K), got {a2.shape}")
+        if (a2 < 1).any() or (b2 < 1).any():
+            raise ValueError("beta: shape parameters must be >= 1")
+        out = np.empty_like(a2)
+        _betas(self._pol, self._cache, a2, b2, out)
+        return out
+
+    def argmax(self, values: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Per run, the index of the largest value (among ``mask``), ties uniformly at random
+        -- the rule the built-ins use."""
+        vals = np.ascontiguousarray(values, dtype=np.float64)
+        out = np.empty(vals.shape[0], dtype=np.int64)
+        if mask is None:
+            _argmax_all(self._pol, vals, out)
+        else:
+            _argmax(self._pol, vals, np.ascontiguousarray(mask, dtype=np.bool_), out)
+        return out
+
+
+class RunState:
+    """What a plain-Python policy sees (read-only arrays; arms are 0-based).
+
+    ``t`` the current slot (1-based); ``runs``, ``arms`` (K); ``pulls`` and ``successes``
+    (runs, K) int64 before this slot; ``mu_hat`` (runs, K) their ratio (0 for unpulled arms);
+    ``aoi`` (runs,) the current age; ``seeds`` (runs,); ``rng`` the runs' :class:`Streams`.
+    """
+
+    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: Streams) -> None:
+        self.t = 0
+        self.runs = runs
+        self.arms = arms
+        self.seeds = seeds
+        self.rng = rng
+        self.pulls = np.zeros((runs, arms), dtype=np.int64)
+        self.successes = np.zeros((runs, arms), dtype=np.int64)
+        self.mu_hat = np.zeros((runs, arms))
+        self.aoi = np.ones(runs, dtype=np.int64)
+
+
+def check_arms(
+    out: Any, *, runs: int, arms: int, name: str, t: int, who: Any = None
+) -> tuple[np.ndarray, Any]:
+    """(arms, candidates or None) from ``select``'s return, or PolicyRuntimeError naming the
+    policy, the slot and (``who(r)``, by default "run r") the run."""
+    cand = None
+    if isinstance(out, tuple):
+        if len(out) != 2:
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: select returned a tuple of {len(out)}; expected "
+                "arms or (arms, candidates)"
+            )
+        out, cand = out
+    a = np.asarray(out)
+    if a.shape != (runs,):
+        raise PolicyRuntimeError(
+            f"policy {name}, slot {t}: select returned shape {a.shape}; expected ({runs},) "
+            "(one arm per run)"
+        )
+    if a.dtype.kind == "f":
+        if not np.isfinite(a).all():
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: select returned NaN or infinity; expected arms "
+                f"0..{arms - 1}"
+            )
+        if (a != np.round(a)).any():
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: select returned a non-integer arm "
+                f"{a[a != np.round(a)][0]!r}"
+            )
+    elif a.dtype.kind not in "iub":
+        raise PolicyRuntimeError(
+            f"policy {name}, slot {t}: select returned {a.dtype} values; expected integer arms"
+        )
+    ai = a.astype(np.int64)
+    bad = (ai < 0) | (ai >= arms)
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise PolicyRuntimeError(
+            f"policy {name}, slot {t}: select returned arm {ai[r]} for "
+            f"{who(r) if who is not None else f'run {r}'}; expected 0..{arms - 1} (0-based; "
+            "arm k+1 in logs)"
+        )
+    if cand is not None:
+        c = np.asarray(cand)
+        if c.shape != (runs, arms) or c.dtype != np.bool_:
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: candidates must be a bool array of shape "
+                f"({runs}, {arms}), got {c.dtype} {c.shape}"
+            )
+        if not c[np.arange(runs), ai].all():
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: a played arm is not among its candidates"
+            )
+    return ai, cand
+
+
+def advance_python(
+    sim: Any,
+    nslots: int,
+    record: bool,
+    out: Any,
+    snap_t: np.ndarray,
+    s_regret: np.ndarray,
+    s_aoisum: np.ndarray,
+    s_pulls: np.ndarray,
+) -> tuple[int, PolicyRuntimeError | None]:
+    """Advance the runs of ``sim`` (an :class:`corraoi.engine.simulation.Simulation` of a
+    plain-Python
+    policy) slot by slot, writing each slot's columns into ``out`` when recording and the
+    snapshots at ``snap_t``; returns (slots done, the plug-in's failure or None)."""
+    policy, state = sim._py, sim._state
+    name = sim.policy.name
+    R, K = sim.pulls.shape
+    xs = np.empty((R, nslots), dtype=np.int64)
+    draw_states(sim._cdf_rows, sim._kind, sim._trace, sim.lat, sim.xprev, sim.t,
+                nslots, xs)  # fmt: skip
+    Y = sim._Y
+    mu = state.mu_hat
+    rew = np.empty(R, dtype=np.int8)
+    state.pulls, state.successes, state.aoi = sim.pulls, sim.succ, sim.aoi
+    if sim.t == 0:
+        try:
+            _call(name, 0, policy.reset, state)
+        except PolicyRuntimeError as exc:
+            return 0, exc
+    si = 0
+    for j in range(nslots):
+        t = sim.t + j + 1
+        state.t = t
+        try:
+            picked = _call(name, t, policy.select, t, state)
+            arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t, who=sim.run_name)
+        except PolicyRuntimeError as exc:
+            return j, exc
+        x = xs[:, j]
+        apply_slot(arms, x, Y, sim.best, sim.pulls, sim.succ, mu, sim.aoi,
+                   sim.oracle_aoi, sim.regret, sim.aoisum, rew)  # fmt: skip
+        if record:
+            out.x[:, j] = x
+            out.arm[:, j] = arms
+            out.succ[:, j] = rew == 1
+            out.aoi[:, j] = sim.aoi
+            out.oaoi[:, j] = sim.oracle_aoi
+            out.regret[:, j] = sim.regret
+            out.override[:, j] = False
+            out.cand[:, j] = True if cand is None else cand
+            out.pulls[:, j] = sim.pulls
+            out.muhat[:, j] = mu
+        if si < snap_t.size and snap_t[si] == t:
+            s_regret[:, si] = sim.regret
+            s_aoisum[:, si] = sim.aoisum
+            s_pulls[:, si] = sim.pulls
+            si += 1
+        try:
+            _call(name, t, policy.update, t, arms, rew, state)
+        except PolicyRuntimeError as exc:
+            return j + 1, exc  # the slot itself happened
+    return nslots, None
+
+
+def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:
+    """A compiled hook's fault the kernel noted (``corraoi.engine._kernel``'s ``err``), in the
+    plain-Python tier's words: one line naming the policy, the slot and the run."""
+    from ._kernel import FAULT_ARM
+
+    if what == FAULT_ARM:
+        text = (f"its forced hook returned arm {value} for {who}; expected 0..{K - 1}, or a "
+                "negative number for none (0-based; arm k+1 in logs)")  # fmt: skip
+    else:
+        text = (f"its score hook gave NaN to arm {value + 1}, a candidate, for {who}; a "
+                "score must be a number (+inf is one)")  # fmt: skip
+    return PolicyRuntimeError(f"policy {name}, slot {t}: {text}")
+
+
+def hook_raised(name: str, first: int, last: int, exc: BaseException) -> PolicyRuntimeError:
+    """A compiled hook that raised (numba's ``raise``) in slots ``first..last``."""
+    detail = " ".join(str(exc).split())[:300]
+    return PolicyRuntimeError(f"policy {name}, slots {first}..{last}: a compiled hook raised "
+                              f"{type(exc).__name__}" + (f": {detail}" if detail else ""))
+
+
+def construct(cls: Any, spec: Any) -> Any:
+    """A plain-Python policy made with its parameters; whatever its ``__init__`` raises is
+    one PolicyRuntimeError line naming the policy (before slot 1: no log is left)."""
+    try:
+        return cls(**spec.params)
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except BaseException as exc:  # noqa: BLE001 - sys.exit in __init__ is the plug-in's too
+        detail = " ".join(str(exc).split())[:300]
+        raise PolicyRuntimeError(f"policy {spec.name}: creating it ({cls.__name__}.__init__) "
+                                 f"raised {type(exc).__name__}"
+                                 + (f": {detail}" if detail else "")) from None  # fmt: skip
+
+
+def _call(name: str, t: int, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
+    try:
+        return func(*args)
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
+        what = getattr(func, "__name__", "policy")
+        detail = " ".join(str(exc).split())
+        raise PolicyRuntimeError(
+            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
+            + (f": {detail}" if detail else "")
+        ) from exc

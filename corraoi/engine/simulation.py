@@ -1,0 +1,391 @@
+"""The simulation engine: many runs of one policy, block by block, in compiled code.
+
+Randomness: run ``i`` of a batch started at ``seed`` uses the integer seed ``seed + i``;
+``SeedSequence(seed).spawn(2)`` gives its latent stream and its policy stream (both SFC64).
+So the hidden path of a run depends on (instance, seed) only -- every policy sees the same
+X path (common random numbers) -- and run ``i`` of a sweep is exactly the run that
+``corraoi record --seed <seed + i>`` records.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from corraoi.errors import ConfigError, CorraoiError, PolicyRuntimeError
+from corraoi.limits import check_seed
+from corraoi.model.candidates import candidate_bitsets
+from corraoi.model.channels import Channel
+from corraoi.model.instance import Instance
+from corraoi.policies.spec import PolicySpec
+from corraoi.rng import streams_for_seeds
+
+from . import threads
+from .block import FIELDS, Columns, SlotBlock
+from .problem import Problem
+from .pyengine import RunState, Streams, advance_python, construct, hook_fault, hook_raised
+
+__all__ = [
+    "RunsBlock",
+    "Simulation",
+    "Snapshot",
+    "simulate",
+    "simulate_run",
+]
+
+DEFAULT_BLOCK = 1000
+
+
+@dataclass
+class RunsBlock(Columns):
+    """Consecutive slots of R runs: the columns of :class:`SlotBlock` with a leading run axis
+    (``t`` stays (B,); the others are (R, B) and (R, B, K))."""
+
+    @classmethod
+    def concat(cls, blocks: list[RunsBlock]) -> RunsBlock:
+        """Join consecutive blocks along the slot axis."""
+        if not blocks:
+            raise ValueError("no blocks to concatenate")
+        return cls(
+            **{
+                f: np.concatenate([b.column(f) for b in blocks], axis=0 if f == "t" else 1)
+                for f in FIELDS
+            }  # fmt: skip
+        )
+
+    def run(self, i: int) -> SlotBlock:
+        """Run ``i``'s columns (views, no copy)."""
+        per_run = {f: getattr(self, f)[i] for f in FIELDS if f != "t"}
+        return SlotBlock(t=self.t, **per_run)
+
+
+@dataclass
+class Snapshot:
+    """The state of every run at slot ``t``: regret (R,), estimator (R,), pulls (R, K)."""
+
+    t: int
+    regret: np.ndarray
+    estimator: np.ndarray
+    pulls: np.ndarray
+
+
+class Simulation:
+    """The state of R runs of one policy on one instance, advanced by :meth:`advance`.
+
+    Compiled policies run in their family's kernel (:mod:`corraoi.engine.kernels`); plain-Python
+    policies (:class:`corraoi.policies.Policy`) slot by slot, vectorised over runs.
+    """
+
+    def __init__(
+        self,
+        instance: Instance,
+        policy: PolicySpec,
+        seeds: Sequence[int] | np.ndarray,
+        horizon: int,
+        *,
+        channel: Channel | None = None,
+        first_run: int = 0,
+    ) -> None:
+        self._setup(Problem.of(instance, policy, horizon, channel), seeds, first_run)
+
+    @classmethod
+    def of(cls, problem: Problem, seeds: Sequence[int] | np.ndarray) -> Simulation:
+        """The runs ``seeds`` of a checked :class:`corraoi.engine.problem.Problem`."""
+        sim = cls.__new__(cls)
+        sim._setup(problem, seeds)
+        return sim
+
+    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray, first_run: int = 0) -> None:
+        seed_arr = check_seeds(seeds)
+        #: the number of run 0 of this batch where a failure names a run (a sweep's chunk)
+        self.first_run = int(first_run)
+        self.problem = pb
+        self.instance = pb.instance
+        self.policy = pb.policy
+        self.seeds = seed_arr
+        self.horizon = pb.horizon
+        self.channel = pb.channel
+        self.best = pb.theory.best_arm
+        self.mu_star = pb.theory.mu_star
+        self.cls: Any = pb.cls
+        R, K = seed_arr.size, pb.K
+        self._cdf_rows, self._kind, self._trace, self._Y = pb.cdf_rows, pb.kind, pb.trace, pb.Y
+        self.lat, self.pol = streams_for_seeds(seed_arr)
+        self.ncache = np.zeros((R, 2))
+        self.xprev = np.full(R, -1, dtype=np.int64)
+        self.pulls = np.zeros((R, K), dtype=np.int64)
+        self.succ = np.zeros((R, K), dtype=np.int64)
+        self.aoi = np.ones(R, dtype=np.int64)
+        self.oracle_aoi = np.ones(R, dtype=np.int64)
+        self.regret = np.zeros(R, dtype=np.int64)
+        self.aoisum = np.zeros(R, dtype=np.int64)
+        self.t = 0
+        if pb.compiled:
+            self._kernels: dict[bool, Any] = {}
+            self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
+            self._params = pb.params
+            self.pstate = np.zeros((R, max(pb.state_size, 1)))
+            self._pclass = pb.pclass
+            self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
+            self._py: Any = None
+            self._rate: float | None = None  # run-slots per second per thread, measured
+        else:
+            self._py = construct(self.cls, pb.policy)
+            rng = Streams(self.pol, self.ncache)
+            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
+
+    def kernel(self, record: bool) -> Any:
+        """The compiled kernel this simulation uses: the record kernel (per-slot columns) or
+        the sweep kernel. Compiled or loaded from the cache on first use; the time it takes
+        goes to ``kernels.compile_seconds`` when it compiles, so rates leave it out."""
+        kernel = self._kernels.get(record)
+        if kernel is None:
+            from .kernels import kernel_for
+
+            kernel = self._kernels[record] = kernel_for(self.cls, record=record)
+        return kernel
+
+    def _run_compiled(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+                      s_regret: np.ndarray, s_aoisum: np.ndarray,
+                      s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
+        """Advance every run ``nslots`` slots in kernel calls of at most about
+        ``threads.PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
+        signal is handled between two calls within that time, however large the work.
+
+        Returns (slots done, None), or, when a hook returned an arm out of range or a NaN
+        score for a candidate (the kernel notes the first such slot of each run and never
+        plays that arm: no array is read out of bounds), the slots before the first such
+        slot and its PolicyRuntimeError; what came after it is not kept."""
+        kernel = self.kernel(record)
+        R, K = self.pulls.shape
+        done = 0
+        while done < nslots:
+            t0 = self.t + done
+            n, slices = threads.plan(self._rate, R, nslots - done)
+            i0, i1 = (int(i) for i in np.searchsorted(snap_t, [t0 + 1, t0 + n + 1]))
+            if n == nslots:  # one piece: straight into the caller's arrays
+                piece, st, snaps = out, snap_t, (s_regret, s_aoisum, s_pulls)
+            else:  # column slices are not C arrays: separate arrays, copied back
+                piece = _Outputs(R, n if record else 0, K)
+                st = np.ascontiguousarray(snap_t[i0:i1])
+                snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
+                         np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
+            start = time.perf_counter()
+            try:
+                self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            except (CorraoiError, KeyboardInterrupt):
+                raise
+            except Exception as exc:  # noqa: BLE001 - a compiled hook raised (numba's raise)
+                return done, hook_raised(self.policy.name, t0 + 1, t0 + n, exc)
+            self._rate = threads.rate(R * n, time.perf_counter() - start, len(slices),
+                                      self._rate)  # fmt: skip
+            if piece is not out:
+                if record:
+                    for name, value in vars(piece).items():
+                        getattr(out, name)[:, done : done + n] = value
+                for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
+                    full[:, i0:i1] = part
+            if self._err[:, 0].any():
+                return self._fault(K)
+            done += n
+        return nslots, None
+
+    def _fault(self, K: int) -> tuple[int, PolicyRuntimeError]:
+        """The first slot at which a compiled hook failed (the kernel's ``err``), with the
+        slots before it (corraoi.engine.pyengine.hook_fault says what and where)."""
+        hit = np.flatnonzero(self._err[:, 0])
+        r = int(hit[np.argmin(self._err[hit, 0])])
+        t, what, value = (int(v) for v in self._err[r])
+        self._err[:] = 0
+        return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
+
+    def run_name(self, r: int) -> str:
+        """How a failure names run ``r`` of this batch: its number and its seed."""
+        return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
+
+    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: _Outputs,
+                     snap_t: np.ndarray, snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     slices: list[tuple[int, int]]) -> None:  # fmt: skip
+        per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
+                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+                   self._err)  # fmt: skip
+        outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
+                   out.cand, out.pulls, out.muhat)  # fmt: skip
+        common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
+                  self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
+                  self._params, t0, nslots)  # fmt: skip
+
+        def run(a: int, b: int) -> None:
+            # row slices of C arrays are C arrays: the same compiled signature
+            kernel(*common, *(x[a:b] for x in per_run), record, *(x[a:b] for x in outputs),
+                   snap_t, *(x[a:b] for x in snaps))  # fmt: skip
+
+        threads.run_slices(run, slices)
+
+    @property
+    def runs(self) -> int:
+        return int(self.seeds.size)
+
+    @property
+    def estimator(self) -> np.ndarray:
+        """The paper's estimator sum(aoi) - t / mu* of each run, at the current slot."""
+        return self.aoisum - self.t / self.mu_star
+
+    def advance(self, nslots: int, *, record: bool = True) -> RunsBlock | None:
+        """Simulate the next ``nslots`` slots (capped at the horizon) of every run.
+
+        With ``record``, returns every slot's columns; otherwise only the state advances.
+        """
+        block, _ = self._advance(nslots, record=record, stops=())
+        return block
+
+    def advance_to(self, stop: int, *, snapshots: Sequence[int] = ()) -> list[Snapshot]:
+        """Simulate up to slot ``stop`` in one compiled call, snapshotting every run at the
+        slots of ``snapshots`` that fall in (t, stop] (cheap: nothing per slot is kept)."""
+        _, snaps = self._advance(stop - self.t, record=False, stops=snapshots)
+        return snaps
+
+    def _advance(
+        self, nslots: int, *, record: bool, stops: Sequence[int]
+    ) -> tuple[RunsBlock | None, list[Snapshot]]:
+        nslots = min(int(nslots), self.horizon - self.t)
+        if nslots <= 0:
+            return None, []
+        R, K = self.pulls.shape
+        snap_t = np.array(
+            sorted({int(s) for s in stops if self.t < s <= self.t + nslots}), dtype=np.int64
+        )
+        S = snap_t.size
+        s_regret = np.empty((R, S), dtype=np.int64)
+        s_aoisum = np.empty((R, S), dtype=np.int64)
+        s_pulls = np.empty((R, S, K), dtype=np.int64)
+        B = nslots if record else 0
+        out = _Outputs(R, B, K)
+        aoisum_before = self.aoisum.copy() if record else None
+        if self._py is None:
+            done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
+                                               s_pulls)  # fmt: skip
+        else:
+            done, failure = advance_python(
+                self, nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
+            )
+        if failure is not None:  # keep the slots before the failing one
+            nslots = done
+            out.trim(done)
+            snap_t = snap_t[snap_t <= self.t + done]
+        snaps = [
+            Snapshot(
+                t=int(ts),
+                regret=s_regret[:, i],
+                estimator=s_aoisum[:, i] - ts / self.mu_star,
+                pulls=s_pulls[:, i],
+            )
+            for i, ts in enumerate(snap_t)
+        ]
+        t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)
+        self.t += nslots
+        if failure is not None:
+            failure.done = nslots
+        if not record:
+            if failure is not None:
+                raise failure
+            return None, snaps
+        assert aoisum_before is not None
+        estimator = aoisum_before[:, None] + np.cumsum(out.aoi, axis=1) - t[None, :] / self.mu_star
+        block = RunsBlock(
+            t=t,
+            x=out.x.astype(np.int64),
+            arm=out.arm.astype(np.int64),
+            success=out.succ,
+            aoi=out.aoi,
+            oracle_aoi=out.oaoi,
+            regret=out.regret,
+            estimator=estimator,
+            override=out.override,
+            mu_hat=out.muhat,
+            pulls=out.pulls,
+            candidates=out.cand,
+        )
+        if failure is not None:
+            failure.partial = block if nslots > 0 else None
+            raise failure
+        return block, snaps
+
+
+class _Outputs:
+    """Per-slot output columns of one advance (empty when not recording)."""
+
+    def __init__(self, R: int, B: int, K: int) -> None:
+        self.x = np.empty((R, B), dtype=np.int32)
+        self.arm = np.empty((R, B), dtype=np.int32)
+        self.succ = np.empty((R, B), dtype=np.bool_)
+        self.aoi = np.empty((R, B), dtype=np.int64)
+        self.oaoi = np.empty((R, B), dtype=np.int64)
+        self.regret = np.empty((R, B), dtype=np.int64)
+        self.override = np.empty((R, B), dtype=np.bool_)
+        self.cand = np.empty((R, B, K), dtype=np.bool_)
+        self.pulls = np.empty((R, B, K), dtype=np.int64)
+        self.muhat = np.empty((R, B, K), dtype=np.float64)
+
+    def trim(self, done: int) -> None:
+        """Keep the first ``done`` slots (a plug-in failed after them)."""
+        for name, value in vars(self).items():
+            setattr(self, name, value[:, :done])
+
+
+def check_seeds(seeds: Sequence[int] | np.ndarray) -> np.ndarray:
+    """The seeds as an int64 array (ConfigError for none, negative or non-integer)."""
+    if isinstance(seeds, range):
+        if len(seeds) < 1:
+            raise ConfigError("at least one run is needed (runs must be >= 1)")
+        check_seed(seeds[0])
+        check_seed(seeds[-1])
+        return np.arange(seeds.start, seeds.stop, seeds.step, dtype=np.int64)
+    if len(seeds) < 1:
+        raise ConfigError("at least one run is needed (runs must be >= 1)")
+    for s in seeds:
+        check_seed(s)
+    return np.asarray([int(s) for s in seeds], dtype=np.int64)
+
+
+def simulate(
+    instance: Instance,
+    policy: PolicySpec,
+    seeds: Sequence[int],
+    horizon: int,
+    *,
+    block: int = DEFAULT_BLOCK,
+    channel: Channel | None = None,
+) -> Iterator[RunsBlock]:
+    """Yield blocks of ``block`` consecutive slots of every run until the horizon."""
+    if block < 1:
+        raise ConfigError(f"block size must be >= 1, got {block}")
+    sim = Simulation(instance, policy, seeds, horizon, channel=channel)
+    while True:
+        try:
+            out = sim.advance(block)
+        except PolicyRuntimeError as exc:
+            if exc.partial is not None:  # hand over the slots before the failure first
+                yield exc.partial
+            raise
+        if out is None:
+            return
+        yield out
+
+
+def simulate_run(
+    instance: Instance,
+    policy: PolicySpec,
+    seed: int,
+    horizon: int,
+    *,
+    block: int = DEFAULT_BLOCK,
+    channel: Channel | None = None,
+) -> Iterator[SlotBlock]:
+    """One run, block by block (what ``corraoi record`` streams to its sinks)."""
+    for b in simulate(instance, policy, [seed], horizon, block=block, channel=channel):
+        yield b.run(0)

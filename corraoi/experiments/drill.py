@@ -1,0 +1,366 @@
+"""From a sweep folder to single runs worth recording slot by slot.
+
+A sweep's run ``i`` of a cell is the CPU engine's run with seed ``grid seed + i``, the cell's
+instance, policy and parameters, channel and horizon: all in the folder's ``manifest.json``.
+:func:`choose` turns ``--run N|worst|best|median|widest-gap`` (with ``--cell`` and
+``--policy`` to select) into the :class:`~corraoi.engine.block.RunConfig` of each run to record; the
+named runs come from each group's ``summary.json`` (:mod:`corraoi.experiments.notable`), or, for a
+folder
+from before they were named, from its parts (the per-run finals, no simulation).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from corraoi.engine.block import RunConfig
+from corraoi.errors import ConfigError, DamagedPart
+from corraoi.policies.spec import PolicySpec
+from corraoi.sweep_code import (
+    changed_note,
+    check_code,
+    current_spec,
+    read_manifest_dict,
+    use_kept_code,
+)
+
+from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
+from .grid import Cell, Grid
+from .notable import CHOICES, notable_runs, pick_pair, well_formed
+
+
+@dataclass(frozen=True)
+class Drill:
+    """One run to record: its configuration and where in the sweep it came from."""
+
+    config: RunConfig
+    run: int
+    #: "worst", "best", "median", "widest-gap" or "run" (an index given)
+    choice: str
+    #: the cell's label in its group (None for a policy added on the run, not swept)
+    cell: str | None
+    folder: Path
+    #: (checkpoint slot, regret) of this run in the sweep's part: what the recording must
+    #: give again (empty: nothing to check -- a policy added, a part missing, other code)
+    expect: tuple[tuple[int, float], ...] = ()
+    #: what the log says beside the run (recorded with code other than the sweep's)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """A file name stem that says where the run came from."""
+        label = self.cell if self.cell is not None else self.config.policy.label
+        what = "" if self.choice == "run" else f"-{self.choice}"
+        return f"{self.folder.name}-{self.config.instance.name}-{label}-run{self.run}{what}"
+
+
+def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
+    """Where the regret of ``block`` (a SlotBlock) differs from the sweep's row ``expect``
+    ((checkpoint, regret) pairs): a one-line account of the first difference, or None."""
+    first, last = int(block.t[0]), int(block.t[-1])
+    for t, want in expect:
+        if first <= t <= last:
+            got = float(block.regret[t - first])
+            if got != want:
+                return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
+                        f"says {want:g}: the engine or the code changed since the sweep")
+    return None
+
+
+def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, str | None]:
+    """The folder with the manifest, its grid, and the group sub-folder named (if any);
+    ``option`` starts the error lines (the option that named ``path``)."""
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise ConfigError(f"{option}{path}: no such folder")
+    if not p.is_dir():
+        raise ConfigError(f"{option}{path}: not a folder (expected a sweep folder, with "
+                          f"{MANIFEST})")  # fmt: skip
+    for root, sub in ((p, None), (p.parent, p.name)):
+        grid = read_manifest(root)
+        if grid is None:
+            continue
+        if sub is not None:  # a group's folder inside a sweep of several groups
+            named = [name for (name, _), d in group_dirs(grid, root).items() if d.name == sub]
+            if not named:
+                break
+            return root, grid, named[0]
+        return root, grid, None
+    raise ConfigError(f"{option}{path}: not a sweep folder (no {MANIFEST} in it; expected the "
+                      "folder `corraoi sweep -o` or `corraoi reproduce -o` wrote)")  # fmt: skip
+
+
+def parse_run(text: str | int) -> str | int:
+    """``--run``: a run index (0-based) or one of :data:`CHOICES`."""
+    if isinstance(text, int):
+        return text
+    t = text.strip().lower()
+    if t in CHOICES:
+        return t
+    try:
+        return int(t)
+    except ValueError:
+        raise ConfigError(f"--run {text!r}: expected a run index (0, 1, ...) or one of "
+                          f"{', '.join(CHOICES)}") from None  # fmt: skip
+
+
+def choose(
+    path: str | Path,
+    run: str | int,
+    *,
+    cells: Sequence[str] = (),
+    policies: Sequence[PolicySpec] = (),
+    warn: Any = None,
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
+) -> list[Drill]:
+    """The runs to record from the sweep folder ``path`` (module docstring).
+
+    ``cells``: labels (``cucb``, ``cucb(c=2)``), instance names or ``INSTANCE/LABEL`` that
+    restrict the sweep's cells. ``policies``: those the sweep ran select its cells; any
+    other is added on the chosen run (paired: the same seed, so the same hidden path),
+    said through ``warn``.
+
+    A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
+    hashes, the way out; :mod:`corraoi.sweep_code`), unless ``kept_code`` (the sweep's copy
+    runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
+    """
+    root, grid, group = sweep_root(path)
+    manifest = read_manifest_dict(root)
+    if kept_code and allow_changed_code:
+        raise ConfigError("--kept-code and --allow-changed-code: choose one")
+    if kept_code:
+        use_kept_code(root, manifest)
+    what = parse_run(run)
+    if isinstance(what, int) and not 0 <= what < grid.runs:
+        raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
+                          f"0..{grid.runs - 1}")  # fmt: skip
+    labels = grid.labels()
+    groups = {k: v for k, v in grid.groups().items() if group is None or k[0] == group}
+    swept = {c.policy.name for g in groups.values() for c in g}
+    extra = [s for s in policies if s.name not in swept]
+    names = [s.name for s in policies if s.name in swept] if policies else None
+    chosen = _select(groups, labels, cells, names, root)
+    if not any(chosen.values()) and not (extra and isinstance(what, int)):
+        raise ConfigError(
+            f"--policy {', '.join(s.name for s in policies)}: not in the sweep in {root} (its "
+            f"policies: {', '.join(sorted(swept))}); a {what} run is chosen among the sweep's "
+            "policies: name one of them too, or give --run N"
+        )
+    picked = {key: _picks(root, grid, key, groups[key], members, labels, what) if members else []
+              for key, members in chosen.items()}  # fmt: skip
+    if grid.backend == "gpu":  # every run is recorded with the GPU kernel: each needs its form
+        from corraoi.gpu.runner import gpu_problem
+
+        for key, members in chosen.items():
+            K = groups[key][0].instance.K
+            problem = next((p for spec in [*(c.policy for c in members), *extra]
+                            if (p := gpu_problem(spec, K)) is not None), None)  # fmt: skip
+            if problem is not None:
+                raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
+                                  "kernel; leave it out of --policy")  # fmt: skip
+    swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
+    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+        if warn is not None:
+            warn(note)
+    streams = _streams(grid, warn)  # after every check: a refusal stays one line
+    if extra and warn is not None:
+        added = ", ".join(s.label for s in extra)
+        warn(f"{added}: not in the sweep; recorded on the chosen run too (paired: the same "
+             "seed, so the same hidden path)")  # fmt: skip
+    drills: list[Drill] = []
+    for key, members in chosen.items():
+        picks = picked[key]
+        for cell, r in picks:
+            drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams,
+                                 allow_changed_code))  # fmt: skip
+        runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])
+        base = (members or groups[key])[0]
+        for spec in extra:
+            for r in runs:
+                drills.append(_drill(root, grid, Cell(base.instance, spec, base.horizon,
+                                                      base.channel), None, r, what,
+                                     streams))  # fmt: skip
+    return drills
+
+
+def _select(
+    groups: dict[tuple[str, int], list[Cell]],
+    labels: dict[str, str],
+    cells: Sequence[str],
+    names: Sequence[str] | None,
+    root: Path,
+) -> dict[tuple[str, int], list[Cell]]:
+    def matches(cell: Cell, text: str) -> bool:
+        inst, _, label = text.rpartition("/")
+        if inst and inst != cell.instance.name:
+            return False
+        return label in (labels[cell.key], cell.policy.name) or (not inst
+                                                                and label == cell.instance.name)
+
+    out: dict[tuple[str, int], list[Cell]] = {}
+    for text in cells:
+        if not any(matches(c, text) for g in groups.values() for c in g):
+            known = ", ".join(dict.fromkeys(f"{k[0]}/{labels[c.key]}"
+                                            for k, g in groups.items() for c in g))  # fmt: skip
+            raise ConfigError(f"--cell {text!r}: no such cell in {root} (its cells: {known})")
+    for key, members in groups.items():
+        keep = [c for c in members if not cells or any(matches(c, t) for t in cells)]
+        if cells and not keep:
+            continue  # a group --cell leaves out
+        out[key] = keep if names is None else [c for c in keep if c.policy.name in names]
+    return out
+
+
+def _picks(
+    root: Path,
+    grid: Grid,
+    key: tuple[str, int],
+    group: list[Cell],
+    members: list[Cell],
+    labels: dict[str, str],
+    what: str | int,
+) -> list[tuple[Cell, int]]:
+    if isinstance(what, int):
+        return [(c, what) for c in members]
+    notable = _notable(root, grid, key, group, labels)
+    if what == "widest-gap":
+        among = [labels[c.key] for c in members] if len(members) < len(group) else None
+        gap = pick_pair(notable.get("pairs", []), among)
+        if gap is None:
+            raise ConfigError(f"--run widest-gap: no pair of policies on one hidden path among "
+                              f"{', '.join(labels[c.key] for c in members)} in {root}")  # fmt: skip
+        by_label = {labels[c.key]: c for c in group}
+        return [(by_label[name], _run_of(gap, grid, root)) for name in gap["policies"]]
+    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root)) for c in members]
+
+
+def _run_of(entry: Any, grid: Grid, root: Path) -> int:
+    run = entry.get("run") if isinstance(entry, dict) else None
+    if not isinstance(run, int) or not 0 <= run < grid.runs:
+        raise ConfigError(f"{root}: its summary.json names run {run!r}, not one of the sweep's "
+                          f"0..{grid.runs - 1} (a damaged summary: sweep again with --resume)")
+    return run
+
+
+def _notable(
+    root: Path, grid: Grid, key: tuple[str, int], group: list[Cell], labels: dict[str, str]
+) -> dict[str, Any]:
+    """The group's notable runs: from its summary.json, else from the parts."""
+    path = group_dirs(grid, root)[key] / "summary.json"
+    want = [labels[c.key] for c in group]
+    if path.is_file():
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ConfigError(f"{path}: unreadable ({why}); sweep again with --resume") from None
+        notable = data.get("notable") if isinstance(data, dict) else None
+        if well_formed(notable, want):
+            return notable  # type: ignore[return-value]
+    try:  # an older folder (none named in its summary, or damaged): from the per-run finals
+        parts = read_parts(root, grid)
+        runs = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in group]
+    except DamagedPart as exc:
+        raise ConfigError(f"{exc}; `corraoi sweep ... --resume` runs it again") from None
+    except ConfigError as exc:
+        raise ConfigError(f"{root}: {exc}: finish the sweep with --resume, or give "
+                          "--run N") from None  # fmt: skip
+    base = [r.label for r in runs if r.cell.policy.name == grid.baseline]
+    return notable_runs([r.label for r in runs], [r.regret[:, -1] for r in runs],
+                        [r.cell.channel.to_dict() for r in runs], seed=grid.seed,
+                        baseline=base[0] if base else None)  # fmt: skip
+
+
+def _streams(grid: Grid, warn: Any) -> str:
+    """Whose streams re-record the sweep's runs: the CPU engine's for a CPU sweep; for a GPU
+    sweep the GPU kernel's, on this machine's CUDA device, else emulated on the host."""
+    if grid.backend != "gpu":
+        return "cpu"
+    import os
+
+    from corraoi.errors import GpuUnavailable
+    from corraoi.gpu.device import DEVICE_ENV, device_of
+
+    if os.environ.get(DEVICE_ENV, "").strip().lower() != "emulate":
+        try:
+            device_of("cuda")
+            return "gpu-cuda"
+        except GpuUnavailable as exc:
+            why = str(exc)
+    else:
+        why = f"{DEVICE_ENV}=emulate"
+    try:
+        device_of("emulate")
+    except GpuUnavailable as exc:
+        raise ConfigError(f"this sweep ran on the GPU; its runs are recorded again with the GPU "
+                          f"kernel, which needs a CUDA device ({why}) or {exc}") from None
+    if warn is not None:
+        warn(f"a GPU sweep's runs are captured from the GPU kernel compiled for this CPU ({why}): "
+             "the same streams and rule; a transcendental that rounds differently from CUDA's "
+             "can flip a near-tie (the log says streams gpu-emulated)")  # fmt: skip
+    return "gpu-emulated"
+
+
+def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
+           what: str | int, streams: str = "cpu", allow_changed: bool = False) -> Drill:
+    """With ``allow_changed`` (--allow-changed-code) a plug-in whose code changed runs as it
+    is now: the spec names that code, the log says so, and nothing is checked against the
+    sweep's row; otherwise the run must give the sweep's regret again (``expect``)."""
+    channel = cell.channel
+    if channel.kind == "trace" and channel.trace is None:
+        channel = _reload_trace(cell, root)
+    spec = cell.policy
+    expect: tuple[tuple[int, float], ...] = ()
+    notes: tuple[str, ...] = ()
+    if allow_changed and label is not None and not spec.builtin and spec.digest:
+        now = current_spec(spec)
+        if not now.digest.startswith(spec.digest):
+            where = spec.qualname.removeprefix("file:").rpartition(":")[0] or spec.qualname
+            notes = (changed_note(where, spec.digest, now.digest),)
+            spec = now
+    if label is not None and not notes:
+        expect = expected_row(root, grid, cell, run)
+    config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
+                       streams=streams)  # fmt: skip
+    choice = what if isinstance(what, str) else "run"
+    return Drill(config, run, choice, label, root, expect, notes)
+
+
+def expected_row(root: Path, grid: Grid, cell: Cell, run: int) -> tuple[tuple[int, float], ...]:
+    """(checkpoint, regret) of run ``run`` of ``cell`` in its part file (only the part that
+    holds it is read; () when it is missing or damaged: nothing to check against)."""
+    for f in sorted((root / PARTS).glob(f"{cell.key}-*.npz")):
+        try:
+            start, stop = (int(v) for v in f.stem.rsplit("-", 2)[1:])
+        except ValueError:
+            continue
+        if start <= run < stop:
+            try:
+                part = ChunkResult.load(f)
+            except DamagedPart:
+                return ()
+            row = part.regret[run - start]
+            return tuple((int(t), float(v)) for t, v in zip(part.t, row, strict=True))
+    return ()
+
+
+def _reload_trace(cell: Cell, root: Path) -> Any:
+    """A trace channel's states, read again from the file the sweep read them from."""
+    from corraoi.model.channels import parse_channel
+
+    ch = cell.channel
+    try:
+        fresh = parse_channel(f"trace:{ch.source}", cell.instance)
+    except ConfigError as exc:
+        raise ConfigError(f"{root}: the sweep's trace channel cannot be read again: "
+                          f"{exc}") from None  # fmt: skip
+    if fresh.digest != ch.digest:
+        raise ConfigError(f"{root}: the trace {ch.source} has changed since the sweep read it "
+                          "(its digest differs): its runs cannot be recorded again")  # fmt: skip
+    return fresh

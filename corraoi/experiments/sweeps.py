@@ -1,0 +1,341 @@
+"""Experiments as library functions: sweeps of grids (in this process or on Dask) into a
+resumable folder, and the paper's reproduction. The CLI commands call these.
+
+A sweep folder holds (docs/scaling.md, docs/log-format.md; its manifest and parts are read
+and written by :mod:`corraoi.experiments.folder`):
+
+* ``manifest.json``: the grid (cells, runs, seeds, chunking) and its status;
+* ``parts/<cell>-<first run>-<end run>.npz``: one part per finished chunk of runs, written
+  atomically as the chunk finishes (what ``--resume`` and appends build on);
+* ``results.parquet/instance=<name>/part-0.parquet``: the per-run results, compacted from the
+  parts when every chunk is done (the ``analysis`` extra);
+* per (instance, horizon) group -- in the folder itself when the grid has one group, else in
+  a sub-folder named after the instance (and ``-T<horizon>`` with several horizons): the
+  sweep log ``sweep.mcap``, ``sweep.rrd``, ``summary.json``, ``summary.md``, ``figure.png``,
+  all written from the parts after all cells finish, so their order and bytes do not depend
+  on which worker finished first.
+
+Run i of a cell uses seed ``seed + i``: the numbers do not depend on the scheduler, the number
+of workers, the chunking of the runs, or on the order chunks finish in.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+from corraoi.errors import ConfigError, DamagedPart
+from corraoi.sweep_code import check_code, keep_sources, kept_copy, read_manifest_dict
+
+from . import backends
+from .folder import (
+    GROUP_FILES,
+    MANIFEST,
+    PARTS,
+    CellRuns,
+    ChunkResult,
+    covered,
+    group_dirs,
+    merge_grids,
+    read_manifest,
+    read_parts,
+    write_manifest,
+    write_text,
+)
+from .grid import Cell, Chunk, Grid
+from .summary import group_summary, summary_markdown
+
+
+def reproduce(
+    out: str | os.PathLike[str],
+    *,
+    runs: int = 200,
+    horizon: int = 10_000,
+    seed: int = 0,
+    force: bool = False,
+    workers: int | None = None,
+    on_slots: Callable[[int], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+    backend: str = "cpu",
+) -> SweepOutcome:
+    """The paper's simulations: I1 and I2, the twelve policies, into ``out`` (a grid sweep
+    with one folder per instance; ``corraoi reproduce`` adds ``out/summary.md``);
+    ``backend`` as for :func:`sweep`."""
+    grid = paper_grid(runs=runs, horizon=horizon, seed=seed, backend=backend)
+    return sweep(grid, out=out, force=force, workers=workers, on_slots=on_slots, warn=warn)
+
+
+def paper_grid(
+    *, runs: int = 200, horizon: int = 10_000, seed: int = 0, backend: str = "cpu"
+) -> Grid:
+    """The grid of the paper's simulations (I1 and I2, the twelve policies)."""
+    from .grid import build_grid
+
+    return build_grid(instances=list(PAPER_INSTANCES), policies=["all"], horizons=[horizon],
+                      runs=runs, seed=seed, backend=backend)  # fmt: skip
+
+
+#: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
+PAPER_INSTANCES = ("I1", "I2")
+
+
+# ---------------------------------------------------------------------------- the folder
+
+
+# ---------------------------------------------------------------------------- the sweep
+
+
+class SweepOutputs(Protocol):
+    """What writes a finished sweep folder's files in the upper layers' formats: the folder's
+    ``results.parquet`` from the parts, then each (instance, horizon) group's files, then
+    ``finish``."""
+
+    def write_results(self, folder: Path, grid: Grid, parts: dict[str, list[ChunkResult]],
+                      labels: dict[str, str], *,
+                      warn: Callable[[str], None] | None) -> None: ...  # fmt: skip
+
+    def write_group(self, folder: Path, grid: Grid, cells: Sequence[CellRuns],
+                    summary: dict[str, Any], *,
+                    warn: Callable[[str], None] | None) -> None: ...  # fmt: skip
+
+    def finish(self, *, warn: Callable[[str], None] | None) -> None:
+        """Every file complete (outputs written meanwhile by other processes waited for),
+        before the manifest says the folder is."""
+
+
+#: The outputs a sweep folder is written with unless the caller hands its own, named here
+#: and imported when a folder is written (the formats are the recorder's and the figure the
+#: viewer's: the core names them instead of importing the layers above it).
+DEFAULT_OUTPUTS = "corraoi.face.outputs:FolderOutputs"
+
+
+def default_outputs() -> SweepOutputs:
+    """An instance of :data:`DEFAULT_OUTPUTS`."""
+    import importlib
+
+    module, _, name = DEFAULT_OUTPUTS.partition(":")
+    made: SweepOutputs = getattr(importlib.import_module(module), name)()
+    return made
+
+
+@dataclass
+class SweepOutcome:
+    grid: Grid
+    summaries: list[dict[str, Any]]
+    folders: list[Path]
+    chunks_run: int
+    chunks_skipped: int
+
+
+def sweep(
+    grid: Grid,
+    *,
+    out: str | os.PathLike[str] | None = None,
+    client: Any = None,
+    resume: bool = False,
+    force: bool = False,
+    workers: int | None = None,
+    threads_per_worker: int | None = None,
+    on_chunk: Callable[[int, int], None] | None = None,
+    on_slots: Callable[[int], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+    backend: str | None = None,
+    outputs: SweepOutputs | None = None,
+) -> SweepOutcome:
+    """Run ``grid``; with ``out``, into a resumable folder (module docstring).
+
+    ``outputs`` writes the folder's files beyond its parts, manifest and summaries
+    (:class:`SweepOutputs`; by default ``corraoi.face.outputs.FolderOutputs``: the sweep
+    logs, recordings, ``results.parquet`` and figures).
+
+    ``backend``: "cpu", "gpu" or "auto" (docs/gpu.md), else the grid's own (``cpu`` unless
+    set). "gpu" runs every cell on the GPU (:class:`corraoi.gpu.GpuUnavailable` says why
+    when it cannot); "auto" takes the GPU when it can run every cell, else the CPU with a
+    notice through ``warn``.
+
+    ``client``: a ``dask.distributed.Client`` (chunks run on its workers), else this
+    process (the engine's own threads, ``workers`` of them). ``resume``: continue or extend
+    the sweep in ``out`` (finished chunks are skipped; new runs, policies or parameter
+    values are appended). ``on_chunk(done, total)`` after each chunk; ``on_slots(n)`` as the
+    in-process engine advances. Returns the summaries, one per (instance, horizon) group.
+    A folder is locked while the sweep writes it: a second sweep into it is refused at once.
+    """
+    from contextlib import ExitStack
+
+    grid = backends.settle(grid, backend, client=client, warn=warn)
+    folder = Path(out) if out is not None else None
+    with ExitStack() as stack:
+        if folder is not None:
+            from corraoi.locks import folder_lock
+
+            _check_parent(folder)
+            folder.mkdir(parents=True, exist_ok=True)
+            stack.enter_context(folder_lock(folder, "sweep folder"))
+        return _sweep(grid, folder, client=client, resume=resume, force=force, workers=workers,
+                      threads_per_worker=threads_per_worker, on_chunk=on_chunk,
+                      on_slots=on_slots, warn=warn, outputs=outputs)  # fmt: skip
+
+
+def _sweep(
+    grid: Grid,
+    folder: Path | None,
+    *,
+    client: Any,
+    resume: bool,
+    force: bool,
+    workers: int | None,
+    threads_per_worker: int | None,
+    on_chunk: Callable[[int, int], None] | None,
+    on_slots: Callable[[int], None] | None,
+    warn: Callable[[str], None] | None,
+    outputs: SweepOutputs | None,
+) -> SweepOutcome:
+    start = time.perf_counter()
+    runner = backends.choose(grid, client=client, workers=workers,
+                             threads_per_worker=threads_per_worker)  # fmt: skip
+    parts: dict[str, list[ChunkResult]] = {}
+    if folder is not None:
+        grid = _prepare_folder(folder, grid, resume=resume, force=force)
+
+        def damaged(exc: DamagedPart) -> None:
+            aside = exc.path.with_name(exc.path.name + ".damaged")
+            os.replace(exc.path, aside)  # kept for a look, never read again
+            if warn is not None:
+                warn(f"{exc}; its runs are run again (the file is now {aside.name})")
+
+        parts = read_parts(folder, grid, on_damaged=damaged)
+    todo: list[tuple[Cell, Chunk]] = []
+    skipped = 0
+    for cell in grid.cells:
+        done = parts.get(cell.key, [])
+        skipped += len(done)
+        todo += [(cell, chunk) for chunk in grid.chunks(cell, covered=covered(done))]
+    total = len(todo)
+    finished = 0
+
+    def on_done(result: ChunkResult) -> None:
+        nonlocal finished
+        if folder is not None:
+            result.save(folder / PARTS / f"{result.chunk.name}.npz")
+        parts.setdefault(result.chunk.cell, []).append(result)
+        finished += 1
+        if on_chunk is not None:
+            on_chunk(finished, total)
+
+    runner.run(grid, todo, on_done=on_done, on_slots=on_slots)
+    for p in parts.values():
+        p.sort(key=lambda r: r.chunk.start)
+    labels = grid.labels()
+    dirs = group_dirs(grid, folder) if folder is not None else {}
+    summaries: list[dict[str, Any]] = []
+    wall = time.perf_counter() - start
+    joined_groups = []
+    for key, cells in grid.groups().items():
+        joined = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in cells]
+        joined_groups.append((key, joined))
+        summaries.append(group_summary(grid, joined, workers=runner.workers, wall_s=wall))
+    if folder is not None:
+        writer = outputs if outputs is not None else default_outputs()
+        writer.write_results(folder, grid, parts, labels, warn=warn)
+        for (key, joined), summary in zip(joined_groups, summaries, strict=True):
+            dirs[key].mkdir(parents=True, exist_ok=True)
+            writer.write_group(dirs[key], grid, joined, summary, warn=warn)
+            write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
+            write_text(dirs[key] / "summary.md", summary_markdown(summary))
+        writer.finish(warn=warn)
+        prov = folder_provenance(grid)
+        keep_sources(folder, prov)
+        write_manifest(folder, grid, "complete", provenance_entry(folder, prov))
+    return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
+                        total, skipped)  # fmt: skip
+
+
+def _check_parent(folder: Path) -> None:
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder}: exists and is not a directory (expected a folder for -o)")
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ConfigError(f"{folder}: cannot create the folder ({probe} is not a directory)")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ConfigError(f"{folder}: cannot create the folder ({probe} is not writable)")
+
+
+def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> Grid:
+    old = read_manifest(folder) if folder.is_dir() else None
+    legacy = folder.is_dir() and old is None and any(
+        (folder / f).exists() for f in (*GROUP_FILES, "results.parquet")
+    )
+    if resume:
+        if old is None:
+            raise ConfigError(f"{folder}: no sweep to resume (no {MANIFEST}); drop --resume")
+        # the code that will run is the code the sweep ran, or one line says which is not
+        check_code([c.policy for c in old.cells], folder, read_manifest_dict(folder))
+        grid = merge_grids(old, grid, folder)
+    elif old is not None or legacy:
+        if not force:
+            raise ConfigError(
+                f"{folder}: already holds a sweep; use --resume to continue or extend it, "
+                "or --force to start over"
+            )
+        _clear(folder, old)
+    folder.mkdir(parents=True, exist_ok=True)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError(f"{folder}: directory is not writable")
+    prov = folder_provenance(grid)  # plug-ins loaded, versions asked: before any file
+    write_manifest(folder, grid, "running", provenance_entry(folder, prov))  # first: resumable
+    keep_sources(folder, prov)
+    (folder / PARTS).mkdir(exist_ok=True)
+    from corraoi.locks import lock_holder
+
+    for stale in (folder / PARTS).glob("*.partial"):  # parts a killed sweep left half-written
+        if stale.is_file() and lock_holder(stale) is None:
+            stale.unlink(missing_ok=True)
+    return grid
+
+
+def folder_provenance(grid: Grid) -> Any:
+    """What made a sweep's numbers: the versions, the backend and each plug-in's source."""
+    from corraoi.provenance import Provenance, sweep_backend
+
+    return Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+
+
+def provenance_entry(folder: Path, prov: Any) -> dict[str, Any]:
+    """The manifest's ``provenance``: :func:`folder_provenance` with where the folder keeps
+    the copy of each plug-in's source (corraoi.sweep_code)."""
+    return {**prov.to_dict(), "plugins": [{**s.to_dict(), "copy": kept_copy(s)}
+                                          for s in prov.sources]}  # fmt: skip
+
+
+def _clear(folder: Path, old: Grid | None) -> None:
+    """Remove an earlier sweep's files (only with --force); a file another process is
+    writing right now is never touched (nothing is removed then)."""
+    from corraoi.errors import OutputError
+    from corraoi.locks import lock_holder
+
+    for f in sorted(folder.rglob("*")):
+        holder = lock_holder(f) if f.is_file() else None
+        if holder is not None:
+            who = f"process {holder}" if holder else "another process"
+            raise OutputError(
+                f"{f}: is being written by {who} right now; not touched (wait for it, stop it, "
+                "or give another output folder)"
+            )
+    targets = [folder / PARTS, folder / "results.parquet", folder / "results.parquet.partial",
+               folder / MANIFEST]  # fmt: skip
+    targets += [folder / f for name in GROUP_FILES for f in (name, f"{name}.partial")]
+    if old is not None:  # the group folders of a grid of several groups
+        targets += [d for d in group_dirs(old, folder).values() if d != folder]
+    for t in targets:
+        if t.is_dir():
+            shutil.rmtree(t)
+        else:
+            t.unlink(missing_ok=True)

@@ -1,0 +1,99 @@
+"""What a finished sweep writes in the recorder's formats: per (instance, horizon) group its
+sweep log (``sweep.mcap``) and Rerun recording (``sweep.rrd``), and for the folder
+``results.parquet``. Made from the parts after every chunk has finished, so their order and
+bytes do not depend on which worker finished first. ``corraoi/face/outputs.py`` adds the
+figure; ``corraoi.experiments.sweeps.sweep`` decides when.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from corraoi.experiments.folder import CellRuns, ChunkResult
+from corraoi.experiments.grid import Grid
+from corraoi.experiments.montecarlo import sweep_config
+from corraoi.provenance import Provenance, sweep_backend
+from recorder.style import spec_color, variant_colors
+from recorder.sweeplog.log import SweepMcapSink
+from recorder.sweeplog.results import write_dataset
+
+
+def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
+    """The sweep log's configuration of a group (``sweep_config`` with cell labels)."""
+    c0 = cells[0].cell
+    config = sweep_config(c0.instance, [c.cell.policy for c in cells], runs=grid.runs,
+                          horizon=c0.horizon, seed=grid.seed,
+                          checkpoints=[int(t) for t in cells[0].checkpoints],
+                          channel=c0.channel)  # fmt: skip
+    # every view draws a policy in its own colour; the parameter values of one policy in
+    # shades of it
+    same: dict[str, list[CellRuns]] = {}
+    for c in cells:
+        same.setdefault(c.cell.policy.name, []).append(c)
+    shade = {
+        id(c): rgb
+        for group in same.values()
+        for c, rgb in zip(group, variant_colors(spec_color(group[0].cell.policy), len(group)),
+                          strict=True)  # fmt: skip
+    }
+    for entry, c in zip(config["policies"], cells, strict=True):
+        entry["name"] = c.label
+        if c.cell.policy.color is not None or len(same[c.cell.policy.name]) > 1:
+            entry["color"] = list(shade[id(c)])
+    return config
+
+
+def write_results(
+    folder: Path,
+    grid: Grid,
+    parts: dict[str, list[ChunkResult]],
+    labels: dict[str, str],
+    *,
+    warn: Callable[[str], None] | None,
+) -> None:
+    """results.parquet, compacted from the parts: one partition per instance."""
+    try:
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        if warn is not None:
+            warn('results.parquet not written: install the analysis extra, '
+                 'pip install "corraoi[analysis]"')  # fmt: skip
+        return
+    write_dataset(folder / "results.parquet", grid, parts)
+
+
+def write_group_log(
+    folder: Path, grid: Grid, cells: Sequence[CellRuns], summary: dict[str, Any]
+) -> dict[str, Any]:
+    """A group's sweep log (``sweep.mcap``); returns its configuration, which
+    :func:`write_group_recording` takes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    config = group_config(grid, cells)
+    config["notable"] = summary["notable"]  # read back by SweepLog.notable
+    prov = Provenance.of([c.cell.policy for c in cells], backend=sweep_backend(grid.backend))
+    # in log-time order: each checkpoint's points, the cells in grid order (a stable sort)
+    points = sorted((p for c in cells for p in c.points()), key=lambda p: int(p.t))
+    with SweepMcapSink(folder / "sweep.mcap", config, provenance=prov) as log:
+        for point in points:
+            log.write(point)
+    return config
+
+
+def write_group_recording(
+    folder: Path, config: dict[str, Any], cells: Sequence[CellRuns], summary: dict[str, Any]
+) -> None:
+    """A group's Rerun recording (``sweep.rrd``): the points of its sweep log, with the runs
+    worth watching drawn over the mean. Imports Rerun (only here)."""
+    from recorder.sweeplog.recording import open_sweep_recording
+
+    with open_sweep_recording(folder / "sweep.rrd", config) as rec:
+        for c in cells:
+            for point in c.points():
+                rec.write(point)
+        for c in cells:  # the runs worth watching, over the mean (CPU: every checkpoint)
+            if c.agg is not None or c.regret.shape[1] < 2:
+                continue
+            for kind, e in summary["notable"]["cells"].get(c.label, {}).items():
+                rec.mark(c.label, kind, e["run"], e["seed"], c.t, c.regret[e["run"]])

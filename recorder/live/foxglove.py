@@ -1,0 +1,339 @@
+"""Live in Foxglove: a Foxglove WebSocket server for a running (or replayed) run.
+
+The server is the maintained ``foxglove-sdk`` package (the optional extra ``foxglove``),
+imported only when ``--foxglove`` is asked for. What a client sees:
+
+- ``/corraoi/slot``: one JSON message per slot, with the very schema
+  (:func:`recorder.slotlog.encode.slot_schema`) and the very bytes
+  (:class:`recorder.slotlog.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
+  the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
+- ``/corraoi/run``: the ``corraoi.run`` metadata record of the MCAP log as one JSON object
+  (flat strings). The WebSocket protocol keeps no message for a client that connects
+  later, so it is sent again with every block of slots (every 1,000 slots).
+- Several runs on one server (``record -p ucb,cucb``): one topic each,
+  ``/corraoi/slot/<label>`` and ``/corraoi/run/<label>``.
+
+Slow clients. ``Channel.log`` never waits for a client: the SDK gives every client its own
+queue of at most :data:`BACKLOG` messages and, when it is full, drops the *oldest* message
+to make room (``send_lossy`` in foxglove-sdk's ``connected_client``). Memory is so bounded
+by ``BACKLOG`` x the largest message per client (plus the sockets' buffers), and the run
+never stalls on a client. The SDK keeps no count of what it dropped; every slot message
+carries its ``t``, so a client counts what it missed as the gaps in ``t``
+(:func:`missed`), and the server reports how many messages it published per topic.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
+from recorder.paths import Sink
+from recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
+from recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
+from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from recorder.vocab import SLOT_TOPIC as TOPIC
+
+#: What to install for ``--foxglove``.
+EXTRA = 'pip install "corraoi[foxglove]"'
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+#: ``--foxglove`` without a value.
+DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
+#: Messages the SDK queues per client before it drops the oldest.
+BACKLOG = 1024
+#: Topic of the run metadata record.
+RUN_TOPIC = "/corraoi/run"
+
+
+@dataclass(frozen=True)
+class Address:
+    """Where the server listens: ``host:port`` (``port`` 0: a free port)."""
+
+    host: str
+    port: int
+
+    def __str__(self) -> str:
+        return f"{self.host}:{self.port}"
+
+
+def parse_address(text: str) -> Address:
+    """``[HOST:]PORT`` -> Address; a bad value is one UsageError naming it."""
+    value = text.strip()
+    host, sep, port = value.rpartition(":")
+    if not sep:
+        host = DEFAULT_HOST
+    host = host.strip("[]") or DEFAULT_HOST
+    try:
+        number = int(port)
+    except ValueError:
+        number = -1
+    if not 0 <= number <= 65535:
+        raise UsageError(
+            f"--foxglove {text}: not [HOST:]PORT, expected e.g. 8765 or 0.0.0.0:8765 "
+            "(a port 0..65535)"
+        )
+    return Address(host, number)
+
+
+def require_foxglove() -> Any:
+    """The ``foxglove`` module, or a MissingExtraError naming the extra to install."""
+    try:
+        import foxglove
+    except ImportError:
+        raise MissingExtraError(
+            f"foxglove-sdk is not installed: --foxglove needs the foxglove extra, {EXTRA}"
+        ) from None
+    return foxglove
+
+
+def missed(ts: Iterable[int]) -> int:
+    """Slots a client missed, from the ``t`` of the slot messages it received in order:
+    the gaps between consecutive values."""
+    out, last = 0, None
+    for t in ts:
+        if last is not None and t > last + 1:
+            out += t - last - 1
+        last = t
+    return out
+
+
+class Pacer:
+    """Holds a stream to ``rate`` slots per second (None: as fast as it comes).
+
+    ``wait(n)`` returns once ``n`` slots in all may have gone out; it sleeps in short
+    steps and returns False at once when ``stop()`` says so.
+    """
+
+    def __init__(self, rate: float | None, *, stop: Callable[[], bool] | None = None) -> None:
+        if rate is not None and not rate > 0:
+            raise UsageError(f"--pace {rate}: expected a positive number of slots per second")
+        self.rate = rate
+        self.stop = stop or (lambda: False)
+        self._start: float | None = None
+
+    def wait(self, n: int) -> bool:
+        if self.rate is None:
+            return not self.stop()
+        now = time.monotonic()
+        if self._start is None:
+            self._start = now
+        due = self._start + n / self.rate
+        while now < due:
+            if self.stop():
+                return False
+            time.sleep(min(due - now, 0.05))
+            now = time.monotonic()
+        return not self.stop()
+
+
+class FoxgloveServer:
+    """A Foxglove WebSocket server on its own SDK context (its channels go to it only).
+
+    ``with FoxgloveServer(Address("127.0.0.1", 8765)) as server: sink =
+    server.slot_sink(config) ...``. Starting on a port that is taken raises one
+    :class:`FoxgloveError` line.
+    """
+
+    def __init__(self, address: Address, *, name: str = "corraoi", backlog: int = BACKLOG):
+        foxglove = require_foxglove()
+        self.address = address
+        self._context = foxglove.Context()
+        self._foxglove = foxglove
+        try:
+            self._server = foxglove.start_server(
+                name=name, host=address.host, port=address.port, context=self._context,
+                message_backlog_size=backlog,
+            )  # fmt: skip
+        except RuntimeError as exc:
+            text = str(exc).removeprefix("FoxgloveError: ")
+            if "in use" in text:
+                text = f"port {address.port} is in use (another server?); pick another " \
+                       "with --foxglove PORT"  # fmt: skip
+            raise FoxgloveError(f"--foxglove {address}: cannot start the server: {text}") from None
+        self.port: int = self._server.port
+        self.published: dict[str, int] = {}
+        self._stopped = False
+
+    @property
+    def url(self) -> str:
+        host = self.address.host
+        shown = f"[{host}]" if ":" in host else host
+        return f"ws://{shown}:{self.port}"
+
+    def hint(self) -> str:
+        """How to open the stream in Foxglove (one line)."""
+        return (
+            f"foxglove: serving {self.url} -- in Foxglove: Open connection -> Foxglove "
+            f"WebSocket -> {self.url} (layout: docs/foxglove-layout.json)"
+        )
+
+    def channel(self, topic: str, schema: Any, *, metadata: dict[str, str] | None = None) -> Any:
+        return self._foxglove.Channel(
+            topic, schema=schema, message_encoding="json", context=self._context,
+            metadata=metadata,
+        )  # fmt: skip
+
+    def slot_sink(
+        self, config: RunConfig, *, label: str | None = None, pace: float | None = None,
+        stop: Callable[[], bool] | None = None,
+    ) -> FoxgloveSlotSink:  # fmt: skip
+        """A sink for one run's slots; ``label``: the run's topics are
+        ``/corraoi/slot/<label>`` and ``/corraoi/run/<label>`` (several runs on one server)."""
+        return FoxgloveSlotSink(self, config, label=label, pace=pace, stop=stop)
+
+    def stop(self) -> None:
+        if not self._stopped:
+            self._stopped = True
+            self._server.stop()
+
+    def __enter__(self) -> FoxgloveServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class FoxgloveSlotSink(Sink):
+    """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
+
+    The messages are :class:`recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
+    ``log_time`` is ``t`` seconds. ``pace``: at most that many slots per second (the
+    writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C).
+    """
+
+    def __init__(
+        self, server: FoxgloveServer, config: RunConfig, *, label: str | None = None,
+        pace: float | None = None, stop: Callable[[], bool] | None = None,
+    ) -> None:  # fmt: skip
+        from foxglove import Schema
+
+        self.server = server
+        suffix = f"/{label}" if label else ""
+        self.topic = TOPIC + suffix
+        self.run_topic = RUN_TOPIC + suffix
+        meta = run_metadata(config)
+        schema = Schema(name=SCHEMA_NAME, encoding="jsonschema", data=schema_bytes(config))
+        self._slots = server.channel(
+            self.topic, schema, metadata={"format_version": meta["format_version"]}
+        )
+        self._run = server.channel(self.run_topic, _run_schema(meta))
+        self._run_message = json.dumps(meta).encode()
+        self._encoder = BlockEncoder(config.instance.K)
+        self._pacer = Pacer(pace, stop=stop)
+        self.sent = 0
+        server.published.setdefault(self.topic, 0)
+        self._send_run(0)
+
+    def _send_run(self, t: int) -> None:
+        self._run.log(self._run_message, log_time=t * NS_PER_SLOT)
+
+    def write(self, block: SlotBlock) -> int:
+        """Publish the block's slots; returns how many went out (fewer if stopped)."""
+        if len(block) == 0:
+            return 0
+        messages = self._encoder.encode(block)
+        ts = block.t.tolist()
+        self._send_run(ts[0])
+        log = self._slots.log
+        paced = self._pacer.rate is not None
+        done = 0
+        for t, message in zip(ts, messages, strict=True):
+            if paced and not self._pacer.wait(self.sent + 1):
+                break
+            log(message, log_time=t * NS_PER_SLOT)
+            self.sent += 1
+            done += 1
+        self.server.published[self.topic] += done
+        return done
+
+    def stop_when(self, stop: Callable[[], bool]) -> None:
+        """A paced ``write`` returns early once ``stop()`` is true (Ctrl-C)."""
+        self._pacer.stop = stop
+
+    def close(self) -> None:
+        """Nothing is buffered here: the channels stay advertised until the server stops."""
+
+
+def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
+    return {
+        "title": RUN_METADATA,
+        "description": f"the {RUN_METADATA} metadata record of the MCAP log (flat strings)",
+        "type": "object",
+        "properties": {key: {"type": "string"} for key in meta},
+    }
+
+
+class FoxgloveSweepSink(Sink):
+    """Streams sweep points to ``/corraoi/sweep`` as each checkpoint finishes:
+    ``write(point)`` with a JSON-able dict (one message; ``log_time`` its ``t`` seconds
+    when it has one), ``close()``."""
+
+    def __init__(self, server: FoxgloveServer, *, topic: str = SWEEP_TOPIC) -> None:
+        self.server = server
+        self.topic = topic
+        self._channel = server.channel(topic, None)
+        self.sent = 0
+        server.published.setdefault(topic, 0)
+
+    def write(self, point: dict[str, Any]) -> None:
+        t = point.get("t")
+        log_time = int(t) * NS_PER_SLOT if isinstance(t, int) and t >= 0 else None
+        self._channel.log(json.dumps(point, sort_keys=True).encode(), log_time=log_time)
+        self.sent += 1
+        self.server.published[self.topic] += 1
+
+    def close(self) -> None:
+        self._channel.close()
+
+
+def stream_log(
+    server: FoxgloveServer,
+    log: Any,
+    *,
+    start: int = 1,
+    pace: float | None = None,
+    stop: Callable[[], bool] | None = None,
+    on_block: Callable[[int], None] | None = None,
+    sink: FoxgloveSlotSink | None = None,
+) -> int:
+    """Publish the slots ``start..`` of a recorded log (a :class:`recorder.slotlog.reader.RunLog`),
+    through ``sink`` if given (made beforehand for the log's config); returns the last slot
+    sent (``start - 1`` if none)."""
+    if not 1 <= start <= log.n_slots:
+        raise UsageError(
+            f"--start {start}: {log.path} holds slots 1..{log.n_slots}, expected a slot there"
+        )
+    if sink is None:
+        sink = server.slot_sink(log.config, pace=pace, stop=stop)
+    last = start - 1
+    for block in log.window(start, log.n_slots):
+        done = sink.write(block)
+        last += done
+        if on_block is not None:
+            on_block(done)
+        if done < len(block):
+            break
+    sink.close()
+    return last
+
+
+__all__ = [
+    "Address",
+    "BACKLOG",
+    "DEFAULT_ADDRESS",
+    "EXTRA",
+    "FoxgloveServer",
+    "FoxgloveSlotSink",
+    "FoxgloveSweepSink",
+    "Pacer",
+    "RUN_TOPIC",
+    "missed",
+    "parse_address",
+    "require_foxglove",
+    "stream_log",
+]

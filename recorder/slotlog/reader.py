@@ -1,0 +1,398 @@
+"""Read a corraoi MCAP log back into the SlotBlocks that were recorded.
+
+``open_log(path)`` checks the file and returns a :class:`RunLog`; ``RunLog.blocks()``
+streams the slots (memory bounded by one chunk plus one block). A log whose writer was
+killed (no footer, or a ``.partial`` file) is read up to its last complete chunk and
+reported as cut short.
+
+The records are walked by :mod:`recorder.walk`, the one MCAP walker, which tells a
+truncated tail (recover) from a damaged chunk (refuse); this module reads the slots.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mcap.records import Attachment, Header, Metadata
+
+from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
+from corraoi.errors import CorraoiError, LogError
+from corraoi.locks import lock_holder
+from recorder.vocab import (
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    PROVENANCE_METADATA,
+    RUN_END_METADATA,
+    RUN_METADATA,
+    SLOT_SCHEMA_NAME,
+    SLOT_TOPIC,
+    SWEEP_METADATA,
+)
+from recorder.walk import (
+    ChunkData,
+    Walker,
+    channel_payloads,
+    chunk_offsets,
+    find_channel,
+    last_log_time,
+    open_mcap,
+)
+
+from .decode import check_agrees, check_run_metadata, decode_messages, empty_block, not_a_run_log
+
+
+@dataclass
+class RunLog:
+    """An opened corraoi log. ``blocks()`` and ``read_all()`` give the slots back."""
+
+    path: Path
+    config: RunConfig
+    metadata: dict[str, str]
+    format_version: int
+    n_slots: int
+    #: The writer did not finish: no footer, or fewer slots than the horizon.
+    cut_short: bool
+    #: The file has its footer (the writer closed it, possibly after an interrupt).
+    finished: bool
+    #: "complete", "interrupted" (finished early, e.g. Ctrl-C) or "truncated" (killed).
+    status: str
+    #: The ``corraoi.end`` metadata of a finished file ({} otherwise).
+    end: dict[str, str] = field(default_factory=dict)
+    library: str = ""
+    n_chunks: int = 0
+    #: With ``open_log(salvage=True)``: what was wrong where reading stopped ("" if nothing).
+    damage: str = ""
+    #: PID of the process writing the file right now (it holds the writer's lock), if any.
+    writer: int | None = None
+    #: The ``corraoi.provenance`` metadata ({} in an older log; Provenance.read parses it)
+    provenance: dict[str, str] = field(default_factory=dict)
+    #: (name, media type, bytes) of each file the log carries: each plug-in's source
+    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
+    _channel_id: int = field(default=0, repr=False)
+    #: byte offset after the last complete chunk seen at open: blocks() stops there
+    _data_end: int = field(default=0, repr=False)
+
+    def __repr__(self) -> str:
+        return (f"RunLog({str(self.path)!r}, {self.config.label}, "
+                f"{self.n_slots}/{self.config.horizon} slots, {self.status})")  # fmt: skip
+
+    @property
+    def label(self) -> str:
+        return self.config.label
+
+    @property
+    def horizon(self) -> int:
+        return self.config.horizon
+
+    @property
+    def summary(self) -> str:
+        """One line on how complete the log is."""
+        T = self.config.horizon
+        if self.status == "complete":
+            return f"complete: {self.n_slots} of {T} slots"
+        if self.status == "failed":
+            return (f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
+                    f"{self.end.get('error', '(no message)')}")  # fmt: skip
+        if self.status == "damaged":
+            return f"damaged: {self.damage}; read {self.n_slots} of {T} slots before the damage"
+        if self.status == "interrupted":
+            return (f"cut short: the run was stopped after slot {self.n_slots} of {T} "
+                    "(the file was finished properly)")  # fmt: skip
+        if self.writer is not None:
+            who = f"process {self.writer}" if self.writer else "another process"
+            return (
+                f"being written right now by {who}: {self.n_slots} of {T} slots so far, up "
+                "to the last complete chunk"
+            )
+        return (
+            f"cut short: the writer did not finish the file (killed?); recovered "
+            f"{self.n_slots} of {T} slots, up to the last complete chunk"
+        )
+
+    def blocks(self, block: int = 1000) -> Iterator[SlotBlock]:
+        """The recorded slots in blocks of ``block`` slots (the last one may be shorter)."""
+        if block < 1:
+            raise ValueError(f"block must be >= 1, got {block}")
+        pending: list[SlotBlock] = []
+        have = 0
+        for part in self._chunk_blocks():
+            pending.append(part)
+            have += len(part)
+            while have >= block:
+                whole = pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
+                yield _slice(whole, 0, block)
+                rest = _slice(whole, block, len(whole))
+                pending = [rest] if len(rest) else []
+                have = len(rest)
+        if have:
+            yield pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
+
+    def read_all(self) -> SlotBlock:
+        """Every recorded slot in one block (memory grows with the log: prefer blocks())."""
+        parts = list(self.blocks(block=max(self.n_slots, 1)))
+        if not parts:
+            return empty_block(self.config.instance.K)
+        return parts[0] if len(parts) == 1 else SlotBlock.concat(parts)
+
+    def window(self, first: int, last: int) -> Iterator[SlotBlock]:
+        """The slots ``first..last`` (inclusive, 1-based t), one block per chunk read.
+
+        Chunks whose time range lies outside the window are skipped without being
+        decompressed or decoded: their ranges come from the summary's chunk index when the
+        file has one, else from each chunk's header (a file cut short).
+        """
+        first, last = max(int(first), 1), min(int(last), self.n_slots)
+        if first > last:
+            return
+        K, n = self.config.instance.K, self.config.instance.n_states
+        lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
+        expected = first
+        with open_mcap(self.path) as f:
+            walker = Walker(f, self.path, stop_at=self._data_end)
+            for offset in chunk_offsets(f, walker, lo, hi):
+                chunk = walker.chunk_at(offset)
+                part = _decode(chunk, self._channel_id, self.path, K, n)
+                keep = (part.t >= first) & (part.t <= last)
+                if not keep.any():
+                    continue
+                idx = np.flatnonzero(keep)
+                part = _slice(part, int(idx[0]), int(idx[-1]) + 1)
+                expected = _follows(part, expected, self.path, offset)
+                yield part
+        if expected != last + 1:
+            raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
+
+    def _chunk_blocks(self) -> Iterator[SlotBlock]:
+        K, n = self.config.instance.K, self.config.instance.n_states
+        expected = 1
+        with open_mcap(self.path) as f:
+            walker = Walker(f, self.path, stop_at=self._data_end)
+            for kind, item in walker.records(read_chunks=True):
+                if kind != "chunk":
+                    continue
+                assert isinstance(item, ChunkData)
+                part = _decode(item, self._channel_id, self.path, K, n)
+                if not len(part):
+                    continue
+                _follows(part, expected, self.path, item.offset)
+                if expected + len(part) - 1 > self.n_slots:
+                    part = _slice(part, 0, self.n_slots - expected + 1)
+                expected += len(part)
+                if len(part):
+                    yield part
+                if expected > self.n_slots:
+                    return
+
+
+def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool = False) -> RunLog:
+    """Open a corraoi MCAP log, checking what it is and how complete it is.
+
+    With ``verify`` (the default) every chunk is decompressed and its CRC checked now, so
+    a damaged file is refused here rather than half-way through a replay. Raises
+    :class:`~recorder.errors.LogError` with a one-line message when the file cannot be used:
+    a finished file with a record that does not fit, a bad CRC, a bad size or an invalid
+    slot is *damaged* (file, byte offset, what is wrong), which is told apart from a file
+    whose writer was killed (*cut short*: no footer, a torn last record).
+
+    With ``salvage`` every chunk is decoded and validated, and the first damage ends the
+    log instead of raising: the RunLog holds the slots before it, ``status`` is
+    "damaged" and ``damage`` says what and where (``corraoi recover`` uses this).
+    """
+    p = Path(path)
+    if not p.exists() and not p.is_symlink():
+        part = p.with_name(p.name + ".partial")
+        if part.exists():
+            raise LogError(
+                f"{p}: no such file, but {part} is there (a writer that did not finish, or "
+                f"one still writing): read it with `corraoi info {part}`, finish it with "
+                f"`corraoi recover {part}`"
+            )
+        raise LogError(f"{p}: no such file")
+    if p.is_dir():
+        raise LogError(f"{p}: is a directory, expected an MCAP log file")
+    with open_mcap(p) as f:
+        size = os.fstat(f.fileno()).st_size
+        if size == 0:
+            raise LogError(f"{p}: empty file (0 bytes), not an MCAP log")
+        walker = Walker(f, p)
+        damage = ""
+        expected = 1
+        library = ""
+        run_md: dict[str, str] | None = None
+        end_md: dict[str, str] = {}
+        prov_md: dict[str, str] = {}
+        attachments: list[tuple[str, str, bytes]] = []
+        channel_id = 0
+        n_chunks = 0
+        n_slots = 0
+        data_end = 0
+        finished = False
+        sweep = False  # a sweep log's metadata was seen
+        records = walker.records(read_chunks=True, lazy_after_first=not (verify or salvage))
+        while True:
+            try:
+                kind, item = next(records)
+            except StopIteration:
+                break
+            except LogError as exc:
+                if not salvage or run_md is None or not n_chunks:
+                    raise
+                damage = _strip_path(exc, p)
+                break
+            if kind == "header":
+                assert isinstance(item, Header)
+                library = item.library
+            elif kind == "metadata":
+                assert isinstance(item, Metadata)
+                if item.name == RUN_METADATA and run_md is None:
+                    run_md = dict(item.metadata)
+                    check_run_metadata(p, run_md, library)
+                elif item.name == RUN_END_METADATA:
+                    end_md = dict(item.metadata)
+                elif item.name == PROVENANCE_METADATA:
+                    prov_md = dict(item.metadata)
+                elif item.name == SWEEP_METADATA:
+                    sweep = True
+            elif kind == "attachment":
+                assert isinstance(item, Attachment)
+                attachments.append((item.name, item.media_type, bytes(item.data)))
+            elif kind == "chunk":
+                assert isinstance(item, ChunkData)
+                if run_md is None:
+                    raise not_a_run_log(p, library, sweep)
+                try:
+                    if item.records is not None:
+                        if not channel_id:
+                            channel_id = find_channel(
+                                item.records, p, item.offset, topic=SLOT_TOPIC,
+                                encoding=MESSAGE_ENCODING, schema=SLOT_SCHEMA_NAME,
+                            )  # fmt: skip
+                        t_ns = last_log_time(item.records, channel_id, p, item.offset)
+                        last = (t_ns or 0) // NS_PER_SLOT
+                        if salvage:
+                            expected = _validate_chunk(item, run_md, channel_id, p, expected)
+                    else:  # not verified: trust the chunk header (our chunks hold only slots)
+                        last = item.end_time // NS_PER_SLOT
+                except LogError as exc:
+                    if not salvage or not n_chunks:
+                        raise
+                    damage = _strip_path(exc, p)
+                    break
+                if last:
+                    n_slots = max(n_slots, last)
+                n_chunks += 1
+                data_end = walker.position
+            elif kind == "footer":
+                finished = True
+            elif kind == "data_end" and run_md is None:
+                raise not_a_run_log(p, library, sweep)
+        if run_md is None:
+            if walker.records_seen == 0:
+                raise LogError(
+                    f"{p}: an MCAP file cut off before its first record; nothing to read"
+                )
+            if walker.records_seen <= 1 and library.startswith("corraoi/"):
+                raise LogError(
+                    f"{p}: the writer stopped before it wrote the run configuration; "
+                    "nothing to read"
+                )
+            raise not_a_run_log(p, library, sweep)
+        if n_slots and not channel_id and verify:
+            raise LogError(f"{p}: no {SLOT_TOPIC} channel with schema {SLOT_SCHEMA_NAME}")
+    config = _config(p, run_md)
+    check_agrees(p, run_md, config)
+    if n_slots > config.horizon:
+        raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
+    if damage:
+        finished = False
+        status = "damaged"
+    elif not finished:
+        status = "truncated"
+    elif end_md.get("status") == "failed":
+        status = "failed"
+    elif n_slots < config.horizon:
+        status = "interrupted"
+    else:
+        status = "complete"
+    if finished and end_md.get("slots") not in (None, str(n_slots)):
+        raise LogError(
+            f"{p}: the file says it holds {end_md['slots']} slots but {n_slots} were found"
+        )
+    return RunLog(
+        path=p,
+        config=config,
+        metadata=run_md,
+        format_version=int(run_md["format_version"]),
+        n_slots=n_slots,
+        cut_short=status != "complete",
+        finished=finished,
+        status=status,
+        end=end_md,
+        library=library,
+        n_chunks=n_chunks,
+        damage=damage,
+        writer=None if finished else lock_holder(p),
+        provenance=prov_md,
+        attachments=attachments,
+        _channel_id=channel_id or 1,
+        _data_end=data_end,
+    )
+
+
+# ---------------------------------------------------------------------------- internals
+
+
+def _strip_path(exc: LogError, p: Path) -> str:
+    text = str(exc)
+    prefix = f"{p}: "
+    return text[len(prefix) :] if text.startswith(prefix) else text
+
+
+def _config(p: Path, run_md: dict[str, str]) -> RunConfig:
+    """The run configuration a log's metadata holds (LogError, one line, when unusable)."""
+    try:
+        return RunConfig.from_dict(json.loads(run_md["config"]))
+    except (CorraoiError, KeyError, TypeError, ValueError, AttributeError, RecursionError) as exc:
+        raise LogError(f"{p}: the run configuration in the log is unusable: "
+                       f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
+
+
+def _validate_chunk(
+    chunk: ChunkData,
+    run_md: dict[str, str] | None,
+    channel_id: int,
+    p: Path,
+    expected: int,
+) -> int:
+    """Decode and check one chunk's slots (salvage); returns the next slot expected."""
+    assert chunk.records is not None and run_md is not None
+    config = _config(p, run_md)
+    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
+    return _follows(part, expected, p, chunk.offset) if len(part) else expected
+
+
+def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int) -> SlotBlock:
+    """The slots of one chunk, decoded and validated (an empty block when it holds none)."""
+    assert chunk.records is not None
+    found = channel_payloads(chunk.records, channel_id, p, chunk.offset)
+    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}")
+
+
+def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
+    """The slots of ``part`` must be ``expected``, ``expected + 1``, ...; the next one."""
+    t = part.t
+    if t[0] != expected or not np.array_equal(
+        t, np.arange(expected, expected + len(t), dtype=np.int64)
+    ):
+        raise LogError(f"{p}: chunk at byte {offset}: slots are not consecutive (expected "
+                       f"slot {expected}, got {int(t[0])}..{int(t[-1])})")  # fmt: skip
+    return expected + len(t)
+
+
+def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
+    return SlotBlock(**{f: b.column(f)[start:stop] for f in FIELDS})

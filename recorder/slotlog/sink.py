@@ -1,0 +1,275 @@
+"""McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
+
+The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
+so a file at ``<path>`` is always complete. Every :data:`~recorder.vocab.SLOT_FLUSH_EVERY`
+slots the current chunk is closed and handed to the operating system, so a writer killed
+with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
+the ``.partial`` file and says the log was cut short.
+
+The chunks are framed by :class:`recorder.slotlog.chunks.ChunkWriter` (whole chunks built
+with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import BinaryIO
+
+import numpy as np
+from mcap.records import Channel, Schema
+
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.errors import ConfigError, CorraoiError, WriteError
+from corraoi.partial_file import PartialFile, reason
+from corraoi.provenance import Provenance
+from recorder.paths import Sink
+from recorder.vocab import (
+    MAX_SLOT,
+    MESSAGE_ENCODING,
+    NS_PER_SLOT,
+    PLUGIN_MEDIA_TYPE,
+    PROVENANCE_METADATA,
+    RUN_METADATA,
+    SCHEMA_ENCODING,
+    library_name,
+)
+from recorder.vocab import RUN_END_METADATA as END_METADATA
+from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from recorder.vocab import SLOT_TOPIC as TOPIC
+
+from .chunks import ChunkWriter
+from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes
+
+
+def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
+    """Whether a ``.partial`` left by a writer that stopped may be written over by a log of
+    ``config``: it is empty, or a corraoi slot log of the same run (its slots are what this
+    writer writes again), so that a killed ``record`` never blocks the next attempt."""
+
+    def same(part: Path) -> bool:
+        from corraoi.errors import LogError
+
+        from .reader import open_log
+
+        try:
+            if part.stat().st_size == 0:
+                return True
+            return bool(open_log(part, verify=False).config.to_dict() == config.to_dict())
+        except (LogError, OSError, ValueError):
+            return False
+
+    return same
+
+
+class McapSink(Sink):
+    """Write one run's slots to ``path`` (an MCAP file), block by block.
+
+    ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
+    normally or by KeyboardInterrupt finishes the file with the slots written so far and
+    renames it into place; any other exception leaves the ``.partial`` file as it is (the
+    reader recovers its complete chunks). Closing twice is safe.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        config: RunConfig,
+        *,
+        overwrite: bool = False,
+        flush_every: int = FLUSH_EVERY,
+        fsync: bool = True,
+        provenance: Provenance | None = None,
+    ) -> None:
+        if flush_every < 1:
+            raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
+        if config.horizon > MAX_SLOT:
+            raise ConfigError(
+                f"horizon {config.horizon} is too long for an MCAP log (at most {MAX_SLOT} "
+                "slots, since log_time is t seconds in nanoseconds)"
+            )
+        # what made the numbers: versions, backend, each plug-in's source as it ran (the
+        # plug-in resolved before any file is made: a refusal leaves nothing behind)
+        self.provenance = provenance or Provenance.of([config.policy], backend=config.streams)
+        self._out = PartialFile(path, overwrite=overwrite, what="MCAP log",
+                                replaceable=same_run_partial(config))  # fmt: skip
+        self.path: Path = self._out.path
+        self.partial_path: Path = self._out.partial
+        self.config = config
+        self.overwrite = overwrite
+        self.flush_every = int(flush_every)
+        self.slots = 0
+        self.closed = False
+        self.finished = False
+        self._fsync = fsync
+        self._torn = False
+        self._last: SlotBlock | None = None
+        self._encoder = BlockEncoder(config.instance.K)
+        self._file: BinaryIO = self._out.create().file
+        try:
+            self._writer = ChunkWriter(
+                self._file,
+                schema=Schema(
+                    id=1, name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
+                ),
+                channel=Channel(
+                    id=1,
+                    topic=TOPIC,
+                    message_encoding=MESSAGE_ENCODING,
+                    schema_id=1,
+                    metadata={"format_version": run_metadata(config)["format_version"]},
+                ),
+                library=library_name(config.version),
+            )
+            self._writer.start()
+            self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
+            self._writer.add_metadata(PROVENANCE_METADATA, self.provenance.metadata())
+            for src in self.provenance.sources:
+                self._writer.add_attachment(src.name, PLUGIN_MEDIA_TYPE, src.data)
+            self._file.flush()
+        except OSError as exc:
+            self._torn = True
+            self._close_file()
+            raise self._write_error(exc) from None
+
+    # ------------------------------------------------------------------ writing
+
+    def write(self, block: SlotBlock) -> None:
+        """Append the block's slots; they must follow the slots written so far."""
+        if self.closed or self._torn:
+            raise ValueError(f"{self.path}: write() after close() or a failed write")
+        n = len(block)
+        if n == 0:
+            return
+        K = self.config.instance.K
+        if block.mu_hat.shape != (n, K):
+            raise ValueError(f"block has {block.mu_hat.shape[1]} arms, the run has {K}")
+        first = int(block.t[0])
+        if first != self.slots + 1 or int(block.t[-1]) != self.slots + n:
+            raise ValueError(
+                f"block covers slots {first}..{int(block.t[-1])}, expected to start at "
+                f"{self.slots + 1} with consecutive slots"
+            )
+        if self.slots + n > self.config.horizon:
+            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+        messages = self._encoder.encode(block)
+        t = block.t.astype(np.uint64)
+        times = t * np.uint64(NS_PER_SLOT)  # no overflow: the horizon is at most MAX_SLOT
+        sequences = t & np.uint64(0xFFFFFFFF)  # MCAP sequence is 32-bit: t modulo 2**32
+        # a chunk ends after every slot t with t % flush_every == 0, wherever the blocks
+        # end: the file is the same for any block size
+        ends = (np.flatnonzero(t % np.uint64(self.flush_every) == 0) + 1).tolist()
+        add, flush = self._writer.add_messages, self._writer.flush
+        self._torn = True  # until this block is fully handed to the writer
+        try:
+            begin = 0
+            for end in ends:
+                add(times[begin:end], sequences[begin:end], messages[begin:end])
+                flush()
+                begin = end
+            if begin < n:  # the rest stays in the open chunk
+                add(times[begin:], sequences[begin:], messages[begin:])
+        except OSError as exc:
+            raise self._write_error(exc) from None
+        self._torn = False
+        self.slots += n
+        self._last = block
+
+    # ------------------------------------------------------------------ closing
+
+    def close(self) -> Path:
+        """Finish the file (summary, footer), sync it and rename it into place.
+
+        Returns the final path. Safe to call twice. If finishing fails (disk full, ...),
+        the ``.partial`` file is left and :class:`WriteError` says so.
+        """
+        if self.closed:
+            return self.path if self.finished else self.partial_path
+        if self._torn:  # a write was cut off half-way: keep what is surely whole
+            return self.abort() or self.partial_path
+        self._write_end(error=None)
+        # synced by _write_end; renamed while still open: the lock is held until it is in place
+        self._out.publish(sync=False)
+        self.finished = True
+        return self.path
+
+    def fail(self, error: str) -> Path:
+        """The run stopped on ``error``: finish the file with status ``failed`` and that error,
+        and leave it at its ``.partial`` name (the final name is never written). A run that
+        failed before its first slot leaves no file, as any failed run."""
+        if self.closed:
+            return self.partial_path
+        if self._torn or self.slots == 0:
+            return self.abort() or self.partial_path
+        self._write_end(error=error)
+        self._close_file()
+        return self.partial_path
+
+    def _write_end(self, *, error: str | None) -> None:
+        """The last chunk, the ``corraoi.end`` record (status failed with ``error``), the
+        summary and the footer, synced (the file stays open: its lock is held)."""
+        self.closed = True
+        try:
+            self._writer.flush()
+            self._writer.add_metadata(
+                END_METADATA,
+                end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last,
+                             error=error),
+            )  # fmt: skip
+            self._writer.finish()
+            self._file.flush()
+            if self._fsync:
+                os.fsync(self._file.fileno())
+        except OSError as exc:
+            self._close_file()
+            raise self._write_error(exc) from None
+
+    def abort(self) -> Path | None:
+        """Stop without finishing: the ``.partial`` file stays (readable up to its last
+        chunk), unless no slot was written and no write failed, in which case it is
+        deleted (None). After a failed write (disk full) it always stays: the error
+        message points to it."""
+        if not self.closed:
+            self.closed = True
+            try:
+                if not self._torn:
+                    self._writer.flush()
+            except OSError:
+                pass
+            if self.slots == 0 and not self._torn:
+                self._out.discard()
+            self._close_file()
+        if self.slots == 0 and not self.partial_path.exists():
+            return None
+        return self.partial_path
+
+    def _close_file(self) -> None:
+        """Keep the ``.partial`` file as it is and release its lock (safe twice)."""
+        self._out.leave()
+
+    def _write_error(self, exc: OSError) -> WriteError:
+        return WriteError(
+            f"{self.partial_path}: cannot write the MCAP log: {reason(exc)} "
+            f"(the unfinished log is left as {self.partial_path})"
+        )
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        interrupted = exc_type is not None and issubclass(exc_type, (KeyboardInterrupt, SystemExit))
+        if exc_type is None or (interrupted and not self._torn):
+            self.close()
+        elif isinstance(exc, CorraoiError) and not isinstance(exc, WriteError):
+            self.fail(str(exc))  # the simulation failed (e.g. a plug-in's bad arm): say so
+        else:
+            self.abort()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else "open"
+        return f"McapSink({str(self.path)!r}, {self.config.label}, {self.slots} slots, {state})"

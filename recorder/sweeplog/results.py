@@ -1,0 +1,384 @@
+"""Per-run sweep results, ``results.parquet``: the writer and the reader side by side.
+
+One row per instance x policy x params x run x checkpoint (``docs/log-format.md``,
+section "Per-run results"). :class:`ResultsWriter` is fed by the sweep's checkpoint hook
+and writes a row group per policy (or per :data:`ROWS_PER_GROUP` rows) to
+``results.parquet.partial``, renamed when the sweep finishes: memory stays bounded by one
+row group whatever the number of runs. :func:`read_results` reads a single file or a
+dataset directory partitioned by instance (``results.parquet/instance=I1/part-0.parquet``).
+
+pyarrow (and pandas for the reader) are the optional extra ``analysis``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from corraoi._version import __version__
+from corraoi.errors import ResultsError
+from corraoi.partial_file import PartialFile, partial_path
+from corraoi.provenance import Provenance, sweep_backend
+from recorder.vocab import SWEEP_METADATA
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import pyarrow as pa
+
+
+#: File name inside a sweep folder.
+RESULTS_FILE = "results.parquet"
+#: Name of the format, in the Parquet key-value metadata under ``format``.
+FORMAT_NAME = "corraoi.results"
+#: Version this code writes and the newest it reads.
+FORMAT_VERSION = 1
+#: Rows buffered before a row group is written (a policy change also writes one).
+ROWS_PER_GROUP = 262_144
+#: The columns, in order, with their Arrow types (by name).
+COLUMNS: tuple[tuple[str, str], ...] = (
+    ("instance", "string"),
+    ("policy", "string"),
+    ("params", "string"),
+    ("horizon", "int64"),
+    ("run", "int64"),
+    ("seed", "int64"),
+    ("t", "int64"),
+    ("regret", "float64"),
+    ("estimator", "float64"),
+    ("best_arm_pulls", "int64"),
+)
+
+
+def results_schema(metadata: dict[str, str] | None = None) -> pa.Schema:
+    """The Arrow schema of ``results.parquet`` (with ``metadata`` as key-value metadata)."""
+    import pyarrow as pa
+
+    types = {"string": pa.string(), "int64": pa.int64(), "float64": pa.float64()}
+    return pa.schema([(n, types[t]) for n, t in COLUMNS], metadata=metadata)
+
+
+def params_json(params: dict[str, float]) -> str:
+    """The ``params`` column: the policy's parameters as JSON with sorted keys."""
+    return json.dumps({k: float(v) for k, v in params.items()}, sort_keys=True)
+
+
+def results_metadata(config: dict[str, Any]) -> dict[str, str]:
+    """The key-value metadata: format, version, corraoi version, the sweep configuration."""
+    return {
+        "format": FORMAT_NAME,
+        "format_version": str(FORMAT_VERSION),
+        "corraoi_version": str(config.get("version", __version__)),
+        "numbering": "run from 0 (seed = master seed + run); t is the checkpoint slot",
+        "sweep_config": json.dumps(config, sort_keys=True),
+    }
+
+
+def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list[Any]]) -> Path:
+    """Compact a grid's finished chunks into ``path`` (``results.parquet``), a dataset
+    partitioned by instance: ``instance=<name>/part-0.parquet``, rows in grid order (cell,
+    checkpoint, run). Written to ``<path>.partial`` and swapped in when complete."""
+    from urllib.parse import quote
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True)
+    full = results_schema()
+    metadata = results_metadata({**grid.to_dict(), "version": __version__})
+    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+    metadata["provenance"] = json.dumps(prov.to_dict(), sort_keys=True)  # what made the rows
+    schema = pa.schema([f for f in full if f.name != "instance"], metadata=metadata)
+    by_instance: dict[str, list[Any]] = {}
+    for cell in grid.cells:
+        by_instance.setdefault(cell.instance.name, []).append(cell)
+    with out:  # published when whole; on an error discarded (a failed write: one line)
+        for name, cells in by_instance.items():
+            folder = out.partial / f"instance={quote(name, safe='')}"
+            folder.mkdir(parents=True)
+            with pq.ParquetWriter(str(folder / "part-0.parquet"), schema,
+                                  compression="zstd") as writer:  # fmt: skip
+                for cell in cells:
+                    chunks = [p for p in parts.get(cell.key, []) if p.chunk.start < grid.runs]
+                    regret = np.concatenate([p.regret for p in chunks])[: grid.runs]
+                    estimator = np.concatenate([p.estimator for p in chunks])[: grid.runs]
+                    best = np.concatenate([p.best_pulls for p in chunks])[: grid.runs]
+                    R, S = regret.shape
+                    t = np.asarray(chunks[0].t, dtype=np.int64)
+                    runs = np.tile(np.arange(R, dtype=np.int64), S)
+                    n = R * S
+                    cols = [
+                        pa.array([cell.policy.name] * n, pa.string()),
+                        pa.array([params_json(cell.policy.params)] * n, pa.string()),
+                        pa.array(np.full(n, cell.horizon, dtype=np.int64)),
+                        pa.array(runs),
+                        pa.array(runs + grid.seed),
+                        pa.array(np.repeat(t, R)),
+                        pa.array(regret.T.reshape(-1)),
+                        pa.array(estimator.T.reshape(-1)),
+                        pa.array(best.T.reshape(-1).astype(np.int64)),
+                    ]
+                    writer.write_table(pa.Table.from_arrays(cols, schema=schema))
+    return out.path
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def _files(p: Path) -> list[Path]:
+    if p.is_dir():
+        return sorted(f for f in p.rglob("*.parquet") if f.is_file())
+    return [p]
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, str]:
+    """The key-value metadata of a results file (of its first part for a dataset)."""
+    import pyarrow.parquet as pq
+
+    p = Path(path)
+    if not p.exists():
+        part = partial_path(p)
+        hint = f" ({part} exists: the sweep did not finish)" if part.exists() else ""
+        raise ResultsError(f"{p}: no such results file{hint}")
+    files = _files(p)
+    if not files:
+        raise ResultsError(f"{p}: a directory without .parquet files (expected results)")
+    try:
+        raw = pq.read_schema(files[0]).metadata or {}
+    except (OSError, ValueError) as exc:
+        raise ResultsError(f"{files[0]}: not a readable Parquet file ({exc})") from None
+    md = {k.decode(): v.decode() for k, v in raw.items()}
+    if md.get("format") != FORMAT_NAME:
+        raise ResultsError(
+            f"{files[0]}: a Parquet file but not corraoi's per-run results "
+            f"(no format {FORMAT_NAME!r} in its metadata)"
+        )
+    version = md.get("format_version", "")
+    if not version.isdigit() or int(version) > FORMAT_VERSION:
+        raise ResultsError(
+            f"{files[0]}: results format version {version!r}; this corraoi reads up to "
+            f"{FORMAT_VERSION}: upgrade corraoi"
+        )
+    return md
+
+
+def read_results_table(path: str | os.PathLike[str]) -> pa.Table:
+    """The results as one Arrow table with the documented columns and types.
+
+    ``path`` is ``results.parquet`` (a file) or a dataset directory partitioned by
+    instance (``instance=I1/part-*.parquet``); the partition key becomes the ``instance``
+    column.
+    """
+    import pyarrow as pa
+    import pyarrow.dataset as ds
+
+    p = Path(path)
+    read_metadata(p)
+    try:
+        if p.is_dir():
+            dataset = ds.dataset(str(p), format="parquet", partitioning="hive")
+        else:
+            dataset = ds.dataset(str(p), format="parquet")
+        table = dataset.to_table()
+    except (OSError, ValueError, pa.ArrowException) as exc:
+        raise ResultsError(f"{p}: cannot read the results ({exc})") from None
+    names = [n for n, _ in COLUMNS]
+    missing = [n for n in names if n not in table.column_names]
+    if missing:
+        raise ResultsError(f"{p}: the results lack the column(s) {', '.join(missing)}")
+    schema = results_schema()
+    cols = [table.column(n).cast(schema.field(n).type) for n in names]
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def read_results(path: str | os.PathLike[str]) -> pd.DataFrame:
+    """``results.parquet`` (a file or a partitioned dataset) as a pandas DataFrame."""
+    frame: pd.DataFrame = read_results_table(path).to_pandas()
+    return frame
+
+
+# ---------------------------------------------------------------------------- sweeps
+
+
+def is_sweep_path(p: Path) -> bool:
+    """Whether ``p`` is a sweep folder, its results, or a sweep log (not a slot log)."""
+    if p.is_dir():
+        return any((p / f).exists() for f in (RESULTS_FILE, "sweep.mcap", "summary.json"))
+    if p.suffix == ".parquet":
+        return True
+    return p.is_file() and _first_metadata(p) == SWEEP_METADATA
+
+
+def _first_metadata(p: Path) -> str | None:
+    """The name of the first metadata record of an MCAP file (None: none, or not MCAP)."""
+    from mcap.records import Metadata
+
+    from recorder.walk import Walker
+
+    try:
+        with open(p, "rb") as f:
+            for _, record in Walker(f, p).records(read_chunks=False):
+                if isinstance(record, Metadata):
+                    return str(record.name)
+    except Exception:  # noqa: BLE001 - not MCAP or damaged: the slot-log reader says why
+        return None
+    return None
+
+
+class SweepData:
+    """A sweep folder, loaded: ``.runs`` (per-run results), ``.summary``, ``.curves``."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        p = Path(path)
+        # a partitioned results.parquet is a directory too: its parent is the sweep folder
+        self.folder = p.parent if (p.is_file() or p.suffix == ".parquet") else p
+        self.results_path = p if p.suffix == ".parquet" else self.folder / RESULTS_FILE
+        self.log_path = p if p.suffix == ".mcap" else self.folder / "sweep.mcap"
+        #: (instance, horizon) of a group folder inside a grid's folder: its rows only
+        self.group: tuple[str, int] | None = None
+        if not self.results_path.exists():
+            self._find_grid_results()
+
+    def _find_grid_results(self) -> None:
+        """A group folder of a grid (``DIR/I1``): the results are the grid's, filtered."""
+        manifest = self.folder.parent / "manifest.json"
+        if not manifest.is_file():
+            return
+        try:
+            groups = json.loads(manifest.read_text(encoding="utf-8")).get("groups", {})
+        except (OSError, ValueError, RecursionError, AttributeError):
+            return
+        if not isinstance(groups, dict):
+            return
+        entry = groups.get(self.folder.name)
+        if isinstance(entry, dict) and "instance" in entry:
+            self.results_path = self.folder.parent / RESULTS_FILE
+            self.group = (str(entry["instance"]), int(entry["horizon"]))
+
+    def __repr__(self) -> str:
+        return f"SweepData({str(self.folder)!r})"
+
+    @cached_property
+    def runs(self) -> pd.DataFrame:
+        """One row per policy x run x checkpoint (columns in ``docs/log-format.md``)."""
+        if not self.results_path.exists() and not partial_path(self.results_path).exists():
+            raise ResultsError(
+                f"{self.results_path}: no per-run results in {self.folder} (written by "
+                "`corraoi sweep -o DIR` with the analysis extra installed)"
+            )
+        frame = read_results(self.results_path)
+        if self.group is not None:
+            name, horizon = self.group
+            keep = (frame["instance"] == name) & (frame["horizon"] == horizon)
+            frame = frame[keep].reset_index(drop=True)
+        return frame
+
+    @cached_property
+    def summary(self) -> dict[str, Any] | None:
+        """``summary.json`` (None when the folder has none)."""
+        f = self.folder / "summary.json"
+        if not f.exists():
+            return None
+        try:
+            out: dict[str, Any] = json.loads(f.read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ResultsError(f"{f}: cannot read the summary ({why})") from None
+        return out
+
+    @cached_property
+    def config(self) -> dict[str, Any]:
+        """The sweep configuration (from the sweep log, else the results' metadata: a grid)."""
+        from .read import read_sweep
+
+        if self.log_path.exists():
+            return read_sweep(self.log_path).config
+        out: dict[str, Any] = json.loads(read_metadata(self.results_path)["sweep_config"])
+        return out
+
+    def record(
+        self,
+        run: int | str = "worst",
+        *,
+        policy: str | Sequence[str] = (),
+        cell: str | Sequence[str] = (),
+        out: str | os.PathLike[str] = "runs",
+        rrd: bool = False,
+        overwrite: bool = False,
+        kept_code: bool = False,
+        allow_changed_code: bool = False,
+    ) -> list[Any]:
+        """Record runs of this sweep slot by slot, as ``corraoi record --from`` does: ``run``
+        an index or worst/best/median/widest-gap; ``policy`` restricts to the sweep's
+        policies or adds others on the same run; ``cell`` selects cells by label. Writes
+        ``out/<folder>-<instance>-<label>-run<N>[-<choice>].mcap`` (and ``.rrd`` with
+        ``rrd``); returns each run's ``RecordOutcome`` (``.mcap``: what ``corraoi.load``
+        reads back). A plug-in edited since the sweep is refused unless ``kept_code`` (run
+        the folder's copy) or ``allow_changed_code``; each run must give the sweep's regret
+        again (corraoi.experiments.drill.SweepMismatch where it does not)."""
+        from corraoi.experiments.drill import choose
+        from corraoi.face.recording import record_drill
+        from corraoi.policies import make_policies
+        from corraoi.text import safe_name
+
+        names = (policy,) if isinstance(policy, str) else tuple(policy)
+        specs = make_policies(names) if names else []
+        cells = (cell,) if isinstance(cell, str) else tuple(cell)
+        drills = choose(self.folder, run, cells=cells, policies=specs, kept_code=kept_code,
+                        allow_changed_code=allow_changed_code)  # fmt: skip
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        outcomes = []
+        for d in drills:
+            stem = folder / safe_name(d.name)
+            outcomes.append(record_drill(d, Path(f"{stem}.mcap"),
+                                         rrd=Path(f"{stem}.rrd") if rrd else None,
+                                         overwrite=overwrite))  # fmt: skip
+        return outcomes
+
+    @cached_property
+    def curves(self) -> pd.DataFrame:
+        """The sweep log's aggregated curves: policy, t, means, CI half-widths, shares."""
+        import pandas as pd
+
+        from .read import read_sweep
+
+        log = read_sweep(self.log_path)
+        parts = []
+        for name in log.policies:
+            c = log.curves[name]
+            part = pd.DataFrame(
+                {
+                    "policy": pd.Series([name] * len(c), dtype="string"),
+                    "t": c.t,
+                    "regret_mean": c.regret_mean,
+                    "regret_ci95": c.regret_ci95,
+                    "estimator_mean": c.estimator_mean,
+                    "estimator_ci95": c.estimator_ci95,
+                }
+            )
+            for k in range(c.pull_share.shape[1]):
+                part[f"pull_share_{k + 1}"] = c.pull_share[:, k]
+            parts.append(part)
+        return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+__all__ = [
+    "COLUMNS",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "RESULTS_FILE",
+    "SweepData",
+    "is_sweep_path",
+    "params_json",
+    "read_metadata",
+    "read_results",
+    "read_results_table",
+    "results_metadata",
+    "results_schema",
+]
