@@ -14,15 +14,27 @@ Prints four tables:
 then peak memory (max RSS of a fresh process) at T = 10,000 and 1,000,000.
 
     python benchmarks/bench_engine.py [--runs 200] [--horizon 10000] [--repeat 5]
+
+With ``--against REV`` it prints one table instead: table 1's rows (the paper's twelve, their
+total, and the compiled plug-in) for the code at REV (``git archive`` into a temporary
+folder, its own kernel cache; or REV a folder holding that code's ``corraoi/``) and for
+this checkout, each side in fresh processes that alternate (before, after, after, before,
+...), ``--repeat`` of each, best per row: what a change to the engine costs
+(docs/performance.md, the hook checks of issue 32).
+
+    python benchmarks/bench_engine.py --against HEAD~1 --repeat 7
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -60,6 +72,79 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
     paper = [best[n] for n in paper_names()]
     print(f"{'total (paper twelve)':22s} {sum(paper):8.3f} "
           f"{run_slots * len(paper) / sum(paper):14,.0f}")  # fmt: skip
+
+
+#: One side's timings, in a fresh process: each policy's ``advance`` over every run (its
+#: kernel loaded first, so that neither compiling nor loading is counted).
+_SIDE = (
+    "import json, sys, time\n"
+    "from corraoi.engine.simulation import Simulation, set_workers\n"
+    "from corraoi.model.instance import load_instance\n"
+    "from corraoi.policies import make_policy\n"
+    "names, runs, horizon = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])\n"
+    "inst = load_instance('I1')\n"
+    "set_workers(None)\n"
+    "out = {}\n"
+    "for name in names:\n"
+    "    Simulation(inst, make_policy(name), range(2), 2).advance(2, record=False)\n"
+    "    best = [float('inf'), float('inf')]\n"
+    "    for _ in range(3):\n"
+    "        sim = Simulation(inst, make_policy(name), range(runs), horizon)\n"
+    "        s, c = time.perf_counter(), time.process_time()\n"
+    "        sim.advance(horizon, record=False)\n"
+    "        s, c = time.perf_counter() - s, time.process_time() - c\n"
+    "        best = [min(best[0], s), min(best[1], c)]\n"
+    "    out[name] = best\n"
+    "print(json.dumps(out))\n"
+)
+
+
+def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
+    """Table 1 for the code at ``rev`` and for this checkout, alternated (module docstring)."""
+    from corraoi.policies import paper_names
+
+    names = [*paper_names(), COMPILED]
+    tmp = Path(tempfile.mkdtemp(prefix="corraoi-bench-"))
+    if Path(rev, "corraoi").is_dir():  # a folder that holds the other code's corraoi/
+        shutil.copytree(Path(rev, "corraoi"), tmp / "corraoi")
+    else:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi"],
+                                 capture_output=True, check=True)  # fmt: skip
+        subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
+    sides = {"before": (tmp, tmp / "cache"), "after": (ROOT, ROOT / ".cache-corraoi")}
+
+    def run(side: str) -> dict[str, list[float]]:
+        path, cache = sides[side]
+        env = {**os.environ, "PYTHONPATH": str(path), "CORRAOI_CACHE_DIR": str(cache)}
+        out = subprocess.run([sys.executable, "-c", _SIDE, json.dumps(names), str(runs),
+                              str(horizon)], env=env, capture_output=True, text=True,
+                             check=True, cwd=tmp)  # fmt: skip
+        found: dict[str, list[float]] = json.loads(out.stdout.splitlines()[-1])
+        return found
+
+    run("before")  # both kernel caches warm: nothing below compiles
+    run("after")
+    times: dict[str, dict[str, list[list[float]]]] = {s: {n: [] for n in names} for s in sides}
+    for i in range(repeat):
+        for side in ("before", "after") if i % 2 == 0 else ("after", "before"):
+            for name, dt in run(side).items():
+                times[side][name].append(dt)
+    # per row: the best wall time and the best CPU time (every thread's) of the repeats
+    best = {s: {n: [min(v[0] for v in t[n]), min(v[1] for v in t[n])] for n in names}
+            for s, t in times.items()}  # fmt: skip
+    print(f"\nthe engine at {rev} (before) and this checkout (after): I1, {runs} runs, horizon "
+          f"{horizon}, fresh processes alternated, best of {repeat} each (each the best of 3 "
+          "advances in its process); wall and CPU seconds (CPU: every thread's, which a "
+          "loaded machine disturbs less)")  # fmt: skip
+    print(f"{'policy':22s} {'wall before':>11} {'after':>7} {'ratio':>6} {'CPU before':>11} "
+          f"{'after':>7} {'ratio':>6}")  # fmt: skip
+    rows = [(n, best["before"][n], best["after"][n]) for n in names if n != COMPILED]
+    total = ("paper workload (total)", [sum(r[1][i] for r in rows) for i in (0, 1)],
+             [sum(r[2][i] for r in rows) for i in (0, 1)])  # fmt: skip
+    plugin = ("compiled plug-in", best["before"][COMPILED], best["after"][COMPILED])
+    for name, b, a in [*rows, total, plugin]:
+        print(f"{name:22s} {b[0]:11.3f} {a[0]:7.3f} {a[0] / b[0]:6.3f} {b[1]:11.3f} "
+              f"{a[1]:7.3f} {a[1] / b[1]:6.3f}")  # fmt: skip
 
 
 def whole_process(runs: int, horizon: int, repeat: int) -> None:
@@ -147,10 +232,16 @@ def main() -> None:
     ap.add_argument("--all-builtins", action="store_true", help="table 1 for every built-in")
     ap.add_argument("--memory-policies", default="ucb,cts")
     ap.add_argument("--skip-memory", action="store_true")
+    ap.add_argument("--against", metavar="REV", default=None,
+                    help="only: table 1 for the code at REV and this checkout, alternated")
     args = ap.parse_args()
     load = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
           f"load average {load:.2f} at start")  # fmt: skip
+    if args.against is not None:
+        against(args.against, args.runs, args.horizon, args.repeat)
+        print(f"load average {os.getloadavg()[0]:.2f} at the end")
+        return
     per_policy(args.runs, args.horizon, args.repeat, args.all_builtins)
     whole_process(args.runs, args.horizon, args.repeat)
     wide(args.repeat)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -43,20 +44,55 @@ class OutputError(UsageError):
     being written by another process, ..."""
 
 
-class LogError(UsageError):
-    """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
-
-
 class WriteError(CorraoiError):
-    """An I/O failure while writing a log (disk full, file too large, device gone, ...)."""
+    """An I/O failure while writing a file (disk full, file too large, device gone, ...)."""
 
     exit_code = 1
+
+
+class CodeChanged(PolicyError):
+    """A plug-in file whose bytes are not those a run or sweep recorded (its sha256 differs):
+    never run under the old hash. ``path``, ``expected`` and ``found`` (hex digests)."""
+
+    def __init__(self, path: str, expected: str, found: str, way_out: str = "") -> None:
+        self.path, self.expected, self.found = path, expected, found
+        text = (f"{path}: the plug-in's code has changed (sha256:{expected[:16]} recorded, "
+                f"sha256:{found[:16]} now)")  # fmt: skip
+        super().__init__(text + (f"; {way_out}" if way_out else ""))
+
+    def with_way_out(self, way_out: str) -> CodeChanged:
+        return CodeChanged(self.path, self.expected, self.found, way_out)
+
+
+class LogError(UsageError):
+    """A log that cannot be read: missing, not MCAP, not corraoi's, too new, or damaged."""
 
 
 class ViewerError(CorraoiError):
     """A Rerun viewer that cannot be reached or started. The files are still written."""
 
     exit_code = 1
+
+
+class SweepMismatch(CorraoiError):
+    """A run recorded again from a sweep whose regret differs from the sweep's row (the
+    engine or the code changed since the sweep): the log is finished as failed, saying so."""
+
+    exit_code = 1
+
+
+class ReaderStopped(CorraoiError):
+    """The forked log reader died (killed, out of memory): one line, exit 1, what was sent
+    so far stays with the consumer."""
+
+    exit_code = 1
+
+    def __init__(self, exitcode: int | None) -> None:
+        how = (f"killed by {signal.Signals(-exitcode).name}" if exitcode is not None
+               and exitcode < 0 and -exitcode in signal.valid_signals()
+               else f"exit {exitcode}")  # fmt: skip
+        super().__init__(f"the log reader process stopped unexpectedly ({how}); nothing was "
+                         "written as complete (run the command again)")
 
 
 class ResultsError(LogError):

@@ -1,13 +1,14 @@
 """Locks that die with their process: ``flock`` on the file or folder being written, no lock
 file beside it. A second writer is refused at once, naming the holder's PID (from
-``/proc/locks``). Used by the recorder's writers (``recorder/paths.py``) and by a sweep for its
-folder (``corraoi/experiments/sweeps.py``).
+``/proc/locks``). Used by :class:`corraoi.partial_file.PartialFile` (every writer's
+``.partial`` file) and by a sweep for its folder (``corraoi/experiments/sweeps.py``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,10 +19,9 @@ try:
 except ImportError:  # pragma: no cover - not POSIX: no locks
     fcntl = None  # type: ignore[assignment]
 
-
 def lock_holder(part: str | os.PathLike[str]) -> int | None:
-    """Who holds the writer's lock on ``part``: its PID, 0 if the PID is unknown, or None
-    when nobody writes it (or it does not exist)."""
+    """Who holds the writer's lock on ``part`` (a file or a folder): its PID, 0 if the PID is
+    unknown, or None when nobody writes it (or it does not exist)."""
     if fcntl is None:
         return None
     try:
@@ -30,7 +30,7 @@ def lock_holder(part: str | os.PathLike[str]) -> int | None:
         return None
     try:
         st = os.fstat(fd)
-        if not is_regular(st.st_mode):
+        if not (is_regular(st.st_mode) or stat.S_ISDIR(st.st_mode)):
             return None
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
@@ -68,8 +68,6 @@ def folder_lock(folder: Path, what: str = "folder") -> Iterator[None]:
 
 
 def is_regular(mode: int) -> bool:
-    import stat
-
     return stat.S_ISREG(mode)
 
 
@@ -88,3 +86,6 @@ def pid_of_lock(dev: int, ino: int) -> int:
     except (OSError, ValueError):
         pass
     return 0
+
+
+__all__ = ["fcntl", "folder_lock", "is_regular", "lock_holder", "pid_of_lock"]

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from corraoi.errors import UsageError, WriteError
+from corraoi.errors import UsageError
+from corraoi.partial_file import PartialFile
 
-from .paths import check_output, partial_path, publish, reason
+from .paths import made_again
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -57,42 +58,37 @@ def export(
     from recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
-    check_output(out_p, overwrite=overwrite, what=f"{fmt} export")
+    # a .partial a killed export left is made again from the source: never in the way
+    target = PartialFile(out_p, overwrite=overwrite, what=f"{fmt} export", replaceable=made_again)
     if is_sweep_path(src):
         sweep = SweepData(src)
         table = read_results_table(sweep.results_path)
-        rows = _write(out_p, fmt, table.schema, table.to_batches())
+        rows = _write(target, fmt, table.schema, table.to_batches())
         return Exported(out_p, "runs", rows, fmt)
     run = RunData(src)
-    rows = _write(out_p, fmt, run.arrow_schema(), run.to_arrow())
+    rows = _write(target, fmt, run.arrow_schema(), run.to_arrow())
     return Exported(out_p, "slots", rows, fmt)
 
 
-def _write(out: Path, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBatch]) -> int:
+def _write(
+    target: PartialFile, fmt: str, schema: pa.Schema, batches: Iterable[pa.RecordBatch]
+) -> int:
     import pyarrow.csv as pcsv
     import pyarrow.parquet as pq
 
-    part = partial_path(out)
     rows = 0
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
+    with target:  # published when whole; on an error discarded (a failed write: one line)
         writer: pq.ParquetWriter | pcsv.CSVWriter
         if fmt == "parquet":
-            writer = pq.ParquetWriter(str(part), schema, compression="zstd")
+            writer = pq.ParquetWriter(str(target.partial), schema, compression="zstd")
         else:
-            writer = pcsv.CSVWriter(str(part), schema)
+            writer = pcsv.CSVWriter(str(target.partial), schema)
         try:
             for batch in _nonempty(batches):
                 writer.write_batch(batch)
                 rows += batch.num_rows
         finally:
             writer.close()
-    except OSError as exc:
-        raise WriteError(f"{part}: cannot write the export: {reason(exc)}") from None
-    except BaseException:
-        part.unlink(missing_ok=True)
-        raise
-    publish(out, overwrite=True)
     return rows
 
 

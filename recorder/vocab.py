@@ -16,9 +16,15 @@ from mcap.writer import IndexType
 #: The bytes that open and close every MCAP file.
 MAGIC = b"\x89MCAP0\r\n"
 #: The summary indexes every MCAP file we write carries: chunk, message and metadata
-#: indexes. Not the attachment index: we write no attachment, and the mcap writer would
-#: otherwise end every file with an empty attachment-index summary group.
+#: indexes, and the attachment index in a file that holds attachments (plug-in sources):
+#: the mcap writer would otherwise end every file with an empty attachment-index group.
 MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
+MCAP_INDEX_TYPES_WITH_ATTACHMENTS = MCAP_INDEX_TYPES | IndexType.ATTACHMENT
+#: Metadata record of both formats: the versions, the backend and the plug-in sources that
+#: made the file's numbers (corraoi.provenance.Provenance.metadata); each plug-in's source is
+#: an attachment named after its file, media type PLUGIN_MEDIA_TYPE.
+PROVENANCE_METADATA = "corraoi.provenance"
+PLUGIN_MEDIA_TYPE = "text/x-python"
 #: Both formats' messages are JSON, described by a JSON Schema.
 MESSAGE_ENCODING = "json"
 SCHEMA_ENCODING = "jsonschema"
@@ -67,8 +73,7 @@ SWEEP_METADATA = "corraoi.sweep"
 #: Metadata record written when a sweep log is finished: how the sweep ended.
 SWEEP_END_METADATA = "corraoi.sweep.end"
 #: The open chunk of a sweep log is closed and handed to the OS once SWEEP_FLUSH_EVERY
-#: messages wait in it and whenever the policy changes, so a killed sweep loses fewer
-#: than SWEEP_FLUSH_EVERY checkpoints.
+#: messages wait in it, so a killed writer loses fewer than SWEEP_FLUSH_EVERY points.
 SWEEP_FLUSH_EVERY = 32
 #: Keys a sweep message may lack: a half-width is absent with a single run.
 SWEEP_OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95")
@@ -87,6 +92,9 @@ __all__ = [
     "MAGIC",
     "MAX_SLOT",
     "MCAP_INDEX_TYPES",
+    "MCAP_INDEX_TYPES_WITH_ATTACHMENTS",
+    "PLUGIN_MEDIA_TYPE",
+    "PROVENANCE_METADATA",
     "MESSAGE_ENCODING",
     "NS_PER_SLOT",
     "RUN_END_METADATA",

@@ -38,7 +38,7 @@ from typing import BinaryIO
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Header, McapRecord, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Header, McapRecord, Message, Metadata, Schema
 
 from corraoi.errors import LogError
 
@@ -57,10 +57,12 @@ _U64 = struct.Struct("<Q")
 _PARSED: dict[int, tuple[str, Callable[[ReadDataStream], McapRecord]]] = {
     Opcode.HEADER: ("header", Header.read),
     Opcode.METADATA: ("metadata", Metadata.read),
+    Opcode.ATTACHMENT: ("attachment", Attachment.read),
     Opcode.SCHEMA: ("schema", Schema.read),
     Opcode.CHANNEL: ("channel", Channel.read),
 }
 _IN_CHUNK = (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE)
+_ALWAYS = (Opcode.HEADER, Opcode.METADATA, Opcode.ATTACHMENT)  # parsed on every walk
 
 
 @dataclass
@@ -96,7 +98,8 @@ def open_mcap(p: Path) -> BinaryIO:
 class Walker:
     """Walks the top-level records of an MCAP file, stopping cleanly at a truncated tail.
 
-    :meth:`records` yields ``(kind, item)``: "header", "metadata", "chunk" (ChunkData),
+    :meth:`records` yields ``(kind, item)``: "header", "metadata", "attachment" (its CRC
+    checked), "chunk" (ChunkData),
     "data_end", "footer", and with ``data`` the schemas, channels and messages outside
     chunks (a file without messages has its schema and channel in the summary only);
     :meth:`mcap_records` yields mcap records with the chunks opened, as
@@ -151,11 +154,9 @@ class Walker:
             end = body_at + length
             if end > self.size:
                 if self.sealed:
-                    raise self._bad(
-                        f"damaged at byte {pos}: a record (opcode 0x{opcode:02x}) claims "
-                        f"{length} bytes, past the end of the file ({self.size} bytes), "
-                        "though the file was finished"
-                    )
+                    raise self._bad(f"damaged at byte {pos}: a record (opcode 0x{opcode:02x}) "
+                                    f"claims {length} bytes, past the end of the file "
+                                    f"({self.size} bytes), though the file was finished")
                 self.truncated = True  # the writer died in the middle of this record
                 return
             if opcode == 0 or 0x0F < opcode < 0x80:
@@ -170,9 +171,7 @@ class Walker:
                 chunks += 1
                 self.position = end
                 yield "chunk", chunk
-            elif opcode in (Opcode.HEADER, Opcode.METADATA) or (
-                data and (opcode in _PARSED or opcode == Opcode.MESSAGE)
-            ):
+            elif opcode in _ALWAYS or (data and (opcode in _PARSED or opcode == Opcode.MESSAGE)):
                 record = _parse(opcode, f.read(length))
                 if record is None:
                     raise self._bad(f"damaged MCAP record at byte {pos}")
@@ -234,11 +233,9 @@ class Walker:
         if data_at + dlen > pos + _RECORD.size + length:
             raise self._bad(f"chunk at byte {pos} is damaged (its sizes do not add up)")
         if usize > _MAX_CHUNK or (compression != "" and usize > _MAX_RATIO * dlen + 4096):
-            raise self._bad(
-                f"chunk at byte {pos} is damaged (it claims {usize} bytes uncompressed from "
-                f"{dlen} compressed; at most {min(_MAX_CHUNK, _MAX_RATIO * dlen + 4096)} "
-                "are possible)"
-            )
+            raise self._bad(f"chunk at byte {pos} is damaged (it claims {usize} bytes "
+                            f"uncompressed from {dlen} compressed; at most "
+                            f"{min(_MAX_CHUNK, _MAX_RATIO * dlen + 4096)} are possible)")
         if not read:
             f.seek(pos + _RECORD.size + length)
             return ChunkData(pos, start, end_time, None)
@@ -255,9 +252,8 @@ class Walker:
             try:
                 import lz4.frame
             except ImportError:
-                raise self._bad(
-                    f"chunk at byte {pos} is lz4-compressed; install the lz4 package"
-                ) from None
+                raise self._bad(f"chunk at byte {pos} is lz4-compressed; install the lz4 "
+                                "package") from None  # fmt: skip
             records = lz4.frame.decompress(data)
         else:
             raise self._bad(f"chunk at byte {pos}: unknown compression {compression!r}")
@@ -271,6 +267,10 @@ class Walker:
 def _parse(opcode: int, body: bytes) -> McapRecord | None:
     """One record body parsed by mcap's record class; None if it does not parse (damage)."""
     stream = ReadDataStream(BytesIO(body))
+    if opcode == Opcode.ATTACHMENT and len(body) >= 4:  # mcap's reader skips this CRC
+        crc = int.from_bytes(body[-4:], "little")
+        if crc and zlib.crc32(body[:-4]) != crc:
+            return None
     try:
         if opcode == Opcode.MESSAGE:
             return Message.read(stream, len(body))

@@ -16,14 +16,14 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from corraoi import limits
+from corraoi import limits, partial_file
 from corraoi.cli import main
 from corraoi.engine.block import RunConfig
 from corraoi.engine.simulation import simulate_run
+from corraoi.locks import lock_holder
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 from corraoi.text import safe_name, safe_text
-from recorder import paths
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 
@@ -211,20 +211,20 @@ def test_force_never_touches_a_file_another_writer_holds(tmp_path):
 def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path):
     part = tmp_path / "run.mcap.partial"
     code = (
-        "import sys, time; from pathlib import Path; from recorder.paths import open_partial;"
-        f"f = open_partial(Path({str(tmp_path / 'run.mcap')!r}), overwrite=False);"
+        "import sys, time; from corraoi.partial_file import PartialFile;"
+        f"f = PartialFile({str(tmp_path / 'run.mcap')!r}).create();"
         "print('locked', flush=True); time.sleep(60)"
     )
     holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
-        assert paths.lock_holder(part) == holder.pid
+        assert lock_holder(part) == holder.pid
         err = one_line_error(cli("record", "-T", 10, "--no-rrd", "-o", tmp_path / "run.mcap", "-f"))
         assert f"{part}: is being written by process {holder.pid} right now" in err
     finally:
         holder.kill()
         holder.wait()
-    assert paths.lock_holder(part) is None  # the lock died with its process: no stale lock
+    assert lock_holder(part) is None  # the lock died with its process: no stale lock
     res = cli("record", "-T", 10, "--no-rrd", "-o", tmp_path / "run.mcap", "-f")
     assert res.exit_code == 0, res.output
     assert sorted(os.listdir(tmp_path)) == ["run.mcap"]  # no lock file beside it
@@ -276,8 +276,8 @@ class _FullDisk:
 
 @pytest.mark.parametrize("room", [30_000, 120_000])
 def test_a_full_disk_is_one_line_and_keeps_the_partial_readable(tmp_path, monkeypatch, room):
-    real = paths._fdopen
-    monkeypatch.setattr(paths, "_fdopen", lambda fd: _FullDisk(real(fd), room))
+    real = partial_file._fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), room))
     out = tmp_path / "run.mcap"
     err = one_line_error(cli("record", "-T", 6000, "--no-rrd", "-o", out), code=1)
     part = tmp_path / "run.mcap.partial"
@@ -410,7 +410,7 @@ def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
     out = tmp_path / "sw"
     out.mkdir()
     (out / "summary.json").write_text("{}")
-    held = paths.open_partial(out / "sweep.mcap", overwrite=False)
+    held = partial_file.PartialFile(out / "sweep.mcap").create()
     try:
         err = one_line_error(cli("sweep", "-n", 2, "-T", 10, "-p", "ucb", "-o", out, "--force"))
         assert err == (
@@ -420,7 +420,7 @@ def test_sweep_force_never_clears_a_folder_another_sweep_is_writing(tmp_path):
         )
         assert sorted(os.listdir(out)) == ["summary.json", "sweep.mcap.partial"]
     finally:
-        held.close()
+        held.leave()
 
 
 def test_only_the_runs_that_are_not_up_to_date_are_recorded(tmp_path, monkeypatch):

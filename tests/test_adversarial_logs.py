@@ -399,3 +399,73 @@ def test_random_byte_flips_never_give_a_traceback(tmp_path, seed):
             one_line_error(res)
         elif args[0] == "recover":  # what recover wrote reads back as a finished log
             assert open_log(tmp_path / "fixed.mcap").finished
+
+
+def _rewritten(src: Path, dest: Path, *, metadata=None, attachment=None) -> Path:
+    """``src`` copied record by record (mcap's writer), with metadata records replaced by
+    ``metadata(name, dict)`` and an attachment added (name, bytes, CRC broken or not)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        header = reader.get_header()
+        metas = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+        summary = reader.get_summary()
+        assert summary is not None
+        messages = list(reader.iter_messages())
+    with open(dest, "wb") as out:
+        w = Writer(out)
+        w.start(profile=header.profile, library=header.library)
+        for name, md in metas:
+            w.add_metadata(name, metadata(name, md) if metadata else md)
+        if attachment is not None:
+            w.add_attachment(0, 0, attachment[0], "text/x-python", attachment[1])
+        ids = {}
+        for sid, schema in summary.schemas.items():
+            ids[sid] = w.register_schema(schema.name, schema.encoding, schema.data)
+        chans = {cid: w.register_channel(c.topic, c.message_encoding, ids[c.schema_id],
+                                         dict(c.metadata)) for cid, c in summary.channels.items()}
+        for _, channel, message in messages:
+            w.add_message(chans[channel.id], message.log_time, message.data,
+                          message.publish_time, message.sequence)
+        w.finish()
+    return dest
+
+
+@pytest.mark.parametrize("config", ["[" * 100_000, '{"instance": [1, 2], "policy": 3}',
+                                    '{"instance": {"p": "x"}}', "null"])  # fmt: skip
+def test_a_hostile_run_configuration_is_one_line(tmp_path, config):
+    good = write_log(tmp_path / "good.mcap", horizon=50)
+
+    def edit(name, md):
+        return {**md, "config": config} if name == "corraoi.run" else md
+
+    bad = _rewritten(good, tmp_path / "bad.mcap", metadata=edit)
+    err = one_line_error(cli("info", bad))
+    assert "the run configuration in the log is unusable" in err
+
+
+def test_a_hostile_provenance_record_is_shown_as_far_as_it_reads(tmp_path):
+    good = write_log(tmp_path / "good.mcap", horizon=50)
+
+    def edit(name, md):
+        if name != "corraoi.provenance":
+            return md
+        return {**md, "plugins": "[" * 50_000, "notes": "{\"a\": 1}", "git": "\x1b[2J"}
+
+    bad = _rewritten(good, tmp_path / "bad.mcap", metadata=edit)
+    res = cli("info", bad)
+    assert res.exit_code == 0, res.output
+    assert "\x1b" not in res.output and "code                   corraoi" in res.output
+
+
+def test_an_attachment_with_a_broken_crc_is_damage(tmp_path):
+    good = write_log(tmp_path / "good.mcap", horizon=50)
+    bad = _rewritten(good, tmp_path / "bad.mcap", attachment=("evil.py", b"print('hi')\n"))
+    data = bytearray(bad.read_bytes())
+    at = bytes(data).index(b"print('hi')")
+    data[at] ^= 0x01  # a byte of the attached source flipped: its CRC no longer holds
+    bad.write_bytes(bytes(data))
+    err = one_line_error(cli("info", bad))
+    assert "damaged" in err and str(bad) in err

@@ -26,7 +26,7 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.engine.block import SlotBlock
-from recorder.paths import partial_path
+from corraoi.partial_file import partial_path
 from recorder.slotlog.reader import _slice, open_log
 
 PYTHON = sys.executable
@@ -193,7 +193,7 @@ def test_bad_paths_and_option_mixes_are_one_line_errors(tmp_path):
     one_line_error(run("-o", str(tmp_path / "s.mcap"), "--rrd", str(tmp_path / "s.mcap")), 2,
                    "used twice")  # fmt: skip
     stale = tmp_path / "stale.mcap"
-    partial_path(stale).write_text("")
+    partial_path(stale).write_text("half of another file")  # not this run: never taken over
     one_line_error(run("-T", "10", "-o", str(stale)), 2, "partial file")
     assert not list(tmp_path.glob("*.rrd*"))  # nothing was started
 

@@ -133,5 +133,5 @@ def test_an_interrupted_forced_sweep_keeps_its_chunks_and_resumes(tmp_path: Path
     again = run(*args)
     assert again.exit_code == 2 and "--resume to continue" in again.output
     resumed = run(*args, "--resume")
-    assert resumed.exit_code == 0 and "(2 chunk(s) run, 2 already done)" in resumed.stdout
+    assert resumed.exit_code == 0 and "(2 chunks run, 2 already done)" in resumed.stdout
     assert (out / "sweep.mcap").read_bytes() == complete

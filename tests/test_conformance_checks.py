@@ -61,5 +61,5 @@ def test_an_arm_out_of_range_is_refused_by_the_engine_with_its_slot(tmp_path: Pa
     )
     (case,) = policy_cases(f"{plugin}:Wild", arms=(2,), horizon=10)
     with pytest.raises(PolicyRuntimeError, match=r"policy wild, slot 1: select returned arm 2 "
-                       r"for run 0; expected 0\.\.1"):  # fmt: skip
+                       r"for run 0 \(seed \d+\); expected 0\.\.1"):  # fmt: skip
         CHECKS[0](case, tmp_path)

@@ -5,6 +5,7 @@ is one, on a CUDA GPU: what the kernel captures is the run the sweep counted."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -158,3 +159,38 @@ def test_bad_requests_on_a_gpu_sweep_are_one_line(tmp_path: Path) -> None:
         lines = out.stderr.strip().splitlines()
         assert out.returncode != 0 and len(lines) == 1 and says in lines[0], out.stderr
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_damaged_emulation_library_is_rebuilt_and_a_killed_record_never_blocks(
+    tmp_path: Path,
+) -> None:
+    """Issue 32, case 3: a truncated GPU-emulation library in the kernel cache made `record
+    --from` die of SIGBUS, and the `.mcap.partial` it left blocked the next attempt. The
+    library is checked before it is loaded (rebuilt, one notice), and a `.partial` a killed
+    attempt at the same run left is written over."""
+    env = {**os.environ, DEVICE_ENV: "emulate", "CORRAOI_CACHE_DIR": str(tmp_path / "cache")}
+
+    def cli(*args: object) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "corraoi", *map(str, args)], cwd=tmp_path,
+                              env=env, capture_output=True, text=True, timeout=600)  # fmt: skip
+
+    res = cli("sweep", "-p", "ucb", "-n", 4, "-T", 200, "--backend", "gpu", "-o", "sw")
+    assert res.returncode == 0, res.stderr
+    libs = list((tmp_path / "cache").rglob("kernel-K*.so"))
+    assert libs and all(Path(f"{lib}.sha256").is_file() for lib in libs)
+    for lib in libs:  # cut short, as a full disk or a kill during its copy would leave it
+        lib.write_bytes(lib.read_bytes()[:4096])
+    res = cli("record", "--from", "sw", "--run", 2, "--no-rrd", "-o", "r.mcap")
+    assert res.returncode == 0, res.stderr  # never SIGBUS
+    assert "is damaged or unverified; rebuilding it" in res.stderr
+    log = open_log(tmp_path / "r.mcap")
+    assert log.status == "complete" and log.config.streams == "gpu-emulated"
+    assert log.provenance["backend"] == "gpu-emulated"
+    # what a record --from killed mid-run leaves: its log cut short at its .partial name
+    data = (tmp_path / "r.mcap").read_bytes()
+    (tmp_path / "r.mcap").unlink()
+    (tmp_path / "r.mcap.partial").write_bytes(data[: len(data) // 2])
+    res = cli("record", "--from", "sw", "--run", 2, "--no-rrd", "-o", "r.mcap")
+    assert res.returncode == 0, res.stderr  # not blocked: the same run, written again
+    assert open_log(tmp_path / "r.mcap").read_all().equals(log.read_all())
+    assert not (tmp_path / "r.mcap.partial").exists()

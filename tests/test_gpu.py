@@ -9,6 +9,7 @@ Backend selection, ``auto`` and every error are tested without a GPU.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -680,6 +681,7 @@ def test_two_builders_on_a_fresh_cache_compile_the_emulation_once(
         compiled.append(lib)
         time.sleep(0.3)  # long enough for the other builder to arrive meanwhile
         lib.write_bytes(b"library")
+        Path(f"{lib}.sha256").write_text(hashlib.sha256(b"library").hexdigest())  # as compiled
         return lib
 
     monkeypatch.setattr(EmulatedDevice, "_compile_to", fake_compile)

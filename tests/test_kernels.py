@@ -131,21 +131,33 @@ def test_two_processes_sharing_a_fresh_cache_compile_once(tmp_path: Path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("which", ["index", "data", "source"])
+@pytest.mark.parametrize("which", ["index", "data", "source", "flipped", "sums"])
 def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which: str):
+    """A truncated index or data file, a flipped byte in the compiled code (same size: numba
+    would load it and run it) or lost checksums: checked before loading, rebuilt."""
     cache = tmp_path / "cache"
     assert _result(_python(_RUN, cache, "ucb"))["regret"] == _expected("ucb")
     folder = next(cache.glob("kernels-*"))
     if which == "source":
         victim = next(folder.glob("corraoi_sweep_*.py"))
+    elif which == "sums":
+        victim = next(folder.glob(".corraoi_sweep_*.sha256"))
     else:
         suffix = ".nbi" if which == "index" else ".nbc"
         victim = next(p for p in (folder / "__pycache__").iterdir() if p.suffix == suffix)
     data = victim.read_bytes()
-    victim.write_bytes(data[: len(data) // 3])  # truncated, as by a full disk or a kill
+    if which == "flipped":
+        mid = len(data) // 2
+        victim.write_bytes(data[:mid] + bytes([data[mid] ^ 0xFF]) + data[mid + 1 :])
+    elif which == "sums":
+        victim.unlink()
+    else:
+        victim.write_bytes(data[: len(data) // 3])  # truncated, as by a full disk or a kill
     again = _result(_python(_RUN, cache, "ucb"))
     assert again["regret"] == _expected("ucb")
-    if which != "source":  # a damaged source is simply rewritten (its text is compared)
+    if which == "sums":
+        assert len([n for n in again["notes"] if "has no checksums" in n]) == 1, again["notes"]
+    elif which != "source":  # a damaged source is simply rewritten (its text is compared)
         assert len([n for n in again["notes"] if "damaged" in n]) == 1, again["notes"]
     fine = _result(_python(_RUN, cache, "ucb"))  # and the rebuilt entry loads cleanly
     assert fine["notes"] == [] and fine["misses"] == 0

@@ -11,10 +11,10 @@ import pytest
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
+from corraoi import partial_file
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import OutputError, WriteError
-from recorder.paths import partial_path
-from recorder.slotlog import sink as mcap_sink_module
+from corraoi.partial_file import partial_path
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT
@@ -222,10 +222,8 @@ class _FullDisk:
 def test_a_full_disk_is_one_clear_error_and_no_finished_file(
     tmp_path, make_config, engine, monkeypatch
 ):
-    real = mcap_sink_module.open_partial
-    monkeypatch.setattr(
-        mcap_sink_module, "open_partial", lambda *a, **k: _FullDisk(real(*a, **k), 150_000)
-    )
+    real = partial_file._fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), 150_000))
     config = make_config(horizon=20_000)
     path = tmp_path / "full.mcap"
     with pytest.raises(WriteError) as info:
@@ -253,3 +251,33 @@ def test_a_run_stopped_before_its_first_slot_is_an_empty_log(tmp_path, make_conf
 
 def test_path_of_the_partial_file_is_documented_form():
     assert partial_path(Path("runs/cucb-I1-s0.mcap")) == Path("runs/cucb-I1-s0.mcap.partial")
+
+
+@pytest.mark.parametrize(("channel", "version"), [("iid", 1), ("markov", 2)])
+def test_the_schema_id_says_the_runs_own_format_version(tmp_path, make_config, engine,
+                                                        channel, version):  # fmt: skip
+    """Issue 32: a version-1 run's schema id said version 2. The schema's id and description,
+    the channel's and the run metadata's format_version now agree, for either version."""
+    import dataclasses
+
+    from corraoi.model.channels import parse_channel
+
+    config = make_config(horizon=50, instance="GE")
+    config = dataclasses.replace(config, channel=parse_channel(channel, config.instance))
+    assert config.format_version == version
+    path = tmp_path / "v.mcap"
+    with McapSink(path, config, fsync=False) as sink:
+        for b in engine(config):
+            sink.write(b)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        (schema,) = summary.schemas.values()
+        (chan,) = summary.channels.values()
+        run_md = next(m for m in reader.iter_metadata() if m.name == "corraoi.run").metadata
+    data = json.loads(schema.data)
+    assert data["$id"] == f"urn:corraoi:slot-event:v{version}"
+    assert f"corraoi.slot-log version {version})" in data["description"]
+    assert chan.metadata["format_version"] == run_md["format_version"] == str(version)
+    assert open_log(path).format_version == version

@@ -19,8 +19,8 @@ from corraoi.engine.block import RunConfig
 from corraoi.errors import OutputError, WriteError
 from corraoi.face.recording import record_run
 from corraoi.model.instance import load_instance
+from corraoi.partial_file import partial_path
 from corraoi.policies import make_policies
-from recorder.paths import partial_path
 from recorder.rerun.worker import RerunWorker
 from recorder.slotlog.reader import open_log
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 import recorder
-from recorder.paths import Sink, partial_path
+from corraoi.partial_file import partial_path
+from recorder.paths import Sink
 
 
 def _writers() -> dict[str, type]:

@@ -4,6 +4,7 @@ JSON Schema conformance, byte-reproducibility, cut-short files and one-line erro
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -55,6 +56,7 @@ def small_sweep(
         checkpoints=CHECKPOINTS,
         on_checkpoint=lambda p, snap: points.append(checkpoint_point(p, snap)),
     )
+    points.sort(key=lambda p: p.t)  # log-time order, as a sweep folder's log is written
     return config, points
 
 
@@ -170,25 +172,46 @@ def test_partial_until_closed_and_flushed_while_running(tmp_path: Path, sweep: S
     config, points = sweep
     path = tmp_path / "sweep.mcap"
     part = tmp_path / "sweep.mcap.partial"
-    n = len(CHECKPOINTS)
+    P = len(POLICIES)
     with SweepMcapSink(path, config, flush_every=4, fsync=False) as sink:
-        for p in points[: n + 9]:  # the first policy and 9 points of the second
+        for p in points[: 5 * P + 3]:  # five checkpoints of every policy, then three points
             sink.write(p)
         assert not path.exists() and part.exists()
         snapshot = tmp_path / "snapshot.mcap"
         shutil.copyfile(part, snapshot)  # what a killed sweep would leave
-        for p in points[n + 9 :]:
+        for p in points[5 * P + 3 :]:
             sink.write(p)
     assert path.exists() and not part.exists()
     cut = read_sweep(snapshot)
     assert cut.status == "truncated" and not cut.complete
-    assert cut.policies == list(POLICIES[:2])
-    assert len(cut.curves[POLICIES[0]]) == n  # flushed when the policy changed
-    assert len(cut.curves[POLICIES[1]]) == 8  # two chunks of flush_every = 4
+    assert cut.policies == list(POLICIES)
     full = read_sweep(path)
-    assert np.array_equal(
-        cut.curves[POLICIES[1]].regret_mean, full.curves[POLICIES[1]].regret_mean[:8]
-    )
+    for name in POLICIES:  # five chunks of flush_every = 4 reached the disk; not the three
+        assert np.array_equal(cut.curves[name].t, CHECKPOINTS[:5])
+        assert np.array_equal(cut.curves[name].regret_mean, full.curves[name].regret_mean[:5])
+
+
+def test_points_are_logged_in_slot_order_and_checkers_agree(tmp_path: Path, sweep: Sweep):
+    """MCAP checkers want log times that never go back: the writer refuses a point of an
+    earlier slot than the last one, and a whole log has its messages and its chunks in
+    log-time order, which ``rerun mcap check`` reports as ok."""
+    config, points = sweep
+    path = write_log(tmp_path / "sweep.mcap", sweep, flush_every=4)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=False)]
+        chunks = [(c.message_start_time, c.message_end_time)
+                  for c in reader.get_summary().chunk_indexes]  # fmt: skip
+    assert times == sorted(times) and len(times) == len(points)
+    assert all(a[1] <= b[0] for a, b in zip(chunks, chunks[1:], strict=False))
+    exe = Path(sys.executable).parent / "rerun"
+    if exe.exists():
+        out = subprocess.run([str(exe), "mcap", "check", str(path)], capture_output=True,
+                             text=True, check=True).stdout  # fmt: skip
+        assert "PROBLEM" not in out and re.search(r"^ok\s+1\s", out, re.M), out
+    by_policy = sorted(points, key=lambda p: POLICIES.index(p.policy))  # policy by policy
+    with pytest.raises(ValueError, match=r"t=1 after a point at t=300 \(points come in slot"):
+        write_log(tmp_path / "other.mcap", (config, by_policy))
 
 
 def test_exception_leaves_an_interrupted_partial_file(tmp_path: Path, sweep: Sweep):

@@ -267,5 +267,40 @@ def test_a_reader_process_that_dies_is_an_error(monkeypatch):
         yield 1
         os._exit(3)
 
-    with pytest.raises(RuntimeError, match="stopped unexpectedly"):
+    with pytest.raises(readahead.ReaderStopped, match=r"stopped unexpectedly \(exit 3\)"):
         list(readahead.read_ahead(die))
+
+
+def test_replay_whose_reader_is_killed_is_one_line_and_no_rrd(tmp_path, monkeypatch):
+    """Issue 32, case 4: the read-ahead process of ``replay`` killed: exit 1, one line, no
+    traceback, no .rrd (nor a .partial left presented as anything)."""
+    import os
+    import signal
+
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+    from recorder.slotlog.reader import RunLog
+    from viewer import readahead
+
+    if not readahead._can_fork():
+        pytest.skip("no fork here: the reader runs in a thread")
+    assert CliRunner().invoke(main, ["record", "-T", "3000", "--no-rrd", "-o",
+                                     str(tmp_path / "r.mcap")]).exit_code == 0  # fmt: skip
+    real = RunLog.blocks
+    parent = os.getpid()
+
+    def killed(self, block=1000):
+        for i, b in enumerate(real(self, block)):
+            if i == 1 and os.getpid() != parent:  # in the reader process only
+                os.kill(os.getpid(), signal.SIGKILL)
+            yield b
+
+    monkeypatch.setattr(RunLog, "blocks", killed)
+    res = CliRunner().invoke(main, ["replay", str(tmp_path / "r.mcap"), "-o",
+                                    str(tmp_path / "r.rrd")])  # fmt: skip
+    assert res.exit_code == 1, res.output
+    assert res.output.strip() == ("corraoi: error: the log reader process stopped unexpectedly "
+                                  "(killed by SIGKILL); nothing was written as complete (run "
+                                  "the command again)")  # fmt: skip
+    assert not (tmp_path / "r.rrd").exists()

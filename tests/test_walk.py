@@ -233,7 +233,8 @@ def _silent_flip(raw: bytes, offset: int) -> int:
 def test_a_damaged_chunk_ends_a_sweep_log_where_it_starts(tmp_path):
     """The sweep reader checks each chunk's CRC through the walker: a flipped byte ends the
     curves at the chunk before it (status truncated), never decodes garbage as points."""
-    path = write_log(tmp_path / "sweep.mcap", small_sweep(("ucb", "cucb"), runs=2, horizon=60))
+    path = write_log(tmp_path / "sweep.mcap", small_sweep(("ucb", "cucb"), runs=2, horizon=60),
+                     flush_every=4)  # several chunks: the damaged one is not the first
     full = read_sweep(path)
     raw = path.read_bytes()
     at = _silent_flip(raw, _chunks(path)[-1])

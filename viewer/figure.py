@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from corraoi.errors import FigureUnavailable, UsageError
+from corraoi.partial_file import PartialFile
 from corraoi.policies import RGB
-from recorder.paths import open_partial, publish, unlink_partial
 from recorder.style import (
     DASH_AOI_AWARE,
     REGRET_UNIT,
@@ -169,13 +169,8 @@ def draw_figure(
 
     # the recorder's locked .partial: a second writer of the same figure (another sweep
     # resuming this folder, say) is refused by name instead of renaming ours away
-    try:
-        with open_partial(out, overwrite=True, what="figure") as f:
-            fig.savefig(f, format=fmt, metadata=_metadata(fmt))
-            publish(out, overwrite=True)  # while the lock is held
-    except BaseException:
-        unlink_partial(out)  # ours only: not one another process holds
-        raise
+    with PartialFile(out, overwrite=True, what="figure") as target:  # discarded on error
+        fig.savefig(target.file, format=fmt, metadata=_metadata(fmt))
     return out
 
 

@@ -3,13 +3,16 @@ and what a sweep folder holds, with its runs worth watching and the command that
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shlex
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from corraoi.experiments.notable import well_formed
 from corraoi.model.theory import analyse
+from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
 
 from .runs import LogLike, as_log
@@ -36,6 +39,7 @@ def log_info(log: LogLike) -> dict[str, Any]:
         "chunks": run.n_chunks,
         "description": run.summary,
         "config": cfg.to_dict(),
+        "provenance": provenance_info(run.provenance, run.attachments),
         "theory": {
             "mu": [float(v) for v in theory.mu],
             "best_arm": theory.best_arm + 1,
@@ -87,9 +91,50 @@ def info_text(info: dict[str, Any]) -> str:
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
         f"  {'corraoi version':<22} {cfg['version']}",
     ]
+    lines += provenance_rows(info.get("provenance"))
     lines += ["summary figures:"] + [f"  {k:<22} {v}" for k, v in summary_rows(s)]
     # names and paths come from the file: one line each, no control codes
     return "\n".join(safe_text(line) for line in lines)
+
+
+def provenance_info(
+    metadata: dict[str, str], attachments: Sequence[tuple[str, str, bytes]]
+) -> dict[str, Any] | None:
+    """What made a log's numbers (its ``corraoi.provenance`` record), with each plug-in's
+    attached source checked against the hash the record names (None: an older log)."""
+    if not metadata:
+        return None
+    prov = Provenance.read(metadata)
+    carried: dict[str, list[str]] = {}
+    for name, _, data in attachments:
+        carried.setdefault(name, []).append(hashlib.sha256(data).hexdigest())
+    for p in prov["plugins"]:
+        p["attached"] = p["sha256"] in carried.get(p["file"], [])
+    return prov
+
+
+def provenance_rows(prov: dict[str, Any] | None) -> list[str]:
+    """The lines ``info`` prints about what made the numbers (log or sweep folder)."""
+    if not prov:
+        return [f"  {'provenance':<22} not recorded (written before corraoi recorded it)"]
+    v = dict(prov.get("versions", {}))
+    corraoi = f"corraoi {v.pop('corraoi', '?')}"
+    if "git" in v:
+        commit = str(v.pop("git"))
+        corraoi += f" (git {commit[:12]}{', dirty' if commit.endswith('+dirty') else ''})"
+    kernel = v.pop("kernel_sources", "?")
+    others = ", ".join(f"{k.replace('python', 'Python')} {val}" for k, val in v.items())
+    lines = [f"  {'code':<22} {corraoi}, kernel sources {short(str(kernel))}",
+             f"  {'versions':<22} {others}",
+             f"  {'backend':<22} {prov.get('backend') or '?'}"]  # fmt: skip
+    for p in prov.get("plugins", []):
+        where = ("a copy of its source kept in the folder" if p.get("kept") else
+                 "its source attached, byte for byte" if p.get("attached", True)
+                 else "its source NOT attached")  # fmt: skip
+        lines.append(f"  {'plug-in source':<22} {p['file']} {short(p['sha256'])} ({where})")
+    for note in prov.get("notes", []):
+        lines.append(f"  {'note':<22} {note}")
+    return lines
 
 
 def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:
@@ -115,35 +160,58 @@ def sweep_info(folder: Path) -> dict[str, Any]:
     and, per group, the runs worth watching with the ``corraoi record --from`` line of each.
     Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
     from corraoi.experiments.drill import sweep_root
+    from corraoi.experiments.folder import group_dirs
+    from corraoi.sweep_code import read_manifest_dict
 
     root, grid, only = sweep_root(folder, option="")
-    manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    manifest = read_manifest_dict(root)  # the grid read above is checked; the rest is shown
     groups = []
-    several = len(manifest.get("groups", {})) > 1
-    for sub, entry in sorted(manifest.get("groups", {}).items()):
-        if only is not None and entry.get("instance") != only:
+    dirs = group_dirs(grid, root)  # from the grid: the manifest's own list is not trusted
+    several = len(dirs) > 1
+    for (name, horizon), where in sorted(dirs.items(), key=lambda kv: str(kv[1])):
+        entry = {"instance": name, "horizon": horizon}
+        if only is not None and name != only:
             continue
-        where = root / sub
         summary_path = where / "summary.json"
         notable = None
         if summary_path.is_file():
             try:
                 notable = json.loads(summary_path.read_text(encoding="utf-8")).get("notable")
-            except (OSError, ValueError, AttributeError):
+            except (OSError, ValueError, AttributeError, RecursionError):
                 notable = None
         named = _with_commands(notable, root, entry.get("instance"), several)
         groups.append({"folder": str(where), "instance": entry.get("instance"),
                        "horizon": entry.get("horizon"), "notable": named})  # fmt: skip
+    prov = manifest.get("provenance")
     return {
         "path": str(root),
-        "status": manifest.get("status"),
-        "corraoi_version": manifest.get("corraoi_version"),
+        "status": str(manifest.get("status")),
+        "corraoi_version": str(manifest.get("corraoi_version")),
+        "provenance": prov if isinstance(prov, dict) else None,
         "backend": grid.backend,
         "cells": len(grid.cells),
         "runs": grid.runs,
         "seeds": [grid.seed, grid.seed + grid.runs - 1],
         "groups": groups,
     }
+
+
+def _sweep_provenance(info: dict[str, Any]) -> dict[str, Any] | None:
+    """A manifest's provenance as provenance_rows reads it (whatever is malformed left out)."""
+    prov = info.get("provenance")
+    if not isinstance(prov, dict):
+        return None
+    versions = prov.get("versions")
+    plugins = prov.get("plugins")
+    return {
+        "versions": {str(k): str(v) for k, v in versions.items()}
+        if isinstance(versions, dict) else {},
+        "backend": str(prov.get("backend", "")),
+        "plugins": [{"file": str(p.get("copy") or p.get("file")), "sha256": p["sha256"],
+                     "kept": True} for p in plugins if isinstance(p, dict)
+                    and isinstance(p.get("sha256"), str)] if isinstance(plugins, list) else [],
+        "notes": [],
+    }  # fmt: skip
 
 
 def _with_commands(
@@ -171,9 +239,11 @@ def sweep_info_text(info: dict[str, Any]) -> str:
     """The lines ``corraoi info DIR`` prints from :func:`sweep_info`'s dict."""
     lo, hi = info["seeds"]
     lines = [
-        f"{safe_text(info['path'])}: corraoi sweep folder ({info['status']}), {info['cells']} "
-        f"cells x {info['runs']} runs (seeds {lo}..{hi}), backend {info['backend']}",
+        f"{safe_text(info['path'])}: corraoi sweep folder ({safe_text(info['status'])}), "
+        f"{info['cells']} cells x {info['runs']} runs (seeds {lo}..{hi}), backend "
+        f"{info['backend']}",
     ]
+    lines += [safe_text(line) for line in provenance_rows(_sweep_provenance(info))]
     for g in info["groups"]:
         lines.append(f"  {safe_text(g['instance'])}, T = {g['horizon']}: {safe_text(g['folder'])}")
         notable = g["notable"]

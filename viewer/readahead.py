@@ -19,6 +19,8 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any, TypeVar
 
+from corraoi.errors import ReaderStopped
+
 T = TypeVar("T")
 
 #: ``fork`` (default on Linux with 2+ cores) or ``thread``.
@@ -112,10 +114,9 @@ def _forked(make_items: Callable[[], Iterable[T]], depth: int) -> Iterator[T]:
             while True:
                 try:
                     item = receive.recv()
-                except EOFError:
-                    raise RuntimeError(
-                        f"the log reader process stopped unexpectedly (exit {proc.exitcode})"
-                    ) from None
+                except (EOFError, OSError):
+                    proc.join(timeout=5)
+                    raise ReaderStopped(proc.exitcode) from None
                 if isinstance(item, _Done):
                     return
                 if isinstance(item, _Raised):

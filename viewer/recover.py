@@ -15,14 +15,18 @@ RUN.mcap`` is the usual call; the source is never modified.
 
 from __future__ import annotations
 
-import errno
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
+from corraoi.partial_file import PARTIAL_SUFFIX, PartialFile, partial_path
+
 from .runs import require_slots
+
+#: The name a recovered copy is written under while it is made, when ``.partial`` would be
+#: the source itself (``recover RUN.mcap.partial -o RUN.mcap``).
+RECOVER_SUFFIX = ".recovering"
 
 if TYPE_CHECKING:
     from recorder.slotlog.reader import RunLog
@@ -90,18 +94,16 @@ def recover(
     src = Path(source)
     log = require_slots(open_log(src, salvage=True), "recover")
     dest = _check_dest(src, Path(out), overwrite=overwrite)
+    # RUN.mcap.partial -> RUN.mcap: the copy cannot be written under the source's name
+    suffix = RECOVER_SUFFIX if partial_path(dest).resolve() == src.resolve() else PARTIAL_SUFFIX
+    # a copy left by a recover that was stopped is made again from the source: never in the way
+    target = PartialFile(dest, overwrite=overwrite, what="recovered log", suffix=suffix,
+                         replaceable=lambda _: True).create()  # fmt: skip
+    tmp = target.partial
     try:
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".recover", dir=dest.parent)
-    except OSError as exc:
-        raise OutputError(f"{dest}: cannot create the recovered log: {_reason(exc)}") from None
-    tmp = Path(name)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with src.open("rb") as fin, os.fdopen(fd, "wb") as fout:
-            consumed = _copy(log, fin, fout)
-            fout.flush()
-            os.fsync(fout.fileno())
+        with src.open("rb") as fin:
+            consumed = _copy(log, fin, target.file)
+        target.sync()
         if log.damage:
             consumed = log._data_end
         size = src.stat().st_size
@@ -110,10 +112,13 @@ def recover(
             from corraoi.errors import LogError
 
             raise LogError(f"{src}: the rewritten log does not read back ({check.summary})")
-        _publish(tmp, dest, overwrite=overwrite)
+    except OSError as exc:
+        target.discard()
+        raise OutputError(f"{dest}: cannot write the recovered log: {_reason(exc)}") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        target.discard()
         raise
+    target.publish(sync=False)
     return Recovered(
         source=src,
         path=dest,
@@ -131,13 +136,13 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
 
     Returns the byte offset after the last complete record read from the source.
     """
-    from mcap.records import Channel, Header, Message, Metadata, Schema
+    from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
     from corraoi.errors import LogError
     from recorder.slotlog.decode import decode_messages
     from recorder.slotlog.encode import end_metadata as make_end
-    from recorder.vocab import MCAP_INDEX_TYPES, NS_PER_SLOT
+    from recorder.vocab import MCAP_INDEX_TYPES, MCAP_INDEX_TYPES_WITH_ATTACHMENTS, NS_PER_SLOT
     from recorder.vocab import RUN_END_METADATA as END_METADATA
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
     from recorder.vocab import SLOT_TOPIC as TOPIC
@@ -154,7 +159,7 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     fin.seek(0)
     writer = Writer(
         fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD,
-        index_types=MCAP_INDEX_TYPES,
+        index_types=MCAP_INDEX_TYPES_WITH_ATTACHMENTS if log.attachments else MCAP_INDEX_TYPES,
     )  # fmt: skip
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
@@ -171,6 +176,9 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
         elif isinstance(rec, Metadata):
             if rec.name != END_METADATA:
                 writer.add_metadata(rec.name, dict(rec.metadata))
+        elif isinstance(rec, Attachment):  # a plug-in's source, byte for byte
+            writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
+                                  rec.data)  # fmt: skip
         elif isinstance(rec, Schema):
             if rec.id not in schemas:
                 schemas[rec.id] = writer.register_schema(
@@ -235,12 +243,9 @@ def _complete_length(f: BinaryIO, path: Path) -> int:
 
 
 def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
+    """Refuse the source itself as the destination (the rest is PartialFile's check)."""
     from corraoi.errors import OutputError
 
-    if str(dest) == "" or dest.name in ("", ".", ".."):
-        raise OutputError(f"{dest!s}: not a file name for the recovered log")
-    if dest.is_dir():
-        raise OutputError(f"{dest}: is a directory; give a file path for the recovered log")
     if dest.exists() or dest.is_symlink():
         try:
             same = os.path.samefile(src, dest)
@@ -248,43 +253,7 @@ def _check_dest(src: Path, dest: Path, *, overwrite: bool) -> Path:
             same = False
         if same:
             raise OutputError(f"{dest}: is the log being recovered; give another path with -o")
-        if not overwrite:
-            raise OutputError(f"{dest}: already exists (use --force to overwrite it)")
-    for up in dest.parents:
-        if up.exists():
-            if not up.is_dir():
-                raise OutputError(f"{dest}: {up} is not a directory")
-            if not os.access(up, os.W_OK | os.X_OK):
-                raise OutputError(f"{dest}: directory {up} is not writable")
-            break
     return dest
-
-
-def _publish(tmp: Path, dest: Path, *, overwrite: bool) -> None:
-    """Move the finished copy into place; without ``overwrite`` never replace a file."""
-    from corraoi.errors import OutputError
-
-    if overwrite:
-        os.replace(tmp, dest)
-        return
-    try:
-        os.link(tmp, dest)
-    except FileExistsError:
-        raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
-    except OSError as exc:
-        if exc.errno not in (errno.EPERM, errno.EXDEV, errno.ENOTSUP, errno.EOPNOTSUPP):
-            raise
-        if dest.exists():
-            raise OutputError(f"{dest}: appeared while recovering; not overwritten") from None
-        os.replace(tmp, dest)
-        return
-    tmp.unlink()
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _reason(exc: OSError) -> str:

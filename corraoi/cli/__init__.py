@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from corraoi._version import __version__
+from corraoi.text import safe_text
 
 from .common import OneLineGroup, handle_errors
 from .options import HORIZON
@@ -41,8 +42,13 @@ def main() -> None:
       corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
       corraoi sweep ... --backend gpu   built-in policies on a CUDA GPU (docs/gpu.md)
     """
+    import os
+
     from corraoi.engine import kernels
 
+    # Rerun's own log lines (a file writer stopped by a full disk, ...) would come before our
+    # one line about the same thing: we report its problems ourselves.
+    os.environ.setdefault("RUST_LOG", "off")
     # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
     kernels.on_compile = lambda message: click.echo(
         f"corraoi: {message}" + ("" if message.startswith(" ") else " ..."), err=True
@@ -129,7 +135,9 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
         "p      " + "  ".join(f"{s}={v:g}" for s, v in zip(inst.state_names, inst.p, strict=True))
     )
     click.echo("")
-    header = f"{'arm':>4} {'name':>10} {'Y(x)':>{max(6, 2 * inst.n_states)}} "
+    names = [safe_text(n) for n in inst.arm_names]
+    nw = max(10, *(len(n) for n in names))  # a long arm name widens its column, never shifts
+    header = f"{'arm':>4} {'name':>{nw}} {'Y(x)':>{max(6, 2 * inst.n_states)}} "
     header += f"{'mu':>7} {'gap':>7} {'phi':>7} {'p-gap':>7}  role"
     click.echo(header)
     for k in range(inst.K):
@@ -143,7 +151,7 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
         else:
             role = "non-competitive"
         click.echo(
-            f"{k + 1:>4} {inst.arm_names[k]:>10} {row:>{max(6, 2 * inst.n_states)}} "
+            f"{k + 1:>4} {names[k]:>{nw}} {row:>{max(6, 2 * inst.n_states)}} "
             f"{th.mu[k]:7.4g} {th.gaps[k]:7.4g} {th.phi[k]:7.4g} {th.pseudo_gap[k]:7.4g}  {role}"
         )
     click.echo("")

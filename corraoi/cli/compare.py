@@ -15,7 +15,7 @@ from corraoi.text import safe_text
 
 from .common import handle_errors, keep_pandas_out, say, warn
 from .live import ViewerChoice, viewer_options
-from .options import output_option
+from .options import code_options, from_only, output_option
 from .reading import LOG, not_an_input, progress
 
 
@@ -28,6 +28,7 @@ from .reading import LOG, not_an_input, progress
               help="With --from: which run of each policy (as for record) [default: worst].")
 @click.option("--cell", "cell", metavar="LABEL", multiple=True,
               help="With --from: only these cells (as for record); repeat for several.")
+@code_options
 @output_option(metavar="OUT.rrd", aliases=("--out", "--rrd"),
                help="Rerun recording to write [default: compare.rrd, unless a viewer option "
                "is given].")  # fmt: skip
@@ -49,6 +50,8 @@ def compare(
     from_: str | None,
     run: str | None,
     cell: tuple[str, ...],
+    kept_code: bool,
+    allow_changed_code: bool,
 ) -> None:
     """Put recorded runs side by side in one Rerun recording, and print their summary.
 
@@ -73,9 +76,11 @@ def compare(
     if from_ is not None:
         if logs:
             raise UsageError("A.mcap ... and --from: compare logs or a sweep's runs, not both")
-        logs = _record_from(from_, run if run is not None else "worst", cell, force)
-    elif run is not None or cell:
-        raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
+        logs = _record_from(from_, run if run is not None else "worst", cell, force,
+                            kept_code=kept_code, allow_changed_code=allow_changed_code)
+    elif run is not None or cell or kept_code or allow_changed_code:
+        given = from_only(run, cell, kept_code, allow_changed_code)
+        raise UsageError(f"{given}: only with --from SWEEP")
     elif not logs:
         raise UsageError("nothing to compare: give logs (A.mcap B.mcap ...) or --from SWEEP")
     keep_pandas_out()
@@ -118,18 +123,21 @@ def compare(
     viewer.serve_until_stopped()
 
 
-def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> tuple[Path, ...]:
+def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool, *,
+                 kept_code: bool = False, allow_changed_code: bool = False) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
     a log already there with the same run and complete is used as it is)."""
     from corraoi.engine.threads import set_workers
     from corraoi.errors import LogError, OutputError
     from corraoi.experiments.drill import choose
-    from corraoi.face.recording import record_run
+    from corraoi.face.recording import record_drill
     from corraoi.face.resolve import TRACE_READERS
     from corraoi.text import safe_name
     from recorder.slotlog.reader import open_log
 
-    drills = choose(folder, run, cells=cells, warn=warn, trace_readers=TRACE_READERS)
+    drills = choose(folder, run, cells=cells, warn=warn, kept_code=kept_code,
+                    allow_changed_code=allow_changed_code,
+                    trace_readers=TRACE_READERS)  # fmt: skip
     plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
     todo = []
     for d, path in plans:
@@ -150,7 +158,7 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool) -> 
         click.echo(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
                    f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
                    f"{d.config.seed}, {d.choice})", err=True)  # fmt: skip
-        record_run(d.config, path, overwrite=True)
+        record_drill(d, path, overwrite=True)
     return tuple(path for _, path in plans)
 
 

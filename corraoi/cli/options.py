@@ -57,9 +57,10 @@ def param_options(func: F) -> F:
         "--param",
         "param",
         multiple=True,
-        metavar="NAME=VALUE",
-        help="Set a policy parameter (repeatable); it applies to every listed policy that "
-        "declares NAME and is checked against its range ('corraoi policies' lists them).",
+        metavar="[POLICY.]NAME=VALUE",
+        help="Set a policy parameter (repeatable): NAME=VALUE applies to every listed policy "
+        "that declares NAME (a warning when that is more than one), POLICY.NAME=VALUE to that "
+        "policy only; checked against its range ('corraoi policies' lists them).",
     )(func)
     func = click.option(
         "--beta",
@@ -229,3 +230,28 @@ def output_option(
         )(func)
 
     return deco
+
+
+def code_options(func: F) -> F:
+    """``--kept-code`` and ``--allow-changed-code``: what runs when a plug-in's source is not
+    the one the sweep ran (corraoi.sweep_code); without either, that is refused."""
+    func = click.option(
+        "--allow-changed-code", "allow_changed_code", is_flag=True,
+        help="With --from: record a plug-in whose source changed since the sweep with its "
+        "current code (the log names that code and says so; its regret is not checked "
+        "against the sweep's).",
+    )(func)  # fmt: skip
+    return click.option(
+        "--kept-code", "kept_code", is_flag=True,
+        help="Run the copy of each plug-in's source the sweep folder kept (plugins/), "
+        "whatever the file holds now.",
+    )(func)  # fmt: skip
+
+
+def from_only(run: Any, cell: Any, kept_code: bool, allow_changed_code: bool) -> str:
+    """The option that was given without ``--from`` (for its one-line refusal)."""
+    if run is not None:
+        return "--run"
+    if cell:
+        return "--cell"
+    return "--kept-code" if kept_code else "--allow-changed-code"

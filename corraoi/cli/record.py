@@ -22,6 +22,8 @@ from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
 from .options import (
     backend_option,
     channel_option,
+    code_options,
+    from_only,
     horizon_option,
     instance_option,
     output_option,
@@ -58,6 +60,7 @@ from .record_plan import from_sweep, plan_files, say_where_from, up_to_date
 @click.option("--cell", "cell", metavar="LABEL", multiple=True,
               help="With --from: only these cells (a label such as cucb or cucb(c=2), an "
                    "instance name, or INSTANCE/LABEL); repeat for several.")  # fmt: skip
+@code_options
 @click.option(
     "--rrd",
     metavar="PATH",
@@ -96,6 +99,8 @@ def record(
     from_: str | None,
     run: str | None,
     cell: tuple[str, ...],
+    kept_code: bool,
+    allow_changed_code: bool,
 ) -> None:
     """Simulate runs and stream every slot to an MCAP log and a Rerun recording.
 
@@ -134,13 +139,15 @@ def record(
     drills = None
     if from_ is not None:
         which = run if run is not None else "worst"
-        drills = from_sweep(from_, which, cell, policy, param, c=c, beta=beta)
+        drills = from_sweep(from_, which, cell, policy, param, c=c, beta=beta,
+                            kept_code=kept_code, allow_changed_code=allow_changed_code)
         configs = [d.config for d in drills]
     else:
-        if run is not None or cell:
-            raise UsageError(f"{'--run' if run is not None else '--cell'}: only with --from SWEEP")
+        if run is not None or cell or kept_code or allow_changed_code:
+            raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
+                             "--from SWEEP")  # fmt: skip
         inst = load_instance(instance)
-        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
         chan = resolve_channel(channel, inst)
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
@@ -150,7 +157,8 @@ def record(
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from corraoi.errors import OutputError
-    from recorder.paths import check_output
+    from recorder.paths import check_output, made_again
+    from recorder.slotlog.sink import same_run_partial
 
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
@@ -172,9 +180,12 @@ def record(
                 f"{plan.mcap}: already exists and holds another run (a different "
                 "configuration, or not complete); use --force to overwrite it"
             )
-        check_output(plan.mcap, overwrite=force, what="MCAP log")
+        # a .partial a killed attempt at the same run left is taken over (nothing is lost)
+        check_output(plan.mcap, overwrite=force, what="MCAP log",
+                     replaceable=same_run_partial(plan.config))  # fmt: skip
         if plan.rrd is not None:
-            check_output(plan.rrd, overwrite=force, what="Rerun recording")
+            check_output(plan.rrd, overwrite=force, what="Rerun recording",
+                         replaceable=made_again)  # fmt: skip
 
     worker = None
     if any(p.rrd for p in plans):

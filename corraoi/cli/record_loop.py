@@ -130,12 +130,12 @@ def _record_one(plan: Plan, result: Result, outlets: Outlets, stop: Stop, bar: A
     try:
         return _record_into(plan, result, outlets, stop, bar, start, compiled_before)
     except PolicyRuntimeError as exc:
-        from recorder.paths import partial_path
+        from corraoi.partial_file import partial_path
 
         where = partial_path(plan.mcap)
         left = (f"; the log is left as {where}, marked failed" if where.exists()
                 else f"; no log written ({plan.mcap} would have held no slot)")
-        raise PolicyRuntimeError(f"{exc}{left}") from None
+        raise type(exc)(f"{exc}{left}") from None
 
 
 def _record_into(
@@ -168,6 +168,8 @@ def _record_into(
             overwrite=outlets.overwrite,
             on_block=on_block, should_stop=lambda: stop.signal is not None, rerun=outlets.rerun,
             sinks=[fox] if fox is not None else [],
+            expect=plan.drill.expect if plan.drill is not None else (),
+            notes=plan.drill.notes if plan.drill is not None else (),
         )  # fmt: skip
     finally:
         result.wall = time.perf_counter() - start

@@ -31,6 +31,8 @@ class Plan:
     config: Any  # RunConfig
     mcap: Path
     rrd: Path | None
+    #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
+    drill: Any = None
 
 
 def _expand(template: str, config: Any, drill: Any = None) -> Path:
@@ -76,7 +78,7 @@ def plan_files(
         drill = drills[i] if drills else None
         mcap = _expand(out or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
         path = None if no_rrd else (_expand(rrd, config, drill) if rrd else _rrd_beside(mcap))
-        plans.append(Plan(config, mcap, path))
+        plans.append(Plan(config, mcap, path, drill))
     seen: dict[str, str] = {}
     for plan in plans:
         for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
@@ -98,6 +100,8 @@ def from_sweep(
     *,
     c: float | None,
     beta: float | None,
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
 ) -> list[Any]:
     """The runs ``--from`` names (corraoi.experiments.drill); what the sweep fixed cannot be given
     too."""
@@ -117,11 +121,12 @@ def from_sweep(
     if not given and (param or c is not None or beta is not None):
         raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
                          "parameters (with --policy they set those of a policy added)")
-    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta)
+    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
              if given else [])  # fmt: skip
     from corraoi.face.resolve import TRACE_READERS
 
-    return choose(folder, run, cells=cells, policies=specs, warn=warn,
+    return choose(folder, run, cells=cells, policies=specs, warn=warn, kept_code=kept_code,
+                  allow_changed_code=allow_changed_code,
                   trace_readers=TRACE_READERS)  # fmt: skip
 
 

@@ -55,9 +55,10 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--horizon", "-T", "horizon", multiple=True, metavar="T[,T...]",
               help="Horizons (slots); a comma list sweeps each [default: 10000].")  # fmt: skip
 @seed_option
-@click.option("--param", "param", multiple=True, metavar="NAME=V[,V...]",
+@click.option("--param", "param", multiple=True, metavar="[POLICY.]NAME=V[,V...]",
               help="Sweep a policy parameter over values (repeatable): each value goes to every "
-              "listed policy that declares NAME ('corraoi policies').")  # fmt: skip
+              "listed policy that declares NAME (a warning when that is more than one), or with "
+              "POLICY.NAME to that policy only ('corraoi policies').")  # fmt: skip
 @click.option("--c", "c", type=float, default=None, help="Shorthand for --param c=VALUE.")
 @click.option("--beta", type=float, default=None, help="Shorthand for --param beta=VALUE.")
 @channel_option
@@ -77,6 +78,9 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--checkpoints", type=CHECKPOINTS, default=None,
               help="About this many checkpoint slots per curve [default: 200].")  # fmt: skip
 @click.option("--force", is_flag=True, help="With -o: start over in a DIR that holds a sweep.")
+@click.option("--kept-code", "kept_code", is_flag=True,
+              help="With --resume: run the copy of each plug-in's source the folder kept "
+              "(plugins/), whatever the file holds now.")  # fmt: skip
 @click.option("--baseline", default=None, metavar="POLICY",
               help="Also report, for every other policy, the mean and 95% CI of the per-run "
               "regret difference against POLICY on the same hidden paths (paired).")  # fmt: skip
@@ -110,6 +114,7 @@ def sweep(
     backend: str | None,
     allow_huge: bool,
     as_json: bool,
+    kept_code: bool,
 ) -> None:
     """Run a grid of policies over paired seeds and report the AoI regret at the horizon.
 
@@ -132,6 +137,13 @@ def sweep(
     out = output
     if resume and out is None:
         raise ConfigError("--resume needs -o DIR (the folder of the sweep to continue)")
+    if kept_code:
+        if not resume or out is None:
+            raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
+                              "of its plug-ins run)")  # fmt: skip
+        from corraoi.sweep_code import use_kept_code
+
+        use_kept_code(out)  # before the grid is built: its plug-ins load from the copies
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
     given_params = parse_param_lists(param)
     for key, value in (("c", c), ("beta", beta)):
@@ -159,7 +171,7 @@ def sweep(
     from corraoi.face.resolve import TRACE_READERS
 
     try:
-        grid = build_grid(**spec, trace_readers=TRACE_READERS)
+        grid = build_grid(**spec, warn=warn, trace_readers=TRACE_READERS)
     except CorraoiError as exc:
         if experiment is None:
             raise
@@ -193,15 +205,32 @@ def sweep(
                 click.echo("")
             print_table(summary, out)
     if out is not None:
-        done = f"{outcome.chunks_run} chunk(s) run"
-        if outcome.chunks_skipped:
-            done += f", {outcome.chunks_skipped} already done"
-        click.echo(f"wrote {out}/ ({done}): " + ", ".join(
-            str(p.relative_to(out)) + "/" if p != out else "." for p in outcome.folders
-        ), err=as_json)  # fmt: skip
+        click.echo(wrote_line(out, outcome), err=as_json)
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
 
+
+
+def wrote_line(out: Path, outcome: Any) -> str:
+    """What a sweep into ``out`` wrote, by name: ``wrote sw/: manifest.json, ...`` and, for a
+    grid of several groups, their folders with the files each holds; then the chunks run."""
+    from corraoi.experiments.folder import GROUP_FILES
+
+    def n(count: int, what: str) -> str:
+        return f"{count} {what}{'' if count == 1 else 's'}"
+
+    done = n(outcome.chunks_run, "chunk") + " run"
+    if outcome.chunks_skipped:
+        done += f", {outcome.chunks_skipped} already done"
+    names = [f for f in ("manifest.json", "results.parquet", "plugins") if (out / f).exists()]
+    folders = [p for p in outcome.folders if p != out]
+    group = outcome.folders[0] if outcome.folders else out
+    files = [f for f in GROUP_FILES if (group / f).exists()]
+    if folders:
+        names += [f"{p.relative_to(out)}/" for p in folders]
+        return (f"wrote {out}/: {', '.join(names)}, each group folder with "
+                f"{', '.join(files)} ({done})")  # fmt: skip
+    return f"wrote {out}/: {', '.join(names + files)} ({done})"
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:

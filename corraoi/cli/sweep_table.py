@@ -22,9 +22,10 @@ def print_table(summary: dict[str, Any], folder: Path | None = None) -> None:
         f"horizon {summary['horizon']}, C = {summary['theory']['C']}"
     )
     click.echo(
-        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best arm':>9}"
+        f"{'policy':22s} {'regret':>10} {'+-95%':>9} {'estimator':>11} {'best-arm':>9}"
         f" {'wall s':>7}  bound at T"
     )
+    click.echo(f"{'':22s} {'':>10} {'':>9} {'':>11} {'share':>9} {'(runs)':>7}")
     for pname, s in summary["policies"].items():
         ci = s["regret_ci95"]
         ci_text = f"{ci:9.1f}" if ci is not None else f"{'n/a':>9}"

@@ -74,6 +74,8 @@ _score = inlined(_score)
 _update = inlined(_update)
 
 CHANNEL_CDF, CHANNEL_TRACE = 0, 1
+#: A hook's fault, in ``err[r, 1]``: forced returned an arm >= K; score gave a candidate NaN.
+FAULT_ARM, FAULT_NAN = 1, 2
 #: The sweep kernel's decorator (see the module's docstring).
 SWEEP_DECORATOR = (
     '@njit(cache=True, nogil=True, parallel=True, error_model="numpy", '
@@ -169,6 +171,7 @@ def advance(
     oaoi,  # (R,) int64 oracle's current age
     regret,  # (R,) int64 pathwise regret so far
     aoisum,  # (R,) int64 sum of ages so far
+    err,  # (R, 3) int64: a hook's fault (slot, what: 1 arm out of range, 2 NaN score, value)
     record,  # bool: write the per-slot columns below
     o_x,  # (R, B) int32
     o_arm,  # (R, B) int32
@@ -232,6 +235,12 @@ def advance(
                     maxmu = m
                 cand[k] = True
             forced = _forced(t, K, npull, nsucc, params, ps, pst)
+            if forced >= K:  # an arm out of range: noted (the engine ends the run at this
+                if err[r, 0] == 0:  # slot) and never played; the loop goes on unbranched
+                    err[r, 0] = t
+                    err[r, 1] = FAULT_ARM
+                    err[r, 2] = forced
+                forced = -1
             if correlated and forced < 0:
                 # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
                 for k in range(K):
@@ -289,7 +298,15 @@ def advance(
                 else:
                     _score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
                     mask = cand
-                arm = argmax_random(vals, mask, pst, K)
+                    nan = K
+                    for k in range(K):  # a NaN score on a candidate (+inf is a score)
+                        if cand[k] and vals[k] != vals[k] and k < nan:
+                            nan = k
+                    if nan < K and err[r, 0] == 0:  # noted: the engine ends the run here
+                        err[r, 0] = t
+                        err[r, 1] = FAULT_NAN
+                        err[r, 2] = nan
+                arm = argmax_random(vals, mask, pst, K)  # in range even over NaN scores
             else:
                 arm = forced
             # ---- outcome and ages

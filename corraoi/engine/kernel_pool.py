@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from corraoi.policies.api import CompiledPolicy
+from corraoi.policies.loading import PLUGIN_MODULE_PREFIX
 
 from . import kernels
 
@@ -105,7 +106,7 @@ def _importable(ref: Any) -> bool:
     else:
         func = getattr(ref, "py_func", None)
         modname = getattr(func, "__module__", "") if func is not None else ""
-    if not modname:
+    if not modname or modname.startswith(PLUGIN_MODULE_PREFIX):  # a file plug-in: this process
         return False
     module = sys.modules.get(modname)
     file = getattr(module, "__file__", None) if module is not None else None

@@ -29,6 +29,7 @@ import fcntl
 import hashlib
 import importlib
 import importlib.util
+import json
 import os
 import sys
 import tempfile
@@ -77,9 +78,8 @@ def cache_dir() -> Path:
 def _writable(folder: Path) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
+        with tempfile.TemporaryFile(dir=folder):  # a name of its own: threads probe at once
+            pass
         return folder
     except OSError:
         fallback = Path(tempfile.gettempdir()) / f"corraoi-kernels-{__version__}-{os.getuid()}"
@@ -146,7 +146,12 @@ def kernel_source(policy: type[CompiledPolicy], *, record: bool) -> tuple[str, s
             raise KernelError(f"kernel template {_TEMPLATE}: hook line missing: {line}")
         text = text.replace(line, f"from {modname} import {attr} as {alias}  # HOOKS")
         digest.update(f"{modname}:{attr}".encode())
-        if file is not None and file.is_file():
+        # the bytes the hook's module was loaded from (a plug-in's exact source: the file
+        # may have changed since, or a sweep's kept copy runs): never the file read again
+        loaded = getattr(sys.modules.get(modname), "__corraoi_source__", None)
+        if isinstance(loaded, bytes):
+            digest.update(loaded)
+        elif file is not None and file.is_file():
             digest.update(file.read_bytes())
     if not record:
         text = _sweep_variant(text)
@@ -200,6 +205,43 @@ def _is_cached(folder: Path, modname: str) -> bool:
     return any(p.suffix == ".nbi" for p in _index_files(folder, modname))
 
 
+def _sums_file(folder: Path, modname: str) -> Path:
+    return folder / f".{modname}.sha256"
+
+
+def _sums(folder: Path, modname: str) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(_index_files(folder, modname))}  # fmt: skip
+
+
+def _write_sums(folder: Path, modname: str) -> None:
+    """Record the sha256 of every file numba cached for a kernel just compiled."""
+    from corraoi.partial_file import PartialFile
+
+    data = json.dumps(_sums(folder, modname), sort_keys=True).encode()
+    PartialFile.write_bytes(_sums_file(folder, modname), data, what="kernel cache checksums")
+
+
+def _damaged(folder: Path, modname: str) -> str:
+    """Why a kernel's cached files cannot be trusted, as the end of a sentence ("" when they
+    can, or when there are none): integrity is checked before numba loads machine code, so a
+    truncated, altered or foreign file is rebuilt instead of being run."""
+    if not _index_files(folder, modname):
+        return ""
+    try:
+        want = json.loads(_sums_file(folder, modname).read_text(encoding="utf-8"))
+        have = _sums(folder, modname)
+    except (OSError, ValueError, RecursionError):
+        return "has no checksums (cached by an older corraoi, or its checksums were lost)"
+    return "" if want == have else "is damaged (its files do not match their checksums)"
+
+
+def _clear_index(folder: Path, modname: str) -> None:
+    for f in _index_files(folder, modname):
+        f.unlink(missing_ok=True)
+    _sums_file(folder, modname).unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def _locked(folder: Path, modname: str) -> Iterator[None]:
     """Hold an exclusive lock on one kernel's lock file: a second process that needs the
@@ -223,7 +265,7 @@ def warm_args(K: int = 2) -> tuple[Any, ...]:
         np.zeros(0, f8), 0, 0,
         np.zeros((R, 4), np.uint64), np.zeros((R, 4), np.uint64), np.zeros((R, 2), f8),
         np.zeros((R, 1), f8), np.full(R, -1, i8), np.zeros((R, K), i8), np.zeros((R, K), i8),
-        np.ones(R, i8), np.ones(R, i8), np.zeros(R, i8), np.zeros(R, i8),
+        np.ones(R, i8), np.ones(R, i8), np.zeros(R, i8), np.zeros(R, i8), np.zeros((R, 3), i8),
         False, np.empty((R, 0), np.int32), np.empty((R, 0), np.int32),
         np.empty((R, 0), np.bool_), np.empty((R, 0), i8), np.empty((R, 0), i8),
         np.empty((R, 0), i8), np.empty((R, 0), np.bool_), np.empty((R, 0, K), np.bool_),
@@ -242,8 +284,13 @@ def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
     from numba.core.errors import NumbaPerformanceWarning
 
     with _locked(folder, modname):
+        damaged = _damaged(folder, modname)  # checked before numba loads any of it
+        if damaged:
+            if on_compile is not None:
+                on_compile(f"the cached engine for {what} {damaged}; rebuilding it")
+            _clear_index(folder, modname)
         compiling = not _is_cached(folder, modname)
-        if compiling and on_compile is not None:
+        if compiling and on_compile is not None and not damaged:  # said above if damaged
             on_compile(f"compiling the engine for {what} (first use; cached in {folder})")
         for attempt in (0, 1):
             sys.modules.pop(modname, None)
@@ -263,21 +310,21 @@ def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
                 raise
             except Exception as exc:
                 if attempt == 1 or not _index_files(folder, modname):
-                    raise KernelError(
-                        f"the engine for {what} cannot be built in {folder}: "
-                        f"{type(exc).__name__}: {exc}"
-                    ) from exc
+                    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()][:2]
+                    why = " ".join(" ".join(lines).split())[:400]  # numba's errors run long
+                    raise KernelError(f"the engine for {what} cannot be built in {folder}: "
+                                      f"{type(exc).__name__}: {why}") from exc  # fmt: skip
                 if on_compile is not None:
                     on_compile(
                         f"the cached engine for {what} is damaged "
                         f"({type(exc).__name__}); rebuilding it"
                     )
-                for f in _index_files(folder, modname):
-                    f.unlink(missing_ok=True)
+                _clear_index(folder, modname)
                 compiling = True
                 continue
             if compiling:
                 compile_seconds += time.perf_counter() - start
+                _write_sums(folder, modname)
             return module.advance
     raise AssertionError("unreachable")
 

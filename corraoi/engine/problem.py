@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, CorraoiError, PolicyError
 from corraoi.limits import check_horizon
 from corraoi.model.candidates import pseudo_reward_classes
 from corraoi.model.channels import Channel, default_channel
@@ -79,7 +79,7 @@ class Problem:
         cdf_rows, kind, trace = chan.kernel_arrays(instance)
         compiled = isinstance(klass, type) and issubclass(klass, CompiledPolicy)
         params = policy.param_vector(klass) if compiled else np.zeros(0)
-        size = int(klass.state_size(instance.K, policy.params)) if compiled else 0
+        size = _state_size(klass, instance.K, policy) if compiled else 0
         return cls(instance=instance, policy=policy, horizon=int(horizon), channel=chan,
                    theory=theory, cls=klass, cdf_rows=_c(cdf_rows, np.float64), kind=int(kind),
                    trace=_c(trace, np.int64), Y=_c(instance.Y, np.int8),
@@ -93,3 +93,26 @@ class Problem:
     @property
     def K(self) -> int:
         return int(self.instance.K)
+
+
+#: The most float64 state entries a compiled policy may keep per run (8 MiB a run).
+MAX_STATE_SIZE = 1 << 20
+
+
+def _state_size(klass: Any, K: int, policy: PolicySpec) -> int:
+    """A compiled policy's ``state_size``, checked: whatever the hook raises or returns that
+    is not a whole number in 0..MAX_STATE_SIZE is one PolicyError line."""
+    try:
+        size = klass.state_size(K, dict(policy.params))
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except Exception as exc:  # noqa: BLE001 - a plug-in's hook, whatever it raises
+        detail = " ".join(str(exc).split())[:200]
+        raise PolicyError(f"policy {policy.name}: its state_size raised {type(exc).__name__}"
+                          + (f": {detail}" if detail else "")) from None  # fmt: skip
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not (
+        0 <= size <= MAX_STATE_SIZE
+    ):
+        raise PolicyError(f"policy {policy.name}: its state_size returned {size!r}; expected a "
+                          f"whole number of float64 entries per run, 0..{MAX_STATE_SIZE}")
+    return int(size)

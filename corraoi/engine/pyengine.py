@@ -172,9 +172,11 @@ class RunState:
         self.aoi = np.ones(runs, dtype=np.int64)
 
 
-def check_arms(out: Any, *, runs: int, arms: int, name: str, t: int) -> tuple[np.ndarray, Any]:
+def check_arms(
+    out: Any, *, runs: int, arms: int, name: str, t: int, who: Any = None
+) -> tuple[np.ndarray, Any]:
     """(arms, candidates or None) from ``select``'s return, or PolicyRuntimeError naming the
-    policy and the slot."""
+    policy, the slot and (``who(r)``, by default "run r") the run."""
     cand = None
     if isinstance(out, tuple):
         if len(out) != 2:
@@ -209,8 +211,9 @@ def check_arms(out: Any, *, runs: int, arms: int, name: str, t: int) -> tuple[np
     if bad.any():
         r = int(np.flatnonzero(bad)[0])
         raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: select returned arm {ai[r]} for run {r}; expected "
-            f"0..{arms - 1} (0-based; arm k+1 in logs)"
+            f"policy {name}, slot {t}: select returned arm {ai[r]} for "
+            f"{who(r) if who is not None else f'run {r}'}; expected 0..{arms - 1} (0-based; "
+            "arm k+1 in logs)"
         )
     if cand is not None:
         c = np.asarray(cand)
@@ -261,7 +264,7 @@ def advance_python(
         state.t = t
         try:
             picked = _call(name, t, policy.select, t, state)
-            arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t)
+            arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t, who=sim.run_name)
         except PolicyRuntimeError as exc:
             return j, exc
         x = xs[:, j]
@@ -288,6 +291,41 @@ def advance_python(
         except PolicyRuntimeError as exc:
             return j + 1, exc  # the slot itself happened
     return nslots, None
+
+
+def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:
+    """A compiled hook's fault the kernel noted (``corraoi.engine._kernel``'s ``err``), in the
+    plain-Python tier's words: one line naming the policy, the slot and the run."""
+    from ._kernel import FAULT_ARM
+
+    if what == FAULT_ARM:
+        text = (f"its forced hook returned arm {value} for {who}; expected 0..{K - 1}, or a "
+                "negative number for none (0-based; arm k+1 in logs)")  # fmt: skip
+    else:
+        text = (f"its score hook gave NaN to arm {value + 1}, a candidate, for {who}; a "
+                "score must be a number (+inf is one)")  # fmt: skip
+    return PolicyRuntimeError(f"policy {name}, slot {t}: {text}")
+
+
+def hook_raised(name: str, first: int, last: int, exc: BaseException) -> PolicyRuntimeError:
+    """A compiled hook that raised (numba's ``raise``) in slots ``first..last``."""
+    detail = " ".join(str(exc).split())[:300]
+    return PolicyRuntimeError(f"policy {name}, slots {first}..{last}: a compiled hook raised "
+                              f"{type(exc).__name__}" + (f": {detail}" if detail else ""))
+
+
+def construct(cls: Any, spec: Any) -> Any:
+    """A plain-Python policy made with its parameters; whatever its ``__init__`` raises is
+    one PolicyRuntimeError line naming the policy (before slot 1: no log is left)."""
+    try:
+        return cls(**spec.params)
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except BaseException as exc:  # noqa: BLE001 - sys.exit in __init__ is the plug-in's too
+        detail = " ".join(str(exc).split())[:300]
+        raise PolicyRuntimeError(f"policy {spec.name}: creating it ({cls.__name__}.__init__) "
+                                 f"raised {type(exc).__name__}"
+                                 + (f": {detail}" if detail else "")) from None  # fmt: skip
 
 
 def _call(name: str, t: int, func: Any, *args: Any) -> Any:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError, PolicyRuntimeError
+from corraoi.errors import ConfigError, CorraoiError, PolicyRuntimeError
 from corraoi.limits import check_seed
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
@@ -27,7 +27,7 @@ from corraoi.rng import streams_for_seeds
 from . import threads
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import RunState, Streams, advance_python
+from .pyengine import RunState, Streams, advance_python, construct, hook_fault, hook_raised
 
 __all__ = [
     "RunsBlock",
@@ -88,8 +88,9 @@ class Simulation:
         horizon: int,
         *,
         channel: Channel | None = None,
+        first_run: int = 0,
     ) -> None:
-        self._setup(Problem.of(instance, policy, horizon, channel), seeds)
+        self._setup(Problem.of(instance, policy, horizon, channel), seeds, first_run)
 
     @classmethod
     def of(cls, problem: Problem, seeds: Sequence[int] | np.ndarray) -> Simulation:
@@ -98,8 +99,10 @@ class Simulation:
         sim._setup(problem, seeds)
         return sim
 
-    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray) -> None:
+    def _setup(self, pb: Problem, seeds: Sequence[int] | np.ndarray, first_run: int = 0) -> None:
         seed_arr = check_seeds(seeds)
+        #: the number of run 0 of this batch where a failure names a run (a sweep's chunk)
+        self.first_run = int(first_run)
         self.problem = pb
         self.instance = pb.instance
         self.policy = pb.policy
@@ -123,6 +126,7 @@ class Simulation:
         self.t = 0
         if pb.compiled:
             self._kernels: dict[bool, Any] = {}
+            self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
             self._params = pb.params
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
             self._pclass = pb.pclass
@@ -130,7 +134,7 @@ class Simulation:
             self._py: Any = None
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
-            self._py = self.cls(**pb.policy.params)
+            self._py = construct(self.cls, pb.policy)
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 
@@ -145,19 +149,17 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
-    def _run_compiled(
-        self,
-        nslots: int,
-        record: bool,
-        out: _Outputs,
-        snap_t: np.ndarray,
-        s_regret: np.ndarray,
-        s_aoisum: np.ndarray,
-        s_pulls: np.ndarray,
-    ) -> None:
+    def _run_compiled(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+                      s_regret: np.ndarray, s_aoisum: np.ndarray,
+                      s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run ``nslots`` slots in kernel calls of at most about
         ``threads.PIECE_SECONDS`` each (sliced by slots, and by runs across threads), so that a
-        signal is handled between two calls within that time, however large the work."""
+        signal is handled between two calls within that time, however large the work.
+
+        Returns (slots done, None), or, when a hook returned an arm out of range or a NaN
+        score for a candidate (the kernel notes the first such slot of each run and never
+        plays that arm: no array is read out of bounds), the slots before the first such
+        slot and its PolicyRuntimeError; what came after it is not kept."""
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
@@ -173,7 +175,12 @@ class Simulation:
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
             start = time.perf_counter()
-            self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            try:
+                self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
+            except (CorraoiError, KeyboardInterrupt):
+                raise
+            except Exception as exc:  # noqa: BLE001 - a compiled hook raised (numba's raise)
+                return done, hook_raised(self.policy.name, t0 + 1, t0 + n, exc)
             self._rate = threads.rate(R * n, time.perf_counter() - start, len(slices),
                                       self._rate)  # fmt: skip
             if piece is not out:
@@ -182,21 +189,30 @@ class Simulation:
                         getattr(out, name)[:, done : done + n] = value
                 for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
                     full[:, i0:i1] = part
+            if self._err[:, 0].any():
+                return self._fault(K)
             done += n
+        return nslots, None
 
-    def _call_kernel(
-        self,
-        kernel: Any,
-        t0: int,
-        nslots: int,
-        record: bool,
-        out: _Outputs,
-        snap_t: np.ndarray,
-        snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
-        slices: list[tuple[int, int]],
-    ) -> None:
+    def _fault(self, K: int) -> tuple[int, PolicyRuntimeError]:
+        """The first slot at which a compiled hook failed (the kernel's ``err``), with the
+        slots before it (corraoi.engine.pyengine.hook_fault says what and where)."""
+        hit = np.flatnonzero(self._err[:, 0])
+        r = int(hit[np.argmin(self._err[hit, 0])])
+        t, what, value = (int(v) for v in self._err[r])
+        self._err[:] = 0
+        return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
+
+    def run_name(self, r: int) -> str:
+        """How a failure names run ``r`` of this batch: its number and its seed."""
+        return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
+
+    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: _Outputs,
+                     snap_t: np.ndarray, snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     slices: list[tuple[int, int]]) -> None:  # fmt: skip
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
-                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum)  # fmt: skip
+                   self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+                   self._err)  # fmt: skip
         outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
                    out.cand, out.pulls, out.muhat)  # fmt: skip
         common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
@@ -250,17 +266,17 @@ class Simulation:
         B = nslots if record else 0
         out = _Outputs(R, B, K)
         aoisum_before = self.aoisum.copy() if record else None
-        failure: PolicyRuntimeError | None = None
         if self._py is None:
-            self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls)
+            done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
+                                               s_pulls)  # fmt: skip
         else:
             done, failure = advance_python(
                 self, nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
             )
-            if failure is not None:  # keep the slots before the failing one
-                nslots = done
-                out.trim(done)
-                snap_t = snap_t[snap_t <= self.t + done]
+        if failure is not None:  # keep the slots before the failing one
+            nslots = done
+            out.trim(done)
+            snap_t = snap_t[snap_t <= self.t + done]
         snaps = [
             Snapshot(
                 t=int(ts),

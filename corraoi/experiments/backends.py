@@ -125,3 +125,12 @@ def choose(grid: Grid, *, client: Any = None, workers: int | None = None,
     from corraoi.engine.threads import set_workers
 
     return InProcess(set_workers(workers))
+def sweep_backend(grid_backend: str) -> str:
+    """The backend a sweep's runs came from: ``cpu``, or the GPU backend's device kind."""
+    if grid_backend != "gpu":
+        return "cpu"
+    from corraoi.gpu.device import EmulatedDevice, get_device
+
+    return "gpu-emulated" if isinstance(get_device(), EmulatedDevice) else "gpu-cuda"
+
+

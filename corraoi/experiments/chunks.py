@@ -43,9 +43,13 @@ def chunk_task(
     if cell.channel.kind == "trace" and cell.channel.trace is not None:
         task["trace"] = [int(v) for v in cell.channel.trace]
     qual = cell.policy.qualname
-    if qual.startswith("file:"):
+    if qual.startswith("file:"):  # the bytes this process loaded (and hashed), not the file now
+        from corraoi.policies.loading import loaded_source
+
         path = qual[len("file:") :].rpartition(":")[0]
-        task["plugin_source"] = {"path": path, "source": Path(path).read_text(encoding="utf-8")}
+        loaded = loaded_source(cell.policy.resolve().__module__)
+        source = loaded[1] if loaded is not None else Path(path).read_bytes()
+        task["plugin_source"] = {"path": path, "source": source}
     return task
 
 
@@ -55,6 +59,7 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
     from corraoi.engine.threads import set_workers
     from corraoi.model.channels import Channel
     from corraoi.model.theory import analyse
+    from corraoi.policies.api import CompiledPolicy
 
     from .montecarlo import run_policy
 
@@ -92,11 +97,16 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
         best_pulls[:, i] = snap.pulls[:, best]
         pulls_sum[i] = snap.pulls.sum(axis=0)
 
+    cls = cfg.policy.resolve()
+    if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+        from corraoi.engine.kernels import kernel_for
+
+        kernel_for(cls, record=False)  # compiled or loaded now: a chunk's wall_s is its runs
     start = time.perf_counter()
     seed0 = int(task["seed"]) + int(task["start"])
     run_policy(inst, cfg.policy, seeds=range(seed0, seed0 + n), horizon=cfg.horizon,
                checkpoints=stops, on_checkpoint=keep, on_slots=on_slots,
-               channel=channel)  # fmt: skip
+               channel=channel, first_run=int(task["start"]))  # fmt: skip
     return ChunkResult(
         chunk=Chunk(str(task["key"]), int(task["start"]), int(task["stop"])),
         t=np.asarray(stops, dtype=np.int64), regret=regret, estimator=estimator,

@@ -21,8 +21,15 @@ from corraoi.engine.block import RunConfig
 from corraoi.errors import ConfigError, DamagedPart
 from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
+from corraoi.sweep_code import (
+    changed_note,
+    check_code,
+    current_spec,
+    read_manifest_dict,
+    use_kept_code,
+)
 
-from .folder import MANIFEST, CellRuns, group_dirs, read_manifest, read_parts
+from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
 from .grid import Cell, Grid
 from .notable import CHOICES, notable_runs, pick_pair, well_formed
 
@@ -38,6 +45,11 @@ class Drill:
     #: the cell's label in its group (None for a policy added on the run, not swept)
     cell: str | None
     folder: Path
+    #: (checkpoint slot, regret) of this run in the sweep's part: what the recording must
+    #: give again (empty: nothing to check -- a policy added, a part missing, other code)
+    expect: tuple[tuple[int, float], ...] = ()
+    #: what the log says beside the run (recorded with code other than the sweep's)
+    notes: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -45,6 +57,19 @@ class Drill:
         label = self.cell if self.cell is not None else self.config.policy.label
         what = "" if self.choice == "run" else f"-{self.choice}"
         return f"{self.folder.name}-{self.config.instance.name}-{label}-run{self.run}{what}"
+
+
+def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
+    """Where the regret of ``block`` (a SlotBlock) differs from the sweep's row ``expect``
+    ((checkpoint, regret) pairs): a one-line account of the first difference, or None."""
+    first, last = int(block.t[0]), int(block.t[-1])
+    for t, want in expect:
+        if first <= t <= last:
+            got = float(block.regret[t - first])
+            if got != want:
+                return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
+                        f"says {want:g}: the engine or the code changed since the sweep")
+    return None
 
 
 def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, str | None]:
@@ -91,6 +116,8 @@ def choose(
     cells: Sequence[str] = (),
     policies: Sequence[PolicySpec] = (),
     warn: Any = None,
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
     trace_readers: Mapping[str, TraceReader] | None = None,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
@@ -100,8 +127,18 @@ def choose(
     other is added on the chosen run (paired: the same seed, so the same hidden path),
     said through ``warn``. ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel`
     (a trace channel's file is read again).
+
+    A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
+    hashes, the way out; :mod:`corraoi.sweep_code`), unless ``kept_code`` (the sweep's copy
+    runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
     """
     root, grid, group = sweep_root(path)
+    manifest = read_manifest_dict(root)
+    if kept_code and allow_changed_code:
+        raise ConfigError("--kept-code and --allow-changed-code: choose one")
+    if kept_code:
+        use_kept_code(root, manifest)
     what = parse_run(run)
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
@@ -130,6 +167,10 @@ def choose(
             if problem is not None:
                 raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
                                   "kernel; leave it out of --policy")  # fmt: skip
+    swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
+    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+        if warn is not None:
+            warn(note)
     streams = _streams(grid, warn)  # after every check: a refusal stays one line
     if extra and warn is not None:
         added = ", ".join(s.label for s in extra)
@@ -140,14 +181,14 @@ def choose(
         picks = picked[key]
         for cell, r in picks:
             drills.append(_drill(root, grid, cell, labels[cell.key], r, what, streams,
-                                 trace_readers))  # fmt: skip
+                                 allow_changed_code, trace_readers))  # fmt: skip
         runs = list(dict.fromkeys(r for _, r in picks)) or ([what] if isinstance(what, int) else [])
         base = (members or groups[key])[0]
         for spec in extra:
             for r in runs:
                 drills.append(_drill(root, grid, Cell(base.instance, spec, base.horizon,
                                                       base.channel), None, r, what,
-                                     streams, trace_readers))  # fmt: skip
+                                     streams, trace_readers=trace_readers))  # fmt: skip
     return drills
 
 
@@ -219,8 +260,9 @@ def _notable(
     if path.is_file():
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"{path}: unreadable ({exc}); sweep again with --resume") from None
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ConfigError(f"{path}: unreadable ({why}); sweep again with --resume") from None
         notable = data.get("notable") if isinstance(data, dict) else None
         if well_formed(notable, want):
             return notable  # type: ignore[return-value]
@@ -269,15 +311,47 @@ def _streams(grid: Grid, warn: Any) -> str:
 
 
 def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
-           what: str | int, streams: str = "cpu",
+           what: str | int, streams: str = "cpu", allow_changed: bool = False,
            trace_readers: Mapping[str, TraceReader] | None = None) -> Drill:  # fmt: skip
+    """With ``allow_changed`` (--allow-changed-code) a plug-in whose code changed runs as it
+    is now: the spec names that code, the log says so, and nothing is checked against the
+    sweep's row; otherwise the run must give the sweep's regret again (``expect``)."""
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
         channel = _reload_trace(cell, root, trace_readers)
-    config = RunConfig(cell.instance, cell.policy, grid.seed + run, cell.horizon, channel=channel,
+    spec = cell.policy
+    expect: tuple[tuple[int, float], ...] = ()
+    notes: tuple[str, ...] = ()
+    if allow_changed and label is not None and not spec.builtin and spec.digest:
+        now = current_spec(spec)
+        if not now.digest.startswith(spec.digest):
+            where = spec.qualname.removeprefix("file:").rpartition(":")[0] or spec.qualname
+            notes = (changed_note(where, spec.digest, now.digest),)
+            spec = now
+    if label is not None and not notes:
+        expect = expected_row(root, grid, cell, run)
+    config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
                        streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
-    return Drill(config, run, choice, label, root)
+    return Drill(config, run, choice, label, root, expect, notes)
+
+
+def expected_row(root: Path, grid: Grid, cell: Cell, run: int) -> tuple[tuple[int, float], ...]:
+    """(checkpoint, regret) of run ``run`` of ``cell`` in its part file (only the part that
+    holds it is read; () when it is missing or damaged: nothing to check against)."""
+    for f in sorted((root / PARTS).glob(f"{cell.key}-*.npz")):
+        try:
+            start, stop = (int(v) for v in f.stem.rsplit("-", 2)[1:])
+        except ValueError:
+            continue
+        if start <= run < stop:
+            try:
+                part = ChunkResult.load(f)
+            except DamagedPart:
+                return ()
+            row = part.regret[run - start]
+            return tuple((int(t), float(v)) for t, v in zip(part.t, row, strict=True))
+    return ()
 
 
 def _reload_trace(

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -23,13 +22,14 @@ import numpy as np
 
 from corraoi._version import __version__
 from corraoi.errors import ConfigError, DamagedPart
+from corraoi.partial_file import PartialFile
 from corraoi.stats import Moments
+from corraoi.sweep_guard import MANIFEST_FORMAT
 
 from .grid import Cell, Chunk, Grid
 
 MANIFEST = "manifest.json"
 PARTS = "parts"
-MANIFEST_FORMAT = "corraoi.sweep-folder"
 MANIFEST_VERSION = 1
 #: What a group folder holds (written from the parts when the sweep finishes).
 GROUP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
@@ -107,19 +107,15 @@ class ChunkResult:
     agg: DeviceAggregates | None = None
 
     def save(self, path: Path) -> None:
-        """Write atomically (``.partial`` then rename): a part exists only when complete."""
-        tmp = path.with_name(path.name + ".partial")
+        """Write through the ``.partial`` protocol: a part exists only when complete."""
         extra = self.agg.arrays() if self.agg is not None else {}
-        with open(tmp, "wb") as f:
+        with PartialFile(path, overwrite=True, what="part file", sweep=True) as target:
             np.savez(
-                f, cell=np.array(self.chunk.cell), start=self.chunk.start, stop=self.chunk.stop,
-                t=self.t, regret=self.regret, estimator=self.estimator,
+                target.file, cell=np.array(self.chunk.cell), start=self.chunk.start,
+                stop=self.chunk.stop, t=self.t, regret=self.regret, estimator=self.estimator,
                 best_pulls=self.best_pulls, pulls_sum=self.pulls_sum, wall_s=self.wall_s,
                 **extra,
             )  # fmt: skip
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
 
     @classmethod
     def load(cls, path: Path) -> ChunkResult:
@@ -188,16 +184,31 @@ def read_manifest(out: Path) -> Grid | None:
         return None
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: unreadable manifest ({exc})") from None
+    except (OSError, ValueError, RecursionError) as exc:
+        why = " ".join(str(exc).split())[:120] or type(exc).__name__
+        raise ConfigError(f"{path}: unreadable manifest ({why})") from None
     if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT:
         raise ConfigError(f"{path}: not a corraoi sweep manifest")
-    if int(data.get("format_version", 0)) > MANIFEST_VERSION:
-        raise ConfigError(f"{path}: manifest version {data['format_version']}: upgrade corraoi")
-    return Grid.from_dict(data.get("grid", {}), where=str(path))
+    version = data.get("format_version")
+    if type(version) is not int or version < 1:
+        raise ConfigError(f"{path}: manifest format_version {_shown(version)}: expected a whole "
+                          f"number from 1 to {MANIFEST_VERSION} (a damaged manifest)")
+    if version > MANIFEST_VERSION:
+        raise ConfigError(f"{path}: manifest version {version}: upgrade corraoi")
+    grid = data.get("grid")
+    if not isinstance(grid, dict):
+        raise ConfigError(f"{path}: not a corraoi grid (no 'grid' object)")
+    return Grid.from_dict(grid, where=str(path))
 
 
-def write_manifest(out: Path, grid: Grid, status: str) -> None:
+def _shown(value: Any) -> str:
+    """A value from a file, shown in one short line."""
+    text = json.dumps(value)
+    return text[:40] + ("..." if len(text) > 40 else "")
+
+
+def write_manifest(out: Path, grid: Grid, status: str,
+                   provenance: dict[str, Any] | None = None) -> None:  # fmt: skip
     data = {
         "format": MANIFEST_FORMAT,
         "format_version": MANIFEST_VERSION,
@@ -206,38 +217,30 @@ def write_manifest(out: Path, grid: Grid, status: str) -> None:
         "grid": grid.to_dict(),
         "groups": {str(p.relative_to(out)) or ".": {"instance": name, "horizon": h}
                    for (name, h), p in group_dirs(grid, out).items()},  # fmt: skip
+        **({"provenance": provenance} if provenance is not None else {}),
     }
-    write_text(out / MANIFEST, json.dumps(data, indent=1, sort_keys=True) + "\n")
+    write_text(out / MANIFEST, json.dumps(data, indent=1, sort_keys=True) + "\n", "manifest")
 
 
-def write_text(path: Path, text: str) -> None:
-    """Write ``path`` atomically: ``.partial`` first, renamed when complete."""
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+def write_text(path: Path, text: str, what: str = "file") -> None:
+    """Write ``path`` through the ``.partial`` protocol (:class:`~corraoi.locks.PartialFile`)."""
+    PartialFile.write_bytes(path, text.encode(), overwrite=True, what=what, sweep=True)
 
 
 def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:
     """The grid of an existing folder extended by ``new`` (more runs, cells): an append."""
     if old.seed != new.seed:
-        raise ConfigError(
-            f"{where}: holds a sweep with seed {old.seed}; --resume needs the same seed "
-            f"(got {new.seed})"
-        )
+        raise ConfigError(f"{where}: holds a sweep with seed {old.seed}; --resume needs the same "
+                          f"seed (got {new.seed})")  # fmt: skip
     if old.chunk != new.chunk and new.chunk:
-        raise ConfigError(
-            f"{where}: holds a sweep in chunks of {old.chunk or old.runs} runs; --resume keeps "
-            f"them (got --chunk {new.chunk})"
-        )
+        raise ConfigError(f"{where}: holds a sweep in chunks of {old.chunk or old.runs} runs; "
+                          f"--resume keeps them (got --chunk {new.chunk})")  # fmt: skip
     if old.checkpoints != new.checkpoints:
-        raise ConfigError(
-            f"{where}: holds a sweep with {old.checkpoints} checkpoints; --resume keeps them"
-        )
+        raise ConfigError(f"{where}: holds a sweep with {old.checkpoints} checkpoints; --resume "
+                          "keeps them")  # fmt: skip
     if old.backend != new.backend:  # other random streams: the runs would not pair
-        raise ConfigError(
-            f"{where}: holds a sweep run with --backend {old.backend}; --resume it with "
-            f"--backend {old.backend} (got {new.backend})"
-        )
+        raise ConfigError(f"{where}: holds a sweep run with --backend {old.backend}; --resume it "
+                          f"with --backend {old.backend} (got {new.backend})")  # fmt: skip
     cells = list(old.cells)
     keys = {c.key for c in cells}
     cells += [c for c in new.cells if c.key not in keys]

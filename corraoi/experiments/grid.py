@@ -32,7 +32,8 @@ import itertools
 import json
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,7 @@ from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicySpec, make_policy, parse_policy_names, resolve
+from corraoi.policies.spec import assign_params, param_key
 
 #: Keys an experiment file may hold.
 FILE_KEYS = ("instances", "policies", "horizons", "runs", "seed", "chunk", "checkpoints",
@@ -75,8 +77,12 @@ class Cell:
 
     @property
     def key(self) -> str:
-        """A stable identifier of the cell (a hash of what determines its runs)."""
-        text = json.dumps(self.to_dict(), sort_keys=True)
+        """A stable identifier of the cell (a hash of what determines its runs; a plug-in's
+        full sha256 is left out, so that folders swept before it was recorded keep their
+        keys: its version holds the first 16 digits)."""
+        d = self.to_dict()
+        d["policy"].get("plugin", {}).pop("sha256", None)
+        text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     @property
@@ -163,18 +169,18 @@ class Grid:
 
     def labels(self) -> dict[str, str]:
         """A display label per cell key, unique within its group: the policy name, with its
-        parameter values when one policy runs with several in the group."""
+        parameter values when one policy runs with several in the group, and the start of
+        the cell's key when two cells still read alike (one name from two files, say)."""
         out: dict[str, str] = {}
         for cells in self.groups().values():
-            counts: dict[str, int] = {}
+            counts = Counter(c.policy.name for c in cells)
             for c in cells:
-                counts[c.policy.name] = counts.get(c.policy.name, 0) + 1
+                ps, name = ",".join(f"{k}={v:g}" for k, v in c.policy.params.items()), c.policy.name
+                out[c.key] = f"{name}({ps})" if counts[name] > 1 else name
+            alike = Counter(out[c.key] for c in cells)
             for c in cells:
-                if counts[c.policy.name] > 1:
-                    ps = ",".join(f"{k}={v:g}" for k, v in c.policy.params.items())
-                    out[c.key] = f"{c.policy.name}({ps})"
-                else:
-                    out[c.key] = c.policy.name
+                if alike[out[c.key]] > 1:
+                    out[c.key] += f"@{c.key[:8]}"
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -228,9 +234,9 @@ def parse_param_lists(items: Iterable[str]) -> dict[str, list[float]]:
     out: dict[str, list[float]] = {}
     for item in items:
         name, sep, text = str(item).partition("=")
-        name = name.strip()
-        if not sep or not name.isidentifier():
+        if not sep:
             raise ConfigError(f"--param {item!r}: expected NAME=VALUE[,VALUE...] (e.g. c=1,2)")
+        name = param_key(str(item), name, "c=1,2")
         values = []
         for tok in text.split(","):
             try:
@@ -256,12 +262,14 @@ def build_grid(
     trace_readers: Mapping[str, TraceReader] | None = None,
     baseline: str | None = None,
     backend: str = "cpu",
+    warn: Callable[[str], None] | None = None,
 ) -> Grid:
     """The grid of every instance x policy x parameter combination x horizon.
 
-    Each parameter list goes to every policy that declares the parameter (the product over
-    the parameters a policy declares); a parameter that no listed policy declares is an
-    error, as is a value outside its declared range.
+    Each parameter list goes to every policy that declares the parameter, or to one policy
+    for ``POLICY.NAME`` (:func:`~corraoi.policies.spec.assign_params`; the product over the
+    parameters a policy takes); a parameter that no listed policy declares is an error, as
+    is a value outside its declared range.
     """
     if not instances:
         raise ConfigError("no instance given (expected a name, a file, or a comma list)")
@@ -275,16 +283,11 @@ def build_grid(
             raise ConfigError(f"parameter {name}: no value given")
     tokens = parse_policy_names(policies)
     classes = {t: resolve(t).cls for t in tokens}
-    for pname in params:
-        if not any(pname in cls.params for cls in classes.values()):
-            raise ConfigError(
-                f"parameter {pname} does not apply to "
-                f"{', '.join(cls.name for cls in classes.values())}"
-            )
+    each = assign_params(tokens, classes, params, warn=warn)  # NAME or POLICY.NAME
     specs: list[PolicySpec] = []
     for t in tokens:
-        declared = [p for p in params if p in classes[t].params]
-        for combo in itertools.product(*(params[p] for p in declared)):
+        declared = list(each[t])
+        for combo in itertools.product(*(each[t][p] for p in declared)):
             specs.append(make_policy(t, **dict(zip(declared, combo, strict=True))))
     cells = []
     for spec_text in instances:

@@ -135,10 +135,12 @@ def run_policy(
     on_checkpoint: CheckpointHook | None = None,
     on_slots: Callable[[int], None] | None = None,
     channel: Channel | None = None,
+    first_run: int = 0,
 ) -> PolicyResult:
-    """Simulate ``policy`` for every seed to ``horizon`` without keeping per-slot columns."""
+    """Simulate ``policy`` for every seed to ``horizon`` without keeping per-slot columns
+    (``first_run``: the number a failure gives the first seed's run, in a sweep's chunk)."""
     start = time.perf_counter()
-    sim = Simulation(instance, policy, seeds, horizon, channel=channel)
+    sim = Simulation(instance, policy, seeds, horizon, channel=channel, first_run=first_run)
     stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {horizon})
     ends = np.unique(np.linspace(0, horizon, SEGMENTS + 1).round().astype(np.int64)[1:])
     for end in ends:

@@ -91,7 +91,8 @@ def pick_pair(
 
 def well_formed(notable: Any, want: Sequence[str] = ()) -> bool:
     """A summary's runs worth watching (as read back from JSON) hold an entry for every cell
-    in ``want`` and well-formed pairs: a hand-edited or damaged summary is not trusted."""
+    in ``want`` and well-formed pairs, each of two cells it names (of ``want``, when given):
+    a hand-edited or damaged summary is not trusted."""
     if not isinstance(notable, dict):
         return False
     cells, pairs = notable.get("cells"), notable.get("pairs", [])
@@ -106,6 +107,9 @@ def well_formed(notable: Any, want: Sequence[str] = ()) -> bool:
         if not isinstance(entry, dict) or not all(run(entry.get(k), "regret")
                                                   for k in ("worst", "best", "median")):
             return False  # fmt: skip
+    known = set(want) if want else set(cells)  # a pair names two of the sweep's cells
     return all(run(g, "difference") and isinstance(g.get("policies"), list)
-               and len(g["policies"]) == 2 and all(isinstance(n, str) for n in g["policies"])
+               and len(g["policies"]) == 2 and all(isinstance(n, str) and n in known
+                                                   for n in g["policies"])
+               and g["policies"][0] != g["policies"][1]
                for g in pairs)  # fmt: skip

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from corraoi.errors import ConfigError, DamagedPart
+from corraoi.sweep_code import check_code, keep_sources, kept_copy, read_manifest_dict
 
 from . import backends
 from .folder import (
@@ -236,7 +237,9 @@ def _sweep(
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
         if outputs is not None:
             outputs.finish(warn=warn)
-        write_manifest(folder, grid, "complete")
+        prov = folder_provenance(grid)
+        keep_sources(folder, prov)
+        write_manifest(folder, grid, "complete", provenance_entry(folder, prov))
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip
 
@@ -261,6 +264,8 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     if resume:
         if old is None:
             raise ConfigError(f"{folder}: no sweep to resume (no {MANIFEST}); drop --resume")
+        # the code that will run is the code the sweep ran, or one line says which is not
+        check_code([c.policy for c in old.cells], folder, read_manifest_dict(folder))
         grid = merge_grids(old, grid, folder)
     elif old is not None or legacy:
         if not force:
@@ -272,9 +277,32 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     folder.mkdir(parents=True, exist_ok=True)
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ConfigError(f"{folder}: directory is not writable")
+    prov = folder_provenance(grid)  # plug-ins loaded, versions asked: before any file
+    write_manifest(folder, grid, "running", provenance_entry(folder, prov))  # first: resumable
+    keep_sources(folder, prov)
     (folder / PARTS).mkdir(exist_ok=True)
-    write_manifest(folder, grid, "running")
+    from corraoi.locks import lock_holder
+
+    for stale in (folder / PARTS).glob("*.partial"):  # parts a killed sweep left half-written
+        if stale.is_file() and lock_holder(stale) is None:
+            stale.unlink(missing_ok=True)
     return grid
+
+
+def folder_provenance(grid: Grid) -> Any:
+    """What made a sweep's numbers: the versions, the backend and each plug-in's source."""
+    from corraoi.provenance import Provenance
+
+    from .backends import sweep_backend
+
+    return Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+
+
+def provenance_entry(folder: Path, prov: Any) -> dict[str, Any]:
+    """The manifest's ``provenance``: :func:`folder_provenance` with where the folder keeps
+    the copy of each plug-in's source (corraoi.sweep_code)."""
+    return {**prov.to_dict(), "plugins": [{**s.to_dict(), "copy": kept_copy(s)}
+                                          for s in prov.sources]}  # fmt: skip
 
 
 def _clear(folder: Path, old: Grid | None) -> None:

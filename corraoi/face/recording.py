@@ -13,7 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from corraoi.errors import ViewerError, WriteError
+from corraoi.errors import SweepMismatch, ViewerError, WriteError
+from corraoi.experiments.drill import row_mismatch
+from corraoi.provenance import Provenance
 from recorder.paths import Sink
 from recorder.slotlog.sink import McapSink
 
@@ -42,6 +44,8 @@ def record_run(
     should_stop: Callable[[], bool] | None = None,
     rerun: Any = None,
     sinks: Sequence[Sink] = (),
+    expect: Sequence[tuple[int, float]] = (),
+    notes: Sequence[str] = (),
 ) -> RecordOutcome:
     """Simulate one run (a ``RunConfig``) and stream every slot to the MCAP log ``mcap`` and,
     with ``rrd`` or ``viewer_url``, to a Rerun recording (what ``corraoi record`` does for
@@ -51,12 +55,18 @@ def record_run(
     ``rerun``, a :class:`recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
     its process (the same file), else it is written in this one. ``sinks``: further
     :class:`~recorder.paths.Sink` s (a Foxglove live server's, your own) that take every
-    block after those two, closed with the run, or aborted when it fails."""
+    block after those two, closed with the run, or aborted when it fails.
+
+    ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
+    the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
+    finished as failed with that line. ``notes`` go into the log's provenance."""
     problem: str | None = None
     rrd_error: WriteError | None = None
     slots = 0
     rrd_path: Path | None = None
-    with McapSink(mcap, config, overwrite=overwrite) as log, ExitStack() as more:
+    provenance = Provenance.of([config.policy], backend=config.streams, notes=notes)
+    with McapSink(mcap, config, overwrite=overwrite, provenance=provenance) as log, \
+            ExitStack() as more:  # fmt: skip
         extra = [more.enter_context(s) for s in sinks]  # each closed, or aborted, with the run
         output: Any = None
         sink: Any = None  # in this process: the RerunSink in front of ``output``
@@ -82,6 +92,10 @@ def record_run(
                 for other in extra:
                     other.write(block)
                 slots = int(block.t[-1])
+                mismatch = row_mismatch(expect, block) if expect else None
+                if mismatch is not None:  # after the block is in the log: it shows it
+                    raise SweepMismatch(f"{config.label}: {mismatch}; the log is left as "
+                                        f"{log.partial_path}, marked failed")  # fmt: skip
                 if on_block is not None:
                     on_block(block)
                 if should_stop is not None and should_stop():
@@ -116,3 +130,10 @@ def record_run(
             raise WriteError(f"{rrd_error} (the MCAP log {log.path} is complete)")
         raise rrd_error
     return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
+
+
+def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> RecordOutcome:
+    """:func:`record_run` of a run chosen from a sweep (a
+    :class:`corraoi.experiments.drill.Drill`): it
+    must give the sweep's regret again, and its log carries the drill's notes."""
+    return record_run(drill.config, mcap, expect=drill.expect, notes=drill.notes, **kwargs)

@@ -11,9 +11,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from corraoi.experiments.backends import sweep_backend
 from corraoi.experiments.folder import CellRuns, ChunkResult
 from corraoi.experiments.grid import Grid
 from corraoi.experiments.montecarlo import sweep_config
+from corraoi.provenance import Provenance
 from recorder.style import spec_color, variant_colors
 from recorder.sweeplog.log import SweepMcapSink
 from recorder.sweeplog.results import write_dataset
@@ -71,10 +73,12 @@ def write_group_log(
     folder.mkdir(parents=True, exist_ok=True)
     config = group_config(grid, cells)
     config["notable"] = summary["notable"]  # read back by SweepLog.notable
-    with SweepMcapSink(folder / "sweep.mcap", config) as log:
-        for c in cells:
-            for point in c.points():
-                log.write(point)
+    prov = Provenance.of([c.cell.policy for c in cells], backend=sweep_backend(grid.backend))
+    # in log-time order: each checkpoint's points, the cells in grid order (a stable sort)
+    points = sorted((p for c in cells for p in c.points()), key=lambda p: int(p.t))
+    with SweepMcapSink(folder / "sweep.mcap", config, provenance=prov) as log:
+        for point in points:
+            log.write(point)
     return config
 
 

@@ -253,11 +253,17 @@ class EmulatedDevice(Device):
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
         folder = _writable(cache_dir() / "gpu-emulation")  # else the system's temp folder
         lib = folder / f"kernel-K{K}-{digest}.so"
-        if lib.exists():
+        if _intact(lib):  # checked before it is mapped: a cut-short library is never loaded
             return lib
         with _locked(folder, lib.stem):  # two processes on a fresh cache: one compiles
-            if lib.exists():
+            if _intact(lib):
                 return lib
+            if lib.exists():
+                from corraoi.engine import kernels
+
+                if kernels.on_compile is not None:
+                    kernels.on_compile(f"the cached GPU-emulation library {lib.name} is damaged "
+                                       "or unverified; rebuilding it")  # fmt: skip
             return self._compile_to(lib, flags)
 
     def _compile_to(self, lib: Path, flags: tuple[str, ...]) -> Path:
@@ -270,7 +276,9 @@ class EmulatedDevice(Device):
             if done.returncode != 0:
                 first = (done.stderr.strip().splitlines() or ["(no output)"])[0]
                 raise GpuUnavailable(f"{self._cxx} could not compile {SOURCE_PATH}: {first}")
+            data = Path(tmp).read_bytes()
             os.replace(tmp, lib)  # atomic: a library exists only when complete
+            _sums(lib).write_text(hashlib.sha256(data).hexdigest() + "\n", encoding="ascii")
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
@@ -302,6 +310,20 @@ class EmulatedDevice(Device):
         func.restype = None
         func(*self._args([("p", inp), ("p", out), ("i", inp.shape[0])]))
         return out
+
+
+def _sums(lib: Path) -> Path:
+    return lib.with_name(lib.name + ".sha256")
+
+
+def _intact(lib: Path) -> bool:
+    """Whether a cached library is the one compiled: its bytes hash to the sha256 written
+    beside it when it was (a truncated library, mapped, dies of SIGBUS when it is called)."""
+    try:
+        want = _sums(lib).read_text(encoding="ascii").strip()
+        return hashlib.sha256(lib.read_bytes()).hexdigest() == want
+    except OSError:
+        return False
 
 
 # ---------------------------------------------------------------------------- choosing

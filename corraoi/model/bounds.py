@@ -189,7 +189,7 @@ def cucb_bound(inst: Instance, horizon: int) -> Bound:
     t0 = _first_tau(2.0, 4.0, K, level) if level > TIE_TOL else math.inf
     linear = (1.0 / mu_min - 1.0 / th.mu_star) * T
     if not T > t0:
-        return Bound("Theorem 2 (CUCB)", T, linear, "linear", t0, f"T <= t0 = {t0:g}")
+        return Bound("Theorem 2 (CUCB)", T, linear, "linear", t0, _below("t0", t0))
     gap_min = float(min(th.gaps[k] for k in range(K) if k != th.best_arm))
     u_nc = K * t0 + K**3 * 2.0 * _power_sum(K * t0, T, -2.0, K) + 3.0 * _power_sum(1, T, -3.0, 1)
     tail = _exp_sum(T, K, gap_min)
@@ -199,6 +199,13 @@ def cucb_bound(inst: Instance, horizon: int) -> Bound:
     }
     return _capped(Bound("Theorem 2 (CUCB)", T, _assemble(th, u_nc, u_c), "log", t0,
                          f"T > t0 = {t0:g}"), linear)  # fmt: skip
+
+
+def _below(name: str, threshold: float) -> str:
+    """The note of a bound below its theorem's threshold: what the number is, and why."""
+    return (f"T <= {name} = {threshold:g}: the theorem holds from its threshold {name} on (the "
+            "slot from which every gap clears its exploration term); below it, the linear "
+            "bound (1/mu_min - 1/mu*) T")
 
 
 def cts_bound(inst: Instance, horizon: int, beta: float = DEFAULT_BOUND_BETA) -> Bound:
@@ -217,7 +224,7 @@ def cts_bound(inst: Instance, horizon: int, beta: float = DEFAULT_BOUND_BETA) ->
     tb = _first_tau(math.exp(11.0 * beta), 6.0 * math.sqrt(beta), K, level)
     linear = (1.0 / mu_min - 1.0 / th.mu_star) * T
     if not T > tb:
-        return Bound(name, T, linear, "linear", tb, f"T <= t_b = {tb:g}")
+        return Bound(name, T, linear, "linear", tb, _below("t_b", tb))
     gap_min = float(min(th.gaps[k] for k in range(K) if k != th.best_arm))
     u_nc = (
         K * tb

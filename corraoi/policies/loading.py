@@ -9,6 +9,7 @@ only loads code and checks classes.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -20,7 +21,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from corraoi.errors import PolicyError
+from corraoi.errors import CodeChanged, PolicyError
 
 from .api import CompiledPolicy, Policy, PolicyBase
 
@@ -125,51 +126,110 @@ def _write_err(data: bytes) -> None:
         pass
 
 
-#: Plug-in sources handed over as data (a Dask worker that lacks the client's files).
-_SOURCES: dict[str, bytes] = {}
+#: Plug-in sources handed over as data, by resolved path and sha256: a Dask worker that lacks
+#: the client's files, or a sweep's kept copy run instead of a file edited since.
+_SOURCES: dict[str, dict[str, bytes]] = {}
 
 
 def has_source(path: Path) -> bool:
     """Whether a plug-in file's source was handed over as data (it need not exist here)."""
-    return str(path.resolve()) in _SOURCES
+    return bool(_SOURCES.get(str(path.resolve())))
 
 
-def install_plugin_source(path: str, source: str) -> None:
+def install_plugin_source(path: str | Path, source: str | bytes) -> str:
     """Make ``FILE.py:Class`` plug-ins at ``path`` importable from ``source`` (on a worker
-    that does not have the file: plug-ins travel with the chunks as data)."""
-    _SOURCES[str(Path(path).resolve())] = source.encode("utf-8")
+    that does not have the file, or a sweep's kept copy): a spec that names this source's
+    sha256 loads it rather than the file. Returns the sha256 (hex)."""
+    data = source.encode("utf-8") if isinstance(source, str) else bytes(source)
+    digest = hashlib.sha256(data).hexdigest()
+    _SOURCES.setdefault(str(Path(path).resolve()), {})[digest] = data
+    return digest
 
 
-def file_module(path: Path, where: str) -> tuple[ModuleType, str]:
+#: Plug-in files pinned to a source in this process (a sweep's kept copy, ``--kept-code``).
+_PINNED: dict[str, str] = {}
+
+
+def pin_plugin_source(path: str | Path, source: bytes) -> str:
+    """Load the plug-in file ``path`` from ``source`` in this process, whatever the file
+    holds now (``--kept-code``: the sweep's copy). Returns the sha256 (hex)."""
+    digest = install_plugin_source(path, source)
+    _PINNED[str(Path(path).resolve())] = digest
+    return digest
+
+
+def file_module(path: Path, where: str, expect: str = "") -> tuple[ModuleType, str]:
     """Import a plug-in file once per process under a name derived from its path; returns
-    the module and its version (a hash of the source)."""
-    installed = _SOURCES.get(str(path.resolve()))
-    try:
-        source = installed if installed is not None else path.read_bytes()
-    except OSError as exc:
-        raise PolicyError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
-    digest = hashlib.sha256(source).hexdigest()
-    key = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:16]
-    modname = f"{PLUGIN_MODULE_PREFIX}{key}"
+    the module and its version (a hash of the source).
+
+    The module executes exactly the bytes it hashed (kept as ``__corraoi_source__``, for the
+    logs' provenance). ``expect``: the sha256 (hex, or a prefix of it) a run recorded: the
+    module already loaded with it, or a source handed over with it, is used; otherwise the
+    file, which must hash to it (:class:`~corraoi.errors.CodeChanged` if not)."""
+    key = str(path.resolve())
+    expect = expect or _PINNED.get(key, "")
+    modname = f"{PLUGIN_MODULE_PREFIX}{hashlib.sha256(key.encode()).hexdigest()[:16]}"
     module = sys.modules.get(modname)
-    if module is not None and getattr(module, "__corraoi_digest__", None) == digest:
+    loaded = getattr(module, "__corraoi_digest__", "") if module is not None else ""
+    if expect and loaded.startswith(expect):  # the code the run recorded is loaded: keep it
+        return module, f"sha256:{loaded[:16]}"  # type: ignore[return-value]
+    installed = _SOURCES.get(key, {})
+    source = next((d for h, d in installed.items() if expect and h.startswith(expect)), None)
+    if source is None:
+        try:
+            source = path.read_bytes()
+        except OSError as exc:
+            if not installed or expect:
+                raise PolicyError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
+            source = next(iter(installed.values()))
+    digest = hashlib.sha256(source).hexdigest()
+    if expect and not digest.startswith(expect):
+        raise CodeChanged(str(path), expect, digest)
+    if module is not None and loaded == digest:
         return module, f"sha256:{digest[:16]}"
     spec = importlib.util.spec_from_file_location(modname, path)
-    if spec is None or spec.loader is None:
+    if spec is None:
         raise PolicyError(f"{where}: {path} is not a Python file")
     module = importlib.util.module_from_spec(spec)
     module.__corraoi_digest__ = digest  # type: ignore[attr-defined]
+    module.__corraoi_source__ = source  # type: ignore[attr-defined]
     sys.modules[modname] = module
     try:
         with guarded_load(where, str(path)):
-            if installed is not None:
-                exec(compile(source, str(path), "exec"), module.__dict__)
-            else:
-                spec.loader.exec_module(module)
+            exec(compile(source, str(path), "exec"), module.__dict__)  # the bytes hashed
     except BaseException:
         sys.modules.pop(modname, None)
         raise
     return module, f"sha256:{digest[:16]}"
+
+
+def module_digest(modname: str) -> str:
+    """The sha256 (hex) of the source module ``modname`` was loaded from ("" if unknown)."""
+    loaded = loaded_source(modname)
+    return hashlib.sha256(loaded[1]).hexdigest() if loaded is not None else ""
+
+
+def loaded_source(modname: str) -> tuple[str, bytes] | None:
+    """(path, bytes) of the module ``modname`` as it was loaded: a plug-in file's exact
+    bytes; for another module, its file read once, when first asked (None without one)."""
+    module = sys.modules.get(modname)
+    if module is None:
+        return None
+    data = getattr(module, "__corraoi_source__", None)
+    path = getattr(module, "__file__", None)
+    if isinstance(data, bytes) and path:
+        return str(path), data
+    if not path:
+        return None
+    return _read_once(str(path))
+
+
+@functools.lru_cache(maxsize=256)
+def _read_once(path: str) -> tuple[str, bytes] | None:
+    try:
+        return path, Path(path).read_bytes()
+    except OSError:
+        return None
 
 
 def module_version(modname: str) -> str:

@@ -34,6 +34,7 @@ from .loading import (
     guarded_load,
     has_source,
     is_file_ref,
+    module_digest,
     module_version,
     one_line,
 )
@@ -151,6 +152,8 @@ class Resolved:
     cls: type[PolicyBase]
     qualname: str  # "corraoi:cucb", "file:/abs/eps.py:EpsilonGreedy", "pkg.mod:Class"
     version: str
+    #: sha256 (hex) of the source the class was loaded from ("" for a built-in or unknown)
+    sha256: str = ""
 
 
 def _registered(cls: type[PolicyBase]) -> Resolved:
@@ -160,12 +163,16 @@ def _registered(cls: type[PolicyBase]) -> Resolved:
     module = cls.__module__
     if module.startswith(PLUGIN_MODULE_PREFIX):
         file_version = getattr(sys.modules.get(module), "__corraoi_digest__", "")
-        return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "")
-    return Resolved(cls, qual, module_version(module))
+        return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "",
+                        file_version)  # fmt: skip
+    return Resolved(cls, qual, module_version(module), module_digest(module))
 
 
-def resolve(token: str) -> Resolved:
-    """The policy class a ``--policy`` word names (PolicyError with a hint if none)."""
+def resolve(token: str, *, expect: str = "") -> Resolved:
+    """The policy class a ``--policy`` word names (PolicyError with a hint if none).
+
+    ``expect``: the sha256 (hex or a prefix) of the source a run recorded: a plug-in file
+    is loaded from that source or refused (:class:`~corraoi.errors.CodeChanged`)."""
     raw = token.strip()
     if not raw:
         raise PolicyError("empty policy name (expected a name, FILE.py:Class or module:Class)")
@@ -180,16 +187,21 @@ def resolve(token: str) -> Resolved:
             path = Path(left).expanduser()
             if not path.is_file() and not has_source(path):
                 raise PolicyError(f"policy {raw!r}: no such file {left}")
-            module, version = file_module(path, f"policy {raw!r}")
+            module, version = file_module(path, f"policy {raw!r}", expect)
             qual = f"file:{path.resolve()}:{attr}"
+            digest = str(getattr(module, "__corraoi_digest__", ""))
         else:
             with guarded_load(f"policy {raw!r}", f"module {left}", f"cannot import module {left}"):
                 module = importlib.import_module(left)
             version = module_version(left)
             qual = f"{left}:{attr}"
+            digest = module_digest(left)
         if not hasattr(module, attr):
             raise PolicyError(f"policy {raw!r}: {left} has no class {attr}")
-        return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version)
+        return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version,
+                        digest)  # fmt: skip
+    if ":" not in raw and raw.endswith(".py"):  # FILE.py without its class: say which it holds
+        raise PolicyError(_file_without_class(raw))
     for ep in _entry_points():
         if ep.name == raw or ep.name.lower() == name:
             broken = f"its entry point {ep.value} is broken"
@@ -197,8 +209,33 @@ def resolve(token: str) -> Resolved:
                 loaded = ep.load()
             cls = check_class(loaded, f"policy {raw!r} (entry point {ep.value})")
             modname = ep.value.split(":")[0]
-            return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname))
+            return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname),
+                            module_digest(modname))  # fmt: skip
     raise PolicyError(unknown_policy_message(raw))
+
+
+def _file_without_class(raw: str) -> str:
+    """The one line for ``--policy FILE.py``: the policy classes the file holds."""
+    path = Path(raw).expanduser()
+    if not path.is_file() and not has_source(path):
+        return f"policy {raw!r}: no such file {raw} (a plug-in is FILE.py:Class)"
+    module, _ = file_module(path, f"policy {raw!r}")
+    found = [attr for attr, obj in vars(module).items()
+             if isinstance(obj, type) and issubclass(obj, PolicyBase) and obj.__module__ ==
+             module.__name__ and _is_policy(obj, attr)]  # fmt: skip
+    if not found:
+        return (f"policy {raw!r}: {raw} holds no policy class (a subclass of "
+                "corraoi.policies.Policy or CompiledPolicy); a plug-in is FILE.py:Class")
+    return (f"policy {raw!r}: name the class too, e.g. {raw}:{found[0]} (the policy classes "
+            f"{raw} holds: {', '.join(found)})")
+
+
+def _is_policy(obj: type[PolicyBase], where: str) -> bool:
+    try:
+        check_class(obj, where)
+    except PolicyError:
+        return False
+    return True
 
 
 def unknown_policy_message(name: str) -> str:
@@ -209,6 +246,16 @@ def unknown_policy_message(name: str) -> str:
         f"unknown policy {name!r}{hint} (see 'corraoi policies'; a plug-in is FILE.py:Class "
         "or package.module:Class)"
     )
+
+
+def registered_digest(cls: type[PolicyBase]) -> str:
+    """The sha256 (hex) of the source a registered class was loaded from ("" if unknown)."""
+    return _registered(cls).sha256
+
+
+def source_path(cls: type[PolicyBase]) -> str:
+    """The file a plug-in class was loaded from (its module's name if it has none)."""
+    return str(getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__)
 
 
 def held(name: str, qualname: str) -> type[PolicyBase] | None:

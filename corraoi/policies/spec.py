@@ -8,17 +8,25 @@ class through the registry when it is needed.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import PolicyError
+from corraoi.errors import CodeChanged, PolicyError
 
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
-from .registry import builtins, held, paper_names, policy_name, resolve
+from .registry import (
+    builtins,
+    held,
+    paper_names,
+    policy_name,
+    registered_digest,
+    resolve,
+    source_path,
+)
 
 
 @dataclass(frozen=True)
@@ -37,6 +45,9 @@ class PolicySpec:
     tier: str = field(default="compiled", compare=False)
     label: str = field(default="", compare=False)
     color: RGB | None = field(default=None, compare=False)
+    #: sha256 (hex) of the plug-in's source as loaded ("" for a built-in, or a log written
+    #: before corraoi recorded it): a spec names the code it ran, and resolves only to it
+    sha256: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", dict(self.params))
@@ -62,6 +73,8 @@ class PolicySpec:
                 "label": self.label,
                 "color": list(self.color) if self.color is not None else None,
             }
+            if self.sha256:
+                out["plugin"]["sha256"] = self.sha256
         return out
 
     @classmethod
@@ -87,6 +100,10 @@ class PolicySpec:
         rgb: RGB | None = None
         if isinstance(color, list) and len(color) == 3 and all(isinstance(c, int) for c in color):
             rgb = (int(color[0]), int(color[1]), int(color[2]))
+        sha = plugin.get("sha256", "")
+        if not (isinstance(sha, str) and len(sha) == 64
+                and all(c in "0123456789abcdef" for c in sha)):  # fmt: skip
+            sha = ""
         return cls(
             name=data["name"],
             params={k: float(v) for k, v in params.items()},
@@ -95,24 +112,43 @@ class PolicySpec:
             tier=str(plugin.get("tier", "compiled")),
             label=str(plugin.get("label", "") or data["name"]),
             color=rgb,
+            sha256=sha,
         )
 
+    @property
+    def digest(self) -> str:
+        """The sha256 (hex, or the 16 digits an older log's version holds) of the source
+        this spec ran with; "" when it names none (a built-in, a versioned package)."""
+        if self.sha256:
+            return self.sha256
+        tail = self.version.removeprefix("sha256:")
+        if tail != self.version and len(tail) >= 16 and all(c in "0123456789abcdef" for c in tail):
+            return tail
+        return ""
+
     def resolve(self) -> type[PolicyBase]:
-        """The policy class (importing the plug-in); PolicyError when it cannot be had."""
+        """The policy class (importing the plug-in); PolicyError when it cannot be had, and
+        :class:`~corraoi.errors.CodeChanged` when its source is not the one this spec names
+        (a run never goes under another code's hash)."""
         if self.builtin:
             cls = builtins().get(self.name)
             if cls is None:
                 raise PolicyError(f"policy {self.name}: not a built-in of corraoi {__version__}")
             return cls
+        expect = self.digest
         here = held(self.name, self.qualname)
         if here is not None:
+            found = registered_digest(here)
+            if expect and found and not found.startswith(expect):
+                raise CodeChanged(source_path(here), expect, found)
             return here
         qual = self.qualname
         if qual.startswith("file:"):
-            return resolve(qual[len("file:") :]).cls
-        if ":" in qual and not qual.startswith("plugin:"):
-            return resolve(qual).cls
-        return resolve(self.name).cls
+            return resolve(qual[len("file:") :], expect=expect).cls
+        res = resolve(qual if ":" in qual and not qual.startswith("plugin:") else self.name)
+        if expect and res.sha256 and not res.sha256.startswith(expect):
+            raise CodeChanged(source_path(res.cls), expect, res.sha256)
+        return res.cls
 
     def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
         """The parameters in the class's declared order (what compiled hooks receive)."""
@@ -145,6 +181,7 @@ def make_policy(token: str, **params: float | None) -> PolicySpec:
         tier=cls.tier,
         label=cls.label or policy_name(cls),
         color=cls.color,
+        sha256=res.sha256,
     )
 
 
@@ -168,19 +205,80 @@ def parse_policy_names(values: Iterable[str]) -> list[str]:
     return names
 
 
+def param_key(item: str, name: str, example: str = "c=1.5") -> str:
+    """The NAME (or POLICY.NAME) of one ``--param`` word, checked (PolicyError if not)."""
+    scope, _, pname = name.strip().rpartition(".")
+    if not pname.isidentifier() or (scope == "" and "." in name):
+        raise PolicyError(f"--param {item!r}: expected NAME=VALUE or POLICY.NAME=VALUE (e.g. "
+                          f"--param {example})")  # fmt: skip
+    return f"{scope.strip()}.{pname}" if scope.strip() else pname
+
+
 def parse_param_assignments(items: Iterable[str]) -> dict[str, float]:
-    """``--param NAME=VALUE`` words into a dict (later ones win); one clear line if malformed."""
+    """``--param NAME=VALUE`` (or ``POLICY.NAME=VALUE``, for one policy) words into a dict
+    (later ones win); one clear line if malformed."""
     out: dict[str, float] = {}
     for item in items:
         name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or not name.isidentifier():
-            raise PolicyError(f"--param {item!r}: expected NAME=VALUE (e.g. --param c=1.5)")
+        if not sep:
+            raise PolicyError(f"--param {item!r}: expected NAME=VALUE or POLICY.NAME=VALUE "
+                              "(e.g. --param c=1.5)")  # fmt: skip
+        key = param_key(item, name)
         try:
             value = float(text)
         except ValueError:
             raise PolicyError(f"--param {item!r}: {text.strip()!r} is not a number") from None
-        out[name] = value
+        out[key] = value
+    return out
+
+
+V = TypeVar("V")
+
+
+def assign_params(
+    tokens: Sequence[str],
+    classes: Mapping[str, type[PolicyBase]],
+    given: Mapping[str, V],
+    *,
+    warn: Callable[[str], None] | None = None,
+) -> dict[str, dict[str, V]]:
+    """Which listed policy (a ``--policy`` word in ``tokens``) takes which parameter.
+
+    ``NAME`` goes to every listed policy that declares it (an error if none does, so that a
+    typo is never ignored; a warning through ``warn`` when more than one does, since a value
+    meant for one changes the others too); ``POLICY.NAME`` to that policy only (its name or
+    its ``--policy`` word), and wins over ``NAME`` there."""
+    names = {t: policy_name(classes[t]) for t in tokens}
+    out: dict[str, dict[str, V]] = {t: {} for t in tokens}
+    scoped: list[tuple[str, str, V]] = []
+    for key, value in given.items():
+        scope, _, pname = key.rpartition(".")
+        if scope:
+            scoped.append((scope, pname, value))
+            continue
+        takers = [t for t in tokens if pname in classes[t].params]
+        if not takers:
+            users = sorted(n for n, cls in builtins().items() if pname in cls.params)
+            read_by = f" (it is read by {', '.join(users)})" if users else ""
+            raise PolicyError(f"parameter {pname} does not apply to "
+                              f"{', '.join(names.values())}{read_by}")  # fmt: skip
+        if len(takers) > 1 and warn is not None:
+            listed = ", ".join(names[t] for t in takers)
+            warn(f"--param {pname} applies to {listed}; to set it for one of them, write "
+                 f"--param POLICY.{pname}=... (e.g. --param {names[takers[-1]]}.{pname}=...)")
+        for t in takers:
+            out[t][pname] = value
+    for scope, pname, value in scoped:
+        match = [t for t in tokens if scope.lower() in (t.lower(), names[t].lower())]
+        if not match:
+            raise PolicyError(f"--param {scope}.{pname}: {scope} is not one of the listed "
+                              f"policies ({', '.join(names.values())})")  # fmt: skip
+        for t in match:
+            if pname not in classes[t].params:
+                known = ", ".join(classes[t].params) or "none"
+                raise PolicyError(f"--param {scope}.{pname}: policy {names[t]} has no "
+                                  f"parameter {pname!r} (it declares: {known})")  # fmt: skip
+            out[t][pname] = value
     return out
 
 
@@ -190,24 +288,15 @@ def make_policies(
     *,
     c: float | None = None,
     beta: float | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> list[PolicySpec]:
-    """Specs for ``--policy`` values; each parameter goes to every listed policy that declares
-    it, and is an error if none does (so that a typo is never silently ignored). ``c`` and
-    ``beta`` are the shorthands ``--c`` and ``--beta``."""
+    """Specs for ``--policy`` values, with the parameters :func:`assign_params` gives each.
+    ``c`` and ``beta`` are the shorthands ``--c`` and ``--beta``."""
     given = dict(params or {})
     for key, value in (("c", c), ("beta", beta)):
         if value is not None:
             given[key] = float(value)
     tokens = parse_policy_names(values)
     classes = {t: resolve(t).cls for t in tokens}
-    for pname in given:
-        if not any(pname in cls.params for cls in classes.values()):
-            users = sorted(n for n, cls in builtins().items() if pname in cls.params)
-            read_by = f" (it is read by {', '.join(users)})" if users else ""
-            raise PolicyError(
-                f"parameter {pname} does not apply to "
-                f"{', '.join(policy_name(c) for c in classes.values())}{read_by}"
-            )
-    return [
-        make_policy(t, **{k: v for k, v in given.items() if k in classes[t].params}) for t in tokens
-    ]
+    each = assign_params(tokens, classes, given, warn=warn)
+    return [make_policy(t, **each[t]) for t in tokens]

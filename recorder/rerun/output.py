@@ -5,22 +5,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
 
 from corraoi.engine.block import RunConfig
 from corraoi.errors import ViewerError, WriteError
-from recorder.paths import (
-    Sink,
-    check_output,
-    open_partial,
-    partial_path,
-    publish,
-    reason,
-    unlink_partial,
-)
+from corraoi.partial_file import PartialFile, reason
+from recorder.paths import Sink, made_again
 
 from .layout import one_run_blueprint
 from .names import new_recording
@@ -66,15 +59,17 @@ class RrdOutput(Sink):
         self.discard_on_abort = discard_on_abort
         self.closed = False
         self.finished = False
-        self._lock: BinaryIO | None = None
+        self._out: PartialFile | None = None
         sinks: list[Any] = []
         if rrd_path is not None:
-            self.path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording")
             # create (or truncate) the .partial file here, so that an unwritable place is
             # one clear error now rather than a log line from Rerun's writer thread later;
             # kept open (locked) until the file is in place, so no other writer takes it
-            self._lock = open_partial(self.path, overwrite=overwrite, what="Rerun recording")
-            sinks.append(rr.FileSink(str(partial_path(self.path))))
+            self._out = PartialFile(rrd_path, overwrite=overwrite, what="Rerun recording",
+                                    replaceable=made_again)  # fmt: skip
+            self.path = self._out.path
+            self._out.create()
+            sinks.append(rr.FileSink(str(self._out.partial)))
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
         self.recording = new_recording(config, recording_id=recording_id)
@@ -84,23 +79,16 @@ class RrdOutput(Sink):
                 default_blueprint=blueprint or one_run_blueprint(self.label, config),
             )
         except (OSError, RuntimeError, ValueError) as exc:
-            self._unlock()
-            if self.path is not None:
-                unlink_partial(self.path)
+            if self._out is not None:
+                self._out.discard()
             raise WriteError(f"{self._where()}: cannot start the Rerun recording: {exc}") from None
 
     def _where(self) -> str:
-        return str(partial_path(self.path)) if self.path is not None else str(self.viewer_url)
+        return str(self._out.partial) if self._out is not None else str(self.viewer_url)
 
     def _finish(self) -> str | None:
         """Flush and disconnect; returns the problem Rerun reported, if any."""
-        problem = None
-        try:
-            self.recording.flush(timeout_sec=self.flush_timeout)
-        except RuntimeError as exc:
-            problem = first_line(exc)
-        self.recording.disconnect()
-        return problem
+        return finish_recording(self.recording, self.flush_timeout)
 
     def close(self) -> Path | None:
         """Deliver everything, check the file and rename it into place. Safe twice.
@@ -113,12 +101,13 @@ class RrdOutput(Sink):
             return self.path if self.finished else None
         self.closed = True
         problem = self._finish()
-        if self.path is not None:
+        if self._out is not None:
             try:
-                self._check_file(problem)
-                publish(self.path, overwrite=self.overwrite)
-            finally:
-                self._unlock()
+                check_rrd(self._out.partial, problem)
+            except WriteError:
+                self._out.leave()
+                raise
+            self._out.publish()
             self.finished = True
         if problem and self.viewer_url is not None:
             raise ViewerError(f"viewer {self.viewer_url}: {problem}")
@@ -132,52 +121,56 @@ class RrdOutput(Sink):
         if not self.closed:
             self.closed = True
             self._finish()
-        self._unlock()
-        if self.path is None:
+        if self._out is None:
             return None
         if discard is None:
             discard = self.discard_on_abort
-        part = partial_path(self.path)
         if discard:
-            unlink_partial(self.path)
+            self._out.discard()
             return None
-        return part
+        return self._out.leave()
 
-    def _unlock(self) -> None:
-        """Close the locked handle of the ``.partial`` file (safe twice)."""
-        lock, self._lock = self._lock, None
-        if lock is not None:
+
+def finish_recording(recording: Any, timeout: float = 30.0) -> str | None:
+    """Flush and disconnect a recording; returns the problem Rerun reported, if any (its
+    file writer stopped by a full disk, say), instead of raising it."""
+    problem = None
+    try:
+        recording.flush(timeout_sec=timeout)
+    except RuntimeError as exc:
+        problem = first_line(exc)
+    try:
+        recording.disconnect()
+    except RuntimeError as exc:
+        problem = problem or first_line(exc)
+    return problem
+
+
+def check_rrd(part: Path, problem: str | None = None) -> None:
+    """Refuse to present a damaged .rrd as complete: it must be non-empty and read back to
+    its footer. ``problem``: what Rerun said while finishing it, if anything."""
+    why = None
+    try:
+        if part.stat().st_size == 0:
+            why = "the file is empty"
+    except OSError as exc:
+        why = f"the file is gone ({reason(exc)})"
+    if why is None:
+        import warnings
+
+        from rerun.chunk import RrdReader
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             try:
-                lock.close()
-            except OSError:
-                pass
-
-    def _check_file(self, problem: str | None) -> None:
-        """Refuse to present a damaged .rrd as complete: its footer must read back."""
-        assert self.path is not None
-        part = partial_path(self.path)
-        why = None
-        try:
-            if part.stat().st_size == 0:
-                why = "the file is empty"
-        except OSError as exc:
-            why = f"the file is gone ({reason(exc)})"
-        if why is None:
-            import warnings
-
-            from rerun.chunk import RrdReader
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                try:
-                    RrdReader(str(part)).store()
-                except Exception as exc:  # noqa: BLE001 - any failure means an unusable file
-                    why = problem or first_line(exc)
-        if why is not None:
-            raise WriteError(
-                f"{part}: Rerun could not write the whole recording ({why}; disk full?); "
-                f"the incomplete file is left as {part}"
-            )
+                RrdReader(str(part)).store()
+            except Exception as exc:  # noqa: BLE001 - any failure means an unusable file
+                why = problem or first_line(exc)
+    if why is not None:
+        raise WriteError(
+            f"{part}: Rerun could not write the whole recording ({why}; disk full?); "
+            f"the incomplete file is left as {part}"
+        )
 
 
-__all__ = ["RrdOutput", "first_line"]
+__all__ = ["RrdOutput", "check_rrd", "finish_recording", "first_line"]

@@ -35,7 +35,7 @@ from types import TracebackType
 from typing import Any
 
 from corraoi.errors import ViewerError, WriteError
-from recorder.paths import Sink, check_output
+from recorder.paths import Sink, check_output, made_again
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -114,7 +114,8 @@ class RerunWorker:
             raise ValueError("a Rerun recording needs an .rrd path, a viewer URL or both")
         path = None
         if rrd_path is not None:
-            path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording")
+            path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording",
+                                replaceable=made_again)  # fmt: skip
         self._busy = RemoteRecording(self, path)
         self._busy._send(("open", config, path, viewer_url, overwrite))
         return self._busy
@@ -223,7 +224,7 @@ class RemoteRecording(Sink):
 
 
 def _left(path: Path | None) -> str:
-    from recorder.paths import partial_path
+    from corraoi.partial_file import partial_path
 
     if path is None or not partial_path(path).exists():
         return ""

@@ -34,6 +34,8 @@ import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
+    Attachment,
+    AttachmentIndex,
     Channel,
     Chunk,
     ChunkIndex,
@@ -88,6 +90,7 @@ class ChunkWriter:
         self._offset = 0
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
         self._messages = 0
         self._start_time = 0
         self._end_time = 0
@@ -112,6 +115,19 @@ class ChunkWriter:
         record = b.end()
         self._metadata_indexes.append(
             MetadataIndex(offset=self._offset, length=len(record), name=name)
+        )
+        self._write(record)
+
+    def add_attachment(self, name: str, media_type: str, data: bytes) -> None:
+        """A file carried in the log (a plug-in's source): its bytes as they are, with
+        their CRC, indexed in the summary. No wall clock: its times are 0."""
+        b = RecordBuilder()
+        Attachment(create_time=0, log_time=0, name=name, media_type=media_type,
+                   data=data).write(b)  # fmt: skip
+        record = b.end()
+        self._attachment_indexes.append(
+            AttachmentIndex(offset=self._offset, length=len(record), log_time=0, create_time=0,
+                            data_size=len(data), name=name, media_type=media_type)  # fmt: skip
         )
         self._write(record)
 
@@ -238,7 +254,7 @@ class ChunkWriter:
             message_count=self._messages,
             schema_count=1,
             channel_count=1,
-            attachment_count=0,
+            attachment_count=len(self._attachment_indexes),
             metadata_count=len(self._metadata_indexes),
             chunk_count=len(self._chunk_indexes),
             message_start_time=self._start_time,
@@ -249,6 +265,7 @@ class ChunkWriter:
         group(Opcode.CHANNEL, [self._channel])
         group(Opcode.STATISTICS, [stats])
         group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
         group(Opcode.METADATA_INDEX, self._metadata_indexes)
         offset_start = summary_start + s.count
         for o in offsets:

@@ -18,7 +18,6 @@ from corraoi.model.theory import analyse
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
-from recorder.vocab import SLOT_FORMAT_VERSION as FORMAT_VERSION
 from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 
 if TYPE_CHECKING:  # types only: corraoi.engine.block's import circle stays out of this module
@@ -81,11 +80,12 @@ def slot_schema(config: RunConfig) -> dict[str, Any]:
             "uniqueItems": True,
         },
     }
+    version = config.format_version  # the run's own: the schema says what its metadata says
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "$id": f"urn:corraoi:slot-event:v{FORMAT_VERSION}",
+        "$id": f"urn:corraoi:slot-event:v{version}",
         "title": SCHEMA_NAME,
-        "description": f"One slot of a corraoi run ({FORMAT_NAME} version {FORMAT_VERSION}); "
+        "description": f"One slot of a corraoi run ({FORMAT_NAME} version {version}); "
         "arms and states are numbered from 1.",
         "type": "object",
         "properties": properties,

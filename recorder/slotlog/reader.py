@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Header, Metadata
+from mcap.records import Attachment, Header, Metadata
 
 from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import CorraoiError, LogError
@@ -26,6 +26,7 @@ from corraoi.locks import lock_holder
 from recorder.vocab import (
     MESSAGE_ENCODING,
     NS_PER_SLOT,
+    PROVENANCE_METADATA,
     RUN_END_METADATA,
     RUN_METADATA,
     SLOT_SCHEMA_NAME,
@@ -42,13 +43,7 @@ from recorder.walk import (
     open_mcap,
 )
 
-from .decode import (
-    check_agrees,
-    check_run_metadata,
-    decode_messages,
-    empty_block,
-    not_a_run_log,
-)
+from .decode import check_agrees, check_run_metadata, decode_messages, empty_block, not_a_run_log
 
 
 @dataclass
@@ -74,15 +69,17 @@ class RunLog:
     damage: str = ""
     #: PID of the process writing the file right now (it holds the writer's lock), if any.
     writer: int | None = None
+    #: The ``corraoi.provenance`` metadata ({} in an older log; Provenance.read parses it)
+    provenance: dict[str, str] = field(default_factory=dict)
+    #: (name, media type, bytes) of each file the log carries: each plug-in's source
+    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
 
     def __repr__(self) -> str:
-        return (
-            f"RunLog({str(self.path)!r}, {self.config.label}, "
-            f"{self.n_slots}/{self.config.horizon} slots, {self.status})"
-        )
+        return (f"RunLog({str(self.path)!r}, {self.config.label}, "
+                f"{self.n_slots}/{self.config.horizon} slots, {self.status})")  # fmt: skip
 
     @property
     def label(self) -> str:
@@ -99,17 +96,13 @@ class RunLog:
         if self.status == "complete":
             return f"complete: {self.n_slots} of {T} slots"
         if self.status == "failed":
-            return (
-                f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
-                f"{self.end.get('error', '(no message)')}"
-            )
+            return (f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
+                    f"{self.end.get('error', '(no message)')}")  # fmt: skip
         if self.status == "damaged":
             return f"damaged: {self.damage}; read {self.n_slots} of {T} slots before the damage"
         if self.status == "interrupted":
-            return (
-                f"cut short: the run was stopped after slot {self.n_slots} of {T} "
-                "(the file was finished properly)"
-            )
+            return (f"cut short: the run was stopped after slot {self.n_slots} of {T} "
+                    "(the file was finished properly)")  # fmt: skip
         if self.writer is not None:
             who = f"process {self.writer}" if self.writer else "another process"
             return (
@@ -232,6 +225,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         library = ""
         run_md: dict[str, str] | None = None
         end_md: dict[str, str] = {}
+        prov_md: dict[str, str] = {}
+        attachments: list[tuple[str, str, bytes]] = []
         channel_id = 0
         n_chunks = 0
         n_slots = 0
@@ -259,8 +254,13 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                     check_run_metadata(p, run_md, library)
                 elif item.name == RUN_END_METADATA:
                     end_md = dict(item.metadata)
+                elif item.name == PROVENANCE_METADATA:
+                    prov_md = dict(item.metadata)
                 elif item.name == SWEEP_METADATA:
                     sweep = True
+            elif kind == "attachment":
+                assert isinstance(item, Attachment)
+                attachments.append((item.name, item.media_type, bytes(item.data)))
             elif kind == "chunk":
                 assert isinstance(item, ChunkData)
                 if run_md is None:
@@ -304,10 +304,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {SLOT_TOPIC} channel with schema {SLOT_SCHEMA_NAME}")
-    try:
-        config = RunConfig.from_dict(json.loads(run_md["config"]))
-    except (CorraoiError, KeyError, TypeError, ValueError) as exc:
-        raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    config = _config(p, run_md)
     check_agrees(p, run_md, config)
     if n_slots > config.horizon:
         raise LogError(f"{p}: {n_slots} slots recorded for a horizon of {config.horizon}")
@@ -340,6 +337,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         n_chunks=n_chunks,
         damage=damage,
         writer=None if finished else lock_holder(p),
+        provenance=prov_md,
+        attachments=attachments,
         _channel_id=channel_id or 1,
         _data_end=data_end,
     )
@@ -354,6 +353,15 @@ def _strip_path(exc: LogError, p: Path) -> str:
     return text[len(prefix) :] if text.startswith(prefix) else text
 
 
+def _config(p: Path, run_md: dict[str, str]) -> RunConfig:
+    """The run configuration a log's metadata holds (LogError, one line, when unusable)."""
+    try:
+        return RunConfig.from_dict(json.loads(run_md["config"]))
+    except (CorraoiError, KeyError, TypeError, ValueError, AttributeError, RecursionError) as exc:
+        raise LogError(f"{p}: the run configuration in the log is unusable: "
+                       f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
+
+
 def _validate_chunk(
     chunk: ChunkData,
     run_md: dict[str, str] | None,
@@ -363,10 +371,7 @@ def _validate_chunk(
 ) -> int:
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
-    try:
-        config = RunConfig.from_dict(json.loads(run_md["config"]))
-    except (CorraoiError, KeyError, TypeError, ValueError) as exc:
-        raise LogError(f"{p}: the run configuration in the log is unusable: {exc}") from None
+    config = _config(p, run_md)
     part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 

@@ -13,6 +13,7 @@ with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 from typing import BinaryIO
@@ -22,19 +23,15 @@ from mcap.records import Channel, Schema
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
-from recorder.paths import (
-    Sink,
-    check_output,
-    open_partial,
-    partial_path,
-    publish,
-    reason,
-    unlink_partial,
-)
+from corraoi.partial_file import PartialFile, reason
+from corraoi.provenance import Provenance
+from recorder.paths import Sink
 from recorder.vocab import (
     MAX_SLOT,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
+    PLUGIN_MEDIA_TYPE,
+    PROVENANCE_METADATA,
     RUN_METADATA,
     SCHEMA_ENCODING,
     library_name,
@@ -46,6 +43,26 @@ from recorder.vocab import SLOT_TOPIC as TOPIC
 
 from .chunks import ChunkWriter
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes
+
+
+def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
+    """Whether a ``.partial`` left by a writer that stopped may be written over by a log of
+    ``config``: it is empty, or a corraoi slot log of the same run (its slots are what this
+    writer writes again), so that a killed ``record`` never blocks the next attempt."""
+
+    def same(part: Path) -> bool:
+        from corraoi.errors import LogError
+
+        from .reader import open_log
+
+        try:
+            if part.stat().st_size == 0:
+                return True
+            return bool(open_log(part, verify=False).config.to_dict() == config.to_dict())
+        except (LogError, OSError, ValueError):
+            return False
+
+    return same
 
 
 class McapSink(Sink):
@@ -65,6 +82,7 @@ class McapSink(Sink):
         overwrite: bool = False,
         flush_every: int = FLUSH_EVERY,
         fsync: bool = True,
+        provenance: Provenance | None = None,
     ) -> None:
         if flush_every < 1:
             raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
@@ -73,8 +91,13 @@ class McapSink(Sink):
                 f"horizon {config.horizon} is too long for an MCAP log (at most {MAX_SLOT} "
                 "slots, since log_time is t seconds in nanoseconds)"
             )
-        self.path: Path = check_output(path, overwrite=overwrite, what="MCAP log")
-        self.partial_path: Path = partial_path(self.path)
+        # what made the numbers: versions, backend, each plug-in's source as it ran (the
+        # plug-in resolved before any file is made: a refusal leaves nothing behind)
+        self.provenance = provenance or Provenance.of([config.policy], backend=config.streams)
+        self._out = PartialFile(path, overwrite=overwrite, what="MCAP log",
+                                replaceable=same_run_partial(config))  # fmt: skip
+        self.path: Path = self._out.path
+        self.partial_path: Path = self._out.partial
         self.config = config
         self.overwrite = overwrite
         self.flush_every = int(flush_every)
@@ -85,7 +108,7 @@ class McapSink(Sink):
         self._torn = False
         self._last: SlotBlock | None = None
         self._encoder = BlockEncoder(config.instance.K)
-        self._file: BinaryIO = open_partial(self.path, overwrite=overwrite, what="MCAP log")
+        self._file: BinaryIO = self._out.create().file
         try:
             self._writer = ChunkWriter(
                 self._file,
@@ -103,6 +126,9 @@ class McapSink(Sink):
             )
             self._writer.start()
             self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
+            self._writer.add_metadata(PROVENANCE_METADATA, self.provenance.metadata())
+            for src in self.provenance.sources:
+                self._writer.add_attachment(src.name, PLUGIN_MEDIA_TYPE, src.data)
             self._file.flush()
         except OSError as exc:
             self._torn = True
@@ -165,10 +191,8 @@ class McapSink(Sink):
         if self._torn:  # a write was cut off half-way: keep what is surely whole
             return self.abort() or self.partial_path
         self._write_end(error=None)
-        try:  # renamed while still open: the lock on it is held until it is in place
-            publish(self.path, overwrite=self.overwrite)
-        finally:
-            self._close_file()
+        # synced by _write_end; renamed while still open: the lock is held until it is in place
+        self._out.publish(sync=False)
         self.finished = True
         return self.path
 
@@ -215,18 +239,16 @@ class McapSink(Sink):
                     self._writer.flush()
             except OSError:
                 pass
-            self._close_file()
             if self.slots == 0 and not self._torn:
-                unlink_partial(self.path)
+                self._out.discard()
+            self._close_file()
         if self.slots == 0 and not self.partial_path.exists():
             return None
         return self.partial_path
 
     def _close_file(self) -> None:
-        try:
-            self._file.close()
-        except OSError:
-            pass
+        """Keep the ``.partial`` file as it is and release its lock (safe twice)."""
+        self._out.leave()
 
     def _write_error(self, exc: OSError) -> WriteError:
         return WriteError(

@@ -1,8 +1,9 @@
 """The sweep log: the aggregated curves of a sweep, streamed to MCAP as the sweep runs.
 
 One JSON message per (policy, checkpoint slot) on :data:`SWEEP_TOPIC` (schema
-:data:`SWEEP_SCHEMA_NAME`), in the order the sweep produces them: all checkpoints of the first
-policy, then the next policy, ... The configuration of the sweep (instance, policies,
+:data:`SWEEP_SCHEMA_NAME`), in log-time order: at each checkpoint slot, every policy in the
+grid's order (MCAP checkers, ``mcap``'s and ``rerun mcap check``, want log times that never
+go back). The configuration of the sweep (instance, policies,
 runs, horizon, seed, checkpoints, version) is stored in the metadata record
 :data:`SWEEP_METADATA`, so a figure can be redrawn from the file alone.
 ``docs/log-format.md`` (section 3) is the human description; this module is the code.
@@ -28,14 +29,18 @@ from mcap.writer import CompressionType, Writer
 
 from corraoi._version import __version__
 from corraoi.errors import WriteError
-from recorder.paths import Sink, open_partial, partial_path, publish, reason
+from corraoi.partial_file import PartialFile, reason
+from recorder.paths import Sink
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
 # The sweep log's names (recorder.vocab)
 from recorder.vocab import (
     MCAP_INDEX_TYPES,
+    MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
+    PLUGIN_MEDIA_TYPE,
+    PROVENANCE_METADATA,
     SCHEMA_ENCODING,
     SWEEP_END_METADATA,
     SWEEP_FLUSH_EVERY,
@@ -54,6 +59,7 @@ from .read import sweep_arms
 # corraoi.experiments.montecarlo imports the numba engine: readers need not pay for it
 if TYPE_CHECKING:
     from corraoi.experiments.montecarlo import SweepPoint
+    from corraoi.provenance import Provenance
 
 
 # ---------------------------------------------------------------------------- format
@@ -151,6 +157,7 @@ class SweepMcapSink(Sink):
         overwrite: bool = True,
         flush_every: int = SWEEP_FLUSH_EVERY,
         fsync: bool = True,
+        provenance: Provenance | None = None,
     ) -> None:
         if flush_every < 1:
             raise ValueError(f"flush_every must be >= 1, got {flush_every}")
@@ -166,17 +173,23 @@ class SweepMcapSink(Sink):
         self._count = 0
         self._pending = 0
         self._last_t: dict[str, int] = {}
-        self._policy: str | None = None
+        self._time = 0  # the last message's log time: they never go back
         self._closed = False
         metadata = sweep_metadata(config, flush_every=self.flush_every)
-        self._stream: BinaryIO = open_partial(self.path, overwrite=overwrite, what="sweep log")
+        sources = provenance.sources if provenance is not None else ()
+        self._out = PartialFile(self.path, overwrite=overwrite, what="sweep log", sweep=True)
+        self._stream: BinaryIO = self._out.create().file
         try:
-            self._writer = Writer(
-                self._stream, compression=CompressionType.ZSTD, index_types=MCAP_INDEX_TYPES
-            )
+            index = MCAP_INDEX_TYPES_WITH_ATTACHMENTS if sources else MCAP_INDEX_TYPES
+            self._writer = Writer(self._stream, compression=CompressionType.ZSTD,
+                                  index_types=index)  # fmt: skip
             library = library_name(str(config.get("version", __version__)))
             self._writer.start(profile="", library=library)
             self._writer.add_metadata(SWEEP_METADATA, metadata)
+            if provenance is not None:  # what made the numbers, each plug-in's source too
+                self._writer.add_metadata(PROVENANCE_METADATA, provenance.metadata())
+            for src in sources:
+                self._writer.add_attachment(0, 0, src.name, PLUGIN_MEDIA_TYPE, src.data)
             schema_id = self._writer.register_schema(
                 name=SWEEP_SCHEMA_NAME,
                 encoding=SCHEMA_ENCODING,
@@ -190,13 +203,13 @@ class SweepMcapSink(Sink):
             )
             self._writer.flush()
         except OSError as exc:
-            self._stream.close()
+            self._out.leave()
             raise WriteError(f"{self.part}: cannot write the sweep log: {reason(exc)}") from None
 
     @property
     def part(self) -> Path:
         """Where the file lives until it is closed."""
-        return partial_path(self.path)
+        return self._out.partial
 
     @property
     def count(self) -> int:
@@ -217,6 +230,9 @@ class SweepMcapSink(Sink):
             raise ValueError(
                 f"sweep point {point.policy}: t must increase, got t={t} after t={last}"
             )
+        if t * NS_PER_SLOT < self._time:
+            raise ValueError(f"sweep point {point.policy}: t={t} after a point at "
+                             f"t={self._time // NS_PER_SLOT} (points come in slot order)")
         for name in ("regret_mean", "estimator_mean"):
             if not math.isfinite(getattr(point, name)):
                 raise ValueError(f"sweep point {point.policy} t={t}: {name} is not finite")
@@ -239,16 +255,14 @@ class SweepMcapSink(Sink):
         return orjson.dumps({k: v for k, v in message.items() if v is not None})
 
     def write(self, point: SweepPoint) -> None:
-        """Append one point; flushes a chunk every ``flush_every`` points and per policy."""
+        """Append one point (in slot order: log times never go back); flushes a chunk every
+        ``flush_every`` points."""
         if self._closed:
             raise ValueError(f"{self.path}: the sweep log is closed")
         data = self.encode(point)
         try:
-            if self._policy is not None and point.policy != self._policy:
-                self._flush()  # the previous policy's curve is complete: keep it
-            self._policy = point.policy
             self._count += 1
-            log_time = int(point.t) * NS_PER_SLOT
+            log_time = self._time = int(point.t) * NS_PER_SLOT
             self._writer.add_message(
                 self._channel,
                 log_time=log_time,
@@ -284,22 +298,25 @@ class SweepMcapSink(Sink):
             if self._fsync:
                 os.fsync(self._stream.fileno())
         except OSError as exc:
+            self._out.leave()
             raise WriteError(f"{self.part}: cannot finish the sweep log: {reason(exc)}") from None
-        finally:
-            self._stream.close()
 
     def close(self) -> None:
-        """Finish the file and rename it into place. Safe to call twice."""
+        """Finish the file and rename it into place (while its lock is held). Safe to call
+        twice."""
         if self._closed:
             return
         self._finish("complete")
-        publish(self.path, overwrite=self._overwrite)
+        self._out.publish(sync=False)  # synced by _finish
 
     def abort(self) -> None:
         """Finish the file as interrupted and leave it at ``<path>.partial``."""
         if self._closed:
             return
-        self._finish("interrupted")
+        try:
+            self._finish("interrupted")
+        finally:
+            self._out.leave()
 
 
 def _opt(v: float | None) -> float | None:

@@ -20,7 +20,7 @@ import orjson
 from mcap.records import Channel, Header, Message, Metadata, Schema
 
 from corraoi.errors import LogError, SweepLogError
-from recorder.paths import PARTIAL_SUFFIX, partial_path, reason
+from corraoi.partial_file import PARTIAL_SUFFIX, partial_path, reason
 from recorder.vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
 from recorder.vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
 from recorder.vocab import SWEEP_END_METADATA as END_METADATA
@@ -202,7 +202,7 @@ def _build(
     try:
         config = json.loads(meta["config"])
         K = sweep_arms(config)
-    except (KeyError, ValueError) as exc:
+    except (KeyError, ValueError, TypeError, AttributeError, RecursionError) as exc:
         raise SweepLogError(f"{p}: the sweep metadata holds no valid config ({exc})") from None
     try:
         rows = orjson.loads(b"[" + b",".join(payloads) + b"]")

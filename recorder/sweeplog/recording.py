@@ -18,7 +18,6 @@ row ids and the blueprint's ids are time-based or random).
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,8 +25,10 @@ import rerun as rr
 
 from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
-from recorder.paths import Sink, partial_path, publish, reason
+from corraoi.partial_file import PartialFile, reason
+from recorder.paths import Sink
 from recorder.rerun.names import TIMELINE
+from recorder.rerun.output import check_rrd, finish_recording, first_line
 from recorder.style import (
     MARKER_AOI_AWARE,
     WIDTH_AOI_AWARE,
@@ -112,8 +113,7 @@ class SweepRerunSink(Sink):
         self._styled: set[str] = set()
         self._colors = config_colors(config)  # a policy's own colour, where it has one
         self._closed = False
-        self._owned_path: Path | None = None
-        self._overwrite = True
+        self._owned: PartialFile | None = None
         recording.set_log_time_enabled(False)
         for name in policy_names(config):
             self._style(name)
@@ -131,19 +131,19 @@ class SweepRerunSink(Sink):
     ) -> SweepRerunSink:
         """A sink that owns its recording: saved to ``<path>.partial`` with the default
         blueprint, disconnected and renamed to ``path`` on :meth:`close`."""
-        target = Path(path)
+        out = PartialFile(path, overwrite=overwrite, what="sweep recording", sweep=True).create()
         rec = rr.RecordingStream(
             application_id, recording_id=recording_id or sweep_recording_id(config)
         )
         rec.set_log_time_enabled(False)
         try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            rec.save(partial_path(target), default_blueprint=sweep_blueprint(config))
-        except OSError as exc:
-            raise WriteError(f"{partial_path(target)}: cannot write: {reason(exc)}") from None
+            rec.save(out.partial, default_blueprint=sweep_blueprint(config))
+        except (OSError, RuntimeError) as exc:
+            out.discard()
+            why = reason(exc) if isinstance(exc, OSError) else first_line(exc)
+            raise WriteError(f"{out.partial}: cannot write: {why}") from None
         sink = cls(rec, config, flush_every=flush_every)
-        sink._owned_path = target
-        sink._overwrite = overwrite
+        sink._owned = out
         return sink
 
     # ------------------------------------------------------------------ styling
@@ -268,12 +268,27 @@ class SweepRerunSink(Sink):
         if self._closed:
             return
         self._closed = True
-        self.flush()
-        self.recording.flush()
-        if self._owned_path is not None:
-            self.recording.disconnect()
-            if publish_file:
-                publish(self._owned_path, overwrite=self._overwrite)
+        out = self._owned
+        if out is None:
+            self.flush()
+            self.recording.flush()
+            return
+        try:  # Rerun's file writer stopped (a full disk): one line, never a traceback
+            self.flush()
+        except RuntimeError as exc:
+            problem: str | None = first_line(exc)
+        else:
+            problem = None
+        problem = finish_recording(self.recording) or problem
+        if not publish_file:
+            out.leave()
+            return
+        try:
+            check_rrd(out.partial, problem)  # never a cut-short file under the final name
+        except WriteError:
+            out.leave()
+            raise
+        out.publish()
 
 
 __all__ = [

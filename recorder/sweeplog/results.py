@@ -22,8 +22,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import ResultsError, WriteError
-from recorder.paths import partial_path, reason
+from corraoi.errors import ResultsError
+from corraoi.experiments.backends import sweep_backend
+from corraoi.partial_file import PartialFile, partial_path
+from corraoi.provenance import Provenance
 from recorder.vocab import SWEEP_METADATA
 
 if TYPE_CHECKING:
@@ -82,25 +84,23 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     """Compact a grid's finished chunks into ``path`` (``results.parquet``), a dataset
     partitioned by instance: ``instance=<name>/part-0.parquet``, rows in grid order (cell,
     checkpoint, run). Written to ``<path>.partial`` and swapped in when complete."""
-    import shutil
     from urllib.parse import quote
 
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    target = Path(path)
-    tmp = partial_path(target)
-    if tmp.exists():
-        shutil.rmtree(tmp) if tmp.is_dir() else tmp.unlink()
+    out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True)
     full = results_schema()
-    schema = pa.schema([f for f in full if f.name != "instance"],
-                       metadata=results_metadata({**grid.to_dict(), "version": __version__}))
+    metadata = results_metadata({**grid.to_dict(), "version": __version__})
+    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
+    metadata["provenance"] = json.dumps(prov.to_dict(), sort_keys=True)  # what made the rows
+    schema = pa.schema([f for f in full if f.name != "instance"], metadata=metadata)
     by_instance: dict[str, list[Any]] = {}
     for cell in grid.cells:
         by_instance.setdefault(cell.instance.name, []).append(cell)
-    try:
+    with out:  # published when whole; on an error discarded (a failed write: one line)
         for name, cells in by_instance.items():
-            folder = tmp / f"instance={quote(name, safe='')}"
+            folder = out.partial / f"instance={quote(name, safe='')}"
             folder.mkdir(parents=True)
             with pq.ParquetWriter(str(folder / "part-0.parquet"), schema,
                                   compression="zstd") as writer:  # fmt: skip
@@ -125,14 +125,7 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
                         pa.array(best.T.reshape(-1).astype(np.int64)),
                     ]
                     writer.write_table(pa.Table.from_arrays(cols, schema=schema))
-        if target.is_dir():
-            shutil.rmtree(target)
-        elif target.exists():
-            target.unlink()
-        os.replace(tmp, target)
-    except OSError as exc:
-        raise WriteError(f"{tmp}: cannot write the results: {reason(exc)}") from None
-    return target
+    return out.path
 
 
 # ---------------------------------------------------------------------------- reading
@@ -259,7 +252,9 @@ class SweepData:
             return
         try:
             groups = json.loads(manifest.read_text(encoding="utf-8")).get("groups", {})
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError, AttributeError):
+            return
+        if not isinstance(groups, dict):
             return
         entry = groups.get(self.folder.name)
         if isinstance(entry, dict) and "instance" in entry:
@@ -292,8 +287,9 @@ class SweepData:
             return None
         try:
             out: dict[str, Any] = json.loads(f.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ResultsError(f"{f}: cannot read the summary ({exc})") from None
+        except (OSError, ValueError, RecursionError) as exc:
+            why = " ".join(str(exc).split())[:120] or type(exc).__name__
+            raise ResultsError(f"{f}: cannot read the summary ({why})") from None
         return out
 
     @cached_property
@@ -315,15 +311,19 @@ class SweepData:
         out: str | os.PathLike[str] = "runs",
         rrd: bool = False,
         overwrite: bool = False,
+        kept_code: bool = False,
+        allow_changed_code: bool = False,
     ) -> list[Any]:
         """Record runs of this sweep slot by slot, as ``corraoi record --from`` does: ``run``
         an index or worst/best/median/widest-gap; ``policy`` restricts to the sweep's
         policies or adds others on the same run; ``cell`` selects cells by label. Writes
         ``out/<folder>-<instance>-<label>-run<N>[-<choice>].mcap`` (and ``.rrd`` with
         ``rrd``); returns each run's ``RecordOutcome`` (``.mcap``: what ``corraoi.load``
-        reads back)."""
+        reads back). A plug-in edited since the sweep is refused unless ``kept_code`` (run
+        the folder's copy) or ``allow_changed_code``; each run must give the sweep's regret
+        again (corraoi.experiments.drill.SweepMismatch where it does not)."""
         from corraoi.experiments.drill import choose
-        from corraoi.face.recording import record_run
+        from corraoi.face.recording import record_drill
         from corraoi.policies import make_policies
         from corraoi.text import safe_name
 
@@ -332,16 +332,17 @@ class SweepData:
         cells = (cell,) if isinstance(cell, str) else tuple(cell)
         from recorder.slotlog.trace import states_of_log
 
-        drills = choose(self.folder, run, cells=cells, policies=specs,
+        drills = choose(self.folder, run, cells=cells, policies=specs, kept_code=kept_code,
+                        allow_changed_code=allow_changed_code,
                         trace_readers={".mcap": states_of_log})  # fmt: skip
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         outcomes = []
         for d in drills:
             stem = folder / safe_name(d.name)
-            outcomes.append(record_run(d.config, Path(f"{stem}.mcap"),
-                                       rrd=Path(f"{stem}.rrd") if rrd else None,
-                                       overwrite=overwrite))  # fmt: skip
+            outcomes.append(record_drill(d, Path(f"{stem}.mcap"),
+                                         rrd=Path(f"{stem}.rrd") if rrd else None,
+                                         overwrite=overwrite))  # fmt: skip
         return outcomes
 
     @cached_property
