@@ -7,7 +7,7 @@ and viewer packages build on them. Heavy pieces are imported lazily by the CLI, 
 
 from typing import TYPE_CHECKING, Any
 
-from . import _signals
+from corraoi import _signals
 
 if _signals.is_cli():  # the command line: Ctrl-C at start-up is one line, exit 130
     _signals.install()

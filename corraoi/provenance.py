@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from corraoi.policies.loading import loaded_source
+
 from ._version import __version__
-from .policies.loading import loaded_source
 
 _HERE = Path(__file__).resolve().parent
 #: The sources that decide what the engines compute, slot for slot (their hash is logged).

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from corraoi.errors import UsageError
-from corraoi.partial_file import PartialFile
+from corraoi.files.partial import PartialFile
 
 from .paths import made_again
 

@@ -1,6 +1,6 @@
 """Output files that are never presented as complete before they are, and never shared.
 
-Every writer of the recorder goes through :class:`~corraoi.locks.PartialFile` (the core's,
+Every writer of the recorder goes through :class:`~corraoi.files.locks.PartialFile` (the core's,
 since the sweep folder's own files use it too): the target checked, ``<path>.partial``
 created under its writer's lock, then published (renamed into place), discarded or left
 (a log finished as failed or interrupted, readable by ``corraoi info`` and ``recover``).
@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from typing_extensions import Self
 
-from corraoi.partial_file import check_target
+from corraoi.files.partial import check_target
 
 #: The check of an output path before anything runs (the first step of PartialFile).
 check_output = check_target

@@ -16,11 +16,12 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from corraoi import limits, partial_file
+from corraoi import limits
 from corraoi.cli import main
 from corraoi.engine.block import RunConfig
 from corraoi.engine.simulation import simulate_run
-from corraoi.locks import lock_holder
+from corraoi.files import partial as partial_file
+from corraoi.files.locks import lock_holder
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 from corraoi.text import safe_name, safe_text
@@ -211,7 +212,7 @@ def test_force_never_touches_a_file_another_writer_holds(tmp_path):
 def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path):
     part = tmp_path / "run.mcap.partial"
     code = (
-        "import sys, time; from corraoi.partial_file import PartialFile;"
+        "import sys, time; from corraoi.files.partial import PartialFile;"
         f"f = PartialFile({str(tmp_path / 'run.mcap')!r}).create();"
         "print('locked', flush=True); time.sleep(60)"
     )

@@ -26,7 +26,7 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.engine.block import SlotBlock
-from corraoi.partial_file import partial_path
+from corraoi.files.partial import partial_path
 from recorder.slotlog.reader import _slice, open_log
 
 PYTHON = sys.executable

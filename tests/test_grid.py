@@ -280,7 +280,7 @@ def test_library_sweep_with_a_client(tmp_path: Path):
 
 
 def test_a_folder_another_sweep_is_writing_is_refused_naming_it(tmp_path: Path):
-    from corraoi.locks import folder_lock
+    from corraoi.files.locks import folder_lock
 
     out = tmp_path / "busy"
     out.mkdir()

@@ -1,4 +1,4 @@
-"""PartialFile (corraoi/partial_file.py): the one protocol every writer follows -- the target
+"""PartialFile (corraoi/files/partial.py): the one protocol every writer follows -- the target
 checked, ``<path>.partial`` created under its lock, then published, left or discarded -- and
 what it does with foreign files under the names it writes."""
 
@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from corraoi import partial_file
 from corraoi.errors import OutputError, WriteError
-from corraoi.locks import lock_holder
-from corraoi.partial_file import PartialFile, partial_path
+from corraoi.files import partial as partial_file
+from corraoi.files.locks import lock_holder
+from corraoi.files.partial import PartialFile, partial_path
 
 
 def test_publish_renames_the_finished_file_into_place(tmp_path: Path):
@@ -31,7 +31,7 @@ def test_publish_renames_the_finished_file_into_place(tmp_path: Path):
 
 def test_a_second_writer_is_refused_naming_the_holder(tmp_path: Path):
     target = tmp_path / "a.bin"
-    code = ("import time; from corraoi.partial_file import PartialFile;"
+    code = ("import time; from corraoi.files.partial import PartialFile;"
             f"f = PartialFile({str(target)!r}).create(); print('locked', flush=True); "
             "time.sleep(60)")  # fmt: skip
     holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)

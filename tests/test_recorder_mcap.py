@@ -11,10 +11,10 @@ import pytest
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
-from corraoi import partial_file
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import OutputError, WriteError
-from corraoi.partial_file import partial_path
+from corraoi.files import partial as partial_file
+from corraoi.files.partial import partial_path
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 from recorder.vocab import NS_PER_SLOT

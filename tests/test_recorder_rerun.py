@@ -13,7 +13,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 
 from corraoi.engine.block import SlotBlock  # noqa: E402
 from corraoi.errors import OutputError  # noqa: E402
-from corraoi.partial_file import partial_path  # noqa: E402
+from corraoi.files.partial import partial_path  # noqa: E402
 from recorder.rerun.layout import one_run_blueprint  # noqa: E402
 from recorder.rerun.names import new_recording, run_path  # noqa: E402
 from recorder.rerun.output import RrdOutput  # noqa: E402

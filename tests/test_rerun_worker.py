@@ -18,8 +18,8 @@ import pytest
 from corraoi.engine.block import RunConfig
 from corraoi.errors import OutputError, WriteError
 from corraoi.face.recording import record_run
+from corraoi.files.partial import partial_path
 from corraoi.model.instance import load_instance
-from corraoi.partial_file import partial_path
 from corraoi.policies import make_policies
 from recorder.rerun.worker import RerunWorker
 from recorder.slotlog.reader import open_log

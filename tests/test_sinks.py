@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import recorder
-from corraoi.partial_file import partial_path
+from corraoi.files.partial import partial_path
 from recorder.paths import Sink
 
 

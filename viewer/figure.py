@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from corraoi.errors import FigureUnavailable, UsageError
-from corraoi.partial_file import PartialFile
+from corraoi.files.partial import PartialFile
 from corraoi.policies import RGB
 from recorder.style import (
     DASH_AOI_AWARE,

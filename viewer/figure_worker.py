@@ -84,7 +84,7 @@ class FigureWorker:
         if self._proc.is_alive():
             self._proc.kill()
             self._proc.join(1.0)
-        from corraoi.partial_file import partial_path
+        from corraoi.files.partial import partial_path
 
         partial_path(out).unlink(missing_ok=True)  # a drawing cut short
 
@@ -97,7 +97,7 @@ class FigureWorker:
         if self._proc.is_alive():
             self._proc.kill()
         self._proc.join(1.0)
-        from corraoi.partial_file import partial_path
+        from corraoi.files.partial import partial_path
 
         for _, out in self._pending:  # a drawing cut short
             partial_path(out).unlink(missing_ok=True)

@@ -161,7 +161,7 @@ def sweep_info(folder: Path) -> dict[str, Any]:
     Reads the JSON files only, so that it stays as quick as ``info`` of a log."""
     from corraoi.experiments.drill import sweep_root
     from corraoi.experiments.folder import group_dirs
-    from corraoi.sweep_code import read_manifest_dict
+    from corraoi.experiments.kept_code import read_manifest_dict
 
     root, grid, only = sweep_root(folder, option="")
     manifest = read_manifest_dict(root)  # the grid read above is checked; the rest is shown

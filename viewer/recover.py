@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
-from corraoi.partial_file import PARTIAL_SUFFIX, PartialFile, partial_path
+from corraoi.files.partial import PARTIAL_SUFFIX, PartialFile, partial_path
 
 from .runs import require_slots
 

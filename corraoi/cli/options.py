@@ -234,7 +234,7 @@ def output_option(
 
 def code_options(func: F) -> F:
     """``--kept-code`` and ``--allow-changed-code``: what runs when a plug-in's source is not
-    the one the sweep ran (corraoi.sweep_code); without either, that is refused."""
+    the one the sweep ran (corraoi.experiments.kept_code); without either, that is refused."""
     func = click.option(
         "--allow-changed-code", "allow_changed_code", is_flag=True,
         help="With --from: record a plug-in whose source changed since the sweep with its "

@@ -130,7 +130,7 @@ def _record_one(plan: Plan, result: Result, outlets: Outlets, stop: Stop, bar: A
     try:
         return _record_into(plan, result, outlets, stop, bar, start, compiled_before)
     except PolicyRuntimeError as exc:
-        from corraoi.partial_file import partial_path
+        from corraoi.files.partial import partial_path
 
         where = partial_path(plan.mcap)
         left = (f"; the log is left as {where}, marked failed" if where.exists()

@@ -141,7 +141,7 @@ def sweep(
         if not resume or out is None:
             raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
                               "of its plug-ins run)")  # fmt: skip
-        from corraoi.sweep_code import use_kept_code
+        from corraoi.experiments.kept_code import use_kept_code
 
         use_kept_code(out)  # before the grid is built: its plug-ins load from the copies
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}

@@ -216,7 +216,7 @@ def _sums(folder: Path, modname: str) -> dict[str, str]:
 
 def _write_sums(folder: Path, modname: str) -> None:
     """Record the sha256 of every file numba cached for a kernel just compiled."""
-    from corraoi.partial_file import PartialFile
+    from corraoi.files.partial import PartialFile
 
     data = json.dumps(_sums(folder, modname), sort_keys=True).encode()
     PartialFile.write_bytes(_sums_file(folder, modname), data, what="kernel cache checksums")

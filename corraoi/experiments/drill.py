@@ -21,16 +21,16 @@ from corraoi.engine.block import RunConfig
 from corraoi.errors import ConfigError, DamagedPart
 from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
-from corraoi.sweep_code import (
+
+from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
+from .grid import Cell, Grid
+from .kept_code import (
     changed_note,
     check_code,
     current_spec,
     read_manifest_dict,
     use_kept_code,
 )
-
-from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
-from .grid import Cell, Grid
 from .notable import CHOICES, notable_runs, pick_pair, well_formed
 
 
@@ -129,8 +129,8 @@ def choose(
     (a trace channel's file is read again).
 
     A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
-    hashes, the way out; :mod:`corraoi.sweep_code`), unless ``kept_code`` (the sweep's copy
-    runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    hashes, the way out; :mod:`corraoi.experiments.kept_code`), unless ``kept_code`` (the
+    sweep's copy runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
     :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
     """
     root, grid, group = sweep_root(path)

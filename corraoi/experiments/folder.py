@@ -22,9 +22,9 @@ import numpy as np
 
 from corraoi._version import __version__
 from corraoi.errors import ConfigError, DamagedPart
-from corraoi.partial_file import PartialFile
+from corraoi.files.guard import MANIFEST_FORMAT
+from corraoi.files.partial import PartialFile
 from corraoi.stats import Moments
-from corraoi.sweep_guard import MANIFEST_FORMAT
 
 from .grid import Cell, Chunk, Grid
 
@@ -223,7 +223,8 @@ def write_manifest(out: Path, grid: Grid, status: str,
 
 
 def write_text(path: Path, text: str, what: str = "file") -> None:
-    """Write ``path`` through the ``.partial`` protocol (:class:`~corraoi.locks.PartialFile`)."""
+    """Write ``path`` through the ``.partial`` protocol
+    (:class:`~corraoi.files.partial.PartialFile`)."""
     PartialFile.write_bytes(path, text.encode(), overwrite=True, what=what, sweep=True)
 
 

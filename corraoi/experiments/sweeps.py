@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from corraoi.errors import ConfigError, DamagedPart
-from corraoi.sweep_code import check_code, keep_sources, kept_copy, read_manifest_dict
 
 from . import backends
 from .folder import (
@@ -49,6 +48,7 @@ from .folder import (
     write_text,
 )
 from .grid import Cell, Chunk, Grid
+from .kept_code import check_code, keep_sources, kept_copy, read_manifest_dict
 from .summary import group_summary, summary_markdown
 
 
@@ -158,7 +158,7 @@ def sweep(
     folder = Path(out) if out is not None else None
     with ExitStack() as stack:
         if folder is not None:
-            from corraoi.locks import folder_lock
+            from corraoi.files.locks import folder_lock
 
             _check_parent(folder)
             folder.mkdir(parents=True, exist_ok=True)
@@ -281,7 +281,7 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
     write_manifest(folder, grid, "running", provenance_entry(folder, prov))  # first: resumable
     keep_sources(folder, prov)
     (folder / PARTS).mkdir(exist_ok=True)
-    from corraoi.locks import lock_holder
+    from corraoi.files.locks import lock_holder
 
     for stale in (folder / PARTS).glob("*.partial"):  # parts a killed sweep left half-written
         if stale.is_file() and lock_holder(stale) is None:
@@ -300,7 +300,7 @@ def folder_provenance(grid: Grid) -> Any:
 
 def provenance_entry(folder: Path, prov: Any) -> dict[str, Any]:
     """The manifest's ``provenance``: :func:`folder_provenance` with where the folder keeps
-    the copy of each plug-in's source (corraoi.sweep_code)."""
+    the copy of each plug-in's source (corraoi.experiments.kept_code)."""
     return {**prov.to_dict(), "plugins": [{**s.to_dict(), "copy": kept_copy(s)}
                                           for s in prov.sources]}  # fmt: skip
 
@@ -309,7 +309,7 @@ def _clear(folder: Path, old: Grid | None) -> None:
     """Remove an earlier sweep's files (only with --force); a file another process is
     writing right now is never touched (nothing is removed then)."""
     from corraoi.errors import OutputError
-    from corraoi.locks import lock_holder
+    from corraoi.files.locks import lock_holder
 
     for f in sorted(folder.rglob("*")):
         holder = lock_holder(f) if f.is_file() else None

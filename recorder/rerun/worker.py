@@ -224,7 +224,7 @@ class RemoteRecording(Sink):
 
 
 def _left(path: Path | None) -> str:
-    from corraoi.partial_file import partial_path
+    from corraoi.files.partial import partial_path
 
     if path is None or not partial_path(path).exists():
         return ""

@@ -22,7 +22,7 @@ from mcap.records import Attachment, Header, Metadata
 
 from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import CorraoiError, LogError
-from corraoi.locks import lock_holder
+from corraoi.files.locks import lock_holder
 from recorder.vocab import (
     MESSAGE_ENCODING,
     NS_PER_SLOT,

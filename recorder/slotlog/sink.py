@@ -23,7 +23,7 @@ from mcap.records import Channel, Schema
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
-from corraoi.partial_file import PartialFile, reason
+from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
 from recorder.paths import Sink
 from recorder.vocab import (

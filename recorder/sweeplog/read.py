@@ -20,7 +20,7 @@ import orjson
 from mcap.records import Channel, Header, Message, Metadata, Schema
 
 from corraoi.errors import LogError, SweepLogError
-from corraoi.partial_file import PARTIAL_SUFFIX, partial_path, reason
+from corraoi.files.partial import PARTIAL_SUFFIX, partial_path, reason
 from recorder.vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
 from recorder.vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
 from recorder.vocab import SWEEP_END_METADATA as END_METADATA

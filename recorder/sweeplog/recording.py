@@ -25,7 +25,7 @@ import rerun as rr
 
 from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
-from corraoi.partial_file import PartialFile, reason
+from corraoi.files.partial import PartialFile, reason
 from recorder.paths import Sink
 from recorder.rerun.names import TIMELINE
 from recorder.rerun.output import check_rrd, finish_recording, first_line

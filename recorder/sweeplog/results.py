@@ -24,7 +24,7 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.errors import ResultsError
 from corraoi.experiments.backends import sweep_backend
-from corraoi.partial_file import PartialFile, partial_path
+from corraoi.files.partial import PartialFile, partial_path
 from corraoi.provenance import Provenance
 from recorder.vocab import SWEEP_METADATA
 

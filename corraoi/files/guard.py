@@ -4,7 +4,7 @@ A run recorded from a sweep (``record --from``, ``compare --from``), a replay, a
 recovered log: each is refused, in one line, an output path that is one of a sweep folder's
 own files -- its manifest, parts, plug-in copies, ``results.parquet``, and per group its
 sweep log, recording and summaries -- even with ``--force`` (the sweep's writers say
-``sweep=True`` to :class:`~corraoi.partial_file.PartialFile`). ``figure.png`` is left out: it
+``sweep=True`` to :class:`~corraoi.files.partial.PartialFile`). ``figure.png`` is left out: it
 is drawn again from the sweep log, and ``corraoi figure`` redraws it there on purpose.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .errors import OutputError
+from corraoi.errors import OutputError
 
 #: The ``format`` of a sweep folder's manifest (corraoi.experiments.folder writes it).
 MANIFEST_FORMAT = "corraoi.sweep-folder"

@@ -18,8 +18,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from .errors import CodeChanged, ConfigError, PolicyError
-from .partial_file import PartialFile
+from corraoi.errors import CodeChanged, ConfigError, PolicyError
+from corraoi.files.partial import PartialFile
 
 #: Where a sweep folder keeps its plug-ins' sources.
 PLUGINS = "plugins"
@@ -144,7 +144,7 @@ def read_manifest_dict(folder: Path) -> dict[str, Any]:
 
 
 def safe_file_name(name: str) -> str:
-    from .text import safe_name
+    from corraoi.text import safe_name
 
     return safe_name(Path(name).name) or "plugin.py"
 

@@ -3,7 +3,7 @@
 A writer writes ``<path>.partial`` and renames it to ``<path>`` only once the file is
 finished (footer written, data on disk). A writer that is killed leaves the ``.partial``
 file, which a reader opens and reports as cut short. The ``.partial`` file carries the
-writer's exclusive lock (:mod:`corraoi.locks`) for as long as it is open: a second writer of
+writer's exclusive lock (:mod:`corraoi.files.locks`) for as long as it is open: a second writer of
 the same path, with or without ``--force``, is refused at once with one line that names the
 process holding it; ``--force`` only ever replaces files nobody is writing.
 
@@ -23,7 +23,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-from .errors import OutputError, WriteError
+from corraoi.errors import OutputError, WriteError
+
 from .locks import fcntl, is_regular, lock_holder, pid_of_lock
 
 #: What a file's name ends with while it is being written.
@@ -53,7 +54,7 @@ def check_target(path: str | os.PathLike[str], *, overwrite: bool, what: str = "
     ``overwrite``), an existing target without ``overwrite``, and a ``.partial`` left by an
     earlier writer that stopped, unless ``overwrite`` or ``replaceable(partial)`` says that
     nothing is lost by writing over it (the same run, recorded again); and one of a sweep
-    folder's own files unless ``sweep`` (the sweep's writers; :mod:`corraoi.sweep_guard`).
+    folder's own files unless ``sweep`` (the sweep's writers; :mod:`corraoi.files.guard`).
     """
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
@@ -61,7 +62,7 @@ def check_target(path: str | os.PathLike[str], *, overwrite: bool, what: str = "
     if "\0" in str(path):
         raise OutputError(f"{path!r}: a NUL byte in the path of the {what}")
     if not sweep:
-        from .sweep_guard import refuse_sweep_file
+        from .guard import refuse_sweep_file
 
         refuse_sweep_file(p, what)
     _no_dangling_link(p, what)

@@ -1,6 +1,6 @@
 """Locks that die with their process: ``flock`` on the file or folder being written, no lock
 file beside it. A second writer is refused at once, naming the holder's PID (from
-``/proc/locks``). Used by :class:`corraoi.partial_file.PartialFile` (every writer's
+``/proc/locks``). Used by :class:`corraoi.files.partial.PartialFile` (every writer's
 ``.partial`` file) and by a sweep for its folder (``corraoi/experiments/sweeps.py``).
 """
 
@@ -12,7 +12,7 @@ import stat
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import OutputError
+from corraoi.errors import OutputError
 
 try:
     import fcntl
