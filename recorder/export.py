@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 from corraoi.errors import UsageError
 from corraoi.files.partial import PartialFile
 
-from .paths import made_again
+from .sink import made_again
 
 if TYPE_CHECKING:
     import pyarrow as pa

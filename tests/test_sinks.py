@@ -1,6 +1,6 @@
 """One sink protocol (issue 23): everything in the recorder that takes a run's slots or a
 sweep's points implements ``write``, ``close`` and ``abort`` and is a context manager, by
-deriving from ``recorder.paths.Sink``; leaving the ``with`` through an error aborts."""
+deriving from ``recorder.sink.Sink``; leaving the ``with`` through an error aborts."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 import recorder
 from corraoi.files.partial import partial_path
-from recorder.paths import Sink
+from recorder.sink import Sink
 
 
 def _writers() -> dict[str, type]:

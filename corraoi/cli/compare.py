@@ -93,10 +93,10 @@ def compare(
     if out is None and not viewer.asked and not no_rrd:
         out = Path("compare.rrd")
     if out is not None:
-        from recorder.paths import check_output
+        from corraoi.files.partial import check_target
 
         not_an_input(out, logs)
-        check_output(out, overwrite=force, what="Rerun recording")
+        check_target(out, overwrite=force, what="Rerun recording")
     for w in warnings:
         warn(w)
     url = viewer.start() if viewer.asked else None

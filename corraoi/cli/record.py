@@ -157,7 +157,8 @@ def record(
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
     from corraoi.errors import OutputError
-    from recorder.paths import check_output, made_again
+    from corraoi.files.partial import check_target
+    from recorder.sink import made_again
     from recorder.slotlog.sink import same_run_partial
 
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
@@ -181,10 +182,10 @@ def record(
                 "configuration, or not complete); use --force to overwrite it"
             )
         # a .partial a killed attempt at the same run left is taken over (nothing is lost)
-        check_output(plan.mcap, overwrite=force, what="MCAP log",
+        check_target(plan.mcap, overwrite=force, what="MCAP log",
                      replaceable=same_run_partial(plan.config))  # fmt: skip
         if plan.rrd is not None:
-            check_output(plan.rrd, overwrite=force, what="Rerun recording",
+            check_target(plan.rrd, overwrite=force, what="Rerun recording",
                          replaceable=made_again)  # fmt: skip
 
     worker = None

@@ -86,10 +86,10 @@ def replay(
     if rrd is None and not viewer.asked:
         rrd = _default_rrd(log)
     if rrd is not None:
-        from recorder.paths import check_output
+        from corraoi.files.partial import check_target
 
         not_an_input(rrd, [log])
-        check_output(rrd, overwrite=force, what="Rerun recording")
+        check_target(rrd, overwrite=force, what="Rerun recording")
     if run.cut_short and not as_json:
         warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
     url = viewer.start() if viewer.asked else None

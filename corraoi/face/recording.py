@@ -16,7 +16,7 @@ from typing import Any
 from corraoi.errors import SweepMismatch, ViewerError, WriteError
 from corraoi.experiments.drill import row_mismatch
 from corraoi.provenance import Provenance
-from recorder.paths import Sink
+from recorder.sink import Sink
 from recorder.slotlog.sink import McapSink
 
 from .slots import slots_of
@@ -54,7 +54,7 @@ def record_run(
     log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files.
     ``rerun``, a :class:`recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
     its process (the same file), else it is written in this one. ``sinks``: further
-    :class:`~recorder.paths.Sink` s (a Foxglove live server's, your own) that take every
+    :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
     block after those two, closed with the run, or aborted when it fails.
 
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);

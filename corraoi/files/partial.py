@@ -8,7 +8,7 @@ the same path, with or without ``--force``, is refused at once with one line tha
 process holding it; ``--force`` only ever replaces files nobody is writing.
 
 The sweep folder's own files (manifest, parts, summaries, plug-in copies), the recorder's
-writers (``recorder/paths.py`` re-exports these names), the figures and ``recover`` all go
+writers (``recorder/sink.py`` re-exports these names), the figures and ``recover`` all go
 through it: check the target, create the ``.partial`` with its lock, publish it, or discard
 it (or leave it, for a log finished as failed or interrupted).
 """

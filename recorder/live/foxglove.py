@@ -32,7 +32,7 @@ from typing import Any
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
-from recorder.paths import Sink
+from recorder.sink import Sink
 from recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
 from recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
 from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME

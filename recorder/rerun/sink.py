@@ -18,7 +18,7 @@ import rerun as rr
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.model.theory import analyse
 from recorder import style
-from recorder.paths import Sink
+from recorder.sink import Sink
 
 from .names import (
     TIMELINE,

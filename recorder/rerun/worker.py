@@ -35,7 +35,8 @@ from types import TracebackType
 from typing import Any
 
 from corraoi.errors import ViewerError, WriteError
-from recorder.paths import Sink, check_output, made_again
+from corraoi.files.partial import check_target
+from recorder.sink import Sink, made_again
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -114,7 +115,7 @@ class RerunWorker:
             raise ValueError("a Rerun recording needs an .rrd path, a viewer URL or both")
         path = None
         if rrd_path is not None:
-            path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording",
+            path = check_target(rrd_path, overwrite=overwrite, what="Rerun recording",
                                 replaceable=made_again)  # fmt: skip
         self._busy = RemoteRecording(self, path)
         self._busy._send(("open", config, path, viewer_url, overwrite))

@@ -25,7 +25,7 @@ from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
-from recorder.paths import Sink
+from recorder.sink import Sink
 from recorder.vocab import (
     MAX_SLOT,
     MESSAGE_ENCODING,

@@ -30,7 +30,7 @@ from mcap.writer import CompressionType, Writer
 from corraoi._version import __version__
 from corraoi.errors import WriteError
 from corraoi.files.partial import PartialFile, reason
-from recorder.paths import Sink
+from recorder.sink import Sink
 
 # Colours live in recorder.style (one place for every view); re-exported for old imports.
 # The sweep log's names (recorder.vocab)

@@ -26,9 +26,9 @@ import rerun as rr
 from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
 from corraoi.files.partial import PartialFile, reason
-from recorder.paths import Sink
 from recorder.rerun.names import TIMELINE
 from recorder.rerun.output import check_rrd, finish_recording, first_line
+from recorder.sink import Sink
 from recorder.style import (
     MARKER_AOI_AWARE,
     WIDTH_AOI_AWARE,

@@ -1,15 +1,9 @@
-"""Output files that are never presented as complete before they are, and never shared.
+"""The protocol every writer of the recorder shares: :class:`Sink` (``write``, ``close``,
+``abort``, a context manager), handed a run's slot blocks or a sweep's points.
 
-Every writer of the recorder goes through :class:`~corraoi.files.locks.PartialFile` (the core's,
-since the sweep folder's own files use it too): the target checked, ``<path>.partial``
-created under its writer's lock, then published (renamed into place), discarded or left
-(a log finished as failed or interrupted, readable by ``corraoi info`` and ``recover``).
-A second writer of the same path is refused at once with one line that names the process
-holding it; ``--force`` only ever replaces files nobody is writing.
-
-:class:`Sink` is the context-manager protocol of every writer here. Output names made
-from data (instance, policy, plug-in names) go through :func:`safe_name` first, so that
-they cannot leave the output folder.
+A sink writes its file through :class:`~corraoi.files.partial.PartialFile` (the target
+checked, ``<path>.partial`` created under its writer's lock, then published, discarded or
+left, readable by ``corraoi info`` and ``recover``).
 """
 
 from __future__ import annotations
@@ -20,11 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from typing_extensions import Self
-
-from corraoi.files.partial import check_target
-
-#: The check of an output path before anything runs (the first step of PartialFile).
-check_output = check_target
 
 
 def made_again(part: Path) -> bool:
@@ -70,6 +59,5 @@ class Sink:
 
 __all__ = [
     "Sink",
-    "check_output",
     "made_again",
 ]
