@@ -594,7 +594,7 @@ CAI_FN int cai_explore(const CaiSlot& sl, CaiWords* eb, const CaiDraw& dr) {
     bool second = (tm1 & 1u) != 0u;
     u32 coin = second ? eb->w2 : eb->w0;
     u32 pick = second ? eb->w3 : eb->w1;
-    real prob = (real)(3 * KARMS) * sl.lt * sl.lt / (real)sl.t;
+    real prob = cai_qdiv((real)(3 * KARMS) * sl.lt * sl.lt, (real)sl.t);  // a coin's odds
     if ((real)coin * (real)2.3283064365386963e-10 < prob) return cai_integer_of(pick, KARMS);
     return -1;
 }
@@ -649,7 +649,7 @@ struct TsGaussForm {
     struct Arm {
         real sd;  // sqrt(beta / (n + 1))
         CAI_METHOD void set(u32 n, u32, const St& st) {
-            sd = cai_sqrt(st.beta / ((real)n + (real)1));
+            sd = cai_sqrt(cai_qdiv(st.beta, (real)n + (real)1));
         }
     };
     CAI_STATIC int forced(CAI_FORCED_ARGS) { return -1; }
