@@ -117,10 +117,10 @@ CAI_FN void cai_set(T* a, int i, const T& v) {
 // ------------------------------------------------------------------ arithmetic
 //
 // `real` is the precision of the policies' arithmetic: float (default) or double (CAI_FP64).
-// The samplers use the hardware's fast functions on the GPU (__logf, rsqrtf, __sincosf,
-// __fdividef: a few instructions each, against tens for their double forms); means are
-// correctly rounded quotients s / n, so that arms with equal ratios tie exactly, as on the
-// CPU.
+// The samplers use the GPU's hardware approximations in single precision (logarithm, roots,
+// sine, cosine, division: one instruction each, against tens for their double forms); means
+// are correctly rounded quotients s / n, so that arms with equal ratios tie exactly, as on
+// the CPU.
 
 #if CAI_FP64
 typedef double real;
