@@ -5,10 +5,13 @@ Prints, each as a table:
 1. start-up, in fresh processes: importing CuPy, creating the CUDA context, and the module of
    UCB for K = 4 arms, compiled into an empty CuPy cache, then loaded from it (--startup);
 2. what each entry point of UCB and TS takes on the device (registers, local memory, blocks
-   a multiprocessor holds at the block size) and, for a few launch shapes (threads a block,
-   a register cap), their run-slots per second on I1 (--variants; measured last);
+   a multiprocessor holds at the block size) and, for each variant of VARIANTS (launch shapes:
+   threads a block, a register cap; kernel.cu's switches: CAI_LOG_TEST, CAI_FP64), their
+   run-slots per second on I1 (--variants; measured last), so that one run on a GPU says
+   which variant is fastest;
 3. run-slots per second per policy on I1 (default checkpoints, as a sweep runs them) at each
-   --sizes (runs x T), best of --repeat after one warm-up run;
+   --sizes (runs x T), best of --repeat after one warm-up run; then UCB and TS at the largest
+   size with a checkpoint at T only (the kernel alone, without the checkpoints' reductions);
 4. the paper workload (I1, the twelve policies, 200 runs, T = 10,000) as
    ``experiments.sweep(grid, backend="gpu")`` in a warm process (modules compiled), best and
    median of 3 or --repeat; start-up (1) is what a fresh process adds to it.
@@ -35,10 +38,16 @@ from typing import Any
 
 POLICIES = ("ucb", "cucb", "aoi-aware-ucb", "aoi-aware-cucb", "ts", "cts", "aoi-aware-ts",
             "aoi-aware-cts", "ts-gauss", "q-ucb", "q-ts", "sw-ucb", "d-ts")  # fmt: skip
-#: (threads a block, register cap, kernel.cu switches) measured by --variants; the first is
-#: the device's default.
-VARIANTS = ((128, None, ()), (256, None, ()), (128, 128, ()), (128, 96, ()),
-            (128, None, ("CAI_LOG_BATCH=1",)))  # fmt: skip
+#: (name, threads a block, register cap, kernel.cu switches) measured by --variants; the first
+#: is the device's default. The switches change the Beta sampler (CAI_LOG_TEST) or all the
+#: arithmetic (CAI_FP64); a variant with switches of the sampler alone times TS and CTS only.
+VARIANTS = (("default", 128, None, ()), ("block 256", 256, None, ()),
+            ("registers <= 64", 128, 64, ()), ("registers <= 96", 128, 96, ()),
+            ("log test where needed", 128, None, ("CAI_LOG_TEST=1",)),
+            ("log tests batched", 128, None, ("CAI_LOG_TEST=2",)),
+            ("double precision", 128, None, ("CAI_FP64=1",)))  # fmt: skip
+#: Switches that touch the Beta-sampling families only.
+SAMPLER_SWITCHES = ("CAI_LOG_TEST",)
 
 
 def main() -> None:
@@ -50,7 +59,8 @@ def main() -> None:
     ap.add_argument("--sizes", default=None,
                     help="runs x T, comma-separated (default 1e5x1e4,1e6x1e4)")  # fmt: skip
     ap.add_argument("--startup", action="store_true", help="time start-up in fresh processes")
-    ap.add_argument("--variants", action="store_true", help="time launch shapes (CUDA)")
+    ap.add_argument("--variants", action="store_true",
+                    help="time the variants of VARIANTS (emulated: the switches only)")
     ap.add_argument("--paper-runs", type=int, default=200,
                     help="runs of the paper workload (0: leave it out)")  # fmt: skip
     ap.add_argument("--json", default=None, help="write the figures into this file")
@@ -76,7 +86,7 @@ def main() -> None:
     _rates_table(args, out, dev, sizes)
     if args.paper_runs > 0:
         _paper_table(args, out)
-    if args.variants and args.device == "cuda":  # last: the figures above matter more
+    if args.variants:  # last: the figures above matter more
         _variants_table(args, out)
 
 
@@ -148,56 +158,75 @@ def _startup_table(args: argparse.Namespace, out: _Figures) -> None:
 # ---------------------------------------------------------------------------- launch shapes
 
 
-def _variants_table(args: argparse.Namespace, out: _Figures) -> None:
+def kernel_attributes(func: Any, block: int) -> dict[str, int]:
+    """Registers, local memory (bytes a thread) and blocks a multiprocessor holds at ``block``
+    threads of a CuPy RawKernel (its ``num_regs`` and ``local_size_bytes``; the occupancy from
+    the driver, on the kernel's CUfunction ``kernel.ptr``)."""
     import cupy
 
-    from corraoi.gpu.device import CudaDevice, entry_name
-
     drv = cupy.cuda.driver
-    sms = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)["multiProcessorCount"]
-    runs, T = (4096, 500) if args.quick else (1_000_000, 2_000)
+    return {"registers": int(func.num_regs), "local_bytes": int(func.local_size_bytes),
+            "blocks_per_sm": int(drv.occupancyMaxActiveBlocksPerMultiprocessor(
+                func.kernel.ptr, block, 0))}  # fmt: skip
+
+
+def _variants_table(args: argparse.Namespace, out: _Figures) -> None:
+    """Each variant's run-slots per second (and on a CUDA device its entries' attributes). On
+    the emulated device only the switches mean anything: the launch shapes are left out."""
+    from corraoi.gpu.device import CudaDevice, EmulatedDevice, entry_name
+
+    cuda = args.device == "cuda"
+    sms = 0
+    if cuda:
+        import cupy
+
+        sms = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)["multiProcessorCount"]
+    runs, T = (1024, 200) if args.quick else (1_000_000, 2_000)
     rows = []
-    print(f"\n| threads a block | register cap | switches | entry | registers | local bytes | "
-          f"blocks / SM | run-slots/s ({runs:.0e} runs x T {T}) |")  # fmt: skip
-    print("|---:|---:|---|---|---:|---:|---:|---:|")
-    for block, cap, defines in VARIANTS:
-        dev = CudaDevice(block=block, maxrregcount=cap, defines=defines)
+    print(f"\n| variant | threads a block | register cap | switches | entry | registers | "
+          f"local bytes | blocks / SM | run-slots/s ({runs:.0e} runs x T {T}) |")  # fmt: skip
+    print("|---|---:|---:|---|---|---:|---:|---:|---:|")
+    for name, block, cap, defines in VARIANTS:
+        if not cuda and (block, cap) != (VARIANTS[0][1], VARIANTS[0][2]):
+            continue
+        dev: Any = (CudaDevice(block=block, maxrregcount=cap, defines=defines) if cuda
+                    else EmulatedDevice(defines=defines))  # fmt: skip
         pairs = (("ucb", "ucb", False), ("cucb", "ucb", True), ("ts", "ts_beta", False),
                  ("cts", "ts_beta", True))  # fmt: skip
-        if defines:  # the switches are the sampling families'
+        if defines and all(d.split("=")[0] in SAMPLER_SWITCHES for d in defines):
             pairs = pairs[2:]
         for policy, family, corr in pairs:
             entry = entry_name(family, corr, False)
-            func = dev.module(4, family).get_function(entry)
+            attrs = {"registers": -1, "local_bytes": -1, "blocks_per_sm": -1}
             try:
-                regs = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_NUM_REGS, func.ptr)
-                local = drv.funcGetAttribute(drv.CU_FUNC_ATTRIBUTE_LOCAL_SIZE_BYTES, func.ptr)
-                per_sm = drv.occupancyMaxActiveBlocksPerMultiprocessor(func.ptr, block, 0)
-            except Exception as exc:  # the figures below matter more than these
+                if cuda:
+                    attrs = kernel_attributes(dev.module(4, family).get_function(entry), block)
+            except Exception as exc:  # the rates below matter more than these
                 print(f"(attributes of {entry} not read: {type(exc).__name__}: {exc})")
-                regs = local = per_sm = -1
             rate = _rate(dev, policy, runs, T, repeat=args.repeat)
-            rows.append({"block": block, "maxrregcount": cap, "defines": list(defines),
-                         "entry": entry, "registers": regs, "local_bytes": local,
-                         "blocks_per_sm": per_sm, "sms": sms,
-                         "run_slots_per_s": rate})  # fmt: skip
-            print(f"| {block} | {cap or '-'} | {' '.join(defines) or '-'} | {entry} | {regs} | "
-                  f"{local} | {per_sm} | {rate:.3g} |", flush=True)  # fmt: skip
-        out["variants"] = rows
-        out.save()
+            rows.append({"variant": name, "block": block, "maxrregcount": cap,
+                         "defines": list(defines), "policy": policy, "entry": entry, **attrs,
+                         "sms": sms, "run_slots_per_s": rate})  # fmt: skip
+            print(f"| {name} | {block} | {cap or '-'} | {' '.join(defines) or '-'} | {entry} | "
+                  f"{attrs['registers']} | {attrs['local_bytes']} | {attrs['blocks_per_sm']} | "
+                  f"{rate:.3g} |", flush=True)  # fmt: skip
+            out["variants"] = rows
+            out.save()
 
 
 # ---------------------------------------------------------------------------- rates
 
 
-def _rate(dev: Any, name: str, runs: int, T: int, *, repeat: int) -> float:
-    """Run-slots per second of ``name`` on I1, best of ``repeat`` after one warm-up run."""
+def _rate(dev: Any, name: str, runs: int, T: int, *, repeat: int, bare: bool = False) -> float:
+    """Run-slots per second of ``name`` on I1, best of ``repeat`` after one warm-up run; with
+    the default checkpoints (as a sweep runs), or ``bare``: a checkpoint at T only."""
     from corraoi.experiments.montecarlo import default_checkpoints
     from corraoi.gpu.runner import simulate
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
 
-    inst, spec, stops = load_instance("I1"), make_policy(name), default_checkpoints(T)
+    inst, spec = load_instance("I1"), make_policy(name)
+    stops = [T] if bare else default_checkpoints(T)
     simulate(inst, spec, seed0=0, runs=min(runs, 256), horizon=min(T, 100), device=dev)
     best = float("inf")
     for i in range(repeat):
@@ -222,6 +251,15 @@ def _rates_table(args: argparse.Namespace, out: _Figures, dev: Any,
             cells.append(f"{rate:.3g}")
             out.save()
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    runs, T = max(sizes, key=lambda size: size[0] * size[1])
+    bare: dict[str, float] = {}
+    out["rates_checkpoint_at_T_only"] = {"size": f"{runs}x{T}", "rates": bare}
+    for name in ("ucb", "ts"):
+        if name in args.policies.split(","):
+            bare[name] = _rate(dev, name, runs, T, repeat=args.repeat, bare=True)
+            print(f"| {name}, a checkpoint at T only, {runs:.0e} runs x T {T:.0e} | "
+                  f"{bare[name]:.3g} |", flush=True)  # fmt: skip
+            out.save()
 
 
 def _paper_table(args: argparse.Namespace, out: _Figures) -> None:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The GPU backend on a real GPU in one call of a lent machine (docs/gpu.md, "Measuring on a
 # GPU"): installs, then tests, measures and checks it, each step under its own `timeout`,
-# writing its results under $OUT as it goes, in at most about 5 minutes.
+# writing its results under $OUT as it goes, in at most about 4 minutes 40 s (a deadline of
+# 280 s: the asymptotic check, last, takes what is left of it).
 #
 #   bash benchmarks/gpu_device_run.sh             # on the GPU machine ($OUT set by the tool)
 #   bash benchmarks/gpu_device_run.sh --emulate   # the same steps, small, on this CPU
@@ -10,10 +11,13 @@
 #   install  the carried wheels (.whl/: mcap, orjson, zstandard) into /tmp/site, corraoi
 #            itself with --no-deps (no rerun-sdk there: the tests that need it skip)
 #   1 tests  tests/test_gpu.py and tests/test_drill_gpu.py, every CUDA test enabled
-#   2 bench  benchmarks/bench_gpu.py: start-up (compile and cached load apart), launch shapes,
-#            run-slots/s per policy at 1e5 and 1e6 runs x T = 1e4, the paper workload warm
+#   2 bench  benchmarks/bench_gpu.py: start-up (compile and cached load apart), run-slots/s per
+#            policy at 1e5 and 1e6 runs x T = 1e4, the paper workload warm, then the variants
+#            (launch shapes, kernel.cu's switches CAI_LOG_TEST and CAI_FP64) side by side
 #   4 means  benchmarks/gpu_means.py: 1e6 runs of UCB, CUCB, TS, CTS on I1 at T = 1e4
-#            against the CPU engine's means at 4,000 runs (benchmarks/gpu_cpu_reference.json)
+#            against the CPU engine's means at 4,000 runs (benchmarks/gpu_cpu_reference.json),
+#            for the default kernel and each switch variant (so that a faster one can become
+#            the default with its means checked)
 #   3 asymp  benchmarks/gpu_asymptotics.py on I2, 10,000 runs, the horizon that the time left
 #            (at most 60 s) allows, chosen from a pilot run; its figure
 # (4 runs before 3: it is short, and 3 takes whatever time is left.) STEPS="2 4" runs only
@@ -37,10 +41,13 @@ mkdir -p "$OUT"
 LOG=$OUT/log.txt
 : >"$LOG"
 T0=$(date +%s)
-DEADLINE=$((T0 + 290)) # the asymptotic check takes what is left of this
+DEADLINE=$((T0 + 280)) # the asymptotic check takes what is left of this
 export PYTHONUNBUFFERED=1
 ROWS=()
 FAILED=0
+# the kernels whose means step 4 checks: the default and each switch of bench_gpu's VARIANTS
+MEANS_VARIANTS=(--variant "" --variant "CAI_FP64=1" --variant "CAI_LOG_TEST=1:ts,cts"
+    --variant "CAI_LOG_TEST=2:ts,cts")
 STEPS=${STEPS:-1 2 3 4}
 want() { [[ " $STEPS " == *" $1 "* ]]; }
 
@@ -79,6 +86,7 @@ def load(name):
         return None
 bench, means, asym = load("bench.json"), load("means.json"), load("asymptotics.json")
 rows = []
+variant_lines = []
 if bench:
     print(f"\ndevice: {bench.get('device', '?')}")
     rates = bench.get("rates", {})
@@ -99,10 +107,22 @@ if bench:
     if paper:
         rows.append((f"paper workload ({paper['runs']} runs) warm, s (best)", "<= 1.0",
                      f"{paper['best']:.3f}", paper["best"] <= 1.0))
+    by_policy = {}
+    for v in bench.get("variants", []):
+        by_policy.setdefault(v["policy"], []).append(v)
+    for policy, vs in by_policy.items():
+        base = next((v for v in vs if v["variant"] == "default"), None)
+        best = max(vs, key=lambda v: v["run_slots_per_s"])
+        gain = best["run_slots_per_s"] / base["run_slots_per_s"] if base else float("nan")
+        variant_lines.append(f"| {policy} | {base['run_slots_per_s'] if base else 0:.3g} | "
+                             f"{best['variant']} | {best['run_slots_per_s']:.3g} | {gain:.2f} |")
 if means:
-    worst = max(means["rows"], key=lambda r: abs(r["z"]))
-    rows.append((f"GPU vs CPU means, largest |z| ({worst['policy']})", f"<= {means['z_limit']}",
-                 f"{abs(worst['z']):.2f}", all(r["within"] for r in means["rows"])))
+    for variant in dict.fromkeys(r.get("variant", "default") for r in means["rows"]):
+        vrows = [r for r in means["rows"] if r.get("variant", "default") == variant]
+        worst = max(vrows, key=lambda r: abs(r["z"]))
+        rows.append((f"GPU vs CPU means ({variant}), largest |z| ({worst['policy']})",
+                     f"<= {means['z_limit']}", f"{abs(worst['z']):.2f}",
+                     all(r["within"] for r in vrows)))
 if asym:
     rows.append(("asymptotic check: horizon", "-", f"{asym['horizon']:.3g}", True))
     rows.append(("UCB regret per unit of ln T", "> 0", f"{asym['ucb_slope_per_ln_t']:.1f}",
@@ -111,6 +131,10 @@ if rows:
     print("\n| figure | target | measured | met |\n|---|---|---:|---|")
     for label, target, got, ok in rows:
         print(f"| {label} | {target} | {got} | {'yes' if ok else 'NO'} |")
+if variant_lines:
+    print("\n| policy | default, run-slots/s | fastest variant | its run-slots/s | gain |")
+    print("|---|---:|---|---:|---:|")
+    print("\n".join(variant_lines))
 EOF
 }
 
@@ -148,11 +172,12 @@ EOF
     export CORRAOI_GPU_DEVICE=cuda
     # -v: each test's result is in the log as it ends, even if the step runs out of time; the
     # drill's emulated capture tests (tens of seconds of CPU, nothing about the GPU) stay out
-    want 1 && step "1 tests" 120 "$PY" -m pytest -v -p no:cacheprovider -n 8 tests/test_gpu.py \
+    want 1 && step "1 tests" 100 "$PY" -m pytest -v -p no:cacheprovider -n 8 tests/test_gpu.py \
         tests/test_drill_gpu.py -k "not emulate"
-    want 2 && step "2 bench" 80 "$PY" benchmarks/bench_gpu.py --startup --variants --repeat 2 \
+    want 2 && step "2 bench" 90 "$PY" benchmarks/bench_gpu.py --startup --variants --repeat 2 \
         --json "$OUT/bench.json"
-    want 4 && step "4 means" 35 "$PY" benchmarks/gpu_means.py --json "$OUT/means.json"
+    want 4 && step "4 means" 45 "$PY" benchmarks/gpu_means.py --json "$OUT/means.json" \
+        "${MEANS_VARIANTS[@]}"
     RUNS=10000 PILOT=20000
     BUDGET=$((DEADLINE - $(date +%s) - 30)) # seconds of simulation left for step 3
     ((BUDGET > 60)) && BUDGET=60
@@ -163,10 +188,10 @@ numpy.__version__, '(emulated GPU device)')" >"$OUT/env.txt" 2>&1
     export CORRAOI_GPU_DEVICE=emulate
     want 1 && step "1 tests" 120 "$PY" -m pytest -q -p no:cacheprovider tests/test_gpu.py \
         -k "known_answers and not on_the_gpu"
-    want 2 && step "2 bench" 120 "$PY" benchmarks/bench_gpu.py --device emulate --quick --startup \
-        --repeat 1 --policies ucb,cts --paper-runs 4 --json "$OUT/bench.json"
+    want 2 && step "2 bench" 180 "$PY" benchmarks/bench_gpu.py --device emulate --quick --startup \
+        --variants --repeat 1 --policies ucb,cts --paper-runs 4 --json "$OUT/bench.json"
     want 4 && step "4 means" 120 "$PY" benchmarks/gpu_means.py --device emulate --gpu-runs 1000 \
-        --cpu-runs 500 --horizon 500 --json "$OUT/means.json"
+        --cpu-runs 500 --horizon 500 --json "$OUT/means.json" "${MEANS_VARIANTS[@]}"
     RUNS=100 PILOT=500 BUDGET=1
 fi
 if ! want 3; then

@@ -10,9 +10,14 @@ read from there; a reference the file does not hold is computed now, and the tab
     python benchmarks/gpu_means.py --write-reference    # the CPU engine's means, into the file
     python benchmarks/gpu_means.py --device emulate --gpu-runs 2000 --cpu-runs 1000 \\
         --horizon 1000                                  # the same, small, on the CPU
+    python benchmarks/gpu_means.py --variant "" --variant CAI_FP64=1 \\
+        --variant CAI_LOG_TEST=1:ts,cts                 # kernel.cu's variants too
 
-Prints a table; ``--json FILE`` writes it as JSON too. Exit status 1 when a policy's means
-differ by more than --z standard errors.
+``--variant DEFINES[:POLICIES]`` (repeatable) checks kernel.cu compiled with those switches
+(comma-separated; "" is the default kernel), for POLICIES (default: --policies), so that a
+variant a benchmark finds faster can be made the default with its means checked. Prints a
+table; ``--json FILE`` writes it as JSON too. Exit status 1 when a policy's means differ by
+more than --z standard errors.
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ from typing import Any
 
 REFERENCE = Path(__file__).with_name("gpu_cpu_reference.json")
 POLICIES = ("ucb", "cucb", "ts", "cts")
+#: kernel.cu's switches (compile-time defines) a --variant may set.
+SWITCHES = ("CAI_FP64", "CAI_LOG_TEST")
 
 
 def _key(instance: str, horizon: int, runs: int) -> str:
@@ -59,6 +66,9 @@ def main() -> None:
     ap.add_argument("--gpu-runs", type=int, default=1_000_000)
     ap.add_argument("--cpu-runs", type=int, default=4_000)
     ap.add_argument("--z", type=float, default=4.0)
+    ap.add_argument("--variant", action="append", default=None,
+                    help="kernel.cu switches, comma-separated ('' = default), optionally "
+                         ":policies; repeatable (default: the default kernel only)")
     ap.add_argument("--json", default=None, help="write the table into this file as well")
     ap.add_argument("--write-reference", action="store_true",
                     help=f"compute the CPU engine's means into {REFERENCE.name}")  # fmt: skip
@@ -80,46 +90,62 @@ def main() -> None:
         return
 
     os.environ["CORRAOI_GPU_DEVICE"] = args.device
-    from corraoi.gpu import get_device
+    from corraoi.gpu.device import CudaDevice, Device, EmulatedDevice
     from corraoi.gpu.runner import simulate
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
 
+    variants = []
+    for spec in args.variant if args.variant is not None else [""]:
+        defines, _, which = spec.partition(":")
+        for d in filter(None, defines.split(",")):
+            if d.split("=")[0] not in SWITCHES:
+                sys.exit(f"gpu_means: --variant {spec!r}: {d!r} is not one of kernel.cu's "
+                         f"switches ({', '.join(SWITCHES)}), NAME=VALUE")
+        variants.append((tuple(d for d in defines.split(",") if d),
+                         which.split(",") if which else names))  # fmt: skip
+    wanted = sorted({n for _, ns in variants for n in ns})
     held = stored.get(key, {}).get("policies", {})
-    missing = [n for n in names if n not in held]
+    missing = [n for n in wanted if n not in held]
     source = f"{REFERENCE.name}" if not missing else "computed now"
     ref = {**held, **(cpu_reference(args.instance, missing, args.horizon, args.cpu_runs)
                       if missing else {})}  # fmt: skip
-    dev = get_device()
     inst = load_instance(args.instance)
-    print(f"device: {dev.name}; {args.instance}, T = {args.horizon}: GPU {args.gpu_runs} runs "
-          f"against the CPU engine's {args.cpu_runs} ({source})")  # fmt: skip
-    print("\n| policy | GPU mean +- se | CPU mean +- se | difference / se | GPU s | within |")
-    print("|---|---:|---:|---:|---:|---|")
-    rows = []
-    for name in names:
-        start = time.perf_counter()
-        r = simulate(inst, make_policy(name), seed0=0, runs=args.gpu_runs, horizon=args.horizon,
-                     device=dev)  # fmt: skip
-        wall = time.perf_counter() - start
-        g_mean, g_var = float(r.regret.mean[-1]), float(r.regret.m2[-1]) / (r.regret.n - 1)
-        c = ref[name]
-        c_mean, c_var = c["mean"], c["m2"] / (c["n"] - 1)
-        g_se, c_se = math.sqrt(g_var / r.regret.n), math.sqrt(c_var / c["n"])
-        z = (g_mean - c_mean) / math.hypot(g_se, c_se)
-        ok = abs(z) <= args.z
-        rows.append({"policy": name, "gpu_mean": g_mean, "gpu_se": g_se, "gpu_runs": r.regret.n,
-                     "cpu_mean": c_mean, "cpu_se": c_se, "cpu_runs": c["n"], "z": z,
-                     "gpu_seconds": wall, "within": ok})  # fmt: skip
-        print(f"| {name} | {g_mean:.2f} +- {g_se:.2f} | {c_mean:.2f} +- {c_se:.2f} | {z:+.2f} | "
-              f"{wall:.2f} | {'yes' if ok else 'NO'} |", flush=True)  # fmt: skip
-        if args.json:
-            tmp = Path(args.json + ".partial")
-            tmp.write_text(json.dumps({"device": dev.name, "instance": args.instance,
-                                       "horizon": args.horizon, "reference": source,
-                                       "z_limit": args.z, "rows": rows}, indent=2) + "\n")
-            os.replace(tmp, args.json)
-    bad = [row["policy"] for row in rows if not row["within"]]
+    rows: list[dict[str, Any]] = []
+    device_name = ""
+    for defines, which in variants:
+        dev: Device = (CudaDevice(defines=defines) if args.device == "cuda"
+                       else EmulatedDevice(defines=defines))  # fmt: skip
+        device_name = dev.name
+        label = " ".join(defines) or "default"
+        print(f"\ndevice: {dev.name}, kernel: {label}; {args.instance}, T = {args.horizon}: GPU "
+              f"{args.gpu_runs} runs against the CPU engine's {args.cpu_runs} ({source})")
+        print("\n| policy | GPU mean +- se | CPU mean +- se | difference / se | GPU s | within |")
+        print("|---|---:|---:|---:|---:|---|")
+        for name in which:
+            start = time.perf_counter()
+            r = simulate(inst, make_policy(name), seed0=0, runs=args.gpu_runs,
+                         horizon=args.horizon, device=dev)  # fmt: skip
+            wall = time.perf_counter() - start
+            g_mean, g_var = float(r.regret.mean[-1]), float(r.regret.m2[-1]) / (r.regret.n - 1)
+            c = ref[name]
+            c_mean, c_var = c["mean"], c["m2"] / (c["n"] - 1)
+            g_se, c_se = math.sqrt(g_var / r.regret.n), math.sqrt(c_var / c["n"])
+            z = (g_mean - c_mean) / math.hypot(g_se, c_se)
+            ok = abs(z) <= args.z
+            rows.append({"policy": name, "variant": label, "gpu_mean": g_mean, "gpu_se": g_se,
+                         "gpu_runs": r.regret.n, "cpu_mean": c_mean, "cpu_se": c_se,
+                         "cpu_runs": c["n"], "z": z, "gpu_seconds": wall,
+                         "within": ok})  # fmt: skip
+            print(f"| {name} | {g_mean:.2f} +- {g_se:.2f} | {c_mean:.2f} +- {c_se:.2f} | "
+                  f"{z:+.2f} | {wall:.2f} | {'yes' if ok else 'NO'} |", flush=True)  # fmt: skip
+            if args.json:
+                tmp = Path(args.json + ".partial")
+                tmp.write_text(json.dumps({"device": device_name, "instance": args.instance,
+                                           "horizon": args.horizon, "reference": source,
+                                           "z_limit": args.z, "rows": rows}, indent=2) + "\n")
+                os.replace(tmp, args.json)
+    bad = [f"{row['policy']} ({row['variant']})" for row in rows if not row["within"]]
     if bad:
         sys.exit(f"gpu_means: {', '.join(bad)}: the GPU's mean is more than {args.z} standard "
                  "errors from the CPU engine's")  # fmt: skip

@@ -118,6 +118,54 @@ def test_philox_matches_random123_known_answers_on_the_gpu():
     _kat(CUDA)
 
 
+# ---------------------------------------------------------------------------- the Beta sampler
+
+#: Beta(a, b) shapes from a flat prior to more pulls than a run of 1e7 slots gives (a gamma's
+#: log test in single precision must not lose its digits there: kernel.cu, cai_gamma_log_test).
+BETA_SHAPES = [(1, 1), (1, 30), (2, 5), (30, 70), (300, 700), (3e4, 7e4), (3e6, 7e6)]
+
+
+def _beta_moments(device: Device, n: int) -> None:
+    """Mean and variance of n samples of each shape within 5 standard errors of the exact."""
+    for i, (a, b) in enumerate(BETA_SHAPES):
+        x = device.beta_draws(np.full(n, a), np.full(n, b), seed=1000 + i)
+        assert np.all((x > 0) & (x < 1)), (a, b)
+        s = a + b
+        mean, var = a / s, a * b / (s * s * (s + 1))
+        kurt = 6 * ((a - b) ** 2 * (s + 1) - a * b * (s + 2)) / (a * b * (s + 2) * (s + 3))
+        z_mean = (x.mean() - mean) / math.sqrt(var / n)
+        z_var = (x.var(ddof=1) - var) / (var * math.sqrt((kurt + 2) / n))
+        assert abs(z_mean) < 5 and abs(z_var) < 5, (a, b, z_mean, z_var)
+
+
+def _beta_law(device: Device, n: int) -> None:
+    """Kolmogorov-Smirnov against the exact CDF (scipy), every shape: a distortion of the law
+    by more than 2.7 / sqrt(n) fails (p about 1e-6 for the exact law)."""
+    special = pytest.importorskip("scipy.special")
+    for i, (a, b) in enumerate(BETA_SHAPES):
+        x = np.sort(device.beta_draws(np.full(n, a), np.full(n, b), seed=2000 + i))
+        cdf = special.betainc(a, b, x)
+        d = max(np.max(np.arange(1, n + 1) / n - cdf), np.max(cdf - np.arange(n) / n))
+        assert d < 2.7 / math.sqrt(n), (a, b, d)
+
+
+def test_the_beta_sampler_has_the_moments_of_beta(emulated: Device):
+    _beta_moments(emulated, 200_000)
+
+
+def test_the_beta_sampler_follows_the_beta_law(emulated: Device):
+    _beta_law(emulated, 200_000)
+
+
+@cuda
+def test_the_beta_sampler_draws_beta_on_the_gpu():
+    """The GPU's hardware logarithms, roots and sines (kernel.cu's single precision): the
+    same moments and law, from a million samples a shape."""
+    assert CUDA is not None
+    _beta_moments(CUDA, 1_000_000)
+    _beta_law(CUDA, 1_000_000)
+
+
 # ---------------------------------------------------------------------------- agreement
 
 GROUPS = {
@@ -159,10 +207,15 @@ def test_every_built_in_agrees_with_the_cpu_engine(emulated: Device, family: str
     _agree(emulated, GROUPS[family])
 
 
-def test_the_batched_log_tests_agree_with_the_cpu_engine(emulated: Device):
-    """kernel.cu with CAI_LOG_BATCH=1 (the gamma draws' log tests after the arms, a variant
-    benchmarks/bench_gpu.py times): the Beta-sampling families still agree."""
-    _agree(EmulatedDevice(defines=("CAI_LOG_BATCH=1",)), ["ts", "cts", "aoi-aware-q-ts", "d-ts"])
+@pytest.mark.parametrize("defines", [("CAI_LOG_TEST=1",), ("CAI_LOG_TEST=2",), ("CAI_FP64=1",)])
+def test_the_kernel_switches_agree_with_the_cpu_engine(emulated: Device, defines: tuple[str]):
+    """kernel.cu's switches that benchmarks/bench_gpu.py times against the default (the gamma
+    trials' log tests only where needed or batched after the arms; double precision): the
+    policies they touch still agree with the CPU engine."""
+    names = ["ts", "cts", "aoi-aware-q-ts", "d-ts"]
+    if "CAI_FP64=1" in defines:
+        names += ["ucb", "aoi-aware-cucb", "ts-gauss", "q-ucb", "sw-ucb"]
+    _agree(EmulatedDevice(defines=defines), names)
 
 
 def test_markov_channel_agrees_with_the_cpu_engine(emulated: Device):
@@ -230,24 +283,46 @@ def test_every_policy_sees_the_same_hidden_path_for_a_seed(emulated: Device):
 
 
 def test_the_hidden_path_is_philox_of_seed_slot_and_purpose(emulated: Device):
-    """Slot t of the run with seed s draws X_t from the uniform of Philox(counter = (t, 0,
-    HIDDEN, 0), key = s) (docs/gpu.md): recomputed here from the generator alone."""
-    T, seeds = 300, [5, 6, 2**40 + 3]
+    """Slot t of the run with seed s draws X_t from word (t - 1) mod 4 of Philox(counter =
+    ((t - 1) div 4, 0, HIDDEN, 0), key = s) (docs/gpu.md): the uniform w / 2^32 through the
+    CDF of p, recomputed here from the generator alone."""
+    T, seeds = 301, [5, 6, 2**40 + 3]
     cdf = np.cumsum(I1.p)
     Y = np.asarray(I1.Y)
     for s in seeds:
-        words = np.array([[t & 0xFFFFFFFF, t >> 32, 0x48494444, 0, s & 0xFFFFFFFF, s >> 32]
-                          for t in range(1, T + 1)], dtype=np.uint32)  # fmt: skip
-        w = emulated.philox(words).astype(np.uint64)
-        u = ((w[:, 0] << np.uint64(32)) | w[:, 1]) >> np.uint64(11)
-        x = np.searchsorted(cdf, u.astype(np.float64) / 2.0**53, side="right")
-        x = np.minimum(x, I1.n_states - 1)
+        words = np.array([[b, 0, 0x48494444, 0, s & 0xFFFFFFFF, s >> 32]
+                          for b in range((T + 3) // 4)], dtype=np.uint32)  # fmt: skip
+        w = emulated.philox(words).reshape(-1)[:T].astype(np.float64)
+        x = np.minimum(np.searchsorted(cdf, w / 2.0**32, side="right"), I1.n_states - 1)
         age, total = 1, 0
         for xt in x:
             age = 1 if Y[1, xt] == 1 else age + 1  # arm 2 (index 1) is I1's best
             total += age
         r = simulate(I1, make_policy("ts"), seed0=s, runs=1, horizon=T, device=emulated)
         assert _oracle_sums(r)[0] == total
+
+
+def test_the_hidden_table_inverts_every_cdf_exactly():
+    """runner.hidden_table: the count of thresholds <= a word, capped at h, is numpy's
+    searchsorted of w / 2^32 in the CDF, for words at and next to every threshold, at 0 and
+    2^32 - 1, and for CDFs with states of probability 0 (first, inside, last) and a last
+    value a rounding short of 1."""
+    from corraoi.gpu.runner import hidden_table
+
+    cases = [np.cumsum([0.2, 0.3, 0.3, 0.2]), np.cumsum([0.0, 0.5, 0.0, 0.5, 0.0]),
+             np.array([0.1, 0.1 + 1e-17, 0.3, 0.9999999999999999]), np.array([1.0]),
+             np.cumsum(np.full(11, 1 / 11)), np.array([0.5, 1.0, 1.0, 1.0])]  # fmt: skip
+    for cdf in cases:
+        n = len(cdf)
+        table = hidden_table(cdf[None, :]).astype(np.int64)
+        assert table.shape == (1, 4 + 4 * ((n + 2) // 4))
+        h, thr = table[0, 0], table[0, 4:]
+        edges = np.ceil(cdf * 2.0**32).astype(np.int64)
+        words = np.unique(np.clip(np.concatenate([edges - 1, edges, edges + 1, [0, 2**32 - 1]]),
+                                  0, 2**32 - 1))  # fmt: skip
+        got = np.minimum((words[:, None] >= thr[None, :]).sum(axis=1), h)
+        want = np.minimum(np.searchsorted(cdf, words / 2.0**32, side="right"), n - 1)
+        assert got.tolist() == want.tolist(), cdf
 
 
 class _Tiny(EmulatedDevice):
@@ -334,7 +409,7 @@ def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     assert done.returncode == 0, done.stderr
     entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
                if ".entry" in ln}  # fmt: skip
-    assert entries == {*entry_names(), "philox_kat"}
+    assert entries == {*entry_names(), "philox_kat", "beta_draws"}
 
 
 def _nvrtc():  # type: ignore[no-untyped-def]
@@ -378,7 +453,7 @@ def test_the_kernels_compile_with_nvrtc_as_cupy_compiles_them():
     nvrtc.compileProgram(prog, ["-std=c++17", "-DKARMS=64", "-arch=compute_90"])
     ptx = nvrtc.getPTX(prog).decode()
     entries = {ln.split()[-1].rstrip("(") for ln in ptx.splitlines() if ".entry" in ln}
-    assert entries == {*entry_names(), "philox_kat"}
+    assert entries == {*entry_names(), "philox_kat", "beta_draws"}
 
 
 @needs_nvrtc
@@ -396,7 +471,8 @@ def test_every_entry_point_keeps_a_run_in_registers_on_hopper(K: int):
                                     f"-DCAI_FAMILY={family_id(family)}", "-arch=sm_90",
                                     "--ptxas-options=-v"])  # fmt: skip
         got = _ptxas_report(nvrtc.getProgramLog(prog))
-        assert set(got) == {*entry_names(family), "philox_kat"}, family
+        extra = {"beta_draws"} if family == "ts_beta" else set()
+        assert set(got) == {*entry_names(family), "philox_kat", *extra}, family
         assert nvrtc.getCUBIN(prog)[:4] == b"\x7fELF"  # machine code, not PTX
         report.update(got)
     for name, r in report.items():
@@ -624,8 +700,21 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
     assert set(bench["rates"]) == {"ucb", "cts"}
     assert all(len(r) == 2 and min(r.values()) > 1e5 for r in bench["rates"].values())
     assert 0 < bench["paper_workload_s"]["best"] <= bench["paper_workload_s"]["median"]
+    variants = {(v["variant"], v["policy"]) for v in bench["variants"]}
+    assert variants == {("default", "ucb"), ("default", "cucb"), ("default", "ts"),
+                        ("default", "cts"), ("double precision", "ucb"),
+                        ("double precision", "cucb"), ("double precision", "ts"),
+                        ("double precision", "cts"), ("log test where needed", "ts"),
+                        ("log test where needed", "cts"), ("log tests batched", "ts"),
+                        ("log tests batched", "cts")}  # the launch shapes: CUDA only
+    assert all(v["run_slots_per_s"] > 1e4 for v in bench["variants"])
+    assert bench["rates_checkpoint_at_T_only"]["rates"]["ucb"] > 1e5
     means = json.loads((out / "means.json").read_text())
-    assert [r["policy"] for r in means["rows"]] == ["ucb", "cucb", "ts", "cts"]
+    assert [(r["variant"], r["policy"]) for r in means["rows"]] == [
+        ("default", "ucb"), ("default", "cucb"), ("default", "ts"), ("default", "cts"),
+        ("CAI_FP64=1", "ucb"), ("CAI_FP64=1", "cucb"), ("CAI_FP64=1", "ts"),
+        ("CAI_FP64=1", "cts"), ("CAI_LOG_TEST=1", "ts"), ("CAI_LOG_TEST=1", "cts"),
+        ("CAI_LOG_TEST=2", "ts"), ("CAI_LOG_TEST=2", "cts")]  # fmt: skip
     for r in means["rows"]:
         assert r["gpu_runs"] == 1000 and r["cpu_runs"] == 500 and r["cpu_mean"] > 0
         assert r["within"] == (abs(r["z"]) <= 4.0)
@@ -634,7 +723,10 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
     ucb = asym["curves"]["ucb"]
     assert ucb["t"][-1] == asym["horizon"] and ucb["mean"][-1] > ucb["mean"][0]
     assert (out / "asymptotics.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "| GPU vs CPU means, largest |z|" in summary
+    assert "| GPU vs CPU means (default), largest |z|" in summary
+    assert "| GPU vs CPU means (CAI_LOG_TEST=2), largest |z|" in summary
+    assert re.search(r"^\| cts \| [0-9.e+]+ \| [a-z ]+ \| [0-9.e+]+ \| [0-9.]+ \|$", summary,
+                     flags=re.M), summary  # the fastest variant of each policy
 
 
 def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):

@@ -128,6 +128,11 @@ class Device(ABC):
     def philox(self, words: np.ndarray) -> np.ndarray:
         """Philox4x32-10 of (count, 6) counter+key words: (count, 4) (known-answer tests)."""
 
+    @abstractmethod
+    def beta_draws(self, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray:
+        """One Beta(a[i], b[i]) sample each (a, b >= 1), drawn as the Thompson-sampling kernels
+        draw them (kernel.cu, beta_draws): the sampler's tests."""
+
     def asnumpy(self, a: Any) -> np.ndarray:
         return np.asarray(a)
 
@@ -141,7 +146,8 @@ class Device(ABC):
 class CudaDevice(Device):
     """The current CUDA device, through CuPy (the ``gpu`` extra). ``block``: threads a block;
     ``maxrregcount``: a cap on registers per thread (NVRTC's ``--maxrregcount``; None: the
-    compiler's choice); ``defines``: kernel.cu's compile-time switches (``CAI_LOG_BATCH=1``).
+    compiler's choice); ``defines``: kernel.cu's compile-time switches (``CAI_LOG_TEST=1``,
+    ``CAI_FP64=1``).
     All three are there to be measured (benchmarks/bench_gpu.py)."""
 
     launch_work = 1 << 31
@@ -205,6 +211,17 @@ class CudaDevice(Device):
         out = cupy.zeros((count, 4), dtype=cupy.uint32)
         func = self.module(1, FAMILIES[0]).get_function("philox_kat")
         func(((count + 127) // 128,), (128,), (inp, out, np.int32(count)))
+        return cupy.asnumpy(out)
+
+    def beta_draws(self, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray:
+        import cupy
+
+        count = int(len(a))
+        da = cupy.asarray(np.ascontiguousarray(a, dtype=np.float64))
+        db = cupy.asarray(np.ascontiguousarray(b, dtype=np.float64))
+        out = cupy.zeros(count)
+        func = self.module(1, "ts_beta").get_function("beta_draws")
+        func(((count + 127) // 128,), (128,), (da, db, np.int32(count), np.uint64(seed), out))
         return cupy.asnumpy(out)
 
     def asnumpy(self, a: Any) -> np.ndarray:
@@ -309,6 +326,15 @@ class EmulatedDevice(Device):
         func = self.module(1, FAMILIES[0]).philox_kat
         func.restype = None
         func(*self._args([("p", inp), ("p", out), ("i", inp.shape[0])]))
+        return out
+
+    def beta_draws(self, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray:
+        da = np.ascontiguousarray(a, dtype=np.float64)
+        db = np.ascontiguousarray(b, dtype=np.float64)
+        out = np.zeros(len(da))
+        func = self.module(1, "ts_beta").beta_draws
+        func.restype = None
+        func(*self._args([("p", da), ("p", db), ("i", len(da)), ("Q", seed), ("p", out)]))
         return out
 
 

@@ -72,6 +72,33 @@ def _ckpt_bytes(R: int, K: int) -> int:
     return R * (2 + K) * 8
 
 
+def hidden_table(cdf_rows: np.ndarray) -> np.ndarray:
+    """The kernel's CDF rows (kernel.cu, cai_hidden): per row, h then three unused words,
+    then thr_i = ceil(cdf_i 2^32) for the h first states i < n - 1 with thr_i < 2^32, padded
+    with 2^32 - 1 to a multiple of four words, as uint32. For a 32-bit word w (the uniform
+    w / 2^32), ``w >= thr_i`` exactly when ``w / 2^32 >= cdf_i``, so the hidden state
+    ``min(#{i: w >= thr_i}, h)`` is numpy's ``searchsorted(cdf, w / 2^32, side="right")``
+    clipped to n - 1."""
+    cdf = np.atleast_2d(np.asarray(cdf_rows, dtype=np.float64))
+    rows, n = cdf.shape
+    pad = 4 * ((n + 2) // 4)
+    out = np.full((rows, 4 + pad), 2**32 - 1, dtype=np.uint64)
+    scaled = np.ceil(cdf[:, : n - 1] * 2.0**32)
+    below = scaled < 2.0**32
+    out[:, 0] = below.sum(axis=1)
+    out[:, 1:4] = 0
+    out[:, 4 : 4 + n - 1] = np.where(below, np.maximum(scaled, 0.0), 2**32 - 1)
+    return np.ascontiguousarray(out.astype(np.uint32))
+
+
+def reward_masks(Y: np.ndarray) -> np.ndarray:
+    """(n,) uint64: bit k of entry x is Y[k][x] (the arms that succeed in state x)."""
+    Y = np.asarray(Y)
+    bits = np.uint64(1) << np.arange(Y.shape[0], dtype=np.uint64)
+    return np.ascontiguousarray(((Y != 0).astype(np.uint64) * bits[:, None]).sum(axis=0,
+                                                                            dtype=np.uint64))
+
+
 class _Problem:
     """A policy's runs on a device, ready to launch: the constants and the per-run state
     (laid out [field][run]) that carries from one launch to the next."""
@@ -103,7 +130,8 @@ class _Problem:
         self.arr = arr
         try:
             self.consts = {
-                "cdf": arr(pb.cdf_rows), "trace": arr(pb.trace), "Y": arr(pb.Y),
+                "thr": arr(hidden_table(pb.cdf_rows)), "trace": arr(pb.trace),
+                "ymask": arr(reward_masks(pb.Y)),
                 "comb": arr(candidate_bitsets(pb.pclass).reshape(K * 8)),
                 "prm": arr(pb.params if pb.params.size else np.zeros(1)),
                 "none": xp.zeros(1, dtype=np.int64), "none_d": xp.zeros(1),
@@ -112,8 +140,7 @@ class _Problem:
                 "pulls": xp.zeros((K, R), dtype=np.int64),
                 "succ": xp.zeros((K, R), dtype=np.int64),
                 "pstate": xp.zeros((max(self.S_state, 1), R)),
-                "rpos": xp.zeros(R, dtype=np.uint64), "nspare": xp.zeros(R),
-                "nhas": xp.zeros(R, dtype=np.int32), "xprev": xp.full(R, -1, dtype=np.int32),
+                "xprev": xp.full(R, -1, dtype=np.int32),
                 "age": xp.ones(R, dtype=np.int64), "oage": xp.ones(R, dtype=np.int64),
                 "reg": xp.zeros(R, dtype=np.int64), "asum": xp.zeros(R, dtype=np.int64),
             }  # fmt: skip
@@ -131,11 +158,11 @@ class _Problem:
         args = [
             ("i", self.R), ("Q", int(seed0)), ("q", t), ("q", nslots), ("p", lnt),
             ("i", int(self.cdf.shape[1])), ("i", int(self.cdf.shape[0])), ("i", int(self.kind)),
-            ("p", c["cdf"]), ("p", c["trace"]), ("p", c["Y"]), ("p", c["comb"]),
+            ("p", c["thr"]), ("p", c["trace"]), ("p", c["ymask"]), ("p", c["comb"]),
             ("i", int(self.theory.best_arm)), ("d", float(self.theory.mu_star)),
             ("p", c["prm"]), ("i", self.S_state),
-            *(("p", st[k]) for k in ("pulls", "succ", "pstate", "rpos", "nspare", "nhas",
-                                     "xprev", "age", "oage", "reg", "asum")),
+            *(("p", st[k]) for k in ("pulls", "succ", "pstate", "xprev", "age", "oage", "reg",
+                                     "asum")),
             ("i", nck), ("p", none if ck_t is None else ck_t),
             ("p", c["none_d"] if ck_reg is None else ck_reg),
             ("p", c["none_d"] if ck_est is None else ck_est),
