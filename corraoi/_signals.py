@@ -18,10 +18,23 @@ from types import FrameType, TracebackType
 
 INTERRUPTED = 130
 _installed = False
+#: The signal that asked the command to stop, once one has (never reset): the
+#: KeyboardInterrupt a handler raises can land where Python swallows it (a weakref callback
+#: inside an import: "Exception ignored in ..."), so the engine asks here between its pieces
+#: of work and raises again (:func:`raise_if_asked`). An interrupt is never lost.
+asked: int | None = None
 
 
 def _terminate(signum: int, frame: FrameType | None) -> None:
+    global asked
+    asked = signum
     raise KeyboardInterrupt
+
+
+def raise_if_asked() -> None:
+    """Raise KeyboardInterrupt if a signal asked the command to stop (see :data:`asked`)."""
+    if asked is not None:
+        raise KeyboardInterrupt
 
 
 def _hook(kind: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
@@ -64,8 +77,9 @@ def install() -> None:
         for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
             if sig is not None and signal.getsignal(sig) in (signal.SIG_DFL, None):
                 signal.signal(sig, _terminate)
-        if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-            pass  # started in the background with SIGINT ignored: keep it so
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _terminate)  # the same, and remembered
+        # started in the background with SIGINT ignored: keep it so
     except ValueError:  # not the main thread
         return
     sys.excepthook = _hook

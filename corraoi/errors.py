@@ -17,6 +17,11 @@ class CorraoiError(Exception):
     exit_code = 1
 
 
+class CorraoiWarning(UserWarning):
+    """What corraoi warns a Python caller about (a parameter that changes several policies,
+    a viewer that could not be reached while the files were written)."""
+
+
 class UsageError(CorraoiError):
     """A bad argument, option value or input file."""
 

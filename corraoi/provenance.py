@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from corraoi.policies.loading import loaded_source
+from corraoi.policies.loading import class_source, loaded_source
 
 from ._version import __version__
 
@@ -179,11 +179,14 @@ def sources_of(spec: Any) -> list[Source]:
     for name in modules:
         if name.split(".")[0] in ("corraoi", "recorder", "viewer"):
             continue
-        loaded = loaded_source(name)
+        # the class's own module: a session without a file gives the class's text instead
+        loaded = class_source(cls) if name == cls.__module__ else loaded_source(name)
         if loaded is not None:
             path, data = loaded
-            out.append(Source(spec.name, Path(path).name, path,
-                              hashlib.sha256(data).hexdigest(), data))  # fmt: skip
+            file = Path(path).name if not path.startswith("<") else (
+                f"{cls.__qualname__}.py")  # fmt: skip
+            out.append(Source(spec.name, file, path, hashlib.sha256(data).hexdigest(),
+                              data))  # fmt: skip
     return out
 
 

@@ -14,32 +14,41 @@ when a test first calls the fixture::
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 
 @pytest.fixture
-def corraoi_run(tmp_path: Path) -> Callable[..., Path]:
-    """``corraoi_run(policy="cucb", seed=0, horizon=1000, instance="I1") -> Path``.
+def corraoi_run(tmp_path: Path) -> Callable[..., Any]:
+    """``corraoi_run(policy="cucb", *, seed=0, horizon=1000, instance="I1", params=None,
+    channel=None) -> corraoi.Run``.
 
-    Records one run into a fresh slot log under the test's ``tmp_path`` and returns its
-    path; each call writes a new file.
+    Records one run with :func:`corraoi.record` into a fresh slot log under the test's
+    ``tmp_path`` (no Rerun recording) and returns the :class:`corraoi.Run`, which is also
+    the log's path (``os.fspath(run)``); each call writes a new file. ``policy`` is anything
+    :func:`corraoi.record` takes, a class defined in the test module included.
     """
     count = 0
 
     def record(
-        policy: str = "cucb", *, seed: int = 0, horizon: int = 1000, instance: str = "I1"
-    ) -> Path:
+        policy: Any = "cucb",
+        *,
+        seed: int = 0,
+        horizon: int = 1000,
+        instance: Any = "I1",
+        params: Mapping[str, Any] | None = None,
+        channel: str | None = None,
+    ) -> Any:
         nonlocal count
-        from .testing import record_run
+        from corraoi.face.recording import record as record_run
 
         count += 1
-        name = f"{policy}-{Path(instance).stem}-s{seed}-{count}.mcap"
         return record_run(
-            tmp_path / "corraoi-runs" / name,
-            policy=policy, seed=seed, horizon=horizon, instance=instance,
+            policy, instance, seed=seed, horizon=horizon, params=params, channel=channel,
+            path=tmp_path / "corraoi-runs" / f"{{label}}-{count}.mcap", rrd=False,
         )  # fmt: skip
 
     return record

@@ -206,7 +206,11 @@ def streams_for_seeds(seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     R = len(seeds)
     lat = np.empty((R, 4), dtype=np.uint64)
     pol = np.empty((R, 4), dtype=np.uint64)
+    from corraoi._signals import raise_if_asked
+
     for i, s in enumerate(seeds):
+        if i % 1024 == 1023:
+            raise_if_asked()  # 100,000 seeds take seconds: a signal is answered meanwhile
         key = int(s)
         pair = _STREAMS_CACHE.get(key)
         if pair is None:

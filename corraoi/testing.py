@@ -1,13 +1,13 @@
-"""Helpers for your own test suites: record a run, and assert that two runs are equal.
+"""Helpers for your own test suites: assert that two runs are equal, and check a policy.
 
-``assert_runs_equal(a, b)`` compares two slot logs with :func:`viewer.diff` and raises an
-AssertionError that names the first differing slot, the field and both values, and how
-far the divergence goes. :func:`record_run` records one run into an MCAP slot log (what
-the ``corraoi_run`` pytest fixture calls). :func:`check_policy` is a policy's conformance
-check: the named ``check_*`` functions of :data:`CHECKS` on the cases of
-:func:`policy_cases`, or one test per check with :func:`parametrize_with_checks` (as
-scikit-learn's ``parametrize_with_checks``). Everything heavy is imported inside the
-functions, so importing this module costs nothing.
+``assert_runs_equal(a, b)`` compares two recorded runs with :func:`corraoi.diff` and raises
+an AssertionError that names the first differing slot, the field and both values, and how
+far the divergence goes. :func:`check_policy` is a policy's conformance check (as
+scikit-learn's ``check_estimator``, it takes the class itself, or any word ``--policy``
+takes): the named ``check_*`` functions of :data:`CHECKS` on the cases of
+:func:`policy_cases`, or one test per check with :func:`parametrize_with_checks`. Runs are
+recorded with :func:`corraoi.record` (the ``corraoi_run`` pytest fixture calls it).
+Everything heavy is imported inside the functions, so importing this module costs nothing.
 """
 
 from __future__ import annotations
@@ -18,29 +18,6 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
-
-
-def record_run(
-    path: str | os.PathLike[str],
-    *,
-    policy: str = "cucb",
-    seed: int = 0,
-    horizon: int = 1000,
-    instance: str = "I1",
-    overwrite: bool = False,
-) -> Path:
-    """Simulate one run and record it to the slot log ``path`` (as ``corraoi record``)."""
-    from corraoi.engine.block import RunConfig
-    from corraoi.engine.problem import check_instance
-    from corraoi.face.recording import record_run
-    from corraoi.model.instance import load_instance
-
-    from .policies import make_policy
-
-    inst = load_instance(instance)
-    check_instance(inst)
-    config = RunConfig(inst, make_policy(policy), seed, horizon)
-    return record_run(config, path, overwrite=overwrite).mcap
 
 
 def _log(run: Any) -> Any:
@@ -100,7 +77,6 @@ __all__ = [
     "check_runs_use_their_own_streams",
     "parametrize_with_checks",
     "policy_cases",
-    "record_run",
 ]
 
 
@@ -112,7 +88,7 @@ class PolicyCase:
     """One policy on one random instance: what each ``check_*`` function examines. The batch
     of runs is simulated once, on first use, and shared by the checks of the case."""
 
-    policy: str
+    policy: Any
     spec: Any
     instance: Any
     seeds: list[int]
@@ -120,6 +96,10 @@ class PolicyCase:
 
     def __str__(self) -> str:  # the pytest id: eps-greedy-K3
         return f"{self.spec.name}-K{self.instance.K}"
+
+    @property
+    def name(self) -> str:
+        return str(self.spec.name)
 
     @cached_property
     def batch(self) -> Any:
@@ -130,11 +110,12 @@ class PolicyCase:
                              block=self.horizon))  # fmt: skip
 
     def where(self) -> str:
-        return f"{self.policy} (K={self.instance.K})"
+        what = self.policy if isinstance(self.policy, str) else self.name
+        return f"{what} (K={self.instance.K})"
 
 
 def policy_cases(
-    policy: str,
+    policy: Any,
     *,
     params: dict[str, float] | None = None,
     arms: Sequence[int] = (2, 3, 8, 64),
@@ -142,15 +123,14 @@ def policy_cases(
     runs: int = 4,
     seed: int = 0,
 ) -> list[PolicyCase]:
-    """``policy`` (what ``--policy`` takes) on one random instance per number of ``arms``
-    (some arm always has a positive mean)."""
+    """``policy`` (a class, an instance of one, or what ``--policy`` takes) with ``params`` on
+    one random instance per number of ``arms`` (some arm always has a positive mean)."""
     import numpy as np
 
+    from corraoi.face.resolve import policies
     from corraoi.model.instance import Instance
 
-    from .policies import make_policies
-
-    spec = make_policies([policy], params or {})[0]
+    spec = policies(policy, params)[0]
     cases = []
     for K in arms:
         rng = np.random.default_rng([seed, K])
@@ -238,7 +218,7 @@ def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
     with McapSink(path, config, overwrite=True, fsync=False) as sink:
         sink.write(run)
     log = open_log(path)
-    assert log.config.policy == case.spec, f"{case.policy}: the log does not describe the policy"
+    assert log.config.policy == case.spec, f"{case.name}: the log does not describe the policy"
     assert log.read_all().equals(run), f"{case.where()}: log round-trip differs"
 
 
@@ -247,7 +227,7 @@ CHECKS = (check_deterministic, check_arms_in_range, check_counts_follow_the_arms
           check_runs_use_their_own_streams, check_hidden_path, check_log_round_trip)  # fmt: skip
 
 
-def parametrize_with_checks(policies: Sequence[str], **options: Any) -> Any:
+def parametrize_with_checks(policies: Sequence[Any], **options: Any) -> Any:
     """A ``pytest.mark.parametrize`` over every check of every case of ``policies`` (the
     ``options`` of :func:`policy_cases`), one test each with a readable id
     (``eps-greedy-K3-runs_use_their_own_streams``)::
@@ -265,7 +245,7 @@ def parametrize_with_checks(policies: Sequence[str], **options: Any) -> Any:
 
 
 def check_policy(
-    policy: str,
+    policy: Any,
     *,
     params: dict[str, float] | None = None,
     arms: Sequence[int] = (2, 3, 8, 64),
@@ -277,8 +257,10 @@ def check_policy(
     """The conformance check a plug-in author runs in their own tests (raises AssertionError):
     every check of :data:`CHECKS` on every case of :func:`policy_cases`.
 
-    ``policy`` is what ``--policy`` takes (``"my_policy.py:MyPolicy"``, ``"pkg.mod:Cls"``, a
-    built-in name). On random instances with each number of ``arms`` it checks that the
+    ``policy`` is the class itself (or an instance of it), or what ``--policy`` takes
+    (``"my_policy.py:MyPolicy"``, ``"pkg.mod:Cls"``, a built-in name); ``params`` its
+    parameters (``{name: value}``; a parameter it does not declare is refused). On random
+    instances with each number of ``arms`` it checks that the
     policy is deterministic for a seed; plays arms in range, with successes and pulls
     consistent with them; decides each run from that run's own stream (run i of a batch
     equals the single run with seed ``seed + i``); sees the hidden path built-ins see on the

@@ -134,8 +134,10 @@ def test_load_names_the_extra_without_pandas(
     cucb_log: Recorded, monkeypatch: pytest.MonkeyPatch
 ):
     monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas now raises ImportError
+    run = corraoi.load(cucb_log[0])  # the run and its figures need no table
+    assert run.summary.slots == run.log.n_slots
     with pytest.raises(MissingExtraError, match=r'pip install "corraoi\[analysis\]"'):
-        corraoi.load(cucb_log[0])
+        _ = run.slots
 
 
 def test_load_refuses_what_is_not_a_log(tmp_path: Path):

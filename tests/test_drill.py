@@ -116,13 +116,17 @@ def test_pairs_against_a_baseline_and_none_for_a_large_grid_without_one() -> Non
 def test_a_rerecorded_run_equals_the_sweeps_row_at_every_checkpoint(
     folder: Path, tmp_path: Path, choice: str
 ) -> None:
-    runs = corraoi.load(folder).runs
+    sweep = corraoi.load(folder)
+    runs = sweep.runs
     summary = json.loads((folder / "summary.json").read_text())
-    outcomes = corraoi.load(folder).record(choice, out=tmp_path)
-    assert len(outcomes) == len(POLICIES)
-    for label, outcome in zip(POLICIES, outcomes, strict=True):
+    with pytest.raises(corraoi.CorraoiError, match=f"{choice!r} names 3 runs .*I2/ucb run"):
+        sweep.record(choice)  # one run per policy: say which
+    for label in POLICIES:
+        outcome = sweep.record(choice, policy=label, path=tmp_path / "{from}.mcap", rrd=False)
         run = summary["notable"]["cells"][label][choice]["run"]
         assert outcome.mcap.name == f"sw-I2-{label}-run{run}-{choice}.mcap"
+        assert outcome.summary.regret == runs[(runs["policy"] == label) & (runs["run"] == run)
+                                              & (runs["t"] == 1500)]["regret"].item()
         log = open_log(outcome.mcap)
         assert log.config.seed == SEED + run and log.config.policy.name == label
         regret = _regret(outcome.mcap)
@@ -193,10 +197,10 @@ def test_a_folder_without_named_runs_still_drills(folder: Path, tmp_path: Path) 
     named = summary.pop("notable")
     (old / "summary.json").write_text(json.dumps(summary))
     data = corraoi.load(old)
-    by_index = data.record(3, cell="ucb", out=tmp_path / "a")
-    assert [open_log(o.mcap).config.seed for o in by_index] == [SEED + 3]
-    worst = data.record("worst", policy="cucb", out=tmp_path / "b")
-    assert open_log(worst[0].mcap).config.seed == SEED + named["cells"]["cucb"]["worst"]["run"]
+    by_index = data.record(3, cell="ucb", path=tmp_path / "a.mcap", rrd=False)
+    assert by_index.log.config.seed == SEED + 3
+    worst = data.record("worst", policy="cucb", path=tmp_path / "b.mcap", rrd=False)
+    assert worst.log.config.seed == SEED + named["cells"]["cucb"]["worst"]["run"]
 
 
 def test_info_lists_the_named_runs_with_a_command_that_records_each(

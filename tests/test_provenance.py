@@ -254,10 +254,10 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
     name; once the engine agrees again, the next attempt is not blocked by that log."""
     from click.testing import CliRunner
 
-    import corraoi.face.recording
+    import corraoi.face.slots
     from corraoi.cli import main
 
-    real = corraoi.face.recording.slots_of
+    real = corraoi.face.slots.slots_of
 
     def changed_engine(config):
         for block in real(config):
@@ -266,7 +266,7 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
 
     out = swept.parent / "m.mcap"
     args = ["record", "--from", str(swept), "--cell", "cucb", "--run", 1, "--no-rrd", "-o", out]
-    monkeypatch.setattr(corraoi.face.recording, "slots_of", changed_engine)
+    monkeypatch.setattr(corraoi.face.slots, "slots_of", changed_engine)
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 1, res.output
     line = res.output.strip().splitlines()[-1]
@@ -279,7 +279,7 @@ def test_a_rerecorded_run_that_differs_from_the_sweeps_row_is_refused(swept: Pat
     assert not out.exists()
     log = open_log(f"{out}.partial")
     assert log.status == "failed" and "the sweep's row says" in log.end["error"]
-    monkeypatch.setattr(corraoi.face.recording, "slots_of", real)
+    monkeypatch.setattr(corraoi.face.slots, "slots_of", real)
     res = CliRunner().invoke(main, [str(a) for a in args])  # no --force needed: the same run
     assert res.exit_code == 0, res.output
     assert open_log(out).status == "complete" and not Path(f"{out}.partial").exists()

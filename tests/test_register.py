@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import corraoi
 from corraoi.errors import PolicyError
 from corraoi.policies import (
     Policy,
@@ -24,7 +25,7 @@ from corraoi.policies import (
     resolve,
 )
 from corraoi.policies.spec import PolicySpec
-from corraoi.testing import check_policy, record_run
+from corraoi.testing import check_policy
 from recorder.slotlog.reader import open_log
 
 MODULE = textwrap.dedent(
@@ -89,7 +90,7 @@ def test_a_registered_policy_is_found_by_name_everywhere(regmod):
 
 def test_a_registered_policy_runs_and_logs_like_any_other(regmod, tmp_path):
     check_policy("greedy-reg", arms=(2, 4), horizon=80, tmp_path=tmp_path)
-    log = open_log(record_run(tmp_path / "g.mcap", policy="greedy-reg", horizon=60, seed=5))
+    log = open_log(corraoi.record("greedy-reg", horizon=60, seed=5, path=tmp_path / "g.mcap"))
     arms = log.read_all().arm
     K = log.config.instance.K
     assert list(arms[:K]) == list(range(K))  # round robin first, as the class says

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_the_fixture_records_a_run_and_twice_is_equal(corraoi_run: Callable[..., Path]):
     a = corraoi_run(policy="cts", seed=7, horizon=1500)
     b = corraoi_run(policy="cts", seed=7, horizon=1500)
-    assert a != b and a.is_file() and b.is_file()
+    assert a.path != b.path and a.path.is_file() and b.path.is_file() and a.complete
     log = open_log(a)
     assert (log.config.policy.name, log.config.seed, log.n_slots) == ("cts", 7, 1500)
     assert_runs_equal(a, b)

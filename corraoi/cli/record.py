@@ -31,8 +31,8 @@ from .options import (
     policy_option,
     seed_option,
 )
-from .record_loop import Outlets, record_all, report
-from .record_plan import from_sweep, plan_files, say_where_from, up_to_date
+from .record_loop import record_all, report
+from .record_plan import from_sweep, say_where_from
 
 
 @click.command("record")
@@ -151,15 +151,14 @@ def record(
         chan = resolve_channel(channel, inst)
         chan.check(inst, horizon)
         configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
+    from corraoi.face.recording import plan_files
+
     plans = plan_files(configs, output, rrd, no_rrd, drills)
     if drills:
         say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
-    from corraoi.errors import OutputError
-    from corraoi.files.partial import check_target
-    from recorder.sink import made_again
-    from recorder.slotlog.sink import same_run_partial
+    from corraoi.face.recording import Outlets, refuse, up_to_date
 
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
@@ -175,18 +174,7 @@ def record(
         if as_json:
             click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in fresh]}))
         return
-    for plan in plans:  # refuse before simulating anything
-        if not force and plan.mcap.is_file():
-            raise OutputError(
-                f"{plan.mcap}: already exists and holds another run (a different "
-                "configuration, or not complete); use --force to overwrite it"
-            )
-        # a .partial a killed attempt at the same run left is taken over (nothing is lost)
-        check_target(plan.mcap, overwrite=force, what="MCAP log",
-                     replaceable=same_run_partial(plan.config))  # fmt: skip
-        if plan.rrd is not None:
-            check_target(plan.rrd, overwrite=force, what="Rerun recording",
-                         replaceable=made_again)  # fmt: skip
+    refuse(plans, force=force)  # before simulating anything
 
     worker = None
     if any(p.rrd for p in plans):

@@ -1,14 +1,10 @@
-"""What ``corraoi record`` records, and into which files: the runs named by the options or
-chosen from a sweep folder (``--from``, corraoi.experiments.drill), their MCAP and Rerun paths
-(templates
-filled in, clashes refused), and whether a run's files already hold it (up to date).
+"""The runs ``corraoi record --from SWEEP`` records: chosen from a sweep folder
+(corraoi.experiments.drill), with what the sweep fixed refused as an option. Their files are
+planned by the face (:func:`corraoi.face.recording.plan_files`).
 """
 
 from __future__ import annotations
 
-import os
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import click
@@ -17,78 +13,6 @@ from corraoi.errors import UsageError
 from corraoi.text import safe_text
 
 from .common import warn
-
-DEFAULT_OUT = "runs/{label}.mcap"
-_PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}", "{run}", "{from}")
-#: The default name of a run recorded from a sweep (--from): where it came from.
-FROM_OUT = "runs/{from}.mcap"
-
-
-@dataclass
-class Plan:
-    """One run to record: its configuration (a ``RunConfig``) and its files."""
-
-    config: Any  # RunConfig
-    mcap: Path
-    rrd: Path | None
-    #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
-    drill: Any = None
-
-
-def _expand(template: str, config: Any, drill: Any = None) -> Path:
-    """The path ``template`` names for ``config``. The names filled in are data (from an
-    instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
-    climb out of one (``../``) or carry control codes into the file name."""
-    from corraoi.text import safe_name
-
-    values = {
-        "{label}": config.label,
-        "{policy}": config.policy.name,
-        "{instance}": config.instance.name,
-        "{seed}": str(config.seed),
-        "{run}": str(drill.run) if drill is not None else str(config.seed),
-        "{from}": drill.name if drill is not None else config.label,
-    }
-    out = template
-    for key, value in values.items():
-        out = out.replace(key, safe_name(value))
-    return Path(out)
-
-
-def _rrd_beside(mcap: Path) -> Path:
-    return mcap.with_suffix(".rrd") if mcap.suffix == ".mcap" else Path(f"{mcap}.rrd")
-
-
-def plan_files(
-    configs: list[Any], out: str | None, rrd: str | None, no_rrd: bool, drills: Any = None
-) -> list[Plan]:
-    several = len(configs) > 1
-    for option, value in (("-o/--output", out), ("--rrd", rrd)):
-        if value is not None and several and not any(p in value for p in _PLACEHOLDERS):
-            raise UsageError(
-                f"{option} {value}: names one file but {len(configs)} "
-                f"{'runs' if drills else 'policies'} are recorded; put {{label}} or "
-                f"{'{from}' if drills else '{policy}'} in it (e.g. -o "
-                f"'runs/{'{from}' if drills else '{label}'}.mcap')"
-            )
-        if value is not None and value.strip() == "":
-            raise UsageError(f"{option}: empty path")
-    plans = []
-    for i, config in enumerate(configs):
-        drill = drills[i] if drills else None
-        mcap = _expand(out or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
-        path = None if no_rrd else (_expand(rrd, config, drill) if rrd else _rrd_beside(mcap))
-        plans.append(Plan(config, mcap, path, drill))
-    seen: dict[str, str] = {}
-    for plan in plans:
-        for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
-            if p is None:
-                continue
-            key = os.path.abspath(p)
-            if key in seen:
-                raise UsageError(f"{p}: used twice (as {seen[key]} and as {kind})")
-            seen[key] = kind
-    return plans
 
 
 def from_sweep(
@@ -139,20 +63,4 @@ def say_where_from(drills: list[Any]) -> None:
                    err=True)  # fmt: skip
 
 
-def up_to_date(plan: Plan) -> bool:
-    """The plan's files exist, and its MCAP log is complete with the same configuration
-    (the version of corraoi included): recording again would write the same bytes."""
-    from corraoi.errors import LogError
-    from recorder.slotlog.reader import open_log
-
-    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
-        return False
-    try:
-        log = open_log(plan.mcap, verify=False)
-    except LogError:
-        return False
-    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
-
-
-__all__ = ["DEFAULT_OUT", "FROM_OUT", "Plan", "from_sweep", "plan_files", "say_where_from",
-           "up_to_date"]  # fmt: skip
+__all__ = ["from_sweep", "say_where_from"]

@@ -176,18 +176,11 @@ def sweep(
         if experiment is None:
             raise
         raise type(exc)(f"{experiment}: {exc}") from None
-    for cell in grid.cells:
-        from corraoi.engine.problem import check_instance
-
-        check_instance(cell.instance)
     grid = settle_backend(grid)
-    # the biggest cell's runs x checkpoints are held at once when its results are joined (a
-    # GPU sweep keeps every run's final values only)
-    per_run = out is not None and grid.backend == "cpu"
-    limits.check_sweep_memory(grid.runs, max(c.instance.K for c in grid.cells), policies=1,
-                              checkpoints=grid.checkpoints if per_run else 0)  # fmt: skip
+    from corraoi.face.sweeps import check_grid
+
+    size = check_grid(grid, out, allow_huge=allow_huge)
     run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
-    size = limits.check_sweep_size(len(grid.cells), grid.runs, run_slots, allow=allow_huge)
     if run_slots >= SAY_SIZE_FROM:
         click.echo(f"corraoi: sweep of {size}; the progress bar shows the time left", err=True)
     for note in _notes(grid):

@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
+from corraoi._signals import raise_if_asked
 from corraoi.errors import ConfigError
 
 #: Threads that share a kernel call's runs (set_workers); every core by default.
@@ -95,6 +96,7 @@ def run_slices(run: Callable[[int, int], None], slices: list[tuple[int, int]]) -
     worker (a signal is handled between slices), else on the engine's threads. On an
     interrupt, the slices not started are cancelled and the running ones (each about
     PIECE_SECONDS) finish before the KeyboardInterrupt goes on."""
+    raise_if_asked()  # a signal whose KeyboardInterrupt was swallowed is not lost
     if _workers <= 1 or len(slices) == 1:
         for a, b in slices:
             run(a, b)

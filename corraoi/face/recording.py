@@ -1,5 +1,13 @@
-"""One recorded run: a run's slots streamed to its MCAP log and, if asked, a Rerun recording
-(what ``corraoi record`` does for each policy, ``compare --from`` and ``SweepData.record`` too).
+"""Recording runs: a run's slots streamed to its MCAP log, its Rerun recording and any
+further sink -- what :func:`corraoi.record` does, and ``corraoi record`` for each of its runs.
+
+* :func:`record_run`: one run (a ``RunConfig``) into its files, one loop over its sinks;
+* :class:`Plan`, :func:`plan_files`, :func:`up_to_date`, :func:`refuse`: which files a run
+  goes to (path templates filled in), whether they already hold it, and the refusals made
+  before anything runs;
+* :func:`record_plans`: several plans one after another (their kernels compiled together
+  first), each run's figures measured (:class:`Recorded`);
+* :func:`record`: the Python face's one call, returning a :class:`~corraoi.face.runs.Run`.
 
 The core gives the slots (``corraoi.face.slots.slots_of``); the sinks are the recorder's.
 """
@@ -7,19 +15,36 @@ The core gives the slots (``corraoi.face.slots.slots_of``); the sinks are the re
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from corraoi.errors import SweepMismatch, ViewerError, WriteError
-from corraoi.experiments.drill import row_mismatch
+from corraoi.errors import (
+    OutputError,
+    PolicyRuntimeError,
+    SweepMismatch,
+    UsageError,
+    ViewerError,
+    WriteError,
+)
 from corraoi.provenance import Provenance
 from recorder.sink import Sink
 from recorder.slotlog.sink import McapSink
 
-from .slots import slots_of
+if TYPE_CHECKING:
+    from corraoi.model.instance import Instance
+
+    from .resolve import PolicyLike
+    from .runs import Run
+
+#: Where a run's log goes unless told: ``runs/<label>.mcap`` (a run of a sweep: its name).
+DEFAULT_OUT = "runs/{label}.mcap"
+FROM_OUT = "runs/{from}.mcap"
+#: What a path template may hold, each filled with a safe file name.
+PLACEHOLDERS = ("{label}", "{policy}", "{instance}", "{seed}", "{run}", "{from}")
 
 
 @dataclass
@@ -60,6 +85,10 @@ def record_run(
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
     the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
     finished as failed with that line. ``notes`` go into the log's provenance."""
+    from corraoi.experiments.drill import row_mismatch
+
+    from .slots import slots_of
+
     problem: str | None = None
     rrd_error: WriteError | None = None
     slots = 0
@@ -137,3 +166,346 @@ def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> Rec
     :class:`corraoi.experiments.drill.Drill`): it
     must give the sweep's regret again, and its log carries the drill's notes."""
     return record_run(drill.config, mcap, expect=drill.expect, notes=drill.notes, **kwargs)
+
+
+# ---------------------------------------------------------------------------- plans
+
+
+@dataclass
+class Plan:
+    """One run to record: its configuration (a ``RunConfig``) and its files."""
+
+    config: Any  # RunConfig
+    mcap: Path
+    rrd: Path | None
+    #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
+    drill: Any = None
+
+
+def _expand(template: str, config: Any, drill: Any = None) -> Path:
+    """The path ``template`` names for ``config``. The names filled in are data (from an
+    instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
+    climb out of one (``../``) or carry control codes into the file name."""
+    from corraoi.text import safe_name
+
+    values = {
+        "{label}": config.label,
+        "{policy}": config.policy.name,
+        "{instance}": config.instance.name,
+        "{seed}": str(config.seed),
+        "{run}": str(drill.run) if drill is not None else str(config.seed),
+        "{from}": drill.name if drill is not None else config.label,
+    }
+    out = template
+    for key, value in values.items():
+        out = out.replace(key, safe_name(value))
+    return Path(out)
+
+
+def _rrd_beside(mcap: Path) -> Path:
+    return mcap.with_suffix(".rrd") if mcap.suffix == ".mcap" else Path(f"{mcap}.rrd")
+
+
+def plan_files(
+    configs: Sequence[Any],
+    out: str | os.PathLike[str] | None = None,
+    rrd: str | os.PathLike[str] | None = None,
+    no_rrd: bool = False,
+    drills: Sequence[Any] | None = None,
+) -> list[Plan]:
+    """The files of each run: ``out`` (default ``runs/{label}.mcap``, a run of a sweep
+    ``runs/{from}.mcap``) and ``rrd`` (default: beside the log, none with ``no_rrd``), their
+    templates filled in; one line for a path that names one file for several runs, or a
+    path used twice."""
+    several = len(configs) > 1
+    texts = {"-o/--output": None if out is None else os.fspath(out),
+             "--rrd": None if rrd is None else os.fspath(rrd)}  # fmt: skip
+    for option, value in texts.items():
+        if value is not None and several and not any(p in value for p in PLACEHOLDERS):
+            raise UsageError(
+                f"{option} {value}: names one file but {len(configs)} "
+                f"{'runs' if drills else 'policies'} are recorded; put {{label}} or "
+                f"{'{from}' if drills else '{policy}'} in it (e.g. -o "
+                f"'runs/{'{from}' if drills else '{label}'}.mcap')"
+            )
+        if value is not None and value.strip() == "":
+            raise UsageError(f"{option}: empty path")
+    plans = []
+    for i, config in enumerate(configs):
+        drill = drills[i] if drills else None
+        mcap = _expand(texts["-o/--output"] or (FROM_OUT if drill else DEFAULT_OUT), config, drill)
+        rrd_text = texts["--rrd"]
+        path = None if no_rrd else (_expand(rrd_text, config, drill) if rrd_text
+                                    else _rrd_beside(mcap))  # fmt: skip
+        plans.append(Plan(config, mcap, path, drill))
+    seen: dict[str, str] = {}
+    for plan in plans:
+        for kind, p in (("MCAP log", plan.mcap), ("Rerun recording", plan.rrd)):
+            if p is None:
+                continue
+            key = os.path.abspath(p)
+            if key in seen:
+                raise UsageError(f"{p}: used twice (as {seen[key]} and as {kind})")
+            seen[key] = kind
+    return plans
+
+
+def up_to_date(plan: Plan) -> bool:
+    """The plan's files exist, and its MCAP log is complete with the same configuration
+    (the version of corraoi included): recording again would write the same bytes."""
+    from corraoi.errors import LogError
+    from recorder.slotlog.reader import open_log
+
+    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
+        return False
+    try:
+        log = open_log(plan.mcap, verify=False)
+    except LogError:
+        return False
+    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
+
+
+def refuse(plans: Sequence[Plan], *, force: bool, hint: str = "--force") -> None:
+    """Refuse, before anything runs, a plan whose files cannot be written: a log that holds
+    another run (without ``force``), a file another process is writing, a folder, a sweep
+    folder's own file. A ``.partial`` a killed attempt at the same run left is taken over."""
+    from corraoi.files.partial import check_target
+    from recorder.sink import made_again
+    from recorder.slotlog.sink import same_run_partial
+
+    for plan in plans:
+        if not force and plan.mcap.is_file():
+            raise OutputError(
+                f"{plan.mcap}: already exists and holds another run (a different "
+                f"configuration, or not complete); use {hint} to overwrite it"
+            )
+        check_target(plan.mcap, overwrite=force, what="MCAP log",
+                     replaceable=same_run_partial(plan.config))  # fmt: skip
+        if plan.rrd is not None:
+            check_target(plan.rrd, overwrite=force, what="Rerun recording",
+                         replaceable=made_again)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- recording plans
+
+
+@dataclass(frozen=True)
+class Outlets:
+    """Where every run of one recording goes besides its files, decided once: a Rerun
+    viewer's URL, whether files may be overwritten, a live Foxglove server (``.sink(config,
+    stopping)`` gives each run's sink) and a forked Rerun writer
+    (:class:`recorder.rerun.worker.RerunWorker`)."""
+
+    viewer_url: str | None = None
+    overwrite: bool = False
+    live: Any = None
+    rerun: Any = None
+    sinks: tuple[Sink, ...] = ()
+
+
+@dataclass
+class Recorded:
+    """One plan recorded: the slots, the final figures, the files and the wall time (of which
+    ``compile_s`` compiled the kernel, on first use only)."""
+
+    plan: Plan
+    slots: int = 0
+    wall: float = 0.0
+    regret: int | None = None
+    estimator: float | None = None
+    pulls: list[int] = field(default_factory=list)
+    mcap: Path | None = None
+    rrd: Path | None = None
+    compile_s: float = 0.0
+    viewer_problem: str | None = None
+    summary: Any = None  # viewer.summary.RunSummary, measured as the blocks went by
+
+
+def prepare_kernels(plans: Sequence[Plan]) -> None:
+    """Several policy families to record for the first time: compile their record kernels
+    at once, one worker process per core, before the first run starts."""
+    from corraoi.engine import kernel_pool
+    from corraoi.policies.api import CompiledPolicy
+
+    classes = {}
+    for plan in plans:
+        if plan.config.streams != "cpu":  # a GPU sweep's run: the GPU kernel decides it
+            continue
+        cls = plan.config.policy.resolve()
+        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+            classes[cls.name] = cls
+    kernel_pool.prepare(classes.values(), record=True)
+
+
+def record_plans(
+    plans: Sequence[Plan],
+    outlets: Outlets = Outlets(),
+    *,
+    on_block: Callable[[Plan, Any], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> list[Recorded]:
+    """Record every plan in turn (module docstring). ``on_block(plan, block)`` after each
+    block; ``should_stop()`` ends the current run at its next block, its files finished with
+    the slots so far, and records no further plan."""
+    from corraoi.engine.threads import set_workers
+
+    # One run has nothing to spread over threads, and idle numba workers compete with
+    # Rerun's encoder threads for the cores: 2-3x slower on a 2-core machine.
+    set_workers(1)
+    prepare_kernels(plans)
+    done: list[Recorded] = []
+    for plan in plans:
+        result = Recorded(plan)
+        done.append(result)
+        _record_one(plan, result, outlets, on_block, should_stop)
+        if should_stop is not None and should_stop():
+            break
+    return done
+
+
+def _record_one(
+    plan: Plan,
+    result: Recorded,
+    outlets: Outlets,
+    on_block: Callable[[Plan, Any], None] | None,
+    should_stop: Callable[[], bool] | None,
+) -> None:
+    from corraoi.engine import kernels
+    from corraoi.files.partial import partial_path
+    from viewer.summary import SummaryAccumulator
+
+    config = plan.config
+    summary = SummaryAccumulator(config)
+    stopping = should_stop if should_stop is not None else (lambda: False)
+    # with --pace, the Foxglove sink's write is what slows the run
+    fox = outlets.live.sink(config, stopping) if outlets.live is not None else None
+
+    def each(block: Any) -> None:
+        summary.update(block)
+        result.slots = int(block.t[-1])
+        result.regret = int(block.regret[-1])
+        result.estimator = float(block.estimator[-1])
+        result.pulls = [int(v) for v in block.pulls[-1]]
+        if on_block is not None:
+            on_block(plan, block)
+
+    start = time.perf_counter()
+    compiled_before = kernels.compile_seconds  # compiling is not the run: left out of slots/s
+    try:
+        outcome = record_run(
+            config, plan.mcap, rrd=plan.rrd, viewer_url=outlets.viewer_url,
+            overwrite=outlets.overwrite, on_block=each, should_stop=should_stop,
+            rerun=outlets.rerun, sinks=[*outlets.sinks, *([fox] if fox is not None else [])],
+            expect=plan.drill.expect if plan.drill is not None else (),
+            notes=plan.drill.notes if plan.drill is not None else (),
+        )  # fmt: skip
+    except PolicyRuntimeError as exc:
+        where = partial_path(plan.mcap)
+        left = (f"; the log is left as {where}, marked failed" if where.exists()
+                else f"; no log written ({plan.mcap} would have held no slot)")
+        raise type(exc)(f"{exc}{left}") from None
+    finally:
+        result.wall = time.perf_counter() - start
+        result.compile_s = kernels.compile_seconds - compiled_before
+    result.mcap, result.rrd = outcome.mcap, outcome.rrd
+    result.viewer_problem = outcome.viewer_problem
+    result.summary = summary.result()
+
+
+# ---------------------------------------------------------------------------- the face
+
+
+def record(
+    policy: PolicyLike,
+    instance: str | os.PathLike[str] | Instance = "I1",
+    *,
+    seed: int = 0,
+    horizon: int = 10_000,
+    params: Mapping[str, float] | Mapping[str, Mapping[str, float]] | None = None,
+    channel: str | None = None,
+    path: str | os.PathLike[str] | None = None,
+    rrd: str | os.PathLike[str] | bool | None = None,
+    force: bool = False,
+    viewer: str | None = None,
+    sinks: Sequence[Sink] = (),
+    on_block: Callable[[Any], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> Run:
+    """Simulate one run and record every slot, as ``corraoi record`` does with the same
+    arguments (the same bytes in the log); returns the recorded :class:`corraoi.Run`.
+
+    ``policy``: a name (``"cucb"``), a ``FILE.py:Class`` or ``module:Class`` word, a
+    ``corraoi.Policy`` or ``corraoi.CompiledPolicy`` subclass (defined anywhere: it is
+    registered under its ``name``) or an instance of one (its parameters set as attributes).
+    ``instance``: a built-in name, an instance file or a :class:`corraoi.Instance`.
+    ``seed``: the run's seed (its hidden path depends on the instance and the seed only, so
+    runs of different policies with one seed are paired); ``horizon``: its slots.
+    ``params``: ``{name: value}``. ``channel``: ``iid``, ``markov`` or ``trace:PATH``.
+
+    ``path``: the slot log (default ``runs/{label}.mcap``; ``{label}``, ``{policy}``,
+    ``{instance}`` and ``{seed}`` are filled in); ``rrd``: the Rerun recording (default beside
+    the log; ``False`` for none). A complete log of the same run already there is returned as
+    it is (nothing runs) unless ``force``; a file that holds another run is refused
+    (:class:`~corraoi.errors.OutputError`) unless ``force``.
+
+    ``viewer``: the URL of a running Rerun viewer that also gets every slot; ``sinks``:
+    further :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own);
+    ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
+    next block, the files finished with the slots so far (Ctrl-C does the same).
+
+    Raises :class:`~corraoi.errors.PolicyError`, :class:`~corraoi.errors.InstanceError`,
+    :class:`~corraoi.errors.ConfigError` (bad input, before anything runs),
+    :class:`~corraoi.errors.OutputError` (a path that must not be written),
+    :class:`~corraoi.errors.PolicyRuntimeError` (the policy failed: the log is left at its
+    ``.partial`` name, marked failed) and :class:`~corraoi.errors.WriteError`.
+    """
+    from corraoi.engine.block import RunConfig
+    from corraoi.limits import check_horizon, check_seed
+
+    from . import resolve
+    from .runs import Run
+
+    inst = resolve.instance(instance)
+    check_seed(seed, name="seed")
+    check_horizon(horizon)
+    (spec,) = resolve.policies(policy, params)
+    chan = resolve.channel(channel, inst)
+    chan.check(inst, horizon)
+    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan)
+    if rrd is True:
+        rrd = None
+    if rrd is not None and not isinstance(rrd, (str, os.PathLike)) and rrd is not False:
+        raise UsageError(f"rrd: expected a path, None or False, got {rrd!r}")
+    (plan,) = plan_files([config], path, None if rrd is False else rrd, no_rrd=rrd is False)
+    if not force and viewer is None and not sinks and up_to_date(plan):
+        return Run(plan.mcap, rrd=plan.rrd)
+    refuse([plan], force=force, hint="force=True")
+    outlets = Outlets(viewer_url=viewer, overwrite=force, sinks=tuple(sinks))
+    each = None if on_block is None else (lambda _plan, block: on_block(block))
+    (done,) = record_plans([plan], outlets, on_block=each, should_stop=should_stop)
+    if done.viewer_problem is not None:
+        import warnings
+
+        from corraoi.errors import CorraoiWarning
+
+        warnings.warn(done.viewer_problem, CorraoiWarning, stacklevel=2)
+    assert done.mcap is not None
+    return Run(done.mcap, rrd=done.rrd, summary=done.summary)
+
+
+__all__ = [
+    "DEFAULT_OUT",
+    "FROM_OUT",
+    "Outlets",
+    "Plan",
+    "RecordOutcome",
+    "Recorded",
+    "plan_files",
+    "prepare_kernels",
+    "record",
+    "record_drill",
+    "record_plans",
+    "record_run",
+    "refuse",
+    "up_to_date",
+]

@@ -232,6 +232,41 @@ def _read_once(path: str) -> tuple[str, bytes] | None:
         return None
 
 
+def class_source(cls: type) -> tuple[str, bytes] | None:
+    """(where, bytes) of the source a policy class ran from: its module's file as loaded, or,
+    for a class defined in a session without one (a notebook cell, ``python -c``), the text
+    of the class itself (``inspect.getsource``), named ``<module>:<qualname>``."""
+    loaded = loaded_source(cls.__module__)
+    if loaded is not None:
+        return loaded
+    text = _class_text(cls)
+    return None if text is None else (f"<{cls.__module__}>:{cls.__qualname__}", text.encode())
+
+
+def _class_text(cls: type) -> str | None:
+    """The text of a class defined without a file: ``inspect.getsource``, or, where that
+    needs the module's file (a notebook's ``__main__`` has none), the ``class`` block found
+    above one of its methods in the cell the interpreter keeps (``linecache``)."""
+    import inspect
+    import linecache
+    import re
+
+    try:
+        return inspect.getsource(cls)
+    except (OSError, TypeError):
+        pass
+    header = re.compile(rf"\s*class\s+{re.escape(cls.__name__)}\b")
+    for value in vars(cls).values():
+        code = getattr(getattr(value, "__func__", value), "__code__", None)
+        if code is None:
+            continue
+        lines = linecache.getlines(code.co_filename)
+        for start in range(min(code.co_firstlineno, len(lines)) - 1, -1, -1):
+            if header.match(lines[start]):
+                return "".join(inspect.getblock(lines[start:]))
+    return None
+
+
 def module_version(modname: str) -> str:
     top = modname.split(".")[0]
     for dist in importlib.metadata.packages_distributions().get(top, []):
@@ -239,10 +274,9 @@ def module_version(modname: str) -> str:
             return importlib.metadata.version(dist)
         except importlib.metadata.PackageNotFoundError:
             continue
-    mod = sys.modules.get(modname)
-    file = getattr(mod, "__file__", None)
-    if file:
-        return "sha256:" + hashlib.sha256(Path(file).read_bytes()).hexdigest()[:16]
+    loaded = loaded_source(modname)
+    if loaded is not None:
+        return "sha256:" + hashlib.sha256(loaded[1]).hexdigest()[:16]
     return ""
 
 

@@ -15,6 +15,7 @@ The built-in families register themselves with the same :func:`register` a user 
 from __future__ import annotations
 
 import difflib
+import hashlib
 import importlib
 import importlib.metadata
 import re
@@ -30,6 +31,7 @@ from .api import BUILTIN_PREFIX, PolicyBase
 from .loading import (
     PLUGIN_MODULE_PREFIX,
     check_class,
+    class_source,
     file_module,
     guarded_load,
     has_source,
@@ -165,7 +167,9 @@ def _registered(cls: type[PolicyBase]) -> Resolved:
         file_version = getattr(sys.modules.get(module), "__corraoi_digest__", "")
         return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "",
                         file_version)  # fmt: skip
-    return Resolved(cls, qual, module_version(module), module_digest(module))
+    source = class_source(cls)
+    digest = hashlib.sha256(source[1]).hexdigest() if source is not None else ""
+    return Resolved(cls, qual, module_version(module), digest)
 
 
 def resolve(token: str, *, expect: str = "") -> Resolved:

@@ -143,6 +143,13 @@ class PolicySpec:
                 raise CodeChanged(source_path(here), expect, found)
             return here
         qual = self.qualname
+        if qual.startswith("__main__:"):
+            raise PolicyError(
+                f"policy {self.name}: its class {qual.partition(':')[2]} was defined in a Python "
+                "session (a notebook or a script), not in a module corraoi can import; record "
+                "its runs from a session that defines it: corraoi.load(SWEEP).record(..., "
+                f"policy={qual.partition(':')[2]})"
+            )
         if qual.startswith("file:"):
             return resolve(qual[len("file:") :], expect=expect).cls
         res = resolve(qual if ":" in qual and not qual.startswith("plugin:") else self.name)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -301,49 +300,6 @@ class SweepData:
             return read_sweep(self.log_path).config
         out: dict[str, Any] = json.loads(read_metadata(self.results_path)["sweep_config"])
         return out
-
-    def record(
-        self,
-        run: int | str = "worst",
-        *,
-        policy: str | Sequence[str] = (),
-        cell: str | Sequence[str] = (),
-        out: str | os.PathLike[str] = "runs",
-        rrd: bool = False,
-        overwrite: bool = False,
-        kept_code: bool = False,
-        allow_changed_code: bool = False,
-    ) -> list[Any]:
-        """Record runs of this sweep slot by slot, as ``corraoi record --from`` does: ``run``
-        an index or worst/best/median/widest-gap; ``policy`` restricts to the sweep's
-        policies or adds others on the same run; ``cell`` selects cells by label. Writes
-        ``out/<folder>-<instance>-<label>-run<N>[-<choice>].mcap`` (and ``.rrd`` with
-        ``rrd``); returns each run's ``RecordOutcome`` (``.mcap``: what ``corraoi.load``
-        reads back). A plug-in edited since the sweep is refused unless ``kept_code`` (run
-        the folder's copy) or ``allow_changed_code``; each run must give the sweep's regret
-        again (corraoi.experiments.drill.SweepMismatch where it does not)."""
-        from corraoi.experiments.drill import choose
-        from corraoi.face.recording import record_drill
-        from corraoi.policies import make_policies
-        from corraoi.text import safe_name
-
-        names = (policy,) if isinstance(policy, str) else tuple(policy)
-        specs = make_policies(names) if names else []
-        cells = (cell,) if isinstance(cell, str) else tuple(cell)
-        from recorder.slotlog.trace import states_of_log
-
-        drills = choose(self.folder, run, cells=cells, policies=specs, kept_code=kept_code,
-                        allow_changed_code=allow_changed_code,
-                        trace_readers={".mcap": states_of_log})  # fmt: skip
-        folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        outcomes = []
-        for d in drills:
-            stem = folder / safe_name(d.name)
-            outcomes.append(record_drill(d, Path(f"{stem}.mcap"),
-                                         rrd=Path(f"{stem}.rrd") if rrd else None,
-                                         overwrite=overwrite))  # fmt: skip
-        return outcomes
 
     @cached_property
     def curves(self) -> pd.DataFrame:

@@ -1,0 +1,130 @@
+""":class:`Run`: one recorded run, what :func:`corraoi.record` returns and :func:`corraoi.load`
+gives for a slot log. The recorder's :class:`~recorder.slotlog.frames.RunData` (``.slots``,
+``.config``, ``.to_arrow()``) with what a person asks of a run next: its summary, a diff
+against another, the viewer, and a table in Jupyter."""
+
+from __future__ import annotations
+
+import html
+import os
+from collections.abc import Sequence
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from corraoi.errors import UsageError
+from recorder.slotlog.frames import RunData
+from recorder.slotlog.reader import RunLog
+
+if TYPE_CHECKING:
+    from viewer.diff_report import DiffReport
+    from viewer.summary import RunSummary
+
+
+
+class Run(RunData):
+    """One recorded run (a slot log, and its Rerun recording when there is one).
+
+    * ``.path`` / ``.mcap``: the slot log; ``.rrd``: the Rerun recording (None without one);
+    * ``.config``: the run's settings; ``.slots``: one row per slot (pandas, the ``analysis``
+      extra); ``.blocks()``, ``.to_arrow()``;
+    * ``.summary``: final pathwise regret, the paper's estimator, pulls per arm, the share of
+      slots on the best arm, AoI-aware overrides and the slot from which it stayed on the best
+      arm (:class:`viewer.summary.RunSummary`; arms 0-based, ``.to_dict()`` numbers them from 1);
+    * ``.diff(other)``: a :class:`viewer.DiffReport`.
+
+    ``slots=(first, last)`` restricts the tables to those slots (1-based, inclusive).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str] | RunLog,
+        *,
+        slots: tuple[int, int] | None = None,
+        rrd: str | os.PathLike[str] | None = None,
+        summary: RunSummary | None = None,
+    ) -> None:
+        super().__init__(path, slots=slots)
+        if rrd is not None:
+            self.rrd: Path | None = Path(rrd)
+        else:
+            beside = self.path.with_name(self.path.name.removesuffix(".partial")).with_suffix(
+                ".rrd")  # fmt: skip
+            self.rrd = beside if beside.is_file() else None
+        if summary is not None and slots is None:
+            self.__dict__["summary"] = summary  # measured while it was recorded
+
+    def __fspath__(self) -> str:
+        """The slot log's path: a Run goes wherever a log's path does."""
+        return str(self.path)
+
+    @property
+    def mcap(self) -> Path:
+        """The slot log (its ``.partial`` name when the run did not finish)."""
+        return self.path
+
+    @property
+    def label(self) -> str:
+        return self.log.config.label
+
+    @property
+    def complete(self) -> bool:
+        """Every slot of the horizon recorded and the log finished."""
+        return self.log.status == "complete"
+
+    @cached_property
+    def summary(self) -> RunSummary:
+        """The run's figures from its logged slots (the window's, with ``slots=``)."""
+        from viewer.summary import summarize_blocks
+
+        return summarize_blocks(self.log.config, self.blocks())
+
+    def diff(self, other: Run | str | os.PathLike[str], fields: Sequence[str] | None = None,
+             *, atol: float = 0.0) -> DiffReport:  # fmt: skip
+        """Slot by slot against ``other`` (a Run or a log's path): the first divergence per
+        field (``fields``, default all), as :func:`corraoi.diff`."""
+        from .views import diff
+
+        return diff(self, other, fields=fields, atol=atol)
+
+
+    def __repr__(self) -> str:
+        where = f", slots {self.window[0]}..{self.window[1]}" if self.window else ""
+        return f"Run({str(self.path)!r}, {self.label}{where}, {self.log.status})"
+
+    def _repr_html_(self) -> str:
+        cfg = self.log.config
+        s = self.summary
+        arms = cfg.instance.arm_names
+        pulls = ", ".join(f"{a}: {n}" for a, n in zip(arms, s.pulls, strict=True))
+        params = ", ".join(f"{k}={v:g}" for k, v in cfg.policy.params.items())
+        rows = [
+            ("run", cfg.label),
+            ("policy", cfg.policy.name + (f" ({params})" if params else "")),
+            ("instance", f"{cfg.instance.name} (K = {cfg.instance.K})"),
+            ("seed, horizon", f"{cfg.seed}, {cfg.horizon:,}"),
+            ("slots", f"{s.slots:,} ({self.log.status})"),
+            ("AoI regret (pathwise)", "" if s.regret is None else f"{s.regret:,}"),
+            ("paper's estimator", "" if s.estimator is None else f"{s.estimator:,.1f}"),
+            ("pulls per arm", pulls),
+            ("share on the best arm", "" if s.best_share is None else f"{s.best_share:.3f}"),
+            ("slot log", str(self.path)),
+            ("Rerun recording", str(self.rrd) if self.rrd else "none"),
+        ]
+        body = "".join(f"<tr><th style='text-align:left'>{html.escape(k)}</th>"
+                       f"<td style='text-align:left'>{html.escape(str(v))}</td></tr>"
+                       for k, v in rows)  # fmt: skip
+        return f"<table>{body}</table>"
+
+
+def as_run(value: Run | str | os.PathLike[str], what: str = "run") -> Run:
+    """A Run from a Run or a slot log's path (UsageError for anything else)."""
+    if isinstance(value, Run):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return Run(value)
+    raise UsageError(f"{what}: expected a corraoi.Run or a slot log's path, got "
+                     f"{type(value).__name__}")  # fmt: skip
+
+
+__all__ = ["Run", "as_run"]

@@ -1,0 +1,310 @@
+"""Sweeps from Python: :func:`sweep` runs a grid into a folder and returns a :class:`Sweep`, what
+:func:`corraoi.load` gives for a sweep folder too; ``corraoi sweep`` and ``corraoi reproduce``
+run their grids through :func:`run_grid`.
+
+A :class:`Sweep` is the recorder's :class:`~recorder.sweeplog.results.SweepData` (``.runs``,
+``.summary``, ``.curves``, ``.config``) with what comes next: the runs worth watching
+(``.notable``), one of them recorded slot by slot (``.record``, what ``corraoi record --from``
+does), its figure, the viewer, and a table in Jupyter.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+import shutil
+import tempfile
+import weakref
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from corraoi.errors import ConfigError, CorraoiError, UsageError
+from recorder.sweeplog.results import SweepData
+
+from .resolve import PolicyLike, python_warn
+
+if TYPE_CHECKING:
+    from corraoi.experiments.grid import Grid
+    from corraoi.experiments.sweeps import SweepOutcome
+    from corraoi.model.instance import Instance
+
+    from .runs import Run
+
+
+class Sweep(SweepData):
+    """A sweep folder (``corraoi sweep -o DIR``, :func:`corraoi.sweep`), loaded.
+
+    * ``.runs``: every run at every checkpoint (pandas); ``.summary``: ``summary.json``;
+      ``.curves``: the sweep log's mean curves; ``.config``: the grid;
+    * ``.notable``: per policy its worst, median and best run, and the pairs of policies with
+      the widest paired gaps;
+    * ``.record(which)``: one of those runs (or run N) recorded slot by slot, a
+      :class:`corraoi.Run` whose regret equals the sweep's row;
+    * ``.figure(path)``: the sweep figure.
+    """
+
+    @property
+    def notable(self) -> dict[str, Any] | None:
+        """The runs worth watching (``summary.json``'s ``notable``; None without one)."""
+        summary = self.summary
+        value = summary.get("notable") if isinstance(summary, dict) else None
+        return value if isinstance(value, dict) else None
+
+    @property
+    def rrd(self) -> Path | None:
+        """The sweep's Rerun recording (``sweep.rrd``), if it has one."""
+        path = self.folder / "sweep.rrd"
+        return path if path.is_file() else None
+
+    def record(
+        self,
+        which: int | str = "worst",
+        *,
+        policy: PolicyLike | Sequence[PolicyLike] | None = None,
+        cell: str | None = None,
+        path: str | os.PathLike[str] | None = None,
+        rrd: str | os.PathLike[str] | bool | None = None,
+        force: bool = False,
+        kept_code: bool = False,
+        allow_changed_code: bool = False,
+    ) -> Run:
+        """Record one run of this sweep slot by slot, as ``corraoi record --from`` does (the
+        same files): ``which`` is a run index or ``worst``, ``median``, ``best``; ``policy``
+        (a name, a class, ...) and ``cell`` (a label such as ``cucb(c=2)``, or
+        ``INSTANCE/LABEL``) say whose. The run's regret must equal the sweep's row
+        (:class:`~corraoi.errors.SweepMismatch` if not: the engine or the code changed).
+
+        ``path``: the slot log (default ``runs/<folder>-<instance>-<label>-run<N>-<which>.mcap``),
+        ``rrd`` as for :func:`corraoi.record`. A plug-in edited since the sweep is refused
+        unless ``kept_code`` (the folder's copy runs) or ``allow_changed_code``. Where
+        ``which`` names runs of several cells, :class:`~corraoi.errors.CorraoiError` lists
+        them."""
+        from corraoi.experiments.drill import choose
+
+        from .recording import plan_files, record_plans, refuse
+        from .resolve import TRACE_READERS, policies
+        from .runs import Run
+
+        specs = policies(policy) if policy is not None else []
+        cells = (cell,) if cell is not None else ()
+        drills = choose(self.folder, which, cells=cells, policies=specs, warn=python_warn,
+                        kept_code=kept_code, allow_changed_code=allow_changed_code,
+                        trace_readers=TRACE_READERS)  # fmt: skip
+        if len(drills) != 1:
+            listed = "; ".join(f"{d.config.instance.name}/{d.cell or d.config.policy.label} "
+                               f"run {d.run}" for d in drills)  # fmt: skip
+            raise CorraoiError(
+                f"{self.folder}: {which!r} names {len(drills)} runs ({listed}); choose one "
+                "with cell='INSTANCE/LABEL' or policy=..."
+            )
+        if rrd is not None and rrd is not False and not isinstance(rrd, (str, os.PathLike)):
+            raise UsageError(f"rrd: expected a path, None or False, got {rrd!r}")
+        rrd_path = None if rrd is None or rrd is False or rrd is True else rrd
+        plans = plan_files([drills[0].config], path, rrd_path, no_rrd=rrd is False,
+                           drills=drills)  # fmt: skip
+        refuse(plans, force=force, hint="force=True")
+        (done,) = record_plans(plans)
+        assert done.mcap is not None
+        return Run(done.mcap, rrd=done.rrd, summary=done.summary)
+
+    def figure(self, path: str | os.PathLike[str], *, log_x: bool = False,
+               log_y: bool = False) -> Path:  # fmt: skip
+        """Draw the sweep figure (regret against t, a line and 95% band per policy) from the
+        sweep log to ``path`` (its extension picks the format); the ``plot`` extra."""
+        from recorder.sweeplog.read import read_sweep
+        from viewer.figure import draw_figure
+
+        return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
+
+
+    def __repr__(self) -> str:
+        return f"Sweep({str(self.folder)!r})"
+
+    def _repr_html_(self) -> str:
+        summary = self.summary or {}
+        rows = []
+        for name, p in (summary.get("policies") or {}).items():
+            if not isinstance(p, dict):
+                continue
+
+            def num(key: str, fmt: str, p: dict[str, Any] = p) -> str:
+                v = p.get(key)
+                return format(v, fmt) if isinstance(v, (int, float)) else ""
+
+            rows.append((name, num("regret_mean", ",.1f"), num("regret_ci95", ",.1f"),
+                         num("estimator_mean", ",.1f"), num("best_share", ".3f")))  # fmt: skip
+        head = ("policy", "AoI regret at T", "95% +-", "paper's estimator", "best-arm share")
+        title = (f"{summary.get('instance', '')}, {summary.get('runs', '')} runs, "
+                 f"T = {summary.get('horizon', '')}: {self.folder}")  # fmt: skip
+        cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
+                       for r in rows)  # fmt: skip
+        return f"<p>{html.escape(title)}</p><table><tr>{cells}</tr>{body}</table>"
+
+
+def settle_backend(grid: Grid, warn: Callable[[str], None] | None = None) -> Grid:
+    """The grid with ``auto`` resolved (a notice through ``warn`` when it falls back to the
+    CPU) and ``gpu`` checked (:class:`~corraoi.errors.GpuUnavailable` says why not)."""
+    if grid.backend == "cpu":
+        return grid
+    from corraoi.gpu import choose_backend
+
+    return choose_backend(grid, warn=warn)
+
+
+def check_grid(grid: Grid, out: Path | None, *, allow_huge: bool = False) -> str:
+    """Refuse, before anything runs, a grid that cannot be simulated or would not fit in
+    memory, or one too large without ``allow_huge``; returns its size in words."""
+    from corraoi import limits
+    from corraoi.engine.problem import check_instance
+
+    for cell in grid.cells:
+        check_instance(cell.instance)
+    # the biggest cell's runs x checkpoints are held at once when its results are joined (a
+    # GPU sweep keeps every run's final values only)
+    per_run = out is not None and grid.backend == "cpu"
+    limits.check_sweep_memory(grid.runs, max(c.instance.K for c in grid.cells), policies=1,
+                              checkpoints=grid.checkpoints if per_run else 0)  # fmt: skip
+    run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
+    return limits.check_sweep_size(len(grid.cells), grid.runs, run_slots, allow=allow_huge)
+
+
+def run_grid(
+    grid: Grid,
+    *,
+    out: str | os.PathLike[str] | None,
+    scheduler: str | Any = None,
+    resume: bool = False,
+    force: bool = False,
+    workers: int | None = None,
+    on_slots: Callable[[int], None] | None = None,
+    on_chunk: Callable[[int, int], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+    figure_worker: bool = True,
+) -> SweepOutcome:
+    """Run ``grid`` (:func:`corraoi.experiments.sweeps.sweep`) with every output a sweep folder
+    has: the sweep logs, recordings, ``results.parquet`` and figures
+    (:class:`~corraoi.face.outputs.FolderOutputs`). ``scheduler``: ``local:N``,
+    ``tcp://HOST:PORT`` or a ``dask.distributed.Client`` (the ``cluster`` extra). Into a
+    folder in this process, the figures are drawn by a forked process that imports matplotlib
+    while the sweep runs (``figure_worker``)."""
+    from corraoi.experiments.backends import GPU_NOT_ON_CLUSTER
+    from corraoi.experiments.sweeps import sweep as run_sweep
+
+    folder = Path(out) if out is not None else None
+    if scheduler is not None and grid.backend == "gpu":  # before a cluster is started
+        raise ConfigError(GPU_NOT_ON_CLUSTER)
+    with ExitStack() as stack:
+        outputs = None
+        if folder is not None:
+            from .outputs import FolderOutputs
+
+            figures = None
+            if scheduler is None and figure_worker:
+                # the figures are drawn by a process that imports matplotlib now, while this
+                # one runs the sweep and then writes the Rerun recordings
+                # (viewer/figure_worker.py)
+                from viewer.figure_worker import FigureWorker
+
+                figures = FigureWorker.start()
+                if figures is not None:
+                    stack.enter_context(figures)
+            outputs = FolderOutputs(figures)
+        client = None
+        if isinstance(scheduler, str):
+            from corraoi.experiments.cluster import connect
+
+            client = stack.enter_context(connect(scheduler))
+        elif scheduler is not None:
+            client = scheduler  # a dask.distributed.Client of the caller's
+        return run_sweep(grid, out=folder, client=client, resume=resume, force=force,
+                         workers=workers, on_chunk=on_chunk, on_slots=on_slots, warn=warn,
+                         outputs=outputs)  # fmt: skip
+
+
+def _listed(value: Any) -> list[Any]:
+    if isinstance(value, (str, os.PathLike)) or not isinstance(value, Sequence):
+        return [value]
+    return list(value)
+
+
+def sweep(
+    instances: str | os.PathLike[str] | Instance | Sequence[str | os.PathLike[str] | Instance]
+    = "I1",
+    policies: PolicyLike | Sequence[PolicyLike] = "all",
+    *,
+    runs: int = 200,
+    horizon: int | Sequence[int] = 10_000,
+    seed: int = 0,
+    params: Mapping[str, Any] | None = None,
+    out: str | os.PathLike[str] | None = None,
+    backend: str = "cpu",
+    scheduler: str | Any = None,
+    channel: str | None = None,
+    baseline: str | None = None,
+    chunk: int = 0,
+    checkpoints: int = 200,
+    resume: bool = False,
+    force: bool = False,
+    workers: int | None = None,
+    allow_huge: bool = False,
+    on_slots: Callable[[int], None] | None = None,
+) -> Sweep:
+    """Run every policy over the same paired seeds (runs ``seed .. seed + runs - 1``) on every
+    instance and horizon, as ``corraoi sweep -o DIR`` does; returns the :class:`Sweep`.
+
+    ``instances``, ``policies``: one or a list (policies as for :func:`corraoi.record`;
+    ``"all"`` is the paper's twelve); ``runs`` paired runs of ``horizon`` slots (a list of
+    horizons makes a grid); ``seed``: the first run's. ``params``: ``{name: value or
+    [values]}`` or ``{policy: {name: ...}}``; several values make a grid. ``channel``:
+    ``iid``, ``markov`` or ``trace:PATH``; ``baseline``: a policy whose paired differences the
+    others get; ``chunk``: runs per chunk (0: chosen for you); ``checkpoints``: slots at
+    which every run's regret is kept.
+
+    ``out``: the sweep folder (None: a temporary one, removed with the returned Sweep);
+    ``resume``: continue or extend the sweep in ``out``; ``force``: replace another sweep
+    there. ``backend``: ``cpu``, ``gpu`` or ``auto``; ``scheduler``: ``local:N``,
+    ``tcp://HOST:PORT`` or a Dask ``Client`` (policies defined in your own session run in this
+    process only); ``workers``: the engine's threads here. ``allow_huge``: run a grid over
+    the size limit. ``on_slots(n)`` as runs advance.
+
+    Raises the errors of :func:`corraoi.record` for bad input,
+    :class:`~corraoi.errors.GpuUnavailable`, :class:`~corraoi.errors.ConfigError` (a grid too
+    large, a folder that holds another sweep) and :class:`~corraoi.errors.ClusterError`.
+    Ctrl-C (KeyboardInterrupt) keeps the finished chunks: ``resume=True`` continues.
+    """
+    from corraoi import limits
+    from corraoi.experiments.grid import build_grid
+
+    from . import resolve
+
+    insts = [resolve.instance(i) for i in _listed(instances)]
+    words, scoped = resolve.policy_words(policies, params)
+    horizons = [int(h) for h in _listed(horizon)]
+    given = {k: v if isinstance(v, list) else [v]
+             for k, v in {**scoped, **resolve.flat_params(params, several=True)}.items()}
+    limits.check_seed(seed, runs=int(runs), name="seed")
+    grid = build_grid(instances=insts, policies=words, horizons=horizons, params=given,
+                      runs=runs, seed=seed, chunk=chunk, checkpoints=checkpoints,
+                      channel=channel, trace_readers=resolve.TRACE_READERS, baseline=baseline,
+                      backend=backend, warn=python_warn)  # fmt: skip
+    grid = settle_backend(grid, warn=python_warn)
+    temporary = out is None
+    folder = Path(tempfile.mkdtemp(prefix="corraoi-sweep-")) if out is None else Path(out)
+    check_grid(grid, folder, allow_huge=allow_huge)
+    try:
+        run_grid(grid, out=folder, scheduler=scheduler, resume=resume, force=force,
+                 workers=workers, on_slots=on_slots, warn=python_warn)  # fmt: skip
+    except BaseException:
+        if temporary:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
+    result = Sweep(folder)
+    if temporary:
+        weakref.finalize(result, shutil.rmtree, str(folder), True)
+    return result
+
+
+__all__ = ["Sweep", "check_grid", "run_grid", "settle_backend", "sweep"]

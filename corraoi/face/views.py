@@ -1,0 +1,73 @@
+"""Recorded runs side by side and slot by slot, from Python: :func:`compare` and :func:`diff`
+over :class:`~corraoi.face.runs.Run` objects or log paths (the viewer's functions, which
+``corraoi compare`` and ``corraoi diff`` call too). Nothing is simulated."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from corraoi.errors import UsageError
+
+if TYPE_CHECKING:
+    from viewer.compare import Comparison
+    from viewer.diff_report import DiffReport
+
+    from .runs import Run
+
+
+
+def _log(value: Any, what: str) -> Any:
+    from recorder.slotlog.reader import RunLog
+
+    log = getattr(value, "log", None)  # a corraoi.Run
+    if isinstance(log, RunLog):
+        return log
+    if isinstance(value, (str, os.PathLike, RunLog)):
+        return value
+    raise UsageError(f"{what}: expected a corraoi.Run or a slot log's path, got "
+                     f"{type(value).__name__}")  # fmt: skip
+
+
+def compare(
+    runs: Sequence[Run | str | os.PathLike[str]],
+    *,
+    rrd: str | os.PathLike[str] | None = None,
+    viewer: str | None = None,
+    force: bool = False,
+) -> Comparison:
+    """Put recorded runs side by side, as ``corraoi compare`` does: one Rerun recording with a
+    column per run and every run's regret overlaid, into ``rrd`` (a file) and/or ``viewer``
+    (a running viewer's URL); with neither, only the summary figures are gathered; ``force``
+    replaces an existing ``rrd``. ``runs``: :class:`corraoi.Run` objects or slot logs' paths.
+    Returns a :class:`viewer.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
+    :class:`~corraoi.errors.LogError` for a log that cannot be read,
+    :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
+    from viewer.compare import compare as compare_logs
+
+    if isinstance(runs, (str, os.PathLike)) or not isinstance(runs, Sequence) or not runs:
+        raise UsageError("runs: expected a list of runs or slot logs to compare")
+    logs = [_log(r, f"runs[{i}]") for i, r in enumerate(runs)]
+    return compare_logs(logs, rrd_path=rrd, viewer_url=viewer, overwrite=force)
+
+
+def diff(
+    a: Run | str | os.PathLike[str],
+    b: Run | str | os.PathLike[str],
+    fields: Sequence[str] | None = None,
+    *,
+    atol: float = 0.0,
+) -> DiffReport:
+    """Where two recorded runs ``a`` and ``b`` diverge, slot by slot, as ``corraoi diff``
+    does; returns a :class:`viewer.DiffReport` (``.identical``, ``report["arm"].first_slot``,
+    ``.message()``).
+    ``fields`` restricts the comparison (default every logged field); ``atol`` is the
+    tolerance of the float fields. Raises :class:`~corraoi.errors.LogError` for a log that
+    cannot be read."""
+    from viewer.diffs import diff as diff_logs
+
+    return diff_logs(_log(a, "a"), _log(b, "b"), fields=fields, atol=atol)
+
+
+__all__ = ["compare", "diff"]

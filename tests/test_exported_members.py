@@ -1,0 +1,52 @@
+"""The face's public surface is pinned (as httpx's tests/test_exported_members.py): what
+``corraoi`` exports, that each name resolves, and that every callable says what it takes,
+returns and raises."""
+
+from __future__ import annotations
+
+import inspect
+
+import corraoi
+
+EXPECTED = [
+    "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
+    "InstanceError", "LogError", "OutputError", "Param", "Policy", "PolicyError", "Run",
+    "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "load", "record",
+    "register", "sweep",
+]  # fmt: skip
+
+
+def test_all_is_pinned():
+    assert sorted(corraoi.__all__) == sorted(EXPECTED)
+    assert sorted(dir(corraoi)) == sorted(EXPECTED)
+
+
+def test_every_name_resolves():
+    for name in corraoi.__all__:
+        assert getattr(corraoi, name) is not None, name
+
+
+def test_every_error_is_in_corraoi_errors_under_corraoi_error():
+    classes = [v for v in vars(corraoi.errors).values()
+               if inspect.isclass(v) and v.__module__ == "corraoi.errors"]  # fmt: skip
+    assert len(classes) >= 20
+    for cls in classes:
+        assert issubclass(cls, (corraoi.CorraoiError, corraoi.CorraoiWarning)), cls
+        assert cls.__doc__, cls
+
+
+def test_every_function_of_the_face_documents_parameters_return_and_errors():
+    for name in ("record", "sweep", "load", "compare", "diff"):
+        func = getattr(corraoi, name)
+        doc = inspect.getdoc(func) or ""
+        assert doc, name
+        for param in inspect.signature(func).parameters:
+            if param in ("kwargs",):
+                continue
+            assert f"``{param}``" in doc or param in doc, (name, param)
+        assert "Raises" in doc or "raises" in doc, name
+        assert "return" in doc.lower(), name
+    for cls in (corraoi.Run, corraoi.Sweep):
+        assert inspect.getdoc(cls)
+        for attr in ("_repr_html_",):
+            assert callable(getattr(cls, attr)), (cls, attr)
