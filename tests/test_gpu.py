@@ -822,6 +822,12 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
                         ("log tests batched", "cts")}  # the launch shapes: CUDA only
     assert all(v["run_slots_per_s"] > 1e4 for v in bench["variants"])
     assert bench["rates_checkpoint_at_T_only"]["rates"]["ucb"] > 1e5
+    assert bench["reduction"] == "kernel" and set(bench["rates_by_reduction"]) == {"kernel",
+                                                                                 "arrays"}
+    assert bench["rates_by_reduction"]["kernel"] == bench["rates"]
+    assert all(len(r) == 2 for r in bench["rates_by_reduction"]["arrays"].values())
+    assert re.search(r"^\| cts \| 100x10000 \| [0-9.e+]+ \| [0-9.e+]+ \| [0-9.]+ \|$", summary,
+                     flags=re.M), summary  # kernel against arrays, side by side
     means = json.loads((out / "means.json").read_text())
     assert [(r["variant"], r["policy"]) for r in means["rows"]] == [
         ("default", "ucb"), ("default", "cucb"), ("default", "ts"), ("default", "cts"),
@@ -830,7 +836,8 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
         ("CAI_LOG_TEST=2", "ts"), ("CAI_LOG_TEST=2", "cts")]  # fmt: skip
     for r in means["rows"]:
         assert r["gpu_runs"] == 1000 and r["cpu_runs"] == 500 and r["cpu_mean"] > 0
-        assert r["within"] == (abs(r["z"]) <= 4.0)
+        assert r["within"] == (abs(r["z"]) <= 4.0 and r["reduction_rel_error"] <= 1e-9)
+        assert r["reduction_rel_error"] < 1e-12 and r["reduction"] == "kernel"
     asym = json.loads((out / "asymptotics.json").read_text())
     assert asym["runs"] == 100 and asym["horizon"] >= 500
     ucb = asym["curves"]["ucb"]
@@ -843,12 +850,55 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
 
 
 def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):
-    done = subprocess.run(["bash", str(DEVICE_RUN), "--fast"], capture_output=True, text=True,
-                          env={"PATH": "/usr/bin:/bin", "OUT": str(tmp_path)})  # fmt: skip
-    assert done.returncode == 2
-    assert done.stderr.strip().splitlines() == [
-        "gpu_device_run.sh: unknown argument '--fast' (expected --emulate or nothing)"]
-    assert list(tmp_path.iterdir()) == []
+    for args, env, says in (
+        (["--fast"], {}, "unknown argument '--fast' (expected --emulate or nothing)"),
+        (["--emulate"], {"STEPS": "1 5"}, "STEPS='1 5': '5' is not a step (expected 1, 2, 3, 4)"),
+        (["--emulate"], {"DEADLINE_S": "3m"},
+         "DEADLINE_S='3m' (expected whole seconds, more than 0)"),
+    ):  # fmt: skip
+        out = tmp_path / "out"
+        done = subprocess.run(["bash", str(DEVICE_RUN), *args], capture_output=True, text=True,
+                              env={"PATH": "/usr/bin:/bin", "OUT": str(out), **env})  # fmt: skip
+        assert done.returncode == 2
+        assert done.stderr.strip().splitlines() == [f"gpu_device_run.sh: {says}"]
+        assert not out.exists() or list(out.iterdir()) == []
+
+
+@needs_cxx
+def test_the_device_run_script_runs_the_chosen_steps_by_its_deadline(tmp_path: Path):
+    """STEPS picks the steps and their order, BENCH_ARGS and MEANS_ARGS their arguments, and
+    DEADLINE_S cuts every step's limit to the time left before it (less 25 s for the end): a
+    step without 5 s left is not run, and the run is not ok."""
+    import os
+
+    out = tmp_path / "out"
+    env = {**os.environ, "OUT": str(out), "PYTHON": sys.executable, "STEPS": "2 4",
+           "DEADLINE_S": "190", "BENCH_ARGS": "--quick --sizes 1e3x300 --reductions "
+           "kernel,arrays --repeat 1 --policies aoi-aware-cucb --paper-runs 0",
+           "MEANS_ARGS": "--gpu-runs 300 --cpu-runs 100 --horizon 200 --variant default:ucb "
+           "--variant reduction=arrays:ucb"}  # fmt: skip
+    env.pop(DEVICE_ENV, None)
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    summary = (out / "summary.txt").read_text()
+    steps = re.findall(r"^\| (\d \w+) \| ([^|]+) \| \d+ \|$", summary, flags=re.M)
+    assert steps == [("2 bench", "ok"), ("4 means", "ok")]
+    log = (out / "log.txt").read_text()
+    assert re.search(r"^=== 2 bench \(at most 1[0-9]{2} s\)", log, flags=re.M)  # 190 - 25 - ...
+    bench = json.loads((out / "bench.json").read_text())
+    assert set(bench["rates_by_reduction"]) == {"kernel", "arrays"}
+    assert list(bench["rates"]) == ["aoi-aware-cucb"] and "paper_workload_s" not in bench
+    means = json.loads((out / "means.json").read_text())
+    assert [(r["variant"], r["reduction"]) for r in means["rows"]] == [
+        ("default", "kernel"), ("reduction=arrays", "arrays")]
+    assert means["rows"][0]["gpu_mean"] == means["rows"][1]["gpu_mean"]  # the same runs
+    env.update(STEPS="4", DEADLINE_S="20")
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 1
+    summary = (out / "summary.txt").read_text()
+    assert "| 4 means | not run: no time left of the 20 s | 0 |" in summary
 
 
 def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):
