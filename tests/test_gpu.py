@@ -868,7 +868,8 @@ def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):
 def test_the_device_run_script_runs_the_chosen_steps_by_its_deadline(tmp_path: Path):
     """STEPS picks the steps and their order, BENCH_ARGS and MEANS_ARGS their arguments, and
     DEADLINE_S cuts every step's limit to the time left before it (less 25 s for the end): a
-    step without 5 s left is not run, and the run is not ok."""
+    step without 5 s left is not run, and the run is not ok. A bench that breaks while timing
+    the kernel's reduction runs again with the arrays' alone."""
     import os
 
     out = tmp_path / "out"
@@ -899,6 +900,19 @@ def test_the_device_run_script_runs_the_chosen_steps_by_its_deadline(tmp_path: P
     assert done.returncode == 1
     summary = (out / "summary.txt").read_text()
     assert "| 4 means | not run: no time left of the 20 s | 0 |" in summary
+    # a bench that breaks with the kernel's reduction among its own runs again with the
+    # arrays' alone (here both break: the policy does not exist)
+    env.update(STEPS="2", DEADLINE_S="190", BENCH_ARGS="--quick --sizes 1e2x100 --reductions "
+               "kernel,arrays --policies no-such-policy --paper-runs 0")  # fmt: skip
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 1
+    summary = (out / "summary.txt").read_text()
+    steps = re.findall(r"^\| (\d [^|]+) \| ([^|]+) \| \d+ \|$", summary, flags=re.M)
+    assert steps == [("2 bench", "FAILED (exit 1)"),
+                     ("2 bench again, arrays' reduction", "FAILED (exit 1)")]  # fmt: skip
+    assert re.search(r"^=== 2 bench again, arrays' reduction \(at most \d+ s\): .*--json \S+ "
+                     r"--reductions arrays$", (out / "log.txt").read_text(), flags=re.M)
 
 
 def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):
