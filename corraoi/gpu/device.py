@@ -198,8 +198,8 @@ class CudaDevice(Device):
         props = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)
         raw = props.get("name", b"CUDA device")
         self.name = raw.decode() if isinstance(raw, bytes) else str(raw)
-        #: Blocks a reduce_checkpoints launch aims at, its checkpoints together: four rounds
-        #: of 8 blocks of 256 threads on each multiprocessor.
+        #: Blocks a reduce_checkpoints launch aims at, its checkpoints together: 32 for each
+        #: multiprocessor (several rounds of the 3 it holds at once at 74 registers a thread).
         self.reduce_blocks = 32 * int(props.get("multiProcessorCount", 132))
 
     def _compile(self, K: int, family: str) -> Any:
