@@ -132,7 +132,7 @@ class Device(ABC):
     @abstractmethod
     def reduce(self, K: int, family: str, nck: int, runs: int, args: ArgList) -> None:
         """Run ``reduce_checkpoints`` of the K-arm module of ``family`` over ``nck``
-        checkpoints of ``runs`` runs (corraoi.gpu.runner.reduce_checkpoints builds ``args``)."""
+        checkpoints of ``runs`` runs (``args``: corraoi.gpu.checkpoints.reduce_checkpoints)."""
 
     def mark(self) -> Any:
         """A mark after the launches queued so far (None where calls return when done)."""
