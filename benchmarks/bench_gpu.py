@@ -10,18 +10,23 @@ Prints, each as a table:
    run-slots per second on I1 (--variants; measured last), so that one run on a GPU says
    which variant is fastest;
 3. run-slots per second per policy on I1 (default checkpoints, as a sweep runs them) at each
-   --sizes (runs x T), best of --repeat after one warm-up run; then UCB and TS at the largest
-   size with a checkpoint at T only (the kernel alone, without the checkpoints' reductions);
+   --sizes (runs x T), best of --repeat after one warm-up run, with each of --reductions side
+   by side (how the checkpoints are reduced over the runs: kernel.cu's reduce_checkpoints,
+   the default, or the array module's reductions, the second GPU run's; one after the other
+   for each policy and size); then UCB and TS at the largest size with a checkpoint at T only
+   (the kernel alone, without the checkpoints' reductions);
 4. the paper workload (I1, the twelve policies, 200 runs, T = 10,000) as
    ``experiments.sweep(grid, backend="gpu")`` in a warm process (modules compiled), best and
    median of 3 or --repeat; start-up (1) is what a fresh process adds to it.
 
     python benchmarks/bench_gpu.py --startup --variants --json bench.json   # on a CUDA GPU
+    python benchmarks/bench_gpu.py --sizes 1e6x1e4 --reductions kernel,arrays --repeat 2
     python benchmarks/bench_gpu.py --device emulate --quick       # the kernels on the CPU
 
 ``--quick`` shrinks the sizes for the emulated device, whose figures say nothing about a
 GPU's. ``--json FILE`` writes every figure into FILE as it is measured (the file is replaced
-whole after each table, never left half-written).
+whole after each table, never left half-written): ``rates`` are the device's default
+reduction's, ``rates_by_reduction`` each reduction's.
 """
 
 from __future__ import annotations
@@ -57,7 +62,10 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--policies", default=",".join(POLICIES))
     ap.add_argument("--sizes", default=None,
-                    help="runs x T, comma-separated (default 1e5x1e4,1e6x1e4)")  # fmt: skip
+                    help="runs x T, comma-separated (default 1e5x1e4,1e6x1e4)")
+    ap.add_argument("--reductions", default=None,
+                    help="checkpoint reductions timed side by side, comma-separated, of "
+                         "kernel, arrays (default: the device's own)")  # fmt: skip
     ap.add_argument("--startup", action="store_true", help="time start-up in fresh processes")
     ap.add_argument("--variants", action="store_true",
                     help="time the variants of VARIANTS (emulated: the switches only)")
@@ -76,14 +84,21 @@ def main() -> None:
         _startup_table(args, out)
 
     from corraoi.gpu import get_device
+    from corraoi.gpu.device import REDUCTIONS
 
     dev = get_device()
     out["device"] = dev.name
-    print(f"device: {dev.name}", flush=True)
+    out["reduction"] = dev.reduction
+    print(f"device: {dev.name}; checkpoints reduced by default with: {dev.reduction}", flush=True)
+    reductions = (args.reductions or dev.reduction).split(",")
+    for r in reductions:
+        if r not in REDUCTIONS:
+            sys.exit(f"bench_gpu: --reductions {args.reductions!r}: {r!r} is not one of "
+                     f"{', '.join(REDUCTIONS)}")  # fmt: skip
     default = "1e3x1e3,1e2x1e4" if args.quick else "1e5x1e4,1e6x1e4"
     sizes = [tuple(int(float(v)) for v in size.split("x"))
              for size in (args.sizes or default).split(",")]  # fmt: skip
-    _rates_table(args, out, dev, sizes)
+    _rates_table(args, out, dev, sizes, reductions)
     if args.paper_runs > 0:
         _paper_table(args, out)
     if args.variants:  # last: the figures above matter more
@@ -237,17 +252,34 @@ def _rate(dev: Any, name: str, runs: int, T: int, *, repeat: int, bare: bool = F
     return runs * T / best
 
 
+def _with_reduction(dev: Any, reduction: str) -> Any:
+    """``dev`` itself where it reduces with ``reduction``, else a device of its kind that does."""
+    from corraoi.gpu.device import CudaDevice, EmulatedDevice
+
+    if dev.reduction == reduction:
+        return dev
+    return (CudaDevice(reduction=reduction) if isinstance(dev, CudaDevice)
+            else EmulatedDevice(reduction=reduction))  # fmt: skip
+
+
 def _rates_table(args: argparse.Namespace, out: _Figures, dev: Any,
-                 sizes: list[tuple[int, ...]]) -> None:  # fmt: skip
-    head = " | ".join(f"{r:.0e} runs x T {T:.0e}" for r, T in sizes)
-    print(f"\n| run-slots/s, best of {args.repeat} | {head} |\n|---|" + "---:|" * len(sizes))
+                 sizes: list[tuple[int, ...]], reductions: list[str]) -> None:  # fmt: skip
+    devices = {r: _with_reduction(dev, r) for r in reductions}
+    cols = [(f"{r:.0e} runs x T {T:.0e}" + (f", {red}" if len(reductions) > 1 else ""), red,
+             r, T) for r, T in sizes for red in reductions]  # fmt: skip
+    head = " | ".join(c[0] for c in cols)
+    print(f"\n| run-slots/s, best of {args.repeat} | {head} |\n|---|" + "---:|" * len(cols))
     rates: dict[str, dict[str, float]] = {}
+    by_reduction: dict[str, dict[str, dict[str, float]]] = {r: {} for r in reductions}
     out["rates"] = rates
+    out["rates_by_reduction"] = by_reduction
     for name in args.policies.split(","):
         cells = []
-        for runs, T in sizes:
-            rate = _rate(dev, name, runs, T, repeat=args.repeat)
-            rates.setdefault(name, {})[f"{runs}x{T}"] = rate
+        for _, red, runs, T in cols:
+            rate = _rate(devices[red], name, runs, T, repeat=args.repeat)
+            by_reduction[red].setdefault(name, {})[f"{runs}x{T}"] = rate
+            if red == dev.reduction or (dev.reduction not in reductions and red == reductions[0]):
+                rates.setdefault(name, {})[f"{runs}x{T}"] = rate
             cells.append(f"{rate:.3g}")
             out.save()
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)

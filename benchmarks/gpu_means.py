@@ -14,10 +14,13 @@ read from there; a reference the file does not hold is computed now, and the tab
         --variant CAI_LOG_TEST=1:ts,cts                 # kernel.cu's variants too
 
 ``--variant DEFINES[:POLICIES]`` (repeatable) checks kernel.cu compiled with those switches
-(comma-separated; "" is the default kernel), for POLICIES (default: --policies), so that a
-variant a benchmark finds faster can be made the default with its means checked. Prints a
-table; ``--json FILE`` writes it as JSON too. Exit status 1 when a policy's means differ by
-more than --z standard errors.
+(comma-separated; "" or "default" is the default kernel; ``reduction=arrays`` reduces the
+checkpoints with the array module instead of kernel.cu's reduce_checkpoints), for POLICIES
+(default: --policies), so that a variant a benchmark finds faster can be made the default
+with its means checked. Each row also checks the device's moments at T against those of the
+runs' final regrets, which come back one by one (the checkpoint reduction itself: within
+1e-9). Prints a table; ``--json FILE`` writes it as JSON too. Exit status 1 when a policy's
+means differ by more than --z standard errors, or a reduction by more than 1e-9.
 """
 
 from __future__ import annotations
@@ -33,8 +36,11 @@ from typing import Any
 
 REFERENCE = Path(__file__).with_name("gpu_cpu_reference.json")
 POLICIES = ("ucb", "cucb", "ts", "cts")
-#: kernel.cu's switches (compile-time defines) a --variant may set.
-SWITCHES = ("CAI_FP64", "CAI_LOG_TEST")
+#: kernel.cu's switches (compile-time defines) a --variant may set, and the device's reduction.
+SWITCHES = ("CAI_FP64", "CAI_LOG_TEST", "reduction")
+#: The largest relative difference between the device's moments at T and those of the final
+#: regrets: both are of the same values, so only rounding may part them.
+REDUCTION_TOLERANCE = 1e-9
 
 
 def _key(instance: str, horizon: int, runs: int) -> str:
@@ -90,20 +96,23 @@ def main() -> None:
         return
 
     os.environ["CORRAOI_GPU_DEVICE"] = args.device
-    from corraoi.gpu.device import CudaDevice, Device, EmulatedDevice
+    from corraoi.gpu.device import REDUCTIONS, CudaDevice, Device, EmulatedDevice
     from corraoi.gpu.runner import simulate
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
+    from corraoi.stats import Moments
 
     variants = []
     for spec in args.variant if args.variant is not None else [""]:
         defines, _, which = spec.partition(":")
-        for d in filter(None, defines.split(",")):
-            if d.split("=")[0] not in SWITCHES:
+        items = [d for d in defines.split(",") if d and d != "default"]
+        for d in items:
+            name, _, value = d.partition("=")
+            if name not in SWITCHES or (name == "reduction" and value not in REDUCTIONS):
                 sys.exit(f"gpu_means: --variant {spec!r}: {d!r} is not one of kernel.cu's "
-                         f"switches ({', '.join(SWITCHES)}), NAME=VALUE")
-        variants.append((tuple(d for d in defines.split(",") if d),
-                         which.split(",") if which else names))  # fmt: skip
+                         f"switches ({', '.join(SWITCHES[:-1])}), NAME=VALUE, or reduction="
+                         f"{'|'.join(REDUCTIONS)}")  # fmt: skip
+        variants.append((tuple(items), which.split(",") if which else names))
     wanted = sorted({n for _, ns in variants for n in ns})
     held = stored.get(key, {}).get("policies", {})
     missing = [n for n in wanted if n not in held]
@@ -113,15 +122,19 @@ def main() -> None:
     inst = load_instance(args.instance)
     rows: list[dict[str, Any]] = []
     device_name = ""
-    for defines, which in variants:
-        dev: Device = (CudaDevice(defines=defines) if args.device == "cuda"
-                       else EmulatedDevice(defines=defines))  # fmt: skip
+    for items, which in variants:
+        defines = tuple(d for d in items if not d.startswith("reduction="))
+        reduction = next((d.split("=")[1] for d in items if d.startswith("reduction=")), None)
+        dev: Device = (CudaDevice(defines=defines, reduction=reduction) if args.device == "cuda"
+                       else EmulatedDevice(defines=defines, reduction=reduction))  # fmt: skip
         device_name = dev.name
-        label = " ".join(defines) or "default"
-        print(f"\ndevice: {dev.name}, kernel: {label}; {args.instance}, T = {args.horizon}: GPU "
-              f"{args.gpu_runs} runs against the CPU engine's {args.cpu_runs} ({source})")
-        print("\n| policy | GPU mean +- se | CPU mean +- se | difference / se | GPU s | within |")
-        print("|---|---:|---:|---:|---:|---|")
+        label = " ".join(items) or "default"
+        print(f"\ndevice: {dev.name}, kernel: {label} (checkpoints reduced with: "
+              f"{dev.reduction}); {args.instance}, T = {args.horizon}: GPU {args.gpu_runs} runs "
+              f"against the CPU engine's {args.cpu_runs} ({source})")
+        print("\n| policy | GPU mean +- se | CPU mean +- se | difference / se | GPU s | within | "
+              "reduction vs finals |")  # fmt: skip
+        print("|---|---:|---:|---:|---:|---|---:|")
         for name in which:
             start = time.perf_counter()
             r = simulate(inst, make_policy(name), seed0=0, runs=args.gpu_runs,
@@ -132,13 +145,19 @@ def main() -> None:
             c_mean, c_var = c["mean"], c["m2"] / (c["n"] - 1)
             g_se, c_se = math.sqrt(g_var / r.regret.n), math.sqrt(c_var / c["n"])
             z = (g_mean - c_mean) / math.hypot(g_se, c_se)
-            ok = abs(z) <= args.z
-            rows.append({"policy": name, "variant": label, "gpu_mean": g_mean, "gpu_se": g_se,
-                         "gpu_runs": r.regret.n, "cpu_mean": c_mean, "cpu_se": c_se,
-                         "cpu_runs": c["n"], "z": z, "gpu_seconds": wall,
+            finals = Moments.of(r.regret_final)
+            rel = max(abs(g_mean - float(finals.mean)) / max(abs(float(finals.mean)), 1e-300),
+                      abs(float(r.regret.m2[-1]) - float(finals.m2))
+                      / max(abs(float(finals.m2)), 1e-300))  # fmt: skip
+            ok = abs(z) <= args.z and rel <= REDUCTION_TOLERANCE
+            rows.append({"policy": name, "variant": label, "reduction": dev.reduction,
+                         "gpu_mean": g_mean, "gpu_se": g_se, "gpu_runs": r.regret.n,
+                         "cpu_mean": c_mean, "cpu_se": c_se, "cpu_runs": c["n"], "z": z,
+                         "reduction_rel_error": rel, "gpu_seconds": wall,
                          "within": ok})  # fmt: skip
             print(f"| {name} | {g_mean:.2f} +- {g_se:.2f} | {c_mean:.2f} +- {c_se:.2f} | "
-                  f"{z:+.2f} | {wall:.2f} | {'yes' if ok else 'NO'} |", flush=True)  # fmt: skip
+                  f"{z:+.2f} | {wall:.2f} | {'yes' if ok else 'NO'} | {rel:.1e} |",
+                  flush=True)  # fmt: skip
             if args.json:
                 tmp = Path(args.json + ".partial")
                 tmp.write_text(json.dumps({"device": device_name, "instance": args.instance,
@@ -148,7 +167,8 @@ def main() -> None:
     bad = [f"{row['policy']} ({row['variant']})" for row in rows if not row["within"]]
     if bad:
         sys.exit(f"gpu_means: {', '.join(bad)}: the GPU's mean is more than {args.z} standard "
-                 "errors from the CPU engine's")  # fmt: skip
+                 f"errors from the CPU engine's, or its moments at T more than "
+                 f"{REDUCTION_TOLERANCE:g} from those of the final regrets")  # fmt: skip
     print(f"\nevery policy within {args.z} standard errors")
 
 

@@ -161,6 +161,7 @@ def test_bad_requests_on_a_gpu_sweep_are_one_line(tmp_path: Path) -> None:
     assert not (tmp_path / "runs").exists()
 
 
+@needs_cxx
 def test_a_damaged_emulation_library_is_rebuilt_and_a_killed_record_never_blocks(
     tmp_path: Path,
 ) -> None:
@@ -168,6 +169,7 @@ def test_a_damaged_emulation_library_is_rebuilt_and_a_killed_record_never_blocks
     --from` die of SIGBUS, and the `.mcap.partial` it left blocked the next attempt. The
     library is checked before it is loaded (rebuilt, one notice), and a `.partial` a killed
     attempt at the same run left is written over."""
+    pytest.importorskip("rerun", reason="a sweep folder's sweep.rrd needs rerun-sdk")
     env = {**os.environ, DEVICE_ENV: "emulate", "CORRAOI_CACHE_DIR": str(tmp_path / "cache")}
 
     def cli(*args: object) -> subprocess.CompletedProcess[str]:

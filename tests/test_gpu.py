@@ -343,7 +343,14 @@ def test_results_do_not_depend_on_the_launch_shape_or_chunking(emulated: Device)
                     device=_Tiny(emulated, 200))  # fmt: skip
     assert np.array_equal(whole.regret_final, tiny.regret_final)
     assert np.array_equal(whole.regret.mean, tiny.regret.mean)
+    assert np.array_equal(whole.regret.m2, tiny.regret.m2)
     assert np.array_equal(whole.pulls_sum, tiny.pulls_sum)
+    arrays = simulate(I1, spec, seed0=0, runs=200, horizon=1000, checkpoints=marks,
+                      device=EmulatedDevice(reduction="arrays"))  # fmt: skip
+    assert np.allclose(arrays.regret.mean, whole.regret.mean, rtol=1e-12)
+    assert np.allclose(arrays.regret.m2, whole.regret.m2, rtol=1e-9)
+    assert np.allclose(arrays.estimator.mean, whole.estimator.mean, rtol=1e-12)
+    assert np.array_equal(arrays.pulls_sum, whole.pulls_sum)
     a = simulate(I1, spec, seed0=0, runs=120, horizon=1000, checkpoints=marks, device=emulated)
     b = simulate(I1, spec, seed0=120, runs=80, horizon=1000, checkpoints=marks, device=emulated)
     assert np.array_equal(np.concatenate([a.regret_final, b.regret_final]), whole.regret_final)
@@ -353,20 +360,125 @@ def test_results_do_not_depend_on_the_launch_shape_or_chunking(emulated: Device)
     assert whole.t.tolist() == marks
 
 
-def test_device_moments_and_paired_moments_match_the_runs(emulated: Device):
-    base = simulate(I1, make_policy("ucb"), seed0=0, runs=300, horizon=800, checkpoints=[400],
-                    keep=True, device=emulated)  # fmt: skip
-    other = simulate(I1, make_policy("cucb"), seed0=0, runs=300, horizon=800, checkpoints=[400],
-                     baseline=base.kept, device=emulated)  # fmt: skip
-    assert base.kept.shape == (2, 300) and np.array_equal(base.kept[-1], base.regret_final)
-    exact = Moments.of(other.regret_final - base.regret_final)
-    assert other.paired is not None
-    assert math.isclose(other.paired.mean[-1], exact.mean, rel_tol=1e-12)
-    assert math.isclose(other.paired.m2[-1], exact.m2, rel_tol=1e-9)
-    assert math.isclose(other.regret.mean[-1], other.regret_final.mean(), rel_tol=1e-12)
-    assert other.pulls_sum[-1].sum() == 300 * 800
-    est = other.estimator_final
-    assert math.isclose(other.estimator.mean[-1], est.mean(), rel_tol=1e-12)
+@cuda
+def test_results_do_not_depend_on_the_launch_shape_on_the_gpu():
+    """Blocks of 256 threads, launches of 7 slots, one checkpoint between reductions and a
+    single block a checkpoint in the reduction: the same runs and, its sums being exact
+    integers, the same moments to the last bit."""
+    assert CUDA is not None
+    spec, marks = make_policy("aoi-aware-cucb"), [50, 333, 1000]
+    whole = simulate(I1, spec, seed0=0, runs=20_000, horizon=1000, checkpoints=marks,
+                     device=CUDA)  # fmt: skip
+    other = CudaDevice(block=256)
+    other.launch_work, other.checkpoint_bytes, other.reduce_blocks = 7 * 20_000, 1, 1
+    tiny = simulate(I1, spec, seed0=0, runs=20_000, horizon=1000, checkpoints=marks,
+                    device=other)  # fmt: skip
+    assert np.array_equal(whole.regret_final, tiny.regret_final)
+    for a, b in ((whole.regret, tiny.regret), (whole.estimator, tiny.estimator)):
+        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.m2, b.m2)
+    assert np.array_equal(whole.pulls_sum, tiny.pulls_sum)
+
+
+def _exact_moments(values: np.ndarray) -> tuple[list[float], list[float]]:
+    """Mean and M2 of each row of int64 ``values``, exact in Python integers, rounded once."""
+    n = values.shape[1]
+    rows = [[int(v) for v in row] for row in values]
+    s1 = [sum(row) for row in rows]
+    s2 = [sum(v * v for v in row) for row in rows]
+    return [s / n for s in s1], [(n * q - s * s) / n for s, q in zip(s1, s2, strict=True)]
+
+
+def _moments_match_the_runs(device: Device, runs: int) -> None:
+    """The device's moments at every checkpoint against those of every run's values (the
+    kept regret of two policies on the same seeds, both keeping, the second paired with the
+    first): with the kernel's reduction equal to the exact moments, correctly rounded (its
+    sums are exact integers); with the arrays' within rounding."""
+    marks, T = [1, 7, 77, 400, 799], 800
+    base = simulate(I1, make_policy("ucb"), seed0=0, runs=runs, horizon=T, checkpoints=marks,
+                    keep=True, device=device)  # fmt: skip
+    other = simulate(I1, make_policy("cucb"), seed0=0, runs=runs, horizon=T,
+                     checkpoints=marks, baseline=base.kept, keep=True, device=device)  # fmt: skip
+    kb, ko = device.asnumpy(base.kept), device.asnumpy(other.kept)
+    assert kb.shape == (6, runs) and kb.dtype == np.int64
+    assert np.array_equal(kb[-1], base.regret_final) and np.array_equal(ko[-1], other.regret_final)
+    assert other.paired is not None and base.paired is None
+    exact = device.reduction == "kernel"
+    for got, values in ((base.regret, kb), (other.regret, ko), (other.paired, ko - kb)):
+        mean, m2 = _exact_moments(values)
+        assert got.n == runs
+        if exact:
+            assert got.mean.tolist() == mean and got.m2.tolist() == m2
+        else:
+            assert np.allclose(got.mean, mean, rtol=1e-12, atol=1e-12)
+            assert np.allclose(got.m2, m2, rtol=1e-9, atol=1e-9)
+    assert other.pulls_sum.tolist() != base.pulls_sum.tolist()
+    assert other.pulls_sum.sum(axis=1).tolist() == [runs * t for t in [*marks, T]]
+    est = Moments.of(other.estimator_final)
+    assert math.isclose(other.estimator.mean[-1], est.mean, rel_tol=1e-12)
+    assert math.isclose(other.estimator.m2[-1], est.m2, rel_tol=1e-9)
+
+
+@pytest.mark.parametrize("reduction", ["kernel", "arrays"])
+def test_device_moments_and_paired_moments_match_the_runs(emulated: Device, reduction: str):
+    _moments_match_the_runs(EmulatedDevice(reduction=reduction), runs=300)
+
+
+@cuda
+@pytest.mark.parametrize("reduction", ["kernel", "arrays"])
+def test_device_moments_and_paired_moments_match_the_runs_on_the_gpu(reduction: str):
+    _moments_match_the_runs(CudaDevice(reduction=reduction), runs=100_000)
+
+
+def _sums_are_exact(device: Device) -> None:
+    """kernel.cu's reduce_checkpoints on values at the limits: regrets near +-2^62 and AoI
+    sums near 2^63 (sums past 2^64, sums of squares past 2^128: every word and carry of the
+    128- and 192-bit sums), all -1 (the sign through the high words), zeros; pulls near 2^32.
+    Its words are the exact sums, the moments of them the exact moments rounded once, the
+    kept rows the regret."""
+    from corraoi.gpu.checkpoints import moments_of_sums, reduce_checkpoints, sum_words
+
+    rng = np.random.default_rng(7)
+    R, K, xp = 1000, 4, device.xp
+    big = 2**62 - 1
+    reg = np.stack([rng.integers(-big, big, R, endpoint=True), np.full(R, -1), np.zeros(R)])
+    diff = np.stack([rng.integers(-big, big, R, endpoint=True), np.full(R, 2**62), np.zeros(R)])
+    asum = np.stack([rng.integers(2**63 - 2**40, 2**63 - 1, R, endpoint=True),
+                     rng.integers(0, 2**33, R), np.zeros(R)]).astype(np.int64)  # fmt: skip
+    pulls = rng.integers(2**32 - 2**20, 2**32 - 1, (3, K, R), endpoint=True).astype(np.uint32)
+    reg, diff = reg.astype(np.int64), diff.astype(np.int64)
+    base = reg - diff
+    out = xp.zeros((3, sum_words(K)), dtype=np.uint64)
+    kept = xp.full((3, R), 5, dtype=np.int64)
+    d_reg = xp.asarray(reg)
+    reduce_checkpoints(device, "ucb", d_reg, xp.asarray(asum), xp.asarray(pulls), nck=3, out=out,
+                       base=xp.asarray(base), kept=kept)  # fmt: skip
+    words = device.asnumpy(out)
+    assert np.array_equal(device.asnumpy(kept), reg)
+    for c in range(3):
+        w = [int(v) for v in words[c]]
+        for q, values in ((0, reg[c]), (5, asum[c]), (10, diff[c])):
+            s1 = sum(int(v) for v in values)
+            s2 = sum(int(v) ** 2 for v in values)
+            assert w[q] | w[q + 1] << 64 == s1 % 2**128, (c, q)
+            assert w[q + 2] | w[q + 3] << 64 | w[q + 4] << 128 == s2, (c, q)
+        assert w[15:] == [int(v) for v in pulls[c].astype(np.int64).sum(axis=1)]
+    assert max(int(v) for v in words[0, [3, 8, 13]]) > 0 and words[0, 9] > 0  # past 2^64, 2^128
+    regret, asum_m, paired, pulls_sum = moments_of_sums(words, R)
+    for got, values in ((regret, reg), (asum_m, asum), (paired, diff)):
+        mean, m2 = _exact_moments(values)
+        assert got.mean.tolist() == mean and got.m2.tolist() == m2
+    assert regret.mean[1] == -1.0 and regret.m2[1] == 0.0 and regret.mean[2] == 0.0
+    assert pulls_sum.dtype == np.int64 and pulls_sum.shape == (3, K)
+
+
+def test_checkpoint_sums_are_exact_at_the_limits(emulated: Device):
+    _sums_are_exact(emulated)
+
+
+@cuda
+def test_checkpoint_sums_are_exact_at_the_limits_on_the_gpu():
+    assert CUDA is not None
+    _sums_are_exact(CUDA)
 
 
 def test_a_trace_channel_replays_one_path_in_every_run(emulated: Device, tmp_path: Path):
@@ -409,7 +521,7 @@ def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):
     assert done.returncode == 0, done.stderr
     entries = {ln.split()[-1].rstrip("(") for ln in out.read_text().splitlines()
                if ".entry" in ln}  # fmt: skip
-    assert entries == {*entry_names(), "philox_kat", "beta_draws"}
+    assert entries == {*entry_names(), "philox_kat", "beta_draws", "reduce_checkpoints"}
 
 
 def _nvrtc():  # type: ignore[no-untyped-def]
@@ -453,7 +565,7 @@ def test_the_kernels_compile_with_nvrtc_as_cupy_compiles_them():
     nvrtc.compileProgram(prog, ["-std=c++17", "-DKARMS=64", "-arch=compute_90"])
     ptx = nvrtc.getPTX(prog).decode()
     entries = {ln.split()[-1].rstrip("(") for ln in ptx.splitlines() if ".entry" in ln}
-    assert entries == {*entry_names(), "philox_kat", "beta_draws"}
+    assert entries == {*entry_names(), "philox_kat", "beta_draws", "reduce_checkpoints"}
 
 
 @needs_nvrtc
@@ -472,7 +584,8 @@ def test_every_entry_point_keeps_a_run_in_registers_on_hopper(K: int):
                                     "--ptxas-options=-v"])  # fmt: skip
         got = _ptxas_report(nvrtc.getProgramLog(prog))
         extra = {"beta_draws"} if family == "ts_beta" else set()
-        assert set(got) == {*entry_names(family), "philox_kat", *extra}, family
+        assert set(got) == {*entry_names(family), "philox_kat", "reduce_checkpoints",
+                            *extra}, family  # fmt: skip
         assert nvrtc.getCUBIN(prog)[:4] == b"\x7fELF"  # machine code, not PTX
         report.update(got)
     for name, r in report.items():
@@ -709,6 +822,12 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
                         ("log tests batched", "cts")}  # the launch shapes: CUDA only
     assert all(v["run_slots_per_s"] > 1e4 for v in bench["variants"])
     assert bench["rates_checkpoint_at_T_only"]["rates"]["ucb"] > 1e5
+    assert bench["reduction"] == "kernel" and set(bench["rates_by_reduction"]) == {"kernel",
+                                                                                 "arrays"}
+    assert bench["rates_by_reduction"]["kernel"] == bench["rates"]
+    assert all(len(r) == 2 for r in bench["rates_by_reduction"]["arrays"].values())
+    assert re.search(r"^\| cts \| 100x10000 \| [0-9.e+]+ \| [0-9.e+]+ \| [0-9.]+ \|$", summary,
+                     flags=re.M), summary  # kernel against arrays, side by side
     means = json.loads((out / "means.json").read_text())
     assert [(r["variant"], r["policy"]) for r in means["rows"]] == [
         ("default", "ucb"), ("default", "cucb"), ("default", "ts"), ("default", "cts"),
@@ -717,7 +836,8 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
         ("CAI_LOG_TEST=2", "ts"), ("CAI_LOG_TEST=2", "cts")]  # fmt: skip
     for r in means["rows"]:
         assert r["gpu_runs"] == 1000 and r["cpu_runs"] == 500 and r["cpu_mean"] > 0
-        assert r["within"] == (abs(r["z"]) <= 4.0)
+        assert r["within"] == (abs(r["z"]) <= 4.0 and r["reduction_rel_error"] <= 1e-9)
+        assert r["reduction_rel_error"] < 1e-12 and r["reduction"] == "kernel"
     asym = json.loads((out / "asymptotics.json").read_text())
     assert asym["runs"] == 100 and asym["horizon"] >= 500
     ucb = asym["curves"]["ucb"]
@@ -730,12 +850,69 @@ def test_the_device_run_script_runs_its_steps_emulated(tmp_path: Path):
 
 
 def test_the_device_run_script_refuses_an_unknown_argument(tmp_path: Path):
-    done = subprocess.run(["bash", str(DEVICE_RUN), "--fast"], capture_output=True, text=True,
-                          env={"PATH": "/usr/bin:/bin", "OUT": str(tmp_path)})  # fmt: skip
-    assert done.returncode == 2
-    assert done.stderr.strip().splitlines() == [
-        "gpu_device_run.sh: unknown argument '--fast' (expected --emulate or nothing)"]
-    assert list(tmp_path.iterdir()) == []
+    for args, env, says in (
+        (["--fast"], {}, "unknown argument '--fast' (expected --emulate or nothing)"),
+        (["--emulate"], {"STEPS": "1 5"}, "STEPS='1 5': '5' is not a step (expected 1, 2, 3, 4)"),
+        (["--emulate"], {"DEADLINE_S": "3m"},
+         "DEADLINE_S='3m' (expected whole seconds, more than 0)"),
+    ):  # fmt: skip
+        out = tmp_path / "out"
+        done = subprocess.run(["bash", str(DEVICE_RUN), *args], capture_output=True, text=True,
+                              env={"PATH": "/usr/bin:/bin", "OUT": str(out), **env})  # fmt: skip
+        assert done.returncode == 2
+        assert done.stderr.strip().splitlines() == [f"gpu_device_run.sh: {says}"]
+        assert not out.exists() or list(out.iterdir()) == []
+
+
+@needs_cxx
+def test_the_device_run_script_runs_the_chosen_steps_by_its_deadline(tmp_path: Path):
+    """STEPS picks the steps and their order, BENCH_ARGS and MEANS_ARGS their arguments, and
+    DEADLINE_S cuts every step's limit to the time left before it (less 25 s for the end): a
+    step without 5 s left is not run, and the run is not ok. A bench that breaks while timing
+    the kernel's reduction runs again with the arrays' alone."""
+    import os
+
+    out = tmp_path / "out"
+    env = {**os.environ, "OUT": str(out), "PYTHON": sys.executable, "STEPS": "2 4",
+           "DEADLINE_S": "190", "BENCH_ARGS": "--quick --sizes 1e3x300 --reductions "
+           "kernel,arrays --repeat 1 --policies aoi-aware-cucb --paper-runs 0",
+           "MEANS_ARGS": "--gpu-runs 300 --cpu-runs 100 --horizon 200 --variant default:ucb "
+           "--variant reduction=arrays:ucb"}  # fmt: skip
+    env.pop(DEVICE_ENV, None)
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    summary = (out / "summary.txt").read_text()
+    steps = re.findall(r"^\| (\d \w+) \| ([^|]+) \| \d+ \|$", summary, flags=re.M)
+    assert steps == [("2 bench", "ok"), ("4 means", "ok")]
+    log = (out / "log.txt").read_text()
+    assert re.search(r"^=== 2 bench \(at most 1[0-9]{2} s\)", log, flags=re.M)  # 190 - 25 - ...
+    bench = json.loads((out / "bench.json").read_text())
+    assert set(bench["rates_by_reduction"]) == {"kernel", "arrays"}
+    assert list(bench["rates"]) == ["aoi-aware-cucb"] and "paper_workload_s" not in bench
+    means = json.loads((out / "means.json").read_text())
+    assert [(r["variant"], r["reduction"]) for r in means["rows"]] == [
+        ("default", "kernel"), ("reduction=arrays", "arrays")]
+    assert means["rows"][0]["gpu_mean"] == means["rows"][1]["gpu_mean"]  # the same runs
+    env.update(STEPS="4", DEADLINE_S="20")
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 1
+    summary = (out / "summary.txt").read_text()
+    assert "| 4 means | not run: no time left of the 20 s | 0 |" in summary
+    # a bench that breaks with the kernel's reduction among its own runs again with the
+    # arrays' alone (here both break: the policy does not exist)
+    env.update(STEPS="2", DEADLINE_S="190", BENCH_ARGS="--quick --sizes 1e2x100 --reductions "
+               "kernel,arrays --policies no-such-policy --paper-runs 0")  # fmt: skip
+    done = subprocess.run(["bash", str(DEVICE_RUN), "--emulate"], env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 1
+    summary = (out / "summary.txt").read_text()
+    steps = re.findall(r"^\| (\d [^|]+) \| ([^|]+) \| \d+ \|$", summary, flags=re.M)
+    assert steps == [("2 bench", "FAILED (exit 1)"),
+                     ("2 bench again, arrays' reduction", "FAILED (exit 1)")]  # fmt: skip
+    assert re.search(r"^=== 2 bench again, arrays' reduction \(at most \d+ s\): .*--json \S+ "
+                     r"--reductions arrays$", (out / "log.txt").read_text(), flags=re.M)
 
 
 def test_the_cpu_paired_curve_is_the_paired_difference_at_each_checkpoint(tmp_path: Path):

@@ -43,6 +43,11 @@ UNCORRELATED = ("sw_ucb", "d_ts")
 MAX_ARMS = 64
 #: The environment variable that picks the emulated device for ``--backend gpu``.
 DEVICE_ENV = "CORRAOI_GPU_DEVICE"
+#: How the checkpoints' per-run values become moments over the runs (Device.reduction):
+#: "kernel", kernel.cu's reduce_checkpoints (one pass, exact integer sums); "arrays", the
+#: array module's reductions (Moments.of on CuPy or NumPy arrays: the path of the second GPU
+#: run, kept to be timed and checked beside the first, and to fall back on).
+REDUCTIONS = ("kernel", "arrays")
 
 #: Argument kinds of an entry point: int32, int64, uint64, float64, array.
 ArgList = Sequence[tuple[str, Any]]
@@ -86,10 +91,17 @@ class Device(ABC):
     checkpoint_bytes: int = 256 << 20
     #: Seconds spent compiling (or loading) modules in this process.
     compile_seconds: float = 0.0
+    #: One of REDUCTIONS: how a launch's checkpoint values are reduced over the runs.
+    reduction: str = "kernel"
 
-    def __init__(self) -> None:
+    def __init__(self, *, reduction: str | None = None) -> None:
         self._compiled: dict[int, Any] = {}
         self._lock = threading.Lock()
+        if reduction is not None:
+            if reduction not in REDUCTIONS:
+                raise ValueError(f"reduction {reduction!r}: expected one of "
+                                 f"{', '.join(REDUCTIONS)}")  # fmt: skip
+            self.reduction = reduction
 
     @abstractmethod
     def _compile(self, K: int, family: str) -> Any:
@@ -116,6 +128,11 @@ class Device(ABC):
     def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
         """Run ``entry`` (``advance_<family>_<c><a>``) of the K-arm module of ``family`` over
         ``runs`` runs."""
+
+    @abstractmethod
+    def reduce(self, K: int, family: str, nck: int, runs: int, args: ArgList) -> None:
+        """Run ``reduce_checkpoints`` of the K-arm module of ``family`` over ``nck``
+        checkpoints of ``runs`` runs (``args``: corraoi.gpu.checkpoints.reduce_checkpoints)."""
 
     def mark(self) -> Any:
         """A mark after the launches queued so far (None where calls return when done)."""
@@ -147,17 +164,19 @@ class CudaDevice(Device):
     """The current CUDA device, through CuPy (the ``gpu`` extra). ``block``: threads a block;
     ``maxrregcount``: a cap on registers per thread (NVRTC's ``--maxrregcount``; None: the
     compiler's choice); ``defines``: kernel.cu's compile-time switches (``CAI_LOG_TEST=1``,
-    ``CAI_FP64=1``).
-    All three are there to be measured (benchmarks/bench_gpu.py)."""
+    ``CAI_FP64=1``); ``reduction``: one of REDUCTIONS.
+    All four are there to be measured (benchmarks/bench_gpu.py)."""
 
     launch_work = 1 << 31
     checkpoint_bytes = 1 << 30
     in_flight = 1
     BLOCK = 128
+    #: Threads a block of reduce_checkpoints (a multiple of 32: its warps merge by shuffles).
+    REDUCE_BLOCK = 256
 
     def __init__(self, *, block: int = BLOCK, maxrregcount: int | None = None,
-                 defines: Sequence[str] = ()) -> None:  # fmt: skip
-        super().__init__()
+                 defines: Sequence[str] = (), reduction: str | None = None) -> None:  # fmt: skip
+        super().__init__(reduction=reduction)
         self.block = int(block)
         self.options: tuple[str, ...] = ("-std=c++17", *(f"-D{d}" for d in defines))
         if maxrregcount is not None:
@@ -179,6 +198,9 @@ class CudaDevice(Device):
         props = cupy.cuda.runtime.getDeviceProperties(cupy.cuda.Device().id)
         raw = props.get("name", b"CUDA device")
         self.name = raw.decode() if isinstance(raw, bytes) else str(raw)
+        #: Blocks a reduce_checkpoints launch aims at, its checkpoints together: 32 for each
+        #: multiprocessor (several rounds of the 3 it holds at once at 74 registers a thread).
+        self.reduce_blocks = 32 * int(props.get("multiProcessorCount", 132))
 
     def _compile(self, K: int, family: str) -> Any:
         import cupy
@@ -196,6 +218,12 @@ class CudaDevice(Device):
         func = self.module(K, family).get_function(entry)
         blocks = (runs + self.block - 1) // self.block
         func((blocks,), (self.block,), self._args(args))
+
+    def reduce(self, K: int, family: str, nck: int, runs: int, args: ArgList) -> None:
+        func = self.module(K, family).get_function("reduce_checkpoints")
+        per_checkpoint = max(1, min((runs + self.REDUCE_BLOCK - 1) // self.REDUCE_BLOCK,
+                                    -(-self.reduce_blocks // nck)))  # fmt: skip
+        func((nck, per_checkpoint), (self.REDUCE_BLOCK,), self._args(args))
 
     def mark(self) -> Any:
         return self.xp.cuda.get_current_stream().record()
@@ -248,8 +276,8 @@ class EmulatedDevice(Device):
     name = "emulated on the CPU"
     FLAGS = ("-O2", "-std=c++17", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
-    def __init__(self, *, defines: Sequence[str] = ()) -> None:
-        super().__init__()
+    def __init__(self, *, defines: Sequence[str] = (), reduction: str | None = None) -> None:
+        super().__init__(reduction=reduction)
         cxx = host_compiler()
         if cxx is None:
             raise GpuUnavailable(f"{DEVICE_ENV}=emulate needs a C++ compiler (g++ or $CXX)")
@@ -317,6 +345,11 @@ class EmulatedDevice(Device):
 
     def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
         func = getattr(self.module(K, family), entry)
+        func.restype = None
+        func(*self._args(args))
+
+    def reduce(self, K: int, family: str, nck: int, runs: int, args: ArgList) -> None:
+        func = self.module(K, family).reduce_checkpoints
         func.restype = None
         func(*self._args(args))
 

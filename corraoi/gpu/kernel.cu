@@ -797,15 +797,18 @@ struct DTsForm {
 // warp read and write neighbouring addresses. `lnt[j]` is ln(t0 + j + 1); `thr` the CDF rows
 // of the n hidden states (cai_hidden); `ymask[x]` the arms that succeed in state x (bit
 // k: Y[k][x] = 1); `comb` is candidates.candidate_bitsets (K, 8) for the correlated forms.
+// At the checkpoint slots `ck_t` (the launch's, ascending), each run's regret and AoI sum go
+// to ck_reg and ck_asum, laid out [checkpoint][run], and its pulls to ck_pulls,
+// [checkpoint][arm][run] (reduce_checkpoints sums them over the runs).
 #define CAI_PARAMS                                                                            \
     int R, u64 seed0, i64 t0, i64 nslots, const double *lnt, int n, int nrows, int kind,      \
         const u32 *thr, const i64 *trace, const u64 *ymask, const u64 *comb, int best,        \
-        double mu_star, const double *prm, int S, i64 *pulls, i64 *succ, double *pstate,       \
-        int *xprev, i64 *age_a, i64 *oage_a, i64 *reg_a, i64 *asum_a, int nck,                \
-        const i64 *ck_t, double *ck_reg, double *ck_est, i64 *ck_pulls, int cap_run, i64 *cap
+        const double *prm, int S, i64 *pulls, i64 *succ, double *pstate, int *xprev,          \
+        i64 *age_a, i64 *oage_a, i64 *reg_a, i64 *asum_a, int nck, const i64 *ck_t,           \
+        i64 *ck_reg, i64 *ck_asum, u32 *ck_pulls, int cap_run, i64 *cap
 #define CAI_NAMES                                                                             \
-    R, seed0, t0, nslots, lnt, n, nrows, kind, thr, trace, ymask, comb, best, mu_star, prm, S, \
-        pulls, succ, pstate, xprev, age_a, oage_a, reg_a, asum_a, nck, ck_t, ck_reg, ck_est,  \
+    R, seed0, t0, nslots, lnt, n, nrows, kind, thr, trace, ymask, comb, best, prm, S, pulls,  \
+        succ, pstate, xprev, age_a, oage_a, reg_a, asum_a, nck, ck_t, ck_reg, ck_asum,        \
         ck_pulls, cap_run, cap
 
 // The per-slot capture of run `cap_run` (-1: none), CAI_CAPW values a slot of this launch into
@@ -1011,9 +1014,9 @@ CAI_FN void cai_run(int r, const u64* comb_tab, CAI_PARAMS) {
             row[8] = (i64)cand;
         }
         if (t == next_ck) {
-            ck_reg[(i64)ci * R + r] = (double)(asum - osum);
-            ck_est[(i64)ci * R + r] = (double)asum - (double)t / mu_star;
-            CAI_FOR_ARMS(k) ck_pulls[((i64)ci * KARMS + k) * R + r] = (i64)np[k];
+            ck_reg[(i64)ci * R + r] = asum - osum;
+            ck_asum[(i64)ci * R + r] = asum;
+            CAI_FOR_ARMS(k) ck_pulls[((i64)ci * KARMS + k) * R + r] = np[k];
             ++ci;
             next_ck = ci < nck ? (u32)ck_t[ci] : 0u;
         }
@@ -1081,6 +1084,175 @@ CAI_ENTRY2(sw_ucb, SwUcbForm)
 #endif
 #if CAI_WANT(7)
 CAI_ENTRY2(d_ts, DTsForm)
+#endif
+
+// ------------------------------------------------------------------ checkpoint sums
+//
+// reduce_checkpoints sums what a launch wrote at its checkpoints over the runs, in one pass
+// and exactly, in integers: CAI_CKW words a checkpoint of `acc` (zeroed by the host before the
+// first launch and read once after the last):
+//
+//   words 0-4    the regret: its sum (2 words, the lowest first: two's complement mod 2^128)
+//                and the sum of its squares (3 words)
+//   words 5-9    the AoI sum, likewise (the estimator is it minus t / mu*, the same in every run)
+//   words 10-14  the regret minus the baseline's (`base`, run by run; flag CAI_CK_BASE), likewise
+//   words 15..   the pulls of each arm
+//
+// and, with flag CAI_CK_KEEP, copies each run's regret to `kept` (a baseline's runs). Every
+// value is below 2^63 in size (limits.MAX_HORIZON), so a square is below 2^126 and no sum can
+// overflow. Sums of integers do not depend on the order of addition: the moments that the host
+// makes of them (corraoi/gpu/runner.py) are the same whatever the launch shape, the blocks or
+// the order of the atomics, and are exact (sum(x^2) - sum(x)^2 / n in exact integers, rounded
+// once), so no cancellation in them. A thread adds its runs, a warp's threads merge theirs (a
+// tree of shuffles), and its first lane adds the warp's into `acc` with 64-bit atomics, carries
+// passed on word by word. The emulated device runs the same additions, merges and atomics, with
+// the warp's lanes as an array.
+#define CAI_CKW (15 + KARMS)
+#define CAI_CK_BASE 1
+#define CAI_CK_KEEP 2
+
+CAI_FN u64 cai_mulhi64(u64 a, u64 b) {
+#if defined(__CUDACC__)
+    return __umul64hi(a, b);
+#else
+    return (u64)(((unsigned __int128)a * b) >> 64);
+#endif
+}
+
+CAI_FN u64 cai_atomic_add(u64* p, u64 v) {  // returns the value before
+#if defined(__CUDACC__)
+    return atomicAdd((unsigned long long*)p, (unsigned long long)v);
+#else
+    return __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
+#endif
+}
+
+// a += x (five words: the sum, the sum of squares).
+CAI_FN void cai_sum_add(u64* a, i64 x) {
+    u64 lo = (u64)x;
+    u64 s = a[0] + lo;
+    a[1] += (x < 0 ? ~0ull : 0ull) + (s < lo ? 1ull : 0ull);
+    a[0] = s;
+    u64 u = x < 0 ? 0ull - (u64)x : (u64)x;  // |x| <= 2^63
+    u64 q0 = u * u, q1 = cai_mulhi64(u, u);    // q1 < 2^62: q1 + carry does not wrap
+    u64 s2 = a[2] + q0;
+    u64 add = q1 + (s2 < q0 ? 1ull : 0ull);
+    u64 s3 = a[3] + add;
+    a[4] += s3 < add ? 1ull : 0ull;
+    a[2] = s2;
+    a[3] = s3;
+}
+
+// a += b as integers of W words, the lowest first.
+template <int W>
+CAI_FN void cai_wide_add(u64* a, const u64* b) {
+    u64 carry = 0;
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+    for (int i = 0; i < W; ++i) {
+        u64 v = b[i] + carry;
+        u64 c = v < carry ? 1ull : 0ull;  // b[i] = 2^64 - 1 and a carry in
+        u64 s = a[i] + v;
+        carry = c + (s < v ? 1ull : 0ull);
+        a[i] = s;
+    }
+}
+
+// The same into memory that other threads add to at the same time: an atomic a word, the
+// carry out of each (known from the value before) added to the next.
+template <int W>
+CAI_FN void cai_atomic_wide_add(u64* p, const u64* b) {
+    u64 carry = 0;
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+    for (int i = 0; i < W; ++i) {
+        u64 v = b[i] + carry;
+        carry = v < carry ? 1ull : 0ull;
+        if (v != 0ull) {
+            u64 old = cai_atomic_add(p + i, v);
+            carry += old + v < old ? 1ull : 0ull;
+        }
+    }
+}
+
+// One run's values at checkpoint c (its row of the buffers) into a thread's words a.
+CAI_FN void cai_ck_run(u64* a, int c, i64 r, int R, const i64* ck_reg, const i64* ck_asum,
+                       const u32* ck_pulls, const i64* base, i64* kept, int flags) {
+    i64 at = (i64)c * R + r;
+    i64 reg = ck_reg[at];
+    cai_sum_add(a, reg);
+    cai_sum_add(a + 5, ck_asum[at]);
+    if (flags & CAI_CK_BASE) cai_sum_add(a + 10, reg - base[at]);
+    if (flags & CAI_CK_KEEP) kept[at] = reg;
+    CAI_FOR_ARMS(k) a[15 + k] += (u64)ck_pulls[((i64)c * KARMS + k) * R + r];
+}
+
+CAI_FN void cai_ck_merge(u64* a, const u64* b) {
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+    for (int q = 0; q < 15; q += 5) {
+        cai_wide_add<2>(a + q, b + q);
+        cai_wide_add<3>(a + q + 2, b + q + 2);
+    }
+    CAI_FOR_ARMS(k) a[15 + k] += b[15 + k];
+}
+
+CAI_FN void cai_ck_flush(u64* acc, const u64* a) {
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+    for (int q = 0; q < 15; q += 5) {
+        cai_atomic_wide_add<2>(acc + q, a + q);
+        cai_atomic_wide_add<3>(acc + q + 2, a + q + 2);
+    }
+    CAI_FOR_ARMS(k) if (a[15 + k] != 0ull) cai_atomic_add(acc + 15 + k, a[15 + k]);
+}
+
+// `nck` checkpoints of `R` runs: ck_reg, ck_asum, ck_pulls, `base` and `kept` from the
+// group's first checkpoint, `acc` its CAI_CKW words. On the GPU: a block of a multiple of 32
+// threads for (checkpoint blockIdx.x, runs blockIdx.y + gridDim.y i ...).
+#if defined(__CUDACC__)
+extern "C" __global__ void reduce_checkpoints(int R, int nck, const i64* ck_reg,
+                                              const i64* ck_asum, const u32* ck_pulls,
+                                              const i64* base, i64* kept, int flags, u64* acc) {
+    const int c = blockIdx.x;
+    u64 a[CAI_CKW];
+#pragma unroll
+    for (int w = 0; w < CAI_CKW; ++w) a[w] = 0ull;
+    const i64 step = (i64)gridDim.y * blockDim.x;
+    for (i64 r = (i64)blockIdx.y * blockDim.x + threadIdx.x; r < R; r += step)
+        cai_ck_run(a, c, r, R, ck_reg, ck_asum, ck_pulls, base, kept, flags);
+#pragma unroll
+    for (int off = 16; off > 0; off >>= 1) {
+        u64 b[CAI_CKW];
+#pragma unroll
+        for (int w = 0; w < CAI_CKW; ++w) b[w] = __shfl_down_sync(0xffffffffu, a[w], off);
+        cai_ck_merge(a, b);
+    }
+    if ((threadIdx.x & 31u) == 0u) cai_ck_flush(acc + (i64)c * CAI_CKW, a);
+}
+#else
+extern "C" void reduce_checkpoints(int R, int nck, const i64* ck_reg, const i64* ck_asum,
+                                   const u32* ck_pulls, const i64* base, i64* kept, int flags,
+                                   u64* acc) {
+    const int lanes = 32, per_lane = 8;  // a warp's threads, each adding every 32nd run
+    const i64 span = (i64)lanes * per_lane, spans = ((i64)R + span - 1) / span;
+    _Pragma("omp parallel for schedule(static)") for (i64 job = 0; job < (i64)nck * spans;
+                                                       ++job) {
+        int c = (int)(job / spans);
+        i64 r0 = (job % spans) * span;
+        u64 a[32][CAI_CKW];
+        memset(a, 0, sizeof a);
+        for (i64 r = r0; r < r0 + span && r < R; ++r)
+            cai_ck_run(a[r % lanes], c, r, R, ck_reg, ck_asum, ck_pulls, base, kept, flags);
+        for (int off = 16; off > 0; off >>= 1)
+            for (int l = 0; l < off; ++l) cai_ck_merge(a[l], a[l + off]);
+        cai_ck_flush(acc + (i64)c * CAI_CKW, a[0]);
+    }
+}
 #endif
 
 // The Beta sampler as Thompson sampling runs it (cai_betas), for its tests: out[i] is arm 0's

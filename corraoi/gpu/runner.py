@@ -1,14 +1,16 @@
 """Simulating runs on a device (:mod:`corraoi.gpu.device`) and running a grid's chunks there.
 
-A policy's runs advance launch by launch; each launch captures every run's regret,
-estimator and pulls at the checkpoints it passes into device buffers, which are reduced on
-the device to :class:`corraoi.experiments.montecarlo.Moments` (count, mean, sum of squared
-deviations) and,
-with a baseline, to the moments of the run-by-run difference against it. What comes back to
-the host: those aggregates per checkpoint and every run's final values -- never every run's
-checkpoints (a million runs x 200 checkpoints would be gigabytes). The aggregates stay on the
+A policy's runs advance launch by launch; each launch captures every run's regret, AoI sum
+and pulls at the checkpoints it passes into device buffers, which are reduced on the device
+(kernel.cu's ``reduce_checkpoints``: exact integer sums and sums of squares, one pass) and
+become :class:`corraoi.stats.Moments` (count, mean, sum of squared deviations) of the regret
+and the estimator and, with a baseline, of the run-by-run difference against it. What comes
+back to the host: those sums per checkpoint and every run's final values -- never every
+run's checkpoints (a million runs x 200 checkpoints would be gigabytes). The sums stay on the
 device until the last launch, and the host keeps the next launch queued while it waits for
 one (``Device.in_flight``), so that the device never waits for the host between launches.
+``Device.reduction = "arrays"`` reduces with the array module instead (``Moments.of`` on
+CuPy arrays, the path of the second GPU run), to be timed and checked beside it.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from corraoi.model.instance import Instance
 from corraoi.policies import PolicySpec, gpu_form
 from corraoi.stats import Moments
 
+from .checkpoints import Checkpoints, buffer_bytes
 from .device import MAX_ARMS, Device, entry_name, entry_names, get_device
 
 if TYPE_CHECKING:
@@ -50,7 +53,7 @@ class DeviceRun:
     regret_final: np.ndarray  # (R,) float64 at the horizon
     estimator_final: np.ndarray  # (R,) float64
     best_pulls_final: np.ndarray  # (R,) int64
-    kept: Any  # (S, R) device array of the regret at every checkpoint (keep=True), else None
+    kept: Any  # (S, R) int64 device array: the regret at every checkpoint (keep=True), or None
     wall_s: float
 
 
@@ -66,10 +69,6 @@ def gpu_problem(policy: PolicySpec, K: int) -> str | None:
     if K > MAX_ARMS:
         return f"K = {K} arms: the GPU backend holds at most {MAX_ARMS} arms per run"
     return None
-
-
-def _ckpt_bytes(R: int, K: int) -> int:
-    return R * (2 + K) * 8
 
 
 def hidden_table(cdf_rows: np.ndarray) -> np.ndarray:
@@ -134,7 +133,7 @@ class _Problem:
                 "ymask": arr(reward_masks(pb.Y)),
                 "comb": arr(candidate_bitsets(pb.pclass).reshape(K * 8)),
                 "prm": arr(pb.params if pb.params.size else np.zeros(1)),
-                "none": xp.zeros(1, dtype=np.int64), "none_d": xp.zeros(1),
+                "none": xp.zeros(1, dtype=np.int64),
             }  # fmt: skip
             self.st = {
                 "pulls": xp.zeros((K, R), dtype=np.int64),
@@ -148,7 +147,7 @@ class _Problem:
             raise _memory_error(exc, R, policy) from None
 
     def launch(self, seed0: int, t: int, nslots: int, *, nck: int = 0, ck_t: Any = None,
-               ck_reg: Any = None, ck_est: Any = None, ck_pulls: Any = None,
+               ck_reg: Any = None, ck_asum: Any = None, ck_pulls: Any = None,
                cap_run: int = -1, cap: Any = None) -> None:  # fmt: skip
         """Advance every run from slot ``t`` by ``nslots`` (capturing the checkpoints in
         ``ck_t`` it passes, and every slot of run ``cap_run`` into ``cap``)."""
@@ -159,14 +158,11 @@ class _Problem:
             ("i", self.R), ("Q", int(seed0)), ("q", t), ("q", nslots), ("p", lnt),
             ("i", int(self.cdf.shape[1])), ("i", int(self.cdf.shape[0])), ("i", int(self.kind)),
             ("p", c["thr"]), ("p", c["trace"]), ("p", c["ymask"]), ("p", c["comb"]),
-            ("i", int(self.theory.best_arm)), ("d", float(self.theory.mu_star)),
-            ("p", c["prm"]), ("i", self.S_state),
+            ("i", int(self.theory.best_arm)), ("p", c["prm"]), ("i", self.S_state),
             *(("p", st[k]) for k in ("pulls", "succ", "pstate", "xprev", "age", "oage", "reg",
                                      "asum")),
-            ("i", nck), ("p", none if ck_t is None else ck_t),
-            ("p", c["none_d"] if ck_reg is None else ck_reg),
-            ("p", c["none_d"] if ck_est is None else ck_est),
-            ("p", none if ck_pulls is None else ck_pulls),
+            ("i", nck), *(("p", none if a is None else a) for a in (ck_t, ck_reg, ck_asum,
+                                                                       ck_pulls)),
             ("i", int(cap_run)), ("p", none if cap is None else cap),
         ]  # fmt: skip
         self.dev.launch(self.K, self.family, self.entry, self.R, args)
@@ -194,26 +190,20 @@ def simulate(
     """
     start = time.perf_counter()
     dev = device if device is not None else get_device()
-    xp = dev.xp
     prob = _Problem(instance, policy, horizon, channel, runs, dev)
     K, R, theory = prob.K, prob.R, prob.theory
     stops = sorted({int(c) for c in checkpoints if 0 < c <= horizon} | {int(horizon)})
     S = len(stops)
-    cmax = max(1, min(S, dev.checkpoint_bytes // _ckpt_bytes(R, K)))
-    if baseline is not None and tuple(baseline.shape) != (S, R):
-        raise ConfigError(f"baseline of shape {tuple(baseline.shape)}, expected {(S, R)}")
+    cmax = max(1, min(S, dev.checkpoint_bytes // buffer_bytes(R, K)))
+    if baseline is not None and (tuple(baseline.shape) != (S, R) or baseline.dtype != np.int64):
+        raise ConfigError(f"baseline of shape {tuple(baseline.shape)} and type {baseline.dtype}, "
+                          f"expected {(S, R)} int64 (the kept regret of another policy's runs)")
     try:
         ck_t = prob.arr(np.array(stops))
-        ck_reg = xp.zeros((cmax, R))
-        ck_est = xp.zeros((cmax, R))
-        ck_pulls = xp.zeros((cmax, K, R), dtype=np.int64)
-        kept = xp.zeros((S, R)) if keep else None
+        ck = Checkpoints(dev, prob.family, R=R, K=K, S=S, cmax=cmax, baseline=baseline,
+                         keep=keep)  # fmt: skip
     except Exception as exc:  # CuPy's OutOfMemoryError (no CuPy import needed here)
         raise _memory_error(exc, R, policy) from None
-    regret_parts: list[Moments] = []  # their arrays on the device until the end
-    est_parts: list[Moments] = []
-    paired_parts: list[Moments] = []
-    pulls_parts: list[Any] = []
     per_launch = max(1, min(dev.launch_work // R, dev.launch_slots))
     queued: deque[tuple[Any, int]] = deque()  # (mark after a launch, its slots)
 
@@ -230,18 +220,10 @@ def simulate(
         end = min(horizon, t + per_launch, stops[min(ci + cmax, S) - 1])
         nck = bisect.bisect_right(stops, end) - ci
         try:
-            prob.launch(seed0, t, end - t, nck=nck, ck_t=ck_t[ci:], ck_reg=ck_reg,
-                        ck_est=ck_est, ck_pulls=ck_pulls)  # fmt: skip
+            prob.launch(seed0, t, end - t, nck=nck, ck_t=ck_t[ci:], ck_reg=ck.reg,
+                        ck_asum=ck.asum, ck_pulls=ck.pulls)  # fmt: skip
             if nck:
-                reg = ck_reg[:nck]
-                regret_parts.append(Moments.of(reg, axis=1, host=None))
-                est_parts.append(Moments.of(ck_est[:nck], axis=1, host=None))
-                pulls_parts.append(ck_pulls[:nck].sum(axis=2))
-                if baseline is not None:
-                    diff = reg - baseline[ci : ci + nck]
-                    paired_parts.append(Moments.of(diff, axis=1, host=None))
-                if kept is not None:
-                    kept[ci : ci + nck] = reg
+                ck.reduce(ci, nck)
             queued.append((dev.mark(), end - t))
             done(dev.in_flight)
         except Exception as exc:
@@ -252,17 +234,16 @@ def simulate(
     dev.synchronize()
     st = prob.st
     best = int(theory.best_arm)
+    mu_star = float(theory.mu_star)
     regret_final = dev.asnumpy(st["reg"]).astype(np.float64)
-    est_final = dev.asnumpy(st["asum"]).astype(np.float64) - horizon / float(theory.mu_star)
-    host = dev.asnumpy
+    est_final = dev.asnumpy(st["asum"]).astype(np.float64) - horizon / mu_star
+    regret, asum, paired, pulls_sum = ck.moments()
+    t_arr = np.asarray(stops, dtype=np.int64)
     return DeviceRun(
-        t=np.asarray(stops, dtype=np.int64), regret=_concat(regret_parts, xp, host),
-        estimator=_concat(est_parts, xp, host),
-        pulls_sum=np.asarray(host(xp.concatenate(pulls_parts)), dtype=np.int64),
-        paired=_concat(paired_parts, xp, host) if paired_parts else None,
-        regret_final=regret_final, estimator_final=est_final,
-        best_pulls_final=dev.asnumpy(st["pulls"][best]).astype(np.int64), kept=kept,
-        wall_s=time.perf_counter() - start,
+        t=t_arr, regret=regret, estimator=Moments(asum.n, asum.mean - t_arr / mu_star, asum.m2),
+        pulls_sum=pulls_sum, paired=paired, regret_final=regret_final,
+        estimator_final=est_final, best_pulls_final=dev.asnumpy(st["pulls"][best]).astype(
+            np.int64), kept=ck.kept, wall_s=time.perf_counter() - start,
     )  # fmt: skip
 
 
@@ -314,13 +295,6 @@ def capture_run(
         )  # fmt: skip
         pulls, succ = p[-1].copy(), s[-1].copy()
         t += n
-
-
-def _concat(parts: list[Moments], xp: Any, host: Callable[[Any], np.ndarray]) -> Moments:
-    """Moments of consecutive checkpoint groups (same runs, arrays on the device) as one,
-    on the host."""
-    return Moments(parts[0].n, np.asarray(host(xp.concatenate([p.mean for p in parts]))),
-                   np.asarray(host(xp.concatenate([p.m2 for p in parts]))))  # fmt: skip
 
 
 def _memory_error(exc: Exception, R: int, policy: PolicySpec) -> Exception:
