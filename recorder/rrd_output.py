@@ -40,6 +40,11 @@ class RrdOutput(Sink):
     deletes it with ``discard_on_abort`` (replay and compare: their output can be made
     again). Leaving a ``with`` block through any exception, Ctrl-C included, aborts.
     ``recording`` is made here (:func:`new_recording`); hand it to :class:`RerunSink`.
+
+    The default blueprint (``blueprint``, else the one-run layout) goes first; with
+    ``blueprint_at_end`` none is sent then, and :meth:`close` sends the one given to
+    :meth:`set_blueprint` after the data (a layout made from what was sent: ``compare``'s
+    shared y-scales). ``name``: what the viewer lists the recording as (the run's label).
     """
 
     def __init__(
@@ -54,6 +59,8 @@ class RrdOutput(Sink):
         recording_id: str | None = None,
         flush_timeout: float = 30.0,
         discard_on_abort: bool = False,
+        blueprint_at_end: bool = False,
+        name: str | None = None,
     ) -> None:
         if rrd_path is None and viewer_url is None:
             raise ValueError("RrdOutput needs an .rrd path, a viewer URL or both")
@@ -67,6 +74,7 @@ class RrdOutput(Sink):
         self.closed = False
         self.finished = False
         self._lock: BinaryIO | None = None
+        self._final_blueprint: rrb.Blueprint | None = None
         sinks: list[Any] = []
         if rrd_path is not None:
             self.path = check_output(rrd_path, overwrite=overwrite, what="Rerun recording")
@@ -77,17 +85,19 @@ class RrdOutput(Sink):
             sinks.append(rr.FileSink(str(partial_path(self.path))))
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
-        self.recording = new_recording(config, recording_id=recording_id)
+        self.recording = new_recording(config, recording_id=recording_id, name=name)
+        first = None if blueprint_at_end else blueprint or one_run_blueprint(self.label, config)
         try:
-            self.recording.set_sinks(
-                *sinks,
-                default_blueprint=blueprint or one_run_blueprint(self.label, config),
-            )
+            self.recording.set_sinks(*sinks, default_blueprint=first)
         except (OSError, RuntimeError, ValueError) as exc:
             self._unlock()
             if self.path is not None:
                 unlink_partial(self.path)
             raise WriteError(f"{self._where()}: cannot start the Rerun recording: {exc}") from None
+
+    def set_blueprint(self, blueprint: rrb.Blueprint) -> None:
+        """The blueprint :meth:`close` sends after the data (made with ``blueprint_at_end``)."""
+        self._final_blueprint = blueprint
 
     def _where(self) -> str:
         return str(partial_path(self.path)) if self.path is not None else str(self.viewer_url)
@@ -95,6 +105,9 @@ class RrdOutput(Sink):
     def _finish(self) -> str | None:
         """Flush and disconnect; returns the problem Rerun reported, if any."""
         problem = None
+        if self._final_blueprint is not None:
+            self.recording.send_blueprint(self._final_blueprint, make_active=True,
+                                          make_default=True)  # fmt: skip
         try:
             self.recording.flush(timeout_sec=self.flush_timeout)
         except RuntimeError as exc:
