@@ -24,10 +24,11 @@ Presentation entities (:data:`PRESENTATION`), drawn from the same slots to make 
 read at any K (:data:`recorder.style.LINES_UP_TO`):
 
 ====================  ===================================================================
-``arm/best``          the best arm k* (constant: two points a batch), a reference line
-``true_means/<k>``    arm k's true mean as dots at evenly spaced slots (arm k's shifted by
-                      k, so that equal means alternate colours); every arm up to
-                      LINES_UP_TO arms, beyond it the arms that matter
+``arm/best``          the best arm k*, a reference line (slots 1 and T, sent at the start)
+``true_means/<k>``    arm k's true mean as dots at evenly spaced slots up to T (arm k's
+                      shifted by k, so that equal means alternate colours), sent at the
+                      start: every arm up to LINES_UP_TO arms, beyond it the arms that
+                      matter (from the slot each came to matter)
 ``focus/<k>``         beyond LINES_UP_TO arms: arm k's empirical mean from the slot it came
                       to matter (:func:`recorder.style.arms_that_matter`; it became the most
                       played, or was in a candidate set of at most FOCUS_MAX arms)

@@ -96,9 +96,30 @@ class RerunSink(Sink):
         self._last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._snapped = 0
         log_static(recording, self.base, config, self.color)
-        if not self._lines:
+        # the references are known before any slot: the best arm's line and the true
+        # means' dots over the whole horizon, sent once (not a batch at a time)
+        horizon = max(int(config.horizon), 1)
+        self._reference("arm/best", np.array([1, horizon]), self._best + 1.0)
+        if self._lines:
+            for k in range(self.K):
+                self._true_dots(k, 1)
+        else:
             for k in style.arms_that_matter(theory.mu, self._best, theory.competitive):
                 self._join(k, 1)
+
+    def _reference(self, path: str, t: np.ndarray, value: float) -> None:
+        self.recording.send_columns(
+            f"{self.base}/{path}",
+            indexes=[rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(t, dtype=np.int64))],
+            columns=rr.Scalars.columns(scalars=np.full(len(t), value)),
+        )
+
+    def _true_dots(self, k: int, first: int) -> None:
+        """Arm k's true mean as dots from slot ``first`` to the horizon."""
+        t = np.arange(1 + self._phase[k], int(self.config.horizon) + 1, self._dot)
+        t = t[t >= first]
+        if len(t):
+            self._reference(f"true_means/{k + 1}", t, float(self._mu[k]))
 
     def write(self, block: SlotBlock) -> None:
         """Queue the block's slots; they are sent once ``batch`` slots wait (and by
@@ -153,14 +174,9 @@ class RerunSink(Sink):
         for k in range(self.K):
             member = cand[:, k]
             column(f"candidates/{k + 1}", t[member], np.full(int(member.sum()), k + 1.0))
-        # the presentation entities (rerun_names.PRESENTATION)
-        column("arm/best", ends, np.full(len(ends), self._best + 1.0))
+        # the presentation entities (rerun_names.PRESENTATION) beyond LINES_UP_TO arms
         if not self._lines:
             self._snapshots(block, t, cand)
-        start = dict.fromkeys(range(self.K), 1) if self._lines else self.focus
-        for k, first in start.items():
-            dots = t[((t - 1 - self._phase[k]) % self._dot == 0) & (t >= first)]
-            column(f"true_means/{k + 1}", dots, np.full(len(dots), self._mu[k]))
         for k, first in self.focus.items():
             keep = t >= first
             mean = np.ascontiguousarray(block.mu_hat[keep, k], dtype=f64)
@@ -171,6 +187,7 @@ class RerunSink(Sink):
         """Arm k matters from ``slot`` on: its line and true-mean dots are drawn."""
         log_focus(self.recording, self.base, self.config, k, style.focus_color(len(self.focus)))
         self.focus[k] = slot
+        self._true_dots(k, slot)
 
     def _snapshots(self, block: SlotBlock, t: np.ndarray, cand: np.ndarray) -> None:
         """The per-arm bars at the snapshot slots of ``block``; an arm that became the most
