@@ -22,14 +22,14 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def instance_for(arms: int) -> Any:
     """The instance of a K-arm benchmark: the paper's I1 for 4 arms, else a random one with
-    K arms and max(4, K / 8) states (seeded: the same in every checkout)."""
+    K arms and max(8, K / 4) states (seeded: the same in every checkout)."""
     import numpy as np
 
     from corraoi.instance import Instance, load_instance
 
     if arms == 4:
         return load_instance("I1")
-    n = max(4, arms // 8)
+    n = max(8, arms // 4)
     rng = np.random.default_rng(arms)
     Y = (rng.uniform(size=(arms, n)) < rng.uniform(0.1, 0.5, size=(arms, 1))).astype(int)
     Y[np.arange(arms), rng.integers(n, size=arms)] = 1

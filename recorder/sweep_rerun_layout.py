@@ -84,15 +84,15 @@ def shown_arms(config: dict[str, Any]) -> list[int]:
 
 
 def sweep_recording_name(path: str | os.PathLike[str], config: dict[str, Any]) -> str:
-    """What the viewer lists a sweep recording as: ``sweep <folder>: <instance>, <runs>
-    runs, T = <horizon>`` (a group's sub-folder named after the instance is shown with the
-    sweep folder above it)."""
+    """What the viewer lists a sweep recording as: ``<folder>: <instance> sweep, <runs>
+    runs, T = <horizon>``, the folder first (the recording list shows the start of a name;
+    a group's sub-folder named after the instance is shown with the sweep folder above)."""
     from corraoi.text import safe_text
 
     folder = Path(path).resolve().parent
     inst = str((config.get("instance") or {}).get("name", "?"))
     shown = folder.name if folder.name != inst else f"{folder.parent.name}/{folder.name}"
-    return safe_text(f"sweep {shown}: {inst}, {config.get('runs', '?')} runs, "
+    return safe_text(f"{shown}: {inst} sweep, {config.get('runs', '?')} runs, "
                      f"T = {config.get('horizon', '?')}")  # fmt: skip
 
 

@@ -469,7 +469,7 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
     props = [c.to_record_batch().to_pydict() for c in RrdReader(folder / "sweep.rrd").stream()
              if c.entity_path == "/__properties"]  # fmt: skip
     names = [p["RecordingInfo:name"][0][0] for p in props if "RecordingInfo:name" in p]
-    assert names == ["sweep my-sweep: I1, 2 runs, T = 300"]
+    assert names == ["my-sweep: I1 sweep, 2 runs, T = 300"]
     st = statics(folder / "sweep.rrd")
     widths = [st[f"/sweep/pulls/ucb/{k}"]["SeriesLines:widths"][0][0] for k in range(1, 5)]
     assert widths == share_widths(4) and widths == sorted(widths, reverse=True)
