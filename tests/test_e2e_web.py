@@ -15,6 +15,7 @@ made by ``benchmarks/screenshots.py``.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -70,10 +71,21 @@ def record_rrd(tmp_path: Path, instance: str, policy: str, horizon: int) -> Path
     return out
 
 
-def look_at(path: Path, wanted: dict[str, tuple[int, int, int]], least: int = 40,
-            ) -> tuple[dict[str, int], float, bytes]:  # fmt: skip
-    """Open ``path`` in the web viewer; the pixels of each wanted colour, the share of
-    drawn pixels and the screenshot, once every colour shows (or after a minute)."""
+def look_at(path: Path, wanted: dict[str, tuple[int, int, int]], least: int = 40) -> None:
+    """Open ``path`` in the web viewer and fail unless every wanted colour shows (at least
+    ``least`` pixels of it) and 4% of the pixels are drawn; the screenshot is kept beside
+    ``path``."""
+    found, share, png = _screenshot(path, wanted, least)
+    path.with_suffix(".png").write_bytes(png)
+    missing = {n: v for n, v in found.items() if v < least}
+    assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
+    assert share >= 0.04, f"the screenshot is nearly blank ({share:.1%} drawn pixels)"
+
+
+def _screenshot(path: Path, wanted: dict[str, tuple[int, int, int]], least: int,
+                ) -> tuple[dict[str, int], float, bytes]:  # fmt: skip
+    """The pixels of each wanted colour, the share of drawn pixels and the screenshot,
+    once every colour shows (or after a minute and a half)."""
     exe = chromium()
     with serve_rrd(path) as url:
         browser = Chromium(exe)
@@ -95,11 +107,7 @@ def test_a_run_of_four_arms_draws_every_panel(tmp_path):
     wanted = {"policy": style.policy_color("ts"), "success": style.SUCCESS_COLOR,
               "failure": style.FAILURE_COLOR, "estimator and k*": style.REFERENCE_COLOR,
               **{f"arm {k + 1}": style.arm_color(k) for k in range(4)}}  # fmt: skip
-    found, share, png = look_at(path, wanted)
-    (tmp_path / "k4.png").write_bytes(png)
-    missing = {n: v for n, v in found.items() if v < 40}
-    assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
-    assert share >= 0.04, f"the screenshot is nearly blank ({share:.1%} drawn pixels)"
+    look_at(path, wanted)
 
 
 @pytest.mark.slow
@@ -107,16 +115,12 @@ def test_a_run_of_64_arms_draws_bars_strips_and_the_arms_that_matter(tmp_path):
     from .test_views import random_instance
 
     inst = random_instance(64, seed=64)
-    (tmp_path / "r64.json").write_text(__import__("json").dumps(inst.to_dict()))
+    (tmp_path / "r64.json").write_text(json.dumps(inst.to_dict()))
     path = record_rrd(tmp_path, str(tmp_path / "r64.json"), "cucb", 2000)
     wanted = {"policy": style.policy_color("cucb"), "failure": style.FAILURE_COLOR,
               "grey bars": style.BAR_IN_SET_COLOR, "true means": style.BAR_TRUE_COLOR,
               **{f"arm that matters {i + 1}": style.focus_color(i) for i in range(3)}}  # fmt: skip
-    found, share, png = look_at(path, wanted)
-    (tmp_path / "k64.png").write_bytes(png)
-    missing = {n: v for n, v in found.items() if v < 40}
-    assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
-    assert share >= 0.04, f"the screenshot is nearly blank ({share:.1%} drawn pixels)"
+    look_at(path, wanted)
 
 
 @pytest.mark.slow
