@@ -61,6 +61,8 @@ def alternate(script: Path, argv: list[str], baseline: Path, rounds: int,
             times = json.loads(proc.stdout.strip().splitlines()[-1])
             for row, seconds in times.items():
                 best[key][row] = min(seconds, best[key].get(row, float("inf")))
+            print(f"  {key}: " + ", ".join(f"{r} {v:.3f}" for r, v in times.items()
+                                          if not r.endswith("[CPU]")), file=sys.stderr)
     return best
 
 

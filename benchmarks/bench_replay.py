@@ -160,8 +160,9 @@ def main() -> None:
             )
         t = {k: min(v) for k, v in times.items()}
         f_wall, f_cpu = t["floor"]
-        if opts.json:
-            print(json.dumps({k: v[0] for k, v in t.items()}))
+        if opts.json:  # wall seconds, and CPU seconds (every thread and reader process)
+            print(json.dumps({**{k: v[0] for k, v in t.items()},
+                              **{f"{k} [CPU]": v[1] for k, v in t.items()}}))  # fmt: skip
             return
 
         def ratio(x: tuple[float, float]) -> str:
