@@ -96,12 +96,12 @@ def main() -> None:
     T = args.horizon
     if args.baseline is not None:
         with tempfile.TemporaryDirectory(prefix="bench-record-") as work:
-            best = alternate(Path(__file__), ["--horizon", str(T), "--repeat", str(args.repeat),
+            both = alternate(Path(__file__), ["--horizon", str(T), "--repeat", str(args.repeat),
                                               "--arms", str(args.arms), "--no-memory"],
                              args.baseline, args.rounds, Path(work))  # fmt: skip
         print(f"corraoi record: cucb on {instance_for(args.arms).name} ({args.arms} arms), "
               f"{T:,} slots, best of {args.rounds} rounds x {args.repeat}")
-        print_comparison(best, T, "us/slot", args.baseline)
+        print_comparison(both, T, "us/slot", args.baseline)
         return
 
     import os

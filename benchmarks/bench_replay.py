@@ -114,14 +114,14 @@ def main() -> None:
     os.environ.setdefault("RUST_LOG", "off")
     if opts.baseline is not None:
         with tempfile.TemporaryDirectory(prefix="bench-replay-base-") as work:
-            best = alternate(Path(__file__), [
+            both = alternate(Path(__file__), [
                 "--slots", str(opts.slots), "--runs", str(opts.runs), "--run-slots",
                 str(opts.run_slots), "--repeat", str(opts.repeat), "--arms", str(opts.arms),
             ], opts.baseline, opts.rounds, Path(work))  # fmt: skip
         print(f"viewer: {opts.arms} arms ({instance_for(opts.arms).name}), replay of "
               f"{opts.slots:,} slots, compare of {opts.runs} x {opts.run_slots:,}; best of "
               f"{opts.rounds} rounds x {opts.repeat}; times per slot of the long log")
-        print_comparison(best, opts.slots, "us/slot", opts.baseline)
+        print_comparison(both, opts.slots, "us/slot", opts.baseline)
         return
 
     # submodules, not ``import viewer``: an editable install made before the packages had
