@@ -92,13 +92,17 @@ def main() -> None:
     ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
     ap.add_argument("--rounds", type=int, default=3, help="with --baseline: rounds of each")
     ap.add_argument("--json", action="store_true", help="print the times as one JSON object")
+    ap.add_argument("--only", help="with --json or --baseline: the rows whose names start so "
+                    "(a comma list), for more rounds in the same time")  # fmt: skip
     args = ap.parse_args()
     T = args.horizon
+    if args.only and not (args.json or args.baseline):
+        ap.error("--only goes with --json or --baseline")
     if args.baseline is not None:
         with tempfile.TemporaryDirectory(prefix="bench-record-") as work:
-            both = alternate(Path(__file__), ["--horizon", str(T), "--repeat", str(args.repeat),
-                                              "--arms", str(args.arms), "--no-memory"],
-                             args.baseline, args.rounds, Path(work))  # fmt: skip
+            argv = ["--horizon", str(T), "--repeat", str(args.repeat), "--arms",
+                    str(args.arms), "--no-memory", *(["--only", args.only] if args.only else [])]
+            both = alternate(Path(__file__), argv, args.baseline, args.rounds, Path(work))
         print(f"corraoi record: cucb on {instance_for(args.arms).name} ({args.arms} arms), "
               f"{T:,} slots, best of {args.rounds} rounds x {args.repeat}")
         print_comparison(both, T, "us/slot", args.baseline)
@@ -223,8 +227,16 @@ def main() -> None:
             ("Rerun only (RerunSink -> .rrd)", rerun_only),
             ("both sinks", both),
         ]
+        if args.only:  # a few rows, for many rounds (with --json or --baseline)
+            keep = [w.strip() for w in args.only.split(",") if w.strip()]
+            stages = [(n, f) for n, f in stages if any(n.startswith(k) for k in keep)]
+            rows = [(n, f) for n, f in rows if any(n.startswith(k) for k in keep)]
         stage_times = {name: best_of(args.repeat, fn, name) for name, fn in stages}
         times = {name: best_of(args.repeat, fn, name) for name, fn in rows}
+        if args.json:  # wall seconds, and CPU seconds of the same calls
+            cpu = {f"{name} [CPU]": CPU[name] for name in (*stage_times, *times)}
+            print(json.dumps({**stage_times, **times, **cpu}))
+            return
         mcap_size = (tmp / "m.mcap").stat().st_size
         rrd_size = (tmp / "r.rrd").stat().st_size
         memory = None
@@ -232,10 +244,6 @@ def main() -> None:
             text = json.dumps(inst.to_dict())
             memory = (peak_rss_mib(T, tmp, text), peak_rss_mib(10 * T, tmp, text))
 
-    if args.json:  # wall seconds, and CPU seconds of the same calls
-        cpu = {f"{name} [CPU]": CPU[name] for name in (*stage_times, *times)}
-        print(json.dumps({**stage_times, **times, **cpu}))
-        return
     print(
         f"corraoi record: cucb on {inst.name} ({inst.K} arms), {T:,} slots, best of "
         f"{args.repeat}; Python "

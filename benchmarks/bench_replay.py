@@ -110,13 +110,18 @@ def main() -> None:
     ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
     ap.add_argument("--rounds", type=int, default=3, help="with --baseline: rounds of each")
     ap.add_argument("--json", action="store_true", help="print the times as one JSON object")
+    ap.add_argument("--only", help="with --json or --baseline: only these rows (comma list: "
+                    "replay, compare, diff, info, cli replay, cli compare)")  # fmt: skip
     opts = ap.parse_args()
+    if opts.only and not (opts.json or opts.baseline):
+        ap.error("--only goes with --json or --baseline")
     os.environ.setdefault("RUST_LOG", "off")
     if opts.baseline is not None:
         with tempfile.TemporaryDirectory(prefix="bench-replay-base-") as work:
             both = alternate(Path(__file__), [
                 "--slots", str(opts.slots), "--runs", str(opts.runs), "--run-slots",
                 str(opts.run_slots), "--repeat", str(opts.repeat), "--arms", str(opts.arms),
+                *(["--only", opts.only] if opts.only else []),
             ], opts.baseline, opts.rounds, Path(work))  # fmt: skip
         print(f"viewer: {opts.arms} arms ({instance_for(opts.arms).name}), replay of "
               f"{opts.slots:,} slots, compare of {opts.runs} x {opts.run_slots:,}; best of "
@@ -147,17 +152,22 @@ def main() -> None:
             "diff": lambda: diff(long_log, long_log),
             "info": lambda: log_info(long_log),
         }
+        keep = [w.strip() for w in (opts.only or "").split(",") if w.strip()]
+        if keep:  # a few rows, for many rounds (the floor is always timed)
+            tasks = {k: f for k, f in tasks.items() if k == "floor" or k in keep}
         # interleaved rounds: every task sees the same machine (other processes come and go)
         times: dict[str, list[tuple[float, float]]] = {k: [] for k in tasks}
         for _ in range(opts.repeat):
             for name, fn in tasks.items():
                 times[name].append(best(fn, 1))
-            times.setdefault("cli replay", []).append(
-                cli(["replay", str(long_log), "--rrd", str(d / "cli.rrd"), "--force"], d)
-            )
-            times.setdefault("cli compare", []).append(
-                cli(["compare", *map(str, short), "-o", str(d / "cli-compare.rrd"), "--force"], d)
-            )
+            if not keep or "cli replay" in keep:
+                times.setdefault("cli replay", []).append(
+                    cli(["replay", str(long_log), "--rrd", str(d / "cli.rrd"), "--force"], d)
+                )
+            if not keep or "cli compare" in keep:
+                times.setdefault("cli compare", []).append(cli(
+                    ["compare", *map(str, short), "-o", str(d / "cli-compare.rrd"), "--force"], d
+                ))  # fmt: skip
         t = {k: min(v) for k, v in times.items()}
         f_wall, f_cpu = t["floor"]
         if opts.json:  # wall seconds, and CPU seconds (every thread and reader process)
