@@ -15,8 +15,11 @@ front only copies bytes (two threads a connection, blocking calls that let the G
 
 Why a front rather than a second server: the SDK keeps doing what it does (channels,
 subscriptions, the per-client queue that drops the oldest message for a slow client),
-and this is the one place that knows about the older name. ``benchmarks/bench_foxglove.py``
-measures what the hop costs.
+and this is the one place that knows about the older name. What the hop costs
+(``benchmarks/bench_foxglove.py --slots 100000``, two runs each, before the front and with
+it, on the loaded 2-core machine): with a client reading in the same process 157-171k
+against 145-178k slots/s, and that client got 60% of the slots before against 95-99% with
+the front (its socket buffers hold more); without a client the front does nothing.
 """
 
 from __future__ import annotations
