@@ -1,4 +1,4 @@
-"""Recorder benchmark: ``corraoi record`` throughput, stage by stage, and memory (cucb on I1).
+"""Recorder benchmark: ``corraoi record`` throughput, stage by stage, and memory (cucb).
 
 First the stages alone, each on data the previous stage made beforehand: the engine, the
 JSON encoding of the slot messages (``BlockEncoder``), MCAP framing and compression of
@@ -10,14 +10,21 @@ McapSink used before it framed whole chunks). Then the peak memory (max RSS of a
 process recording with both sinks) for T slots against 10 T.
 
     python benchmarks/bench_record.py [--horizon 200000] [--repeat 5] [--no-memory]
+                                      [--arms K] [--baseline DIR [--rounds 3]]
+
+``--arms K``: on an instance of K arms (benchmarks/alternate.py: I1 for 4, else a seeded
+random one). ``--baseline DIR``: time this checkout and another one (its packages on
+PYTHONPATH) alternately, ``--rounds`` times each, and print their rows side by side.
 
 Targets (issue 10): both sinks >= 250,000 slots/s, best of 5; peak memory at 10 T
-<= 1.2x that at T. Measure with a low ``uptime`` load: the figures move with other jobs.
+<= 1.2x that at T. Issue 35: record within 5% of 224f28d at K = 4, at most 1.5x at K = 256.
+Measure with a low ``uptime`` load: the figures move with other jobs.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import platform
 import subprocess
 import sys
@@ -27,19 +34,22 @@ from collections.abc import Callable
 from importlib.metadata import version
 from pathlib import Path
 
+from alternate import alternate, code_root, instance_for, print_comparison
+
 RECORD = """
-import resource, sys, os
+import json, resource, sys, os
 sys.path.insert(0, {root!r})
 os.environ.setdefault("RUST_LOG", "off")
 from corraoi.engine.block import RunConfig
-from corraoi.engine.simulation import set_workers, simulate_run
-from corraoi.model.instance import load_instance
+from corraoi.engine.simulation import simulate_run
+from corraoi.engine.threads import set_workers
+from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
 from recorder.slotlog.sink import McapSink
 from recorder.rerun.sink import RerunSink
 from recorder.rerun.output import RrdOutput
 set_workers(1)
-config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, {horizon})
+config = RunConfig(Instance.from_dict(json.loads({inst!r})), make_policy("cucb"), 0, {horizon})
 with McapSink({mcap!r}, config, overwrite=True) as mcap, \\
         RrdOutput(config, rrd_path={rrd!r}, overwrite=True) as out:
     sink = RerunSink(out.recording, config.label, config)
@@ -51,21 +61,26 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
 
 
-def peak_rss_mib(horizon: int, tmp: Path) -> float:
-    root = str(Path(__file__).resolve().parent.parent)
-    code = RECORD.format(
-        root=root, horizon=horizon, mcap=str(tmp / "mem.mcap"), rrd=str(tmp / "mem.rrd")
-    )
+def peak_rss_mib(horizon: int, tmp: Path, inst: str) -> float:
+    code = RECORD.format(root=str(code_root()), horizon=horizon, inst=inst,
+                         mcap=str(tmp / "mem.mcap"), rrd=str(tmp / "mem.rrd"))  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
 
 
-def best_of(repeat: int, fn: Callable[[], None]) -> float:
+#: CPU seconds of this process (every thread: Rerun's writer too) of the last best_of call.
+CPU: dict[str, float] = {}
+
+
+def best_of(repeat: int, fn: Callable[[], None], name: str = "") -> float:
+    """The fastest of ``repeat`` calls (wall seconds); its CPU seconds go to CPU[name]."""
     best = float("inf")
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        best = min(best, time.perf_counter() - t0)
+        wall = time.perf_counter() - t0
+        if wall < best:
+            best, CPU[name] = wall, time.process_time() - c0
     return best
 
 
@@ -74,8 +89,25 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=200_000)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory runs")
+    ap.add_argument("--arms", type=int, default=4, help="K: the instance's arms [4: I1]")
+    ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
+    ap.add_argument("--rounds", type=int, default=3, help="with --baseline: rounds of each")
+    ap.add_argument("--json", action="store_true", help="print the times as one JSON object")
+    ap.add_argument("--only", help="with --json or --baseline: the rows whose names start so "
+                    "(a comma list), for more rounds in the same time")  # fmt: skip
     args = ap.parse_args()
     T = args.horizon
+    if args.only and not (args.json or args.baseline):
+        ap.error("--only goes with --json or --baseline")
+    if args.baseline is not None:
+        with tempfile.TemporaryDirectory(prefix="bench-record-") as work:
+            argv = ["--horizon", str(T), "--repeat", str(args.repeat), "--arms",
+                    str(args.arms), "--no-memory", *(["--only", args.only] if args.only else [])]
+            both = alternate(Path(__file__), argv, args.baseline, args.rounds, Path(work))
+        print(f"corraoi record: cucb on {instance_for(args.arms).name} ({args.arms} arms), "
+              f"{T:,} slots, best of {args.rounds} rounds x {args.repeat}")
+        print_comparison(both, T, "us/slot", args.baseline)
+        return
 
     import os
 
@@ -88,7 +120,6 @@ def main() -> None:
     from corraoi.engine.block import RunConfig
     from corraoi.engine.simulation import simulate_run
     from corraoi.engine.threads import set_workers
-    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
     from recorder.rerun.output import RrdOutput
     from recorder.rerun.sink import RerunSink
@@ -98,7 +129,8 @@ def main() -> None:
     from recorder.vocab import NS_PER_SLOT
     from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 
-    config = RunConfig(load_instance("I1"), make_policy("cucb"), 0, T)
+    inst = instance_for(args.arms)
+    config = RunConfig(inst, make_policy("cucb"), 0, T)
     set_workers(1)  # as corraoi record does: one run, no use for the engine's threads
 
     def blocks():  # type: ignore[no-untyped-def]
@@ -197,16 +229,26 @@ def main() -> None:
             ("Rerun only (RerunSink -> .rrd)", rerun_only),
             ("both sinks", both),
         ]
-        stage_times = {name: best_of(args.repeat, fn) for name, fn in stages}
-        times = {name: best_of(args.repeat, fn) for name, fn in rows}
+        if args.only:  # a few rows, for many rounds (with --json or --baseline)
+            keep = [w.strip() for w in args.only.split(",") if w.strip()]
+            stages = [(n, f) for n, f in stages if any(n.startswith(k) for k in keep)]
+            rows = [(n, f) for n, f in rows if any(n.startswith(k) for k in keep)]
+        stage_times = {name: best_of(args.repeat, fn, name) for name, fn in stages}
+        times = {name: best_of(args.repeat, fn, name) for name, fn in rows}
+        if args.json:  # wall seconds, and CPU seconds of the same calls
+            cpu = {f"{name} [CPU]": CPU[name] for name in (*stage_times, *times)}
+            print(json.dumps({**stage_times, **times, **cpu}))
+            return
         mcap_size = (tmp / "m.mcap").stat().st_size
         rrd_size = (tmp / "r.rrd").stat().st_size
         memory = None
         if not args.no_memory:
-            memory = (peak_rss_mib(T, tmp), peak_rss_mib(10 * T, tmp))
+            text = json.dumps(inst.to_dict())
+            memory = (peak_rss_mib(T, tmp, text), peak_rss_mib(10 * T, tmp, text))
 
     print(
-        f"corraoi record: cucb on I1, {T:,} slots, best of {args.repeat}; Python "
+        f"corraoi record: cucb on {inst.name} ({inst.K} arms), {T:,} slots, best of "
+        f"{args.repeat}; Python "
         f"{platform.python_version()}, mcap {version('mcap')}, rerun-sdk {rr.__version__}, "
         f"{os.cpu_count()} cores"
     )

@@ -1,6 +1,7 @@
 """Benchmark of the viewer: replay, compare, diff and info against the floor of decoding.
 
     python benchmarks/bench_replay.py [--slots 100000] [--runs 12] [--run-slots 10000]
+                                      [--arms K] [--baseline DIR [--rounds 3]]
 
 Records (untimed) one ``--slots`` log of cucb on I1 and ``--runs`` logs of ``--run-slots``
 slots (the twelve policies, one seed), then times, best of ``--repeat``
@@ -14,12 +15,17 @@ interleaved rounds:
   two commands end to end as ``corraoi`` processes (interpreter and imports included);
 * ``viewer.diff`` and ``viewer.log_info`` of the long log, for reference.
 
+``--arms K``: the logs are of an instance of K arms (benchmarks/alternate.py).
+``--baseline DIR``: this checkout and another one, alternately, side by side (issue 35:
+replay within 5% of 224f28d at K = 4, at most 1.5x at K = 256).
+
 A benchmark, not a test: it prints a table and never fails on a number.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import subprocess
@@ -30,6 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import orjson
+from alternate import alternate, instance_for, print_comparison
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
@@ -40,14 +47,13 @@ POLICIES = (
 )  # fmt: skip
 
 
-def record(path: Path, policy: str, horizon: int, seed: int = 0) -> Path:
+def record(path: Path, policy: str, horizon: int, seed: int = 0, arms: int = 4) -> Path:
     from corraoi.engine.block import RunConfig
     from corraoi.engine.simulation import simulate_run
-    from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
     from recorder.slotlog.sink import McapSink
 
-    config = RunConfig(load_instance("I1"), make_policy(policy), seed, horizon)
+    config = RunConfig(instance_for(arms), make_policy(policy), seed, horizon)
     with McapSink(path, config, overwrite=True, fsync=False) as sink:
         for block in simulate_run(config.instance, config.policy, seed, horizon):
             sink.write(block)
@@ -100,8 +106,28 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=12)
     ap.add_argument("--run-slots", type=int, default=10_000)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--arms", type=int, default=4, help="K: the instance's arms [4: I1]")
+    ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
+    ap.add_argument("--rounds", type=int, default=3, help="with --baseline: rounds of each")
+    ap.add_argument("--json", action="store_true", help="print the times as one JSON object")
+    ap.add_argument("--only", help="with --json or --baseline: only these rows (comma list: "
+                    "replay, compare, diff, info, cli replay, cli compare)")  # fmt: skip
     opts = ap.parse_args()
+    if opts.only and not (opts.json or opts.baseline):
+        ap.error("--only goes with --json or --baseline")
     os.environ.setdefault("RUST_LOG", "off")
+    if opts.baseline is not None:
+        with tempfile.TemporaryDirectory(prefix="bench-replay-base-") as work:
+            both = alternate(Path(__file__), [
+                "--slots", str(opts.slots), "--runs", str(opts.runs), "--run-slots",
+                str(opts.run_slots), "--repeat", str(opts.repeat), "--arms", str(opts.arms),
+                *(["--only", opts.only] if opts.only else []),
+            ], opts.baseline, opts.rounds, Path(work))  # fmt: skip
+        print(f"viewer: {opts.arms} arms ({instance_for(opts.arms).name}), replay of "
+              f"{opts.slots:,} slots, compare of {opts.runs} x {opts.run_slots:,}; best of "
+              f"{opts.rounds} rounds x {opts.repeat}; times per slot of the long log")
+        print_comparison(both, opts.slots, "us/slot", opts.baseline)
+        return
 
     # submodules, not ``import viewer``: an editable install made before the packages had
     # an __init__.py maps them as namespace packages outside the checkout
@@ -112,9 +138,10 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="bench-replay-") as tmp:
         d = Path(tmp)
-        long_log = record(d / "long.mcap", "cucb", opts.slots)
+        long_log = record(d / "long.mcap", "cucb", opts.slots, arms=opts.arms)
         short = [
-            record(d / f"{i:02d}-{POLICIES[i % 12]}.mcap", POLICIES[i % 12], opts.run_slots)
+            record(d / f"{i:02d}-{POLICIES[i % 12]}.mcap", POLICIES[i % 12], opts.run_slots,
+                   arms=opts.arms)  # fmt: skip
             for i in range(opts.runs)
         ]
         n = floor(long_log)
@@ -125,19 +152,28 @@ def main() -> None:
             "diff": lambda: diff(long_log, long_log),
             "info": lambda: log_info(long_log),
         }
+        keep = [w.strip() for w in (opts.only or "").split(",") if w.strip()]
+        if keep:  # a few rows, for many rounds (the floor is always timed)
+            tasks = {k: f for k, f in tasks.items() if k == "floor" or k in keep}
         # interleaved rounds: every task sees the same machine (other processes come and go)
         times: dict[str, list[tuple[float, float]]] = {k: [] for k in tasks}
         for _ in range(opts.repeat):
             for name, fn in tasks.items():
                 times[name].append(best(fn, 1))
-            times.setdefault("cli replay", []).append(
-                cli(["replay", str(long_log), "--rrd", str(d / "cli.rrd"), "--force"], d)
-            )
-            times.setdefault("cli compare", []).append(
-                cli(["compare", *map(str, short), "-o", str(d / "cli-compare.rrd"), "--force"], d)
-            )
+            if not keep or "cli replay" in keep:
+                times.setdefault("cli replay", []).append(
+                    cli(["replay", str(long_log), "--rrd", str(d / "cli.rrd"), "--force"], d)
+                )
+            if not keep or "cli compare" in keep:
+                times.setdefault("cli compare", []).append(cli(
+                    ["compare", *map(str, short), "-o", str(d / "cli-compare.rrd"), "--force"], d
+                ))  # fmt: skip
         t = {k: min(v) for k, v in times.items()}
         f_wall, f_cpu = t["floor"]
+        if opts.json:  # wall seconds, and CPU seconds (every thread and reader process)
+            print(json.dumps({**{k: v[0] for k, v in t.items()},
+                              **{f"{k} [CPU]": v[1] for k, v in t.items()}}))  # fmt: skip
+            return
 
         def ratio(x: tuple[float, float]) -> str:
             return f"{x[0] / f_wall:.2f} x floor ({x[1] / f_cpu:.2f} x in CPU time)"

@@ -10,8 +10,14 @@ policy has the same colour everywhere and a series the same name.
   with cross markers in Rerun (rerun-sdk 0.41 lines cannot be dashed).
 * The oracle (the best arm k* played on the same hidden path) is near-black and dotted
   (a point per slot, no line): never the hue nor the line style of a policy.
-* Arms have their own palette (:func:`arm_color`); the true mean of an arm is drawn in a
-  darker shade of its colour, thin, named ``mu_k (true)``.
+* Arms have their own colours (:func:`arm_color`) up to :data:`LINES_UP_TO` arms; beyond,
+  the arms that matter have theirs (:func:`focus_color`) and the others are grey. An arm's
+  true mean is drawn in its own colour, dotted, and named like its empirical mean, so that
+  a legend lists each arm once.
+* Names come from the instance (``arm 2 (los)``; the number alone where no name was given),
+  shortened in legends (:func:`arm_legend`), whole in the run card.
+* How many arms a view draws line by line (:data:`LINES_UP_TO`) and which arms matter
+  beyond that (:data:`FOCUS_MAX`).
 * rerun-sdk 0.41 has no axis titles: units go into view titles and series names
   (:data:`AOI_UNIT`, :data:`REGRET_UNIT`).
 """
@@ -22,11 +28,27 @@ from collections.abc import Sequence
 from typing import Any
 
 from corraoi.policies import AOI_PREFIX, RGB
+from corraoi.text import safe_text
 
 #: Units, in brackets after a quantity's name (view titles, series names, axis labels).
 AOI_UNIT = "[slots]"
 REGRET_UNIT = "[slot-ages]"
 SLOT_UNIT = "[slot]"
+MEAN_UNIT = "[probability]"
+PULLS_UNIT = "[count]"
+SHARE_UNIT = "[fraction]"
+
+#: Up to this many arms, the views draw a line (or a row of markers) per arm; beyond it,
+#: per-arm values are bars at the time cursor, and lines are kept for the arms that matter.
+LINES_UP_TO = 8
+#: Beyond LINES_UP_TO arms: the most arms drawn as lines (the best arm, the competitive
+#: arms, then the arms that become the most played or make up a small candidate set).
+FOCUS_MAX = 8
+#: Of those, the arms drawn from the first slot (the best arm and the competitive arms with
+#: the highest means); the rest join as the run goes (:func:`arms_that_matter`).
+FOCUS_START = 5
+#: Characters of a legend entry (longer names end in an ellipsis).
+LEGEND_CHARS = 18
 
 def _builtin_colors() -> dict[str, RGB]:
     from corraoi.policies import builtins  # the registry imports without numba
@@ -38,16 +60,16 @@ def _builtin_colors() -> dict[str, RGB]:
 #: class); an ``aoi-aware-`` variant has its base policy's colour.
 POLICY_COLORS: dict[str, RGB] = _builtin_colors()
 _EXTRA_COLORS: tuple[RGB, ...] = ((227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
-#: Colours of arms 1, 2, ... (cycled beyond eight arms).
+#: Colours of arms 1..8, and of the arms that matter beyond eight arms.
 ARM_COLORS: tuple[RGB, ...] = (
     (102, 194, 165),
     (252, 141, 98),
     (141, 160, 203),
     (231, 138, 195),
     (166, 216, 84),
-    (255, 217, 47),
+    (230, 171, 2),  # Set2's yellow (255, 217, 47) is too faint on white, a dark gold instead
     (229, 196, 148),
-    (179, 179, 179),
+    (166, 118, 29),  # a brown for Set2's grey, which the reference lines and bars use
 )
 #: The oracle's AoI: near-black, unlike every policy and arm colour.
 ORACLE_COLOR: RGB = (40, 40, 40)
@@ -61,6 +83,7 @@ WIDTH_MAIN = 2.0
 WIDTH_SECONDARY = 1.0
 WIDTH_ARM = 1.5
 WIDTH_TRUE_MEAN = 1.0
+WIDTH_REFERENCE = 1.0
 WIDTH_AOI_AWARE = 1.25
 WIDTH_BAND = 0.75
 MARKER_SUCCESS = 4.0
@@ -69,6 +92,7 @@ MARKER_OVERRIDE = 5.0
 MARKER_ORACLE = 2.0
 MARKER_STATE = 3.0
 MARKER_CANDIDATE = 3.0
+MARKER_TRUE_MEAN = 3.0
 MARKER_AOI_AWARE = 2.5
 #: matplotlib dash pattern of the AoI-aware variants in figures.
 DASH_AOI_AWARE: tuple[int, tuple[float, float]] = (0, (5, 2.5))
@@ -77,11 +101,25 @@ DASH_AOI_AWARE: tuple[int, tuple[float, float]] = (0, (5, 2.5))
 AOI_NAME = f"AoI {AOI_UNIT}"
 ORACLE_NAME = f"oracle AoI, best arm k* {AOI_UNIT}"
 REGRET_NAME = f"pathwise regret sum(aoi - oracle_aoi) {REGRET_UNIT}"
-ESTIMATOR_NAME = f"estimator sum(aoi) - t/mu* {REGRET_UNIT}"
-SUCCESS_NAME = "success (arm played)"
-FAILURE_NAME = "failure (arm played)"
+ESTIMATOR_NAME = f"paper's estimator sum(aoi) - t/mu* {REGRET_UNIT}"
+SUCCESS_NAME = "success"
+FAILURE_NAME = "failure"
 OVERRIDE_NAME = "AoI-aware override"
 STATE_NAME = "hidden state x"
+BEST_ARM_NAME = "best arm k*"
+
+
+def best_arm_name(k: int) -> str:
+    """The legend entry of the best-arm line: ``best arm k* = 13``."""
+    return f"{BEST_ARM_NAME} = {k + 1}"
+#: Bars of the arms that do not matter (beyond LINES_UP_TO arms): the empirical mean in the
+#: candidate set, out of it, and the true mean.
+BAR_IN_SET_COLOR: RGB = (140, 140, 140)
+BAR_OUT_COLOR: RGB = (195, 195, 195)
+BAR_TRUE_COLOR: RGB = (50, 50, 50)
+#: The paper's estimator and the best-arm line: a neutral reference colour, never a
+#: policy's hue nor a shade of one (two shades of one hue are hard to tell apart).
+REFERENCE_COLOR: RGB = (130, 130, 130)
 
 
 def base_policy(name: str) -> str:
@@ -148,8 +186,16 @@ def lighter(rgb: Sequence[int], amount: float = 0.5) -> RGB:
 
 
 def arm_color(k: int) -> RGB:
-    """Colour of the arm with 0-based index ``k``."""
+    """Colour of the arm with 0-based index ``k`` in views of up to :data:`LINES_UP_TO`
+    arms, where every arm has its own (:data:`ARM_COLORS`; beyond, they repeat)."""
     return ARM_COLORS[k % len(ARM_COLORS)]
+
+
+def focus_color(i: int) -> RGB:
+    """Colour of the ``i``-th arm that matters (0-based, in the order they came to matter)
+    in a view of more than :data:`LINES_UP_TO` arms: each of the at most
+    :data:`FOCUS_MAX` has its own, the other arms are grey (:data:`BAR_IN_SET_COLOR`)."""
+    return ARM_COLORS[i % len(ARM_COLORS)]
 
 
 def darker(rgb: Sequence[int], amount: float = 0.5) -> RGB:
@@ -158,20 +204,54 @@ def darker(rgb: Sequence[int], amount: float = 0.5) -> RGB:
     return (r, g, b)
 
 
-def true_mean_color(k: int) -> RGB:
-    """Colour of arm ``k``'s true mean line: a darker shade of the arm's colour, so the
-    reference stays visible where the empirical mean has settled on it."""
-    return darker(arm_color(k), 0.4)
-
-
 def arm_label(k: int, name: str | None = None) -> str:
-    """``arm 2`` or ``arm 2 (name)`` for the arm with 0-based index ``k``."""
-    return f"arm {k + 1}" if name in (None, str(k + 1)) else f"arm {k + 1} ({name})"
+    """``arm 2`` or ``arm 2 (name)`` for the arm with 0-based index ``k`` (the whole name,
+    control characters escaped)."""
+    if name in (None, str(k + 1)):
+        return f"arm {k + 1}"
+    return f"arm {k + 1} ({safe_text(name)})"
 
 
-def mean_name(k: int, *, true: bool) -> str:
-    """``mu_2 (true)`` / ``mu_2 (empirical)`` for the arm with 0-based index ``k``."""
-    return f"mu_{k + 1} ({'true' if true else 'empirical'})"
+def shorten(text: str, limit: int = LEGEND_CHARS) -> str:
+    """``text`` with control characters escaped and runs of white space made one space,
+    cut to ``limit`` characters, ending in an ellipsis when it was longer."""
+    s = " ".join(safe_text(text).split())
+    return s if len(s) <= limit else s[: max(limit - 1, 1)].rstrip() + "\u2026"
+
+
+def arm_legend(k: int, name: str | None = None) -> str:
+    """An arm in a legend: ``arm 2``, or ``2 los`` with the instance's name, shortened to
+    :data:`LEGEND_CHARS` in all (:func:`shorten`); the number keeps two arms of one name
+    apart."""
+    if name in (None, str(k + 1)):
+        return f"arm {k + 1}"
+    number = str(k + 1)
+    return f"{number} {shorten(name, max(LEGEND_CHARS - len(number) - 1, 4))}"
+
+
+def numbered(i: int, name: str | None, default: str, limit: int = 12) -> str:
+    """An arm or state in a title: ``2 rain`` (0-based ``i``, the name shortened to
+    ``limit``); the number alone where the name is the default one (``default``)."""
+    if name in (None, default):
+        return str(i + 1)
+    return f"{i + 1} {shorten(name, limit)}"
+
+
+def arms_that_matter(mu: Any, best: int, competitive: Sequence[int]) -> list[int]:
+    """The arms (0-based) a view of many arms draws as lines from the first slot (``mu``:
+    the means, a sequence or array): the best
+    arm, then the competitive arms (those a correlated policy keeps in its candidate set)
+    with the highest means, at most :data:`FOCUS_START`. The views add, up to
+    :data:`FOCUS_MAX`, each arm that becomes the most played and the members of a candidate
+    set once it has at most FOCUS_MAX arms."""
+    rest = sorted((k for k in competitive if k != best), key=lambda k: (-float(mu[k]), k))
+    return [best, *rest][:FOCUS_START]
+
+
+def lines_for(K: int) -> bool:
+    """Whether a view of K arms draws a line per arm (else bars, strips and the arms that
+    matter)."""
+    return K <= LINES_UP_TO
 
 
 def run_colors(colors: Sequence[RGB]) -> list[RGB]:
@@ -195,21 +275,30 @@ def mpl(rgb: Sequence[int]) -> tuple[float, float, float]:
 __all__ = [
     "AOI_UNIT",
     "ARM_COLORS",
+    "FOCUS_MAX",
+    "FOCUS_START",
+    "LEGEND_CHARS",
+    "LINES_UP_TO",
+    "REFERENCE_COLOR",
     "ORACLE_COLOR",
     "POLICY_COLORS",
     "REGRET_UNIT",
     "arm_color",
     "arm_label",
+    "arm_legend",
+    "arms_that_matter",
+    "focus_color",
     "base_policy",
     "config_colors",
     "darker",
     "is_aoi_aware",
     "lighter",
-    "mean_name",
+    "lines_for",
     "mpl",
     "policy_color",
     "run_colors",
     "spec_color",
+    "shorten",
     "spec_label",
-    "true_mean_color",
+    "numbered",
 ]

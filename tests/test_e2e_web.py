@@ -1,170 +1,48 @@
-"""End to end in a real viewer: ``corraoi compare --serve-web`` opened in headless Chromium.
+"""End to end in a real viewer: recordings opened in the Rerun web viewer in headless Chromium.
 
-The Rerun web viewer bundled in rerun-sdk is served on 127.0.0.1 by ``corraoi compare
---serve-web``; headless Chromium (Debian's ``chromium``, driven over the DevTools protocol
-on a pipe: no extra Python package) opens it, and the screenshot must look like a
-comparison a person can read: every run's series colour, the success and failure markers,
-the arms' colours in the means panels and enough drawn (non-background) pixels -- a blank,
-error or welcome page has none of them. The test stops the browser and the server itself
-and checks that the ports are closed again.
+The Rerun web viewer bundled in rerun-sdk serves a recording on 127.0.0.1 (``corraoi compare
+--serve-web``, or ``rerun FILE.rrd --serve-web``); headless Chromium (Debian's ``chromium``,
+driven over the DevTools protocol: tests/browser.py) opens it at 1600 x 900, and the
+screenshot must look like views a person can read: the run's colours, the success and
+failure markers, the arms' colours (up to 8 arms) or the colours of the arms that matter
+and the grey bars (beyond), and enough drawn (non-background) pixels -- a blank, error or
+welcome page has none of them. The tests stop the browser and the servers themselves.
 
-``CORRAOI_SCREENSHOT_TO=docs/compare-screenshot.png pytest tests/test_e2e_web.py`` also
-keeps the screenshot (as a 256-colour palette PNG).
+``CORRAOI_SCREENSHOT_TO=docs/compare-screenshot.png pytest tests/test_e2e_web.py -k compare``
+keeps the comparison's screenshot (as a 256-colour palette PNG); the docs' screenshots are
+made by ``benchmarks/screenshots.py``.
 """
 
 from __future__ import annotations
 
-import base64
 import json
 import os
-import shutil
 import signal
-import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
+from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
-import numpy as np
 import pytest
 
 from recorder import style
 
+from .browser import (
+    CHROMIUM_NAMES,
+    Chromium,
+    colour_pixels,
+    drawn_share,
+    find_chromium,
+    free_port,
+    listening,
+    save_palette_png,
+    serve_rrd,
+    settled_screenshot,
+)
+
 POLICIES = ("ucb", "ts", "cts-gauss")  # colours unlike any arm, success or failure colour
-WIDTH, HEIGHT = 1400, 900
-CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
-
-
-def find_chromium() -> str:
-    for name in CHROMIUM_NAMES:
-        found = shutil.which(name)
-        if found:
-            return found
-    pytest.skip(
-        "no Chromium found (looked for " + ", ".join(CHROMIUM_NAMES) + "); .ci/run installs "
-        "Debian's chromium where it can (apt-get install chromium)"
-    )
-
-
-class Chromium:
-    """Headless Chromium driven over ``--remote-debugging-pipe`` (fds 3 and 4)."""
-
-    def __init__(self, exe: str) -> None:
-        self.profile = tempfile.mkdtemp(prefix="corraoi-chromium-")
-        to_r, self._to_w = os.pipe()
-        self._from_r, from_w = os.pipe()
-
-        def child_fds() -> None:  # runs in the child: put the pipe ends at fds 3 and 4
-            a, b = os.dup(to_r), os.dup(from_w)
-            os.dup2(a, 3)
-            os.dup2(b, 4)
-
-        self.proc = subprocess.Popen(
-            [exe, "--headless", "--no-sandbox", "--enable-unsafe-swiftshader",
-             "--use-angle=swiftshader", "--remote-debugging-pipe", "--no-first-run",
-             "--disable-dev-shm-usage", f"--user-data-dir={self.profile}",
-             f"--window-size={WIDTH},{HEIGHT}", "about:blank"],
-            preexec_fn=child_fds,
-            close_fds=False,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,
-        )  # fmt: skip
-        os.close(to_r)
-        os.close(from_w)
-        self._buf = b""
-        self._id = 0
-        self.session = ""
-
-    def call(self, method: str, params: dict | None = None, *, timeout: float = 30) -> dict:
-        self._id += 1
-        msg: dict = {"id": self._id, "method": method, "params": params or {}}
-        if self.session:
-            msg["sessionId"] = self.session
-        os.write(self._to_w, json.dumps(msg).encode() + b"\0")
-        deadline = time.monotonic() + timeout
-        while True:
-            while b"\0" not in self._buf:
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"Chromium did not answer {method}")
-                chunk = os.read(self._from_r, 1 << 20)
-                if not chunk:
-                    raise RuntimeError("Chromium closed the DevTools pipe")
-                self._buf += chunk
-            line, self._buf = self._buf.split(b"\0", 1)
-            reply = json.loads(line)
-            if reply.get("id") == self._id:
-                if "error" in reply:
-                    raise RuntimeError(f"{method}: {reply['error']}")
-                return reply.get("result", {})
-
-    def open(self, url: str) -> None:
-        target = self.call("Target.createTarget", {"url": "about:blank"})["targetId"]
-        self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True})[
-            "sessionId"
-        ]
-        metrics = {"width": WIDTH, "height": HEIGHT, "deviceScaleFactor": 1, "mobile": False}
-        self.call("Emulation.setDeviceMetricsOverride", metrics)
-        self.call("Page.navigate", {"url": url})
-
-    def screenshot(self) -> bytes:
-        return base64.b64decode(self.call("Page.captureScreenshot", {"format": "png"})["data"])
-
-    def close(self) -> None:
-        try:
-            self.session = ""
-            self.call("Browser.close", timeout=5)
-        except Exception:  # noqa: BLE001 - it may be gone already
-            pass
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-            self.proc.wait()
-        for fd in (self._to_w, self._from_r):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        shutil.rmtree(self.profile, ignore_errors=True)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def listening(port: int) -> bool:
-    with socket.socket() as s:
-        s.settimeout(0.5)
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
-def _pixels(png: bytes) -> np.ndarray:
-    import io
-
-    from PIL import Image
-
-    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
-
-
-def colour_pixels(png: bytes, rgb: tuple[int, int, int], tol: int = 14) -> int:
-    img = _pixels(png)
-    return int((np.abs(img - np.array(rgb, dtype=np.int16)) <= tol).all(axis=2).sum())
-
-
-def drawn_share(png: bytes) -> float:
-    """Share of pixels that differ from the page background (its most common colour)."""
-    flat = _pixels(png).reshape(-1, 3)
-    values, counts = np.unique(flat, axis=0, return_counts=True)
-    background = values[counts.argmax()]
-    return float((np.abs(flat - background).max(axis=1) > 24).mean())
-
-
 #: What a readable compare screenshot shows besides the run colours: (name, colour).
 MARKS = (
     ("success marker", style.SUCCESS_COLOR),
@@ -173,9 +51,81 @@ MARKS = (
 )
 
 
+def chromium() -> str:
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip(
+            "no Chromium found (looked for " + ", ".join(CHROMIUM_NAMES) + "); .ci/run "
+            "installs Debian's chromium where it can (apt-get install chromium)"
+        )
+    return exe
+
+
+def record_rrd(tmp_path: Path, instance: str, policy: str, horizon: int) -> Path:
+    out = tmp_path / "run.rrd"
+    subprocess.run(
+        [sys.executable, "-m", "corraoi.cli", "record", "-i", instance, "-p", policy, "-T",
+         str(horizon), "-s", "1", "-o", str(tmp_path / "run.mcap"), "--rrd", str(out)],
+        check=True, capture_output=True, cwd=tmp_path,
+    )  # fmt: skip
+    return out
+
+
+def look_at(path: Path, wanted: dict[str, tuple[int, int, int]], least: int = 40) -> None:
+    """Open ``path`` in the web viewer and fail unless every wanted colour shows (at least
+    ``least`` pixels of it) and 4% of the pixels are drawn; the screenshot is kept beside
+    ``path``."""
+    found, share, png = _screenshot(path, wanted, least)
+    path.with_suffix(".png").write_bytes(png)
+    missing = {n: v for n, v in found.items() if v < least}
+    assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
+    assert share >= 0.04, f"the screenshot is nearly blank ({share:.1%} drawn pixels)"
+
+
+def _screenshot(path: Path, wanted: dict[str, tuple[int, int, int]], least: int,
+                ) -> tuple[dict[str, int], float, bytes]:  # fmt: skip
+    """The pixels of each wanted colour, the share of drawn pixels and the screenshot,
+    once every colour shows (or after a minute and a half)."""
+    exe = chromium()
+    with serve_rrd(path) as url:
+        browser = Chromium(exe)
+        try:
+            browser.open(url)
+            deadline = time.monotonic() + 90
+            while True:
+                png = settled_screenshot(browser, wait=3, timeout=60)
+                found = {n: colour_pixels(png, rgb) for n, rgb in wanted.items()}
+                if all(v >= least for v in found.values()) or time.monotonic() > deadline:
+                    return found, drawn_share(png), png
+        finally:
+            browser.close()
+
+
+@pytest.mark.slow
+def test_a_run_of_four_arms_draws_every_panel(tmp_path):
+    path = record_rrd(tmp_path, "I1", "ts", 2000)
+    wanted = {"policy": style.policy_color("ts"), "success": style.SUCCESS_COLOR,
+              "failure": style.FAILURE_COLOR, "estimator and k*": style.REFERENCE_COLOR,
+              **{f"arm {k + 1}": style.arm_color(k) for k in range(4)}}  # fmt: skip
+    look_at(path, wanted)
+
+
+@pytest.mark.slow
+def test_a_run_of_64_arms_draws_bars_strips_and_the_arms_that_matter(tmp_path):
+    from .test_views import random_instance
+
+    inst = random_instance(64, seed=64)
+    (tmp_path / "r64.json").write_text(json.dumps(inst.to_dict()))
+    path = record_rrd(tmp_path, str(tmp_path / "r64.json"), "cucb", 2000)
+    wanted = {"policy": style.policy_color("cucb"), "failure": style.FAILURE_COLOR,
+              "grey bars": style.BAR_IN_SET_COLOR, "true means": style.BAR_TRUE_COLOR,
+              **{f"arm that matters {i + 1}": style.focus_color(i) for i in range(3)}}  # fmt: skip
+    look_at(path, wanted)
+
+
 @pytest.mark.slow
 def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
-    exe = find_chromium()
+    exe = chromium()
     logs = [str(record_mcap(p, seed=2, horizon=1500)[0]) for p in POLICIES]
     web_port = free_port()
     server = subprocess.Popen(
@@ -210,7 +160,7 @@ def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
         grpc_port = urlsplit(grpc_url).port
         assert urlsplit(grpc_url).hostname == "127.0.0.1"
         assert listening(web_port) and grpc_port and listening(grpc_port)
-        browser = Chromium(exe)
+        browser = Chromium(exe, 1400, 900)
         browser.open(url)
         wanted = {p: style.policy_color(p) for p in POLICIES} | dict(MARKS)
         found: dict[str, int] = {}
@@ -228,11 +178,7 @@ def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
         (tmp_path / "compare.png").write_bytes(png)
         keep = os.environ.get("CORRAOI_SCREENSHOT_TO")
         if keep:
-            from PIL import Image
-
-            Image.open(tmp_path / "compare.png").convert("RGB").quantize(colors=256).save(
-                keep, optimize=True
-            )
+            save_palette_png(png, keep)
         missing = {p: n for p, n in found.items() if n < 40}
         assert not missing, f"colours missing from the screenshot: {missing} (all: {found})"
         # a page with a few coloured dots is not a comparison: most of a blank, error or

@@ -218,9 +218,15 @@ def test_the_shipped_layout_reads_fields_that_exist(written_files: dict[str, Pat
                 policies.add(filt[len('policy=="') : -1])
             else:
                 field = rest.split(".", 1)[1]
+            if field.endswith("[:]"):  # every arm's value: a plot against the array index
+                field = field[:-3]
+                assert panel["xAxisVal"] == "index", pid
+                assert fields[topic]["properties"][field]["type"] == "array", p["value"]
+            assert "[" not in field, p["value"]  # nothing made for one K (mu_hat[3])
             assert field in fields[topic]["properties"], p["value"]
             used[topic].add(field)
-    assert {"aoi", "oracle_aoi", "regret", "arm", "success"} <= used["/corraoi/slot"]
+    assert {"aoi", "oracle_aoi", "regret", "arm", "success", "mu_hat", "pulls"} <= \
+        used["/corraoi/slot"]  # fmt: skip
     assert "regret_mean" in used["/corraoi/sweep"]
     assert policies == set(paper_names())
     assert {"Plot", "StateTransitions", "Tab"} <= kinds

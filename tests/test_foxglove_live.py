@@ -3,13 +3,16 @@ over `websockets` gets the MCAP log's messages, late and slow clients, and the w
 
 Everything listens on 127.0.0.1, and every server is stopped by the test that started it.
 The SDK (0.30) speaks the Foxglove WebSocket protocol under its current subprotocol name
-``foxglove.sdk.v1`` (it refuses the older ``foxglove.websocket.v1`` alone); the client offers both.
+``foxglove.sdk.v1`` (it refuses the older ``foxglove.websocket.v1`` alone); the front
+(recorder.live.front) admits both. The client here offers both unless a test says
+otherwise; one test drives the official ``@foxglove/ws-protocol`` client with node.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import struct
@@ -56,9 +59,10 @@ class Client:
     """A Foxglove WebSocket client: collects advertisements, subscribes to ``topics``
     when they are advertised, and records every message as (topic, log_time, payload)."""
 
-    def __init__(self, url: str, topics: tuple[str, ...] = (TOPIC,), *, read: bool = True):
+    def __init__(self, url: str, topics: tuple[str, ...] = (TOPIC,), *, read: bool = True,
+                 subprotocols: list[str] = SUBPROTOCOLS):  # fmt: skip
         kwargs: dict[str, Any] = {"max_queue": 1} if not read else {}
-        self.ws = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=10, **kwargs)
+        self.ws = connect(url, subprotocols=subprotocols, open_timeout=10, **kwargs)
         self.topics = topics
         self.channels: dict[str, dict[str, Any]] = {}
         self.by_sub: dict[int, str] = {}
@@ -345,6 +349,7 @@ def _start(args: list[str], cwd: Path) -> tuple[subprocess.Popen[str], str]:
             url = line.split()[2]
             assert url.startswith("ws://127.0.0.1:")
             assert "Open connection -> Foxglove WebSocket -> " + url in line
+            assert ("waits up to 5 s for a client" in line) == ("--pace" in args)
             return proc, url
         if not line:
             break
@@ -373,6 +378,121 @@ def test_record_streams_the_logs_messages_to_a_client_in_order(tmp_path):
     start = _t(got[0]) - 1
     assert got == file[start : start + len(got)]  # the log's bytes, consecutive, in order
     assert _t(got[-1]) == 4000
+
+
+@pytest.mark.parametrize("offer", [["foxglove.websocket.v1"], ["foxglove.sdk.v1"]])
+def test_a_client_of_either_subprotocol_gets_every_slot_of_a_paced_run(tmp_path, offer):
+    # the paced run waits for the client's subscription before slot 1: every slot arrives
+    proc, url = _start(["record", "-p", "cucb", "-T", "3000", "--no-rrd", "-o", "a.mcap",
+                        "--foxglove", "127.0.0.1:0", "--pace", "3000"], tmp_path)  # fmt: skip
+    client = Client(url, subprotocols=offer)
+    assert client.ws.subprotocol == offer[0]  # the name it offered, answered
+    client.pump(until=lambda: proc.poll() is not None, timeout=60)
+    client.pump(idle=0.5)
+    client.close()
+    out, err = proc.communicate(timeout=30)
+    _no_traceback(err)
+    assert proc.returncode == 0, err
+    assert "Error" not in err, err  # the SDK saw every connection end with its handshake
+    file = [p for _, p in _mcap_messages(tmp_path / "a.mcap")]
+    assert client.slots() == file and len(file) == 3000  # every slot, the log's bytes
+    assert client.channels[TOPIC]["schemaName"] == "corraoi.SlotEvent"
+
+
+def test_a_client_offering_neither_name_is_refused_as_before():
+    with FoxgloveServer(LOOPBACK) as server:
+        with pytest.raises(Exception, match="400"):
+            connect(server.url, subprotocols=["something.else"], open_timeout=10)
+        assert server.front.renamed == 0
+        legacy = Client(server.url, subprotocols=["foxglove.websocket.v1"])
+        legacy.close()
+        assert server.front.renamed == 1
+
+
+def test_the_front_renames_only_the_subprotocol_header():
+    from recorder.live.front import offered, set_protocol
+
+    head = (b"GET / HTTP/1.1\r\nHost: x\r\nsec-websocket-protocol: a, foxglove.websocket.v1"
+            b"\r\nSec-WebSocket-Protocol: b\r\nUpgrade: websocket")  # fmt: skip
+    assert offered(head) == ["a", "foxglove.websocket.v1", "b"]
+    assert set_protocol(head, "foxglove.sdk.v1") == (
+        b"GET / HTTP/1.1\r\nHost: x\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n"
+        b"Upgrade: websocket"
+    )
+    assert offered(b"GET / HTTP/1.1\r\nHost: x") == []
+
+
+def test_a_paced_sink_waits_for_a_first_client_and_no_longer(make_config, engine, monkeypatch):
+    import recorder.live.foxglove as live
+
+    monkeypatch.setattr(live, "FIRST_CLIENT_WAIT", 0.6)
+    config = make_config(horizon=1000)
+    block = engine(config)[0]
+    with FoxgloveServer(LOOPBACK) as server:  # nobody comes: 0.6 s, then on
+        sink = server.slot_sink(config, pace=1e6)
+        start = time.monotonic()
+        assert sink.write(block) == 1000
+        assert 0.55 <= time.monotonic() - start < 5
+    monkeypatch.setattr(live, "FIRST_CLIENT_WAIT", 30.0)
+    with FoxgloveServer(LOOPBACK) as server:  # a client is there: no wait beyond it
+        sink = server.slot_sink(config, pace=1e6)
+        client = Client(server.url, subprotocols=["foxglove.websocket.v1"])
+        client.pump(until=client.subscribed.is_set, timeout=10)
+        start = time.monotonic()
+        sink.write(block)
+        assert time.monotonic() - start < 10
+        client.pump(until=lambda: len(client.slots()) >= 1000, timeout=30)
+        client.close()
+        assert [_t(p) for p in client.slots()] == list(range(1, 1001))
+
+
+#: The official JavaScript client (what @foxglove/studio-base 1.48 connects with, in its
+#: 0.5 version) and the WebSocket package it runs on in node.
+WS_PROTOCOL = ("@foxglove/ws-protocol@0.8.0", "ws@8")
+NODE_CLIENT = Path(__file__).with_name("foxglove_ws_client.cjs")
+
+
+def _ws_protocol_modules() -> Path:
+    """node_modules holding the official client, installed once into a cache folder (npm
+    needs the registry the first time)."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("node and npm are not installed: the official ws-protocol client is not run")
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    folder = cache / "corraoi-tests" / "ws-protocol-0.8.0"
+    modules = folder / "node_modules"
+    if not (modules / "@foxglove" / "ws-protocol").is_dir():
+        folder.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run(
+            [npm, "install", "--no-audit", "--no-fund", "--no-save", "--prefix", str(folder),
+             *WS_PROTOCOL], capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        if done.returncode != 0:
+            pytest.skip(f"npm could not install {' '.join(WS_PROTOCOL)} (offline?)")
+    return modules
+
+
+@pytest.mark.slow
+def test_the_official_ws_protocol_client_gets_every_slot(tmp_path):
+    modules = _ws_protocol_modules()
+    proc, url = _start(["record", "-p", "cts", "-T", "2500", "--no-rrd", "-o", "a.mcap",
+                        "--foxglove", "127.0.0.1:0", "--pace", "2500"], tmp_path)  # fmt: skip
+    node = subprocess.run(
+        ["node", str(NODE_CLIENT), url, TOPIC, "2500"], capture_output=True, text=True,
+        timeout=120, env={**os.environ, "NODE_PATH": str(modules)},
+    )  # fmt: skip
+    out, err = proc.communicate(timeout=60)
+    _no_traceback(err)
+    assert proc.returncode == 0, err
+    assert node.returncode == 0, node.stderr
+    lines = node.stdout.splitlines()
+    assert lines[0] == "subprotocol foxglove.websocket.v1"  # it offered that name only
+    got = [json.loads(line) for line in lines[1:]]
+    file = _mcap_messages(tmp_path / "a.mcap")
+    assert len(got) == len(file) == 2500
+    import base64
+
+    assert [(int(g["t"]), base64.b64decode(g["data"])) for g in got] == file
 
 
 def test_record_with_the_port_in_use_says_so_and_still_writes_the_log(tmp_path):

@@ -87,21 +87,24 @@ def test_styling_is_static_and_the_blueprint_is_embedded(tmp_path, make_config, 
     oracle = static[f"{base}/oracle_aoi"]  # dotted: points, no line, named
     assert oracle["SeriesPoints:names"] == [["oracle AoI, best arm k* [slots]"]]
     assert "SeriesLines:names" not in oracle
-    arms = range(1, 5)
-    assert static[f"{base}/mu_hat"]["SeriesLines:names"] == [[f"mu_{k} (empirical)" for k in arms]]
-    assert static[f"{base}/mu_true"]["SeriesLines:names"] == [[f"mu_{k} (true)" for k in arms]]
-    assert static[f"{base}/pulls"]["SeriesLines:names"] == [[f"arm {k}" for k in range(1, 5)]]
-    assert static[f"{base}/arm/failure"]["SeriesPoints:names"] == [["failure (arm played)"]]
+    arms = [f"arm {k}" for k in range(1, 5)]  # an arm's line and its true mean: one name
+    assert static[f"{base}/mu_hat"]["SeriesLines:names"] == [arms]
+    assert static[f"{base}/mu_true"]["SeriesLines:names"] == [arms]
+    assert static[f"{base}/pulls"]["SeriesLines:names"] == [arms]
+    for k in range(1, 5):
+        assert static[f"{base}/true_means/{k}"]["SeriesPoints:names"] == [[f"arm {k}"]]
+    assert static[f"{base}/arm/failure"]["SeriesPoints:names"] == [["failure"]]
+    assert static[f"{base}/arm/best"]["SeriesLines:names"] == [["best arm k* = 2"]]
     about = static[f"{base}/about"]["TextDocument:text"][0][0]
-    assert "cucb" in about and "seed 0" in about and "best (k*)" in about
+    assert "cucb" in about and "seed 0" in about and "**best k\\***" in about
     texts = []
     for chunk in reader.stream(store=reader.blueprints()[0]):
         for column in chunk.to_record_batch().columns:
             if "string" in str(column.type):  # view names, origins, queries
                 texts.append(str(column.to_pylist()))
     blueprint_text = " ".join(texts)
-    views = ("AoI [slots]: policy vs oracle", "AoI regret [slot-ages]", "arm played",
-             "candidate set", "[probability]")  # fmt: skip
+    views = ("AoI [slots]: policy (line), oracle k* (black dots)", "AoI regret [slot-ages]",
+             "arm played", "candidate set", "[probability]")  # fmt: skip
     for view in (*views, run_path(config.label), "$origin/candidates/**"):
         assert view in blueprint_text
 

@@ -52,8 +52,8 @@ def test_policy_colours_names_and_explicit_colours():
     assert style.spec_color(SimpleNamespace(name="ucb")) == style.POLICY_COLORS["ucb"]
     assert style.spec_label(SimpleNamespace(name="ucb", label="UCB (c=2)")) == "UCB (c=2)"
     assert style.spec_label(SimpleNamespace(name="ucb", label="")) == "ucb"
-    assert style.mean_name(1, true=True) == "mu_2 (true)"
     assert style.arm_label(0, "1") == "arm 1" and style.arm_label(2, "good") == "arm 3 (good)"
+    assert style.arm_legend(0, "1") == "arm 1" and style.arm_legend(2, "good") == "3 good"
     used = set(style.POLICY_COLORS.values()) | set(style.ARM_COLORS)
     assert style.ORACLE_COLOR not in used
     # the oracle is far from every policy hue, not a shade of one

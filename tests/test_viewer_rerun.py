@@ -125,12 +125,7 @@ def test_compare_puts_every_run_side_by_side(tmp_path, record_mcap):
     bp = blueprint_text(out)
     assert "AoI regret [slot-ages] (pathwise), every run" in bp
     for label in ("ucb", "cucb", "aoi-aware-ts"):
-        views = (
-            "AoI [slots] vs oracle",
-            "arm played (1..4)",
-            "mean reward per arm, empirical and true",
-            "candidate set (arms 1..4)",
-        )
+        views = ("AoI [slots]", "arm played (1..4)", "means", "candidate set")
         for view in views:
             assert f"{label}: {view}" in bp
         assert f"{run_path(label)}/regret" in bp

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from corraoi.policies import RGB
-from recorder.style import AOI_UNIT, REGRET_UNIT, run_colors, spec_color
+from recorder.style import REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
@@ -123,76 +123,72 @@ def log_colors(logs: Sequence[RunLog]) -> list[RGB]:
     return run_colors([spec_color(log.config.policy) for log in logs])
 
 
+def compare_name(runs: Sequence[ComparedRun]) -> str:
+    """What the viewer lists a comparison as: ``compare ucb, ts, cts-gauss``."""
+    from corraoi.text import safe_text
+
+    return "compare " + ", ".join(safe_text(r.label) for r in runs)
+
+
 def compare_recording_id(runs: Sequence[ComparedRun]) -> str:
     """A recording id that depends on the labels and configurations only."""
     text = json.dumps([[r.label, r.config.to_dict()] for r in runs], sort_keys=True)
     return "corraoi-compare-" + hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def compare_blueprint(runs: Sequence[ComparedRun], *, window: int = WINDOW) -> rrb.Blueprint:
-    """One column per run above an overlay of every run's regret and the summary table."""
+def compare_blueprint(
+    runs: Sequence[ComparedRun], *, window: int = WINDOW, aoi_max: float | None = None
+) -> rrb.Blueprint:
+    """One column per run above an overlay of every run's regret and the summary table.
+
+    The columns are the views ``record`` shows (:class:`recorder.rerun.layout.RunViews`,
+    chosen by each run's number of arms), on y-scales shared by every column: the AoI up
+    to ``aoi_max`` (the largest AoI of any run; None: each column its own), the arms up to
+    the largest K.
+    """
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from recorder.rerun.layout import time_windows
+    from recorder.rerun.layout import LEGEND, VIEWER_PX, RunViews, fit, legend_room, time_windows
     from recorder.rerun.names import TIMELINE, run_path
 
-    tw = time_windows(window)
-    window_axis, window_query, whole = tw.window_axis, tw.window_query, tw.whole_axis
-    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
-
-    def windowed(base: str, name: str, contents: list[str], K: int | None = None) -> Any:
-        return rrb.TimeSeriesView(
-            origin=base,
-            contents=contents,
-            name=name,
-            axis_x=window_axis,
-            axis_y=rrb.ScalarAxis(range=(0.5, K + 0.5), zoom_lock=True) if K else None,
-            time_ranges=[window_query],
-            plot_legend=legend,
-        )
-
+    horizon = max(r.config.horizon for r in runs)
+    tw = time_windows(window, horizon)
+    arms = max(r.config.instance.K for r in runs)
+    aoi_y = None if aoi_max is None else (0.5, float(aoi_max) + 0.5)
+    px = VIEWER_PX / len(runs)
     columns = []
     for r in runs:
-        base = run_path(r.label)
-        K = r.config.instance.K
-        means = rrb.TimeSeriesView(
-            origin=base,
-            contents=["$origin/mu_hat", "$origin/mu_true"],
-            name=f"{r.label}: mean reward per arm, empirical and true",
-            axis_x=whole,
-            axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
-            plot_legend=legend,
-        )
+        v = RunViews(r.label, r.config, tw, prefix=r.label, aoi_y=aoi_y, arms=arms)
+        # tab titles share the column's width: short ones
+        tabs: list[rrb.View]
+        if v.lines:
+            tabs = [v.means(px, name=f"{r.label}: means"),
+                    v.candidates(px, name=f"{r.label}: candidate set")]  # fmt: skip
+        else:
+            tabs = [v.mean_bars(px, name=f"{r.label}: means now"),
+                    v.means(px, name=f"{r.label}: arms that matter"),
+                    v.candidates(px, name=f"{r.label}: candidates")]  # fmt: skip
         columns.append(
-            rrb.Vertical(
-                windowed(base, f"{r.label}: AoI {AOI_UNIT} vs oracle",
-                         ["$origin/aoi", "$origin/oracle_aoi"]),
-                windowed(base, f"{r.label}: arm played (1..{K})", ["$origin/arm/**",
-                                                                  "$origin/override"], K),
-                rrb.Tabs(
-                    means,
-                    windowed(base, f"{r.label}: candidate set (arms 1..{K})",
-                             ["$origin/candidates/**"], K),
-                    active_tab=0,
-                ),
-                row_shares=[1, 1, 2],  # the means' legend lists 2 K series
-                name=r.label,
-            )
-        )  # fmt: skip
+            # the arm played gets the height that labels every arm's row up to 8 arms
+            rrb.Vertical(v.aoi(px), v.arm_played(px), rrb.Tabs(*tabs, active_tab=0),
+                         row_shares=[1.2, 1.5, 2], name=r.label)  # fmt: skip
+        )
     overrides = {
         f"{run_path(r.label)}/regret": rr.SeriesLines.from_fields(
             names=[r.label], colors=[r.color], widths=[2.0]
         )
         for r in runs
     }
+    overlay_px = VIEWER_PX * 3 / 5
+    room = legend_room([r.label for r in runs], overlay_px)
     overlay = rrb.TimeSeriesView(
         origin="/",
         contents=[f"{run_path(r.label)}/regret" for r in runs],
-        name=f"AoI regret {REGRET_UNIT} (pathwise), every run",
-        axis_x=whole,
+        name=fit(f"AoI regret {REGRET_UNIT} (pathwise), every run", overlay_px),
+        axis_x=tw.whole_axis(room),
         overrides=overrides,  # type: ignore[arg-type]
-        plot_legend=legend,
+        plot_legend=LEGEND,
     )
     summary = rrb.TextDocumentView(origin=SUMMARY_ENTITY, name="summary")
     return rrb.Blueprint(
@@ -258,9 +254,10 @@ def compare(
         viewer_url=viewer_url,
         overwrite=overwrite,
         label="compare",
-        blueprint=compare_blueprint(runs),
+        name=compare_name(runs),
         recording_id=compare_recording_id(runs),
         discard_on_abort=True,  # Ctrl-C or a damaged chunk: no half-written .rrd is left
+        blueprint_at_end=True,  # its AoI scale is the largest AoI sent
     ) as out:
         sinks = []
         for r in runs:
@@ -271,9 +268,11 @@ def compare(
         def every() -> Iterator[tuple[int, SlotBlock]]:
             return ((i, b) for i, log in enumerate(opened) for b in log.blocks(block))
 
+        aoi_max = 1.0
         for i, b in read_ahead(every):  # the next blocks are read while these are sent
             sinks[i].write(b)
             accs[i].update(b)
+            aoi_max = max(aoi_max, float(b.aoi.max()), float(b.oracle_aoi.max()))
             if on_block is not None:
                 on_block(len(b))
         for r, sink, acc in zip(runs, sinks, accs, strict=True):
@@ -284,6 +283,7 @@ def compare(
             rr.TextDocument(compare_markdown(runs, warnings), media_type=rr.MediaType.MARKDOWN),
             static=True,
         )
+        out.set_blueprint(compare_blueprint(runs, aoi_max=aoi_max))
     return Comparison(runs, warnings, out.path)
 
 

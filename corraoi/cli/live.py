@@ -204,7 +204,7 @@ class FoxgloveChoice:
         for config in configs:
             label = config.label if self.several else None
             self.sinks[config.label] = self.server.slot_sink(config, label=label, pace=self.pace)
-        click.echo(self.server.hint(), err=True)
+        click.echo(self.server.hint(paced=self.pace is not None), err=True)
         return self.server
 
     def sink(self, config: Any, stop: Callable[[], bool]) -> Any:

@@ -13,6 +13,11 @@ imported only when ``--foxglove`` is asked for. What a client sees:
 - Several runs on one server (``record -p ucb,cucb``): one topic each,
   ``/corraoi/slot/<label>`` and ``/corraoi/run/<label>``.
 
+Every client: the SDK speaks the protocol as ``foxglove.sdk.v1`` only; a
+:class:`~recorder.live.front.SubprotocolFront` on the address asked for admits clients
+offering its older name, ``foxglove.websocket.v1``, too. With ``pace`` a slot sink waits
+up to :data:`FIRST_CLIENT_WAIT` s for a subscriber before its first slot.
+
 Slow clients. ``Channel.log`` never waits for a client: the SDK gives every client its own
 queue of at most :data:`BACKLOG` messages and, when it is full, drops the *oldest* message
 to make room (``send_lossy`` in foxglove-sdk's ``connected_client``). Memory is so bounded
@@ -25,6 +30,7 @@ carries its ``t``, so a client counts what it missed as the gaps in ``t``
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -48,6 +54,8 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 BACKLOG = 1024
 #: Topic of the run metadata record.
 RUN_TOPIC = "/corraoi/run"
+#: Seconds a paced stream waits for a first client before its first slot.
+FIRST_CLIENT_WAIT = 5.0
 
 
 @dataclass(frozen=True)
@@ -131,33 +139,70 @@ class Pacer:
         return not self.stop()
 
 
+class _Subscriptions:
+    """The SDK's server listener: which topics a client has subscribed to."""
+
+    def __init__(self) -> None:
+        self.topics: set[str] = set()
+        self.changed = threading.Condition()
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        with self.changed:
+            self.topics.add(channel.topic)
+            self.changed.notify_all()
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        pass  # a paced stream that waited has started already
+
+
 class FoxgloveServer:
     """A Foxglove WebSocket server on its own SDK context (its channels go to it only).
 
     ``with FoxgloveServer(Address("127.0.0.1", 8765)) as server: sink =
-    server.slot_sink(config) ...``. Starting on a port that is taken raises one
-    :class:`FoxgloveError` line.
+    server.slot_sink(config) ...``. The SDK listens on a loopback port, behind the front on
+    ``address``. A port that is taken is one :class:`FoxgloveError` line.
     """
 
     def __init__(self, address: Address, *, name: str = "corraoi", backlog: int = BACKLOG):
         foxglove = require_foxglove()
-        self.address = address
-        self._context = foxglove.Context()
-        self._foxglove = foxglove
-        try:
-            self._server = foxglove.start_server(
-                name=name, host=address.host, port=address.port, context=self._context,
-                message_backlog_size=backlog,
-            )  # fmt: skip
-        except RuntimeError as exc:
-            text = str(exc).removeprefix("FoxgloveError: ")
+        from .front import SubprotocolFront
+
+        self.address, self._foxglove = address, foxglove
+        self._context, self.subscriptions = foxglove.Context(), _Subscriptions()
+
+        def refused(text: str) -> FoxgloveError:
             if "in use" in text:
                 text = f"port {address.port} is in use (another server?); pick another " \
                        "with --foxglove PORT"  # fmt: skip
-            raise FoxgloveError(f"--foxglove {address}: cannot start the server: {text}") from None
-        self.port: int = self._server.port
+            return FoxgloveError(f"--foxglove {address}: cannot start the server: {text}")
+
+        try:
+            self._server = foxglove.start_server(
+                name=name, host="127.0.0.1", port=0, context=self._context,
+                message_backlog_size=backlog, server_listener=self.subscriptions,
+            )  # fmt: skip
+        except RuntimeError as exc:
+            raise refused(str(exc).removeprefix("FoxgloveError: ")) from None
+        try:
+            self.front = SubprotocolFront(address.host, address.port, self._server.port)
+        except OSError as exc:
+            self._server.stop()
+            raise refused((exc.strerror or str(exc)).lower()) from None
+        self.port: int = self.front.port
         self.published: dict[str, int] = {}
         self._stopped = False
+
+    def wait_for_subscriber(self, topic: str, timeout: float,
+                            stop: Callable[[], bool] | None = None) -> bool:  # fmt: skip
+        """Whether a client subscribed to ``topic`` within ``timeout`` s (or ``stop()``)."""
+        end, subs = time.monotonic() + timeout, self.subscriptions
+        with subs.changed:
+            while topic not in subs.topics:
+                left = end - time.monotonic()
+                if left <= 0 or (stop is not None and stop()):
+                    return False
+                subs.changed.wait(min(left, 0.05))
+        return True
 
     @property
     def url(self) -> str:
@@ -165,11 +210,12 @@ class FoxgloveServer:
         shown = f"[{host}]" if ":" in host else host
         return f"ws://{shown}:{self.port}"
 
-    def hint(self) -> str:
+    def hint(self, *, paced: bool = False) -> str:
         """How to open the stream in Foxglove (one line)."""
+        wait = f"; waits up to {FIRST_CLIENT_WAIT:g} s for a client" if paced else ""
         return (
             f"foxglove: serving {self.url} -- in Foxglove: Open connection -> Foxglove "
-            f"WebSocket -> {self.url} (layout: docs/foxglove-layout.json)"
+            f"WebSocket -> {self.url} (layout: docs/foxglove-layout.json){wait}"
         )
 
     def channel(self, topic: str, schema: Any, *, metadata: dict[str, str] | None = None) -> Any:
@@ -189,7 +235,8 @@ class FoxgloveServer:
     def stop(self) -> None:
         if not self._stopped:
             self._stopped = True
-            self._server.stop()
+            self._server.stop()  # closes its connections (through the front) properly
+            self.front.close()
 
     def __enter__(self) -> FoxgloveServer:
         return self
@@ -225,6 +272,7 @@ class FoxgloveSlotSink(Sink):
         self._run_message = json.dumps(meta).encode()
         self._encoder = BlockEncoder(config.instance.K)
         self._pacer = Pacer(pace, stop=stop)
+        self._waited = False
         self.sent = 0
         server.published.setdefault(self.topic, 0)
         self._send_run(0)
@@ -238,9 +286,12 @@ class FoxgloveSlotSink(Sink):
             return 0
         messages = self._encoder.encode(block)
         ts = block.t.tolist()
+        paced = self._pacer.rate is not None
+        if paced and not self._waited:  # a client started with the run sees every slot
+            self._waited = True
+            self.server.wait_for_subscriber(self.topic, FIRST_CLIENT_WAIT, self._pacer.stop)
         self._send_run(ts[0])
         log = self._slots.log
-        paced = self._pacer.rate is not None
         done = 0
         for t, message in zip(ts, messages, strict=True):
             if paced and not self._pacer.wait(self.sent + 1):
@@ -327,6 +378,7 @@ __all__ = [
     "BACKLOG",
     "DEFAULT_ADDRESS",
     "EXTRA",
+    "FIRST_CLIENT_WAIT",
     "FoxgloveServer",
     "FoxgloveSlotSink",
     "FoxgloveSweepSink",

@@ -1,14 +1,26 @@
 """The layout of one run in the Rerun viewer: the default blueprint ``record`` and ``replay``
-embed, and the time windows the views share (``compare`` uses them too)."""
+embed, and the views and time windows it is made of (``compare`` builds its columns from
+the same views, so that a run reads the same in both).
+
+The views are chosen by the number of arms K (:func:`recorder.style.lines_for`): up to
+``style.LINES_UP_TO`` arms a line per arm; beyond it the per-arm values at the time cursor
+as bar charts, strips of arms x slots for the arm played and the candidate set, and lines
+for the arms that matter only. Legends stand in room right of the data: a view's time axis
+reaches past the cursor (or the horizon) by as much as its legend needs at the panel's
+width in a 1600-pixel-wide viewer (:func:`legend_room`). Views whose title says what each
+series is have no legend. Titles are cut to what their panel shows (:func:`fit`).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import rerun.blueprint as rrb
 
 from corraoi.engine.block import RunConfig
+from corraoi.model.theory import analyse
 from recorder import style
 
 from .names import TIMELINE, run_path
@@ -16,114 +28,302 @@ from .names import TIMELINE, run_path
 #: Slots shown by the windowed views (AoI, arms, states, candidates) left of the cursor:
 #: few enough that every success and failure marker stays legible.
 WINDOW = 200
+#: The viewer width the layouts are made for (pixels; the screenshots' 1600 x 900).
+VIEWER_PX = 1600
+#: Pixels of a legend besides its text, and of a character of it (egui's 13 px font).
+LEGEND_PAD_PX, CHAR_PX = 36, 6.8
+#: Pixels a panel's title bar keeps for its icons, and a plot for its y-axis labels.
+TITLE_ICONS_PX, AXIS_PX = 100, 46
+#: The most room a legend is given, as a share of the span of data shown.
+MAX_ROOM = 1.5
 
 
 @dataclass(frozen=True)
 class TimeWindows:
-    """Time axes and query ranges of the blueprints: the last ``window`` slots before the
-    cursor, and the whole run."""
+    """What the time axes show: the last ``window`` slots before the cursor, and the whole
+    run (up to ``horizon``, or the data's extent when it is None)."""
 
-    window_axis: Any
+    window: int
+    horizon: int | None
     window_query: Any
-    whole_axis: Any
     whole_query: Any
 
+    def window_axis(self, room: float = 0.0) -> Any:
+        """The windowed views' axis, reaching ``room`` x window past the cursor."""
+        return rrb.TimeAxis(view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.cursor_relative(seq=-self.window),
+            end=rrb.TimeRangeBoundary.cursor_relative(seq=round(self.window * room)),
+        ))  # fmt: skip
 
-def time_windows(window: int) -> TimeWindows:
-    recent = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.cursor_relative(seq=-window),
-        end=rrb.TimeRangeBoundary.cursor_relative(),
-    )
-    everything = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
-    )
+    def whole_axis(self, room: float = 0.0) -> Any:
+        """The whole-run views' axis, from slot 0 to ``room`` x horizon past the horizon."""
+        if self.horizon is None or self.horizon <= 0:
+            return rrb.TimeAxis(view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()))
+        return rrb.TimeAxis(view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seq=0),
+            end=rrb.TimeRangeBoundary.absolute(seq=round(self.horizon * (1 + room))),
+        ))  # fmt: skip
+
+
+def time_windows(window: int, horizon: int | None = None) -> TimeWindows:
+    """The time windows of the blueprints (``horizon``: the last slot of the longest run
+    shown; None: the whole-run axes follow the data)."""
+    recent = (rrb.TimeRangeBoundary.cursor_relative(seq=-window),
+              rrb.TimeRangeBoundary.cursor_relative())  # fmt: skip
+    infinite = rrb.TimeRangeBoundary.infinite()
     return TimeWindows(
-        window_axis=rrb.TimeAxis(view_range=recent),
-        window_query=rrb.VisibleTimeRange(TIMELINE, start=recent.start, end=recent.end),
-        whole_axis=rrb.TimeAxis(view_range=everything),
-        whole_query=rrb.VisibleTimeRange(TIMELINE, start=everything.start, end=everything.end),
+        window=window,
+        horizon=horizon,
+        window_query=rrb.VisibleTimeRange(TIMELINE, start=recent[0], end=recent[1]),
+        whole_query=rrb.VisibleTimeRange(TIMELINE, start=infinite, end=infinite),
     )
+
+
+LEGEND = rrb.PlotLegend(corner=rrb.components.Corner2D.RightTop)
+NO_LEGEND = rrb.PlotLegend(visible=False)
+
+
+def legend_room(entries: Sequence[str], panel_px: float) -> float:
+    """Room for a legend of ``entries`` right of the data, as a share of the data's span,
+    in a panel ``panel_px`` wide: the legend's width over the plot's width left of it."""
+    if not entries:
+        return 0.0
+    legend = LEGEND_PAD_PX + CHAR_PX * max(len(e) for e in entries)
+    data = panel_px - AXIS_PX - legend - 8
+    return MAX_ROOM if data <= 0 else min(legend / data, MAX_ROOM)
+
+
+def title_chars(panel_px: float) -> int:
+    """Characters of a title that a panel ``panel_px`` wide shows in full."""
+    return max(int((panel_px - TITLE_ICONS_PX) / (CHAR_PX + 0.4)), 16)
+
+
+def fit(title: str, panel_px: float) -> str:
+    """A view title cut to what its panel shows (:func:`recorder.style.shorten`)."""
+    return style.shorten(title, title_chars(panel_px))
+
+
+def first_fit(panel_px: float, *titles: str) -> str:
+    """The first of ``titles`` (longest first) that its panel shows in full, else the last
+    one cut (:func:`fit`)."""
+    for title in titles:
+        if len(title) <= title_chars(panel_px):
+            return title
+    return fit(titles[-1], panel_px)
+
+
+def names_in_title(prefix: str, names: Sequence[str], panel_px: float, fallback: str) -> str:
+    """``prefix: 1 los · 2 nlos-a · ...`` when the names fit the panel's title (each cut
+    to what leaves room for all), else ``fallback``: the instance's names where a title has
+    room for them. ``names``: number and name as text, ``"2 los"``; none: ``fallback``."""
+    if not names:
+        return fallback
+    whole = f"{prefix}: " + " · ".join(style.shorten(n, 10**6) for n in names)
+    if len(whole) <= title_chars(panel_px):
+        return whole
+    each = (title_chars(panel_px) - len(prefix) - 2) // len(names) - 3  # " · " between
+    if each < 6:
+        return fallback
+    return f"{prefix}: " + " · ".join(style.shorten(n, each) for n in names)
+
+
+def _names(names: Sequence[str], default: Sequence[str]) -> list[str]:
+    """``"2 los"`` for each named entry; none when every name is its default."""
+    if list(names) == list(default):
+        return []
+    return [style.numbered(i, n, d, 10**6) for i, (n, d) in enumerate(zip(names, default,
+                                                                           strict=True))]
+
+
+class RunViews:
+    """The views of one run under ``runs/<label>``, for its number of arms.
+
+    Each view takes the width of its panel in a 1600-pixel viewer (``px``), which sets its
+    legend room and how much of its title is kept. ``compare`` builds the same views for
+    each of its columns: ``prefix`` (the run's label before each title), ``aoi_y`` and
+    ``arms`` (y ranges shared by the columns).
+    """
+
+    def __init__(self, label: str, config: RunConfig, tw: TimeWindows, *, prefix: str = "",
+                 aoi_y: tuple[float, float] | None = None, arms: int | None = None) -> None:
+        self.base = run_path(label)
+        self.config = config
+        self.K = config.instance.K
+        self.arms = arms or self.K
+        self.lines = style.lines_for(self.K)
+        self.tw = tw
+        self.prefix = f"{prefix}: " if prefix else ""
+        self.aoi_y = aoi_y
+        inst = config.instance
+        self.arm_legends = [style.arm_legend(k, n) for k, n in enumerate(inst.arm_names)]
+        self.best = int(analyse(inst).best_arm)
+
+    def _title(self, px: float, *titles: str) -> str:
+        """The first of ``titles`` that fits the panel, after the run's prefix."""
+        return first_fit(px, *(self.prefix + t for t in titles))
+
+    def _series(self, name: str, contents: list[str], px: float, *, windowed: bool,
+                y: tuple[float, float] | None = None, legend: Sequence[str] = (),
+                lock: bool = True) -> rrb.TimeSeriesView:  # fmt: skip
+        tw = self.tw
+        room = legend_room(legend, px)
+        return rrb.TimeSeriesView(
+            origin=self.base,
+            contents=contents,
+            name=name,
+            axis_x=tw.window_axis(room) if windowed else tw.whole_axis(room),
+            axis_y=rrb.ScalarAxis(range=y, zoom_lock=lock) if y else None,
+            time_ranges=[tw.window_query if windowed else tw.whole_query],
+            plot_legend=LEGEND if legend else NO_LEGEND,
+        )
+
+    def aoi(self, px: float) -> rrb.TimeSeriesView:
+        w = self.tw.window
+        title = self._title(
+            px, f"AoI {style.AOI_UNIT}: policy (line), oracle k* (black dots), last {w} slots",
+            f"AoI {style.AOI_UNIT}: line, oracle k*: dots, last {w}",
+            f"AoI {style.AOI_UNIT}, oracle: dots",
+        )  # fmt: skip
+        return self._series(title, ["$origin/aoi", "$origin/oracle_aoi"], px, windowed=True,
+                            y=self.aoi_y, lock=False)  # fmt: skip
+
+    def regret(self, px: float) -> rrb.TimeSeriesView:
+        title = self._title(
+            px, f"AoI regret {style.REGRET_UNIT}: pathwise (colour), paper's estimator (grey)",
+            f"AoI regret {style.REGRET_UNIT}, estimator: grey",
+        )  # fmt: skip
+        return self._series(title, ["$origin/regret", "$origin/estimator"], px, windowed=False)
+
+    def arm_played(self, px: float) -> rrb.TimeSeriesView:
+        inst = self.config.instance
+        names = _names(inst.arm_names, [str(k + 1) for k in range(self.K)]) if self.lines else []
+        title = names_in_title(f"{self.prefix}arm played", names, px,
+                               self._title(px, f"arm played (1..{self.K})"))  # fmt: skip
+        legend = [style.SUCCESS_NAME, style.FAILURE_NAME, style.best_arm_name(self.best)]
+        if style.is_aoi_aware(self.config.policy.name):
+            legend.append(style.OVERRIDE_NAME)
+        view = self._series(title, ["$origin/arm/**", "$origin/override"], px, windowed=True,
+                            y=(0.5, self.arms + 0.5), legend=legend)  # fmt: skip
+        return view
+
+    def candidates(self, px: float, *, name: str | None = None) -> rrb.TimeSeriesView:
+        what = "a dot per slot in the set" if self.lines else "a dot per arm and slot in it"
+        title = name or self._title(px, f"candidate set (y: arm; {what})", "candidate set")
+        return self._series(title, ["$origin/candidates/**"], px, windowed=True,
+                            y=(0.5, self.arms + 0.5),
+                            legend=self.arm_legends if self.lines else ())  # fmt: skip
+
+    def means(self, px: float, *, name: str | None = None) -> rrb.TimeSeriesView:
+        if self.lines:
+            title = name or self._title(
+                px, f"mean reward {style.MEAN_UNIT}: line empirical, dots true",
+                f"mean {style.MEAN_UNIT}, dots: true",
+            )  # fmt: skip
+            return self._series(title, ["$origin/mu_hat", "$origin/true_means/**"], px,
+                                windowed=False, y=(0.0, 1.02), legend=self.arm_legends)
+        legends = [self.arm_legends[k] for k in range(min(self.K, style.FOCUS_MAX))]
+        title = name or self._title(
+            px, f"mean {style.MEAN_UNIT} of the arms that matter (dots: true)",
+            f"arms that matter: mean {style.MEAN_UNIT}",
+        )  # fmt: skip
+        return self._series(title, ["$origin/focus/**", "$origin/true_means/**"], px,
+                            windowed=False, y=(0.0, 1.02), legend=legends)  # fmt: skip
+
+    def mean_bars(self, px: float, *, name: str | None = None) -> rrb.BarChartView:
+        return rrb.BarChartView(
+            origin=self.base,
+            contents=["$origin/bars/mean", "$origin/bars/mean_other", "$origin/bars/mean_true",
+                      "$origin/bars/mean_arm/**"],
+            name=name or self._title(
+                px, f"mean {style.MEAN_UNIT} at the cursor: empirical | true",
+                f"mean {style.MEAN_UNIT} now: empirical | true",
+            ),
+            plot_legend=NO_LEGEND,
+        )
+
+    def pulls(self, px: float) -> rrb.View:
+        if self.lines:
+            return self._series(self._title(px, f"pulls per arm {style.PULLS_UNIT}"),
+                                ["$origin/pulls"], px, windowed=False,
+                                legend=self.arm_legends)  # fmt: skip
+        return rrb.BarChartView(
+            origin=self.base, contents=["$origin/bars/pulls", "$origin/bars/pulls_arm/**"],
+            name=self._title(px, f"pulls at the cursor {style.PULLS_UNIT}",
+                             f"pulls now {style.PULLS_UNIT}"),
+            plot_legend=NO_LEGEND,
+        )  # fmt: skip
+
+    def state(self, px: float) -> rrb.TimeSeriesView:
+        inst = self.config.instance
+        n = inst.n_states
+        names = _names(inst.state_names, [f"x{x + 1}" for x in range(n)])
+        title = names_in_title("hidden state x", names, px,
+                               self._title(px, f"hidden state x (1..{n})"))  # fmt: skip
+        return self._series(title, ["$origin/x"], px, windowed=True, y=(0.5, n + 0.5))
+
+    def card(self) -> rrb.TextDocumentView:
+        return rrb.TextDocumentView(origin=f"{self.base}/about", name="run")
 
 
 def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
     """The default layout of one run.
 
     Top: AoI against the oracle's (the last ``window`` slots before the cursor) and the
-    regret with the paper's estimator (whole run). Middle: the arm played (successes and
-    failures apart, AoI-aware overrides marked) and the candidate set, windowed. Bottom:
-    the empirical means (whole run), the pulls, the hidden state and the configuration.
+    regret with the paper's estimator (whole run). Below, beside the run card: the arm
+    played (successes and failures apart, AoI-aware overrides marked, the best arm as a
+    line) and the candidate set, windowed; then, up to ``style.LINES_UP_TO`` arms, the
+    means and the pulls per arm (whole run) and the hidden state; beyond, the means at the
+    cursor as bars, the means of the arms that matter, and the pulls at the cursor (the
+    hidden state goes to a tab beside the run card).
     """
-    base = run_path(label)
-    K = config.instance.K
-    n = config.instance.n_states
-    tw = time_windows(window)
-    window_axis, window_query = tw.window_axis, tw.window_query
-    whole_axis, whole_query = tw.whole_axis, tw.whole_query
-    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
-
-    def windowed(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
-        return rrb.TimeSeriesView(
-            origin=base,
-            contents=contents,
-            name=name,
-            axis_x=window_axis,
-            axis_y=rrb.ScalarAxis(range=y, zoom_lock=True) if y else None,
-            time_ranges=[window_query],
-            plot_legend=legend,
+    v = RunViews(label, config, time_windows(window, config.horizon))
+    W = VIEWER_PX
+    top = rrb.Horizontal(v.aoi(W * 3 / 5), v.regret(W * 2 / 5), column_shares=[3, 2])
+    if v.lines:
+        inner = W * 4 / 5  # left of the run card
+        middle = rrb.Horizontal(v.arm_played(inner * 3 / 5), v.candidates(inner * 2 / 5),
+                                column_shares=[3, 2])  # fmt: skip
+        bottom = rrb.Horizontal(v.means(inner * 0.4), v.pulls(inner * 0.3),
+                                v.state(inner * 0.3), column_shares=[4, 3, 3])  # fmt: skip
+        root = rrb.Vertical(
+            top,
+            rrb.Horizontal(rrb.Vertical(middle, bottom, row_shares=[2.6, 3.4]), v.card(),
+                           column_shares=[4, 1]),  # fmt: skip
+            row_shares=[3, 6],
         )
-
-    aoi = windowed(
-        f"AoI {style.AOI_UNIT}: policy vs oracle (last {window} slots)",
-        ["$origin/aoi", "$origin/oracle_aoi"],
-    )
-
-    def whole(name: str, contents: list[str], y: tuple[float, float] | None = None) -> Any:
-        return rrb.TimeSeriesView(
-            origin=base,
-            contents=contents,
-            name=name,
-            axis_x=whole_axis,
-            axis_y=rrb.ScalarAxis(range=y) if y else None,
-            time_ranges=[whole_query],
-            plot_legend=legend,
-        )
-
-    regret = whole(
-        f"AoI regret {style.REGRET_UNIT}: pathwise and the paper's estimator",
-        ["$origin/regret", "$origin/estimator"],
-    )
-    arms = windowed(
-        f"arm played (1..{K}): success / failure / AoI-aware override",
-        ["$origin/arm/**", "$origin/override"],
-        (0.5, K + 0.5),
-    )
-    candidates = windowed(f"candidate set (arms 1..{K})", ["$origin/candidates/**"],
-                          (0.5, K + 0.5))  # fmt: skip
-    means = whole(
-        "mean reward per arm: empirical and true [probability]",
-        ["$origin/mu_hat", "$origin/mu_true"],
-        (0.0, 1.0),
-    )
-    pulls = whole("pulls per arm [count]", ["$origin/pulls"])
-    state = windowed(f"hidden state x (1..{n})", ["$origin/x"], (0.5, n + 0.5))
-    about = rrb.TextDocumentView(origin=f"{base}/about", name="run")
+    else:
+        # the strips get the height that labels every arm's row up to about 16 arms (egui
+        # labels a y-axis step of 1 from about 20 pixels an arm), the card a tab with the
+        # hidden state beside them, the bars and lines the whole width below
+        middle = rrb.Horizontal(
+            v.arm_played(W * 3 / 6.4), v.candidates(W * 2 / 6.4),
+            rrb.Tabs(v.card(), v.state(W * 1.4 / 6.4), active_tab=0),
+            column_shares=[3, 2, 1.4],
+        )  # fmt: skip
+        bottom = rrb.Horizontal(v.mean_bars(W * 0.37), v.means(W * 0.37), v.pulls(W * 0.26),
+                                column_shares=[37, 37, 26])  # fmt: skip
+        root = rrb.Vertical(top, middle, bottom, row_shares=[2.0, 4.0, 3.0])
     return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.Horizontal(aoi, regret, column_shares=[3, 2]),
-            rrb.Horizontal(arms, candidates, column_shares=[3, 2]),
-            rrb.Horizontal(
-                rrb.Tabs(means, pulls, active_tab=0),
-                state,
-                about,
-                column_shares=[2, 2, 1],
-            ),
-            row_shares=[3, 2.5, 3],  # the means' legend lists 2 K series
-        ),
-        # the views get the room: the time panel shows only its scrubber, the selection
-        # panel opens when asked
+        root,
+        # the views get the room: the time panel shows only its scrubber, the blueprint and
+        # selection panels open when asked
         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="hidden"),
     )
 
 
-__all__ = ["WINDOW", "TimeWindows", "one_run_blueprint", "time_windows"]
+__all__ = [
+    "VIEWER_PX",
+    "WINDOW",
+    "RunViews",
+    "TimeWindows",
+    "first_fit",
+    "fit",
+    "legend_room",
+    "names_in_title",
+    "one_run_blueprint",
+    "time_windows",
+    "title_chars",
+]

@@ -17,7 +17,31 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``mu_true``         true mean of every arm (constant: two points a batch), ``mu_k (true)``
 ``pulls``           pulls of every arm after the slot, K series
 ``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
-``about``           the run configuration (static markdown)
+``about``           the run card: configuration, arms and what the views show (markdown)
+==================  =====================================================================
+
+Presentation entities (:data:`PRESENTATION`), drawn from the same slots to make the views
+read at any K (:data:`recorder.style.LINES_UP_TO`):
+
+====================  ===================================================================
+``arm/best``          the best arm k*, a reference line (slots 1 and T, sent at the start)
+``true_means/<k>``    arm k's true mean as dots at evenly spaced slots up to T (arm k's
+                      shifted by k, so that equal means alternate colours), sent at the
+                      start: every arm up to LINES_UP_TO arms, beyond it the arms that
+                      matter (from the slot each came to matter)
+``focus/<k>``         beyond LINES_UP_TO arms: arm k's empirical mean from the slot it came
+                      to matter (:func:`recorder.style.arms_that_matter`; it became the most
+                      played, or was in a candidate set of at most FOCUS_MAX arms)
+``bars/mean``         beyond LINES_UP_TO arms, at slot 1, every :func:`snapshot_every`-th
+                      slot and the last: the empirical means of the arms in the candidate
+                      set that do not matter (a bar chart, 0 for the others)
+``bars/mean_other``   the same for the arms out of the candidate set
+``bars/mean_true``    the true means (a static bar chart)
+``bars/pulls``        the pulls of the arms that do not matter, at the same slots
+``bars/mean_arm/<k>`` arm k's empirical mean, one bar in its colour, from the slot it came
+                      to matter
+``bars/pulls_arm/<k>`` arm k's pulls, the same way
+====================  ===================================================================
 
 :mod:`recorder.rerun.static` logs what they look like, :mod:`recorder.rerun.sink` their data
 and :mod:`recorder.rerun.layout` arranges them.
@@ -52,6 +76,31 @@ ENTITIES = (
     "candidates",
     "about",
 )
+#: Entities drawn for the views only, relative to :func:`run_path` (``true_means`` and
+#: ``focus`` have one child per arm shown).
+PRESENTATION = (
+    "arm/best",
+    "true_means",
+    "focus",
+    "bars/mean",
+    "bars/mean_other",
+    "bars/mean_true",
+    "bars/pulls",
+    "bars/mean_arm",
+    "bars/pulls_arm",
+)
+#: Snapshots of the per-arm bars in a run, about (:func:`snapshot_every`).
+SNAPSHOTS = 1000
+#: Dots of all the true-mean lines of a run together, about: each arm's line has
+#: TRUE_DOTS // K of them (at least 8), so that where two arms' means are equal their dots
+#: alternate with room between them.
+TRUE_DOTS = 80
+
+
+def snapshot_every(horizon: int) -> int:
+    """Slots between two snapshots of the per-arm bars (also taken at slot 1 and the last
+    slot): about :data:`SNAPSHOTS` in a run of ``horizon`` slots."""
+    return max(1, -(-int(horizon) // SNAPSHOTS))
 
 
 def run_path(label: str) -> str:
@@ -70,8 +119,10 @@ def new_recording(
     *,
     recording_id: str | None = None,
     application_id: str = APPLICATION_ID,
+    name: str | None = None,
 ) -> rr.RecordingStream:
-    """A RecordingStream for one run: explicit id, no wall-clock timeline, named by label.
+    """A RecordingStream for one run: explicit id, no wall-clock timeline, named (as the
+    viewer lists it) ``name``, by default the run's label.
 
     It starts with a buffered sink: attach destinations (``set_sinks``, ``save``, ...)
     before sending data, or use :class:`RrdOutput`.
@@ -83,16 +134,20 @@ def new_recording(
     )
     rec.set_log_time_enabled(False)
     rec.set_log_tick_enabled(False)
-    rec.send_recording_name(config.label)
+    rec.send_recording_name(name or config.label)
     return rec
 
 
 __all__ = [
     "APPLICATION_ID",
     "ENTITIES",
+    "PRESENTATION",
+    "SNAPSHOTS",
+    "TRUE_DOTS",
     "ROOT",
     "TIMELINE",
     "new_recording",
     "run_path",
     "run_recording_id",
+    "snapshot_every",
 ]

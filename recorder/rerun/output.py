@@ -33,6 +33,11 @@ class RrdOutput(Sink):
     deletes it with ``discard_on_abort`` (replay and compare: their output can be made
     again). Leaving a ``with`` block through any exception, Ctrl-C included, aborts.
     ``recording`` is made here (:func:`new_recording`); hand it to :class:`RerunSink`.
+
+    The default blueprint (``blueprint``, else the one-run layout) goes first; with
+    ``blueprint_at_end`` none is sent then, and :meth:`close` sends the one given to
+    :meth:`set_blueprint` after the data (a layout made from what was sent: ``compare``'s
+    shared y-scales). ``name``: what the viewer lists the recording as (the run's label).
     """
 
     def __init__(
@@ -47,6 +52,8 @@ class RrdOutput(Sink):
         recording_id: str | None = None,
         flush_timeout: float = 30.0,
         discard_on_abort: bool = False,
+        blueprint_at_end: bool = False,
+        name: str | None = None,
     ) -> None:
         if rrd_path is None and viewer_url is None:
             raise ValueError("RrdOutput needs an .rrd path, a viewer URL or both")
@@ -60,6 +67,7 @@ class RrdOutput(Sink):
         self.closed = False
         self.finished = False
         self._out: PartialFile | None = None
+        self._final_blueprint: rrb.Blueprint | None = None
         sinks: list[Any] = []
         if rrd_path is not None:
             # create (or truncate) the .partial file here, so that an unwritable place is
@@ -72,22 +80,27 @@ class RrdOutput(Sink):
             sinks.append(rr.FileSink(str(self._out.partial)))
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
-        self.recording = new_recording(config, recording_id=recording_id)
+        self.recording = new_recording(config, recording_id=recording_id, name=name)
+        first = None if blueprint_at_end else blueprint or one_run_blueprint(self.label, config)
         try:
-            self.recording.set_sinks(
-                *sinks,
-                default_blueprint=blueprint or one_run_blueprint(self.label, config),
-            )
+            self.recording.set_sinks(*sinks, default_blueprint=first)
         except (OSError, RuntimeError, ValueError) as exc:
             if self._out is not None:
                 self._out.discard()
             raise WriteError(f"{self._where()}: cannot start the Rerun recording: {exc}") from None
+
+    def set_blueprint(self, blueprint: rrb.Blueprint) -> None:
+        """The blueprint :meth:`close` sends after the data (made with ``blueprint_at_end``)."""
+        self._final_blueprint = blueprint
 
     def _where(self) -> str:
         return str(self._out.partial) if self._out is not None else str(self.viewer_url)
 
     def _finish(self) -> str | None:
         """Flush and disconnect; returns the problem Rerun reported, if any."""
+        if self._final_blueprint is not None:
+            self.recording.send_blueprint(self._final_blueprint, make_active=True,
+                                          make_default=True)  # fmt: skip
         return finish_recording(self.recording, self.flush_timeout)
 
     def close(self) -> Path | None:

@@ -2,12 +2,15 @@
 
 The entities and their paths are :mod:`recorder.rerun.names`'s, their static styling and
 the ``about`` note :mod:`recorder.rerun.static`'s (logged when the sink is made), the
-layout :mod:`recorder.rerun.layout`'s. Data go with ``send_columns``, one call per entity
-and batch of :data:`BATCH` slots (blocks are gathered first): ``rr.log`` per slot would
-cost ~50 us a call. No global Rerun state: the caller passes a ``RecordingStream``
-(:func:`~recorder.rerun.names.new_recording` makes one with reproducible settings) and owns
-where it goes; :class:`~recorder.rerun.output.RrdOutput` is the owner ``corraoi record`` uses
-(an ``.rrd`` file and/or a viewer).
+layout :mod:`recorder.rerun.layout`'s. Besides the slots' own values the sink draws the
+presentation entities (``names.PRESENTATION``): the best arm's line, the true means
+as dots, and beyond ``style.LINES_UP_TO`` arms the per-arm bars at every
+``snapshot_every``-th slot and the lines of the arms that matter. Data go with
+``send_columns``, one call per entity and batch of :data:`BATCH` slots (blocks are
+gathered first): ``rr.log`` per slot would cost ~50 us a call. No global Rerun state: the
+caller passes a ``RecordingStream`` (:func:`~recorder.rerun.names.new_recording` makes one
+with reproducible settings) and owns where it goes; :class:`~recorder.rerun.output.RrdOutput`
+is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
 """
 
 from __future__ import annotations
@@ -22,10 +25,12 @@ from recorder.sink import Sink
 
 from .names import (
     TIMELINE,
+    TRUE_DOTS,
     run_path,
+    snapshot_every,
 )
 from .output import first_line
-from .static import log_static
+from .static import log_focus, log_static, tensor_batch
 
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
@@ -71,8 +76,44 @@ class RerunSink(Sink):
         #: the run's colour: ``color`` (compare gives runs of one policy distinct shades),
         #: else the policy's own (``spec.color``) or its base policy's
         self.color = color if color is not None else style.spec_color(config.policy)
-        self._mu = np.asarray(analyse(config.instance).mu, dtype=np.float64)
+        theory = analyse(config.instance)
+        self._mu = np.asarray(theory.mu, dtype=np.float64)
+        self._best = int(theory.best_arm)
+        self._lines = style.lines_for(self.K)
+        #: true-mean dots: every ``_dot`` slots, arm k's shifted by ``_phase[k]``
+        shown = self.K if self._lines else style.FOCUS_MAX
+        self._dot = max(1, int(config.horizon) // max(8, TRUE_DOTS // shown))
+        self._phase = (np.arange(self.K) * self._dot) // self.K
+        self._every = snapshot_every(config.horizon)
+        #: beyond LINES_UP_TO arms: the arms drawn as lines, each with its first slot
+        self.focus: dict[int, int] = {}
+        self._last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._snapped = 0
         log_static(recording, self.base, config, self.color)
+        # the references are known before any slot: the best arm's line and the true
+        # means' dots over the whole horizon, sent once (not a batch at a time)
+        horizon = max(int(config.horizon), 1)
+        self._reference("arm/best", np.array([1, horizon]), self._best + 1.0)
+        if self._lines:
+            for k in range(self.K):
+                self._true_dots(k, 1)
+        else:
+            for k in style.arms_that_matter(theory.mu, self._best, theory.competitive):
+                self._join(k, 1)
+
+    def _reference(self, path: str, t: np.ndarray, value: float) -> None:
+        self.recording.send_columns(
+            f"{self.base}/{path}",
+            indexes=[rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(t, dtype=np.int64))],
+            columns=rr.Scalars.columns(scalars=np.full(len(t), value)),
+        )
+
+    def _true_dots(self, k: int, first: int) -> None:
+        """Arm k's true mean as dots from slot ``first`` to the horizon."""
+        t = np.arange(1 + self._phase[k], int(self.config.horizon) + 1, self._dot)
+        t = t[t >= first]
+        if len(t):
+            self._reference(f"true_means/{k + 1}", t, float(self._mu[k]))
 
     def write(self, block: SlotBlock) -> None:
         """Queue the block's slots; they are sent once ``batch`` slots wait (and by
@@ -127,7 +168,77 @@ class RerunSink(Sink):
         for k in range(self.K):
             member = cand[:, k]
             column(f"candidates/{k + 1}", t[member], np.full(int(member.sum()), k + 1.0))
+        # the presentation entities (names.PRESENTATION) beyond LINES_UP_TO arms
+        if not self._lines:
+            self._snapshots(block, t, cand)
+        for k, first in self.focus.items():
+            keep = t >= first
+            mean = np.ascontiguousarray(block.mu_hat[keep, k], dtype=f64)
+            column(f"focus/{k + 1}", t[keep], mean)
         self.slots += n
+
+    def _join(self, k: int, slot: int) -> None:
+        """Arm k matters from ``slot`` on: its line and true-mean dots are drawn."""
+        log_focus(self.recording, self.base, self.config, k, style.focus_color(len(self.focus)))
+        self.focus[k] = slot
+        self._true_dots(k, slot)
+
+    def _snapshots(self, block: SlotBlock, t: np.ndarray, cand: np.ndarray) -> None:
+        """The per-arm bars at the snapshot slots of ``block``; an arm that became the most
+        played, or is in a candidate set of at most FOCUS_MAX arms, joins the lines."""
+        at = np.flatnonzero((t % self._every == 0) | (t == 1))
+        pulls = block.pulls
+        for i in at[t[at] > self.K]:  # not while every arm is being tried once
+            if len(self.focus) >= style.FOCUS_MAX:
+                break
+            top2 = np.partition(pulls[i], -2)[-2:]
+            joining = [int(np.argmax(pulls[i]))] if top2[1] > top2[0] else []
+            members = np.flatnonzero(cand[i])
+            if len(members) <= style.FOCUS_MAX:
+                joining += [int(k) for k in members]
+            for k in joining:
+                if k not in self.focus and len(self.focus) < style.FOCUS_MAX:
+                    self._join(k, int(t[i]))
+        last = len(t) - 1
+        self._last = (int(t[last]), block.mu_hat[last], pulls[last], cand[last])
+        if len(at):
+            self._bars(t[at], block.mu_hat[at], pulls[at], cand[at])
+
+    def _bars(self, t: np.ndarray, mu_hat: np.ndarray, pulls: np.ndarray, cand: np.ndarray) -> None:
+        """The bars at the snapshot slots ``t``: an arm that matters (at that slot) in its
+        own colour, the others grey (the means: darker while in the candidate set)."""
+        send, base = self.recording.send_columns, self.base
+        mu_hat = np.asarray(mu_hat, dtype=np.float64)
+        pulls = np.asarray(pulls, dtype=np.float64)
+        descriptor = rr.BarChart.descriptor_values()
+
+        def bars(path: str, times: np.ndarray, values: np.ndarray) -> None:
+            if len(times):
+                send(f"{base}/{path}",
+                     indexes=[rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(times))],
+                     columns=[rr.ComponentColumn(descriptor, tensor_batch(values))])  # fmt: skip
+
+        joined = np.full(self.K, np.iinfo(np.int64).max, dtype=np.int64)
+        for k, first in self.focus.items():
+            joined[k] = first
+        shown = joined[None, :] <= t[:, None]  # drawn in its colour at that slot
+        t = np.asarray(t, dtype=np.int64)
+        bars("bars/mean", t, np.where(cand & ~shown, mu_hat, 0.0))
+        bars("bars/mean_other", t, np.where(~cand & ~shown, mu_hat, 0.0))
+        bars("bars/pulls", t, np.where(shown, 0.0, pulls))
+        for k, first in self.focus.items():
+            rows = t >= first
+            bars(f"bars/mean_arm/{k + 1}", t[rows], mu_hat[rows, k : k + 1])
+            bars(f"bars/pulls_arm/{k + 1}", t[rows], pulls[rows, k : k + 1])
+        self._snapped = int(t[-1])
+
+    def finish(self) -> None:
+        """Send the queued slots, and the bars at the last slot when it was not a snapshot
+        slot (so the bars at the end show the end). :meth:`close` calls it."""
+        self.send()
+        if self._last is not None and self._last[0] != self._snapped:
+            t, mu_hat, pulls, cand = self._last
+            self._bars(np.array([t]), mu_hat[None, :], pulls[None, :], cand[None, :])
 
     def close(self) -> str | None:
         """Flush the recording (blocking up to ``flush_timeout`` s). Safe to call twice.
@@ -139,7 +250,7 @@ class RerunSink(Sink):
         """
         if self.closed:
             return self.problem
-        self.send()
+        self.finish()
         self.closed = True
         try:
             self.recording.flush(timeout_sec=self.flush_timeout)

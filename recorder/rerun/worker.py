@@ -287,7 +287,7 @@ def _serve(
                 reply(failure)
             else:
                 try:
-                    sink.send()  # the slots it holds; output.close() flushes them, once
+                    sink.finish()  # the slots it holds; output.close() flushes them, once
                     reply(output.close())
                 except Exception as exc:  # noqa: BLE001 - WriteError, ViewerError
                     reply(exc)

@@ -7,7 +7,15 @@ Entities (timeline ``slot``, a sequence; arms numbered from 1):
   ``sweep/regret/<policy>/lo`` and ``.../hi``: the 95% confidence band (mean -/+ half-width;
   absent with a single run), thin lines in a lighter shade of the policy's colour;
 * ``sweep/estimator/<policy>``: the paper's estimator sum aoi - t / mu*;
-* ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t.
+* ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t; up to
+  ``style.LINES_UP_TO`` arms each arm's line is thinner than the one before, so that
+  shares that coincide show both colours (a thin line inside a wide one);
+* ``sweep/share/<policy>``: beyond ``style.LINES_UP_TO`` arms, the shares of every arm at
+  each checkpoint as a bar chart (the pull shares at the time cursor); the lines are then
+  drawn for the arms that matter only (:func:`recorder.style.arms_that_matter`).
+
+The recording is named after its folder and instance (:func:`sweep_recording_name`), as
+the viewer lists it.
 
 
 :func:`sweep_blueprint` is the default layout: the regret overlay on top, the pulls per arm
@@ -18,11 +26,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+from pathlib import Path
 from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
 
+from recorder import style
 from recorder.rerun.names import TIMELINE
 from recorder.style import REGRET_UNIT, is_aoi_aware
 
@@ -53,6 +64,38 @@ def pulls_path(policy: str, arm: int | None = None) -> str:
     return base if arm is None else f"{base}/{arm}"
 
 
+def share_path(policy: str) -> str:
+    """``sweep/share/<policy>``: the pull shares at each checkpoint as a bar chart."""
+    return f"{ROOT}/share/{entity_part(policy)}"
+
+
+def shown_arms(config: dict[str, Any]) -> list[int]:
+    """The arms (0-based) whose pull-share lines the layout shows: every arm up to
+    ``style.LINES_UP_TO``, else the arms that matter."""
+    from corraoi.model.instance import Instance
+    from corraoi.model.theory import analyse
+
+    inst = config.get("instance") or {}
+    K = len(inst.get("Y") or [])
+    if style.lines_for(K):
+        return list(range(K))
+    th = analyse(Instance.from_dict(inst, where="sweep"))
+    return style.arms_that_matter(th.mu, th.best_arm, th.competitive)
+
+
+def sweep_recording_name(path: str | os.PathLike[str], config: dict[str, Any]) -> str:
+    """What the viewer lists a sweep recording as: ``<folder>: <instance> sweep, <runs>
+    runs, T = <horizon>``, the folder first (the recording list shows the start of a name;
+    a group's sub-folder named after the instance is shown with the sweep folder above)."""
+    from corraoi.text import safe_text
+
+    folder = Path(path).resolve().parent
+    inst = str((config.get("instance") or {}).get("name", "?"))
+    shown = folder.name if folder.name != inst else f"{folder.parent.name}/{folder.name}"
+    return safe_text(f"{shown}: {inst} sweep, {config.get('runs', '?')} runs, "
+                     f"T = {config.get('horizon', '?')}")  # fmt: skip
+
+
 def policy_names(config: dict[str, Any]) -> list[str]:
     return [p["name"] if isinstance(p, dict) else str(p) for p in config.get("policies", [])]
 
@@ -70,20 +113,16 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
         f"AoI regret {REGRET_UNIT}, {inst.get('name', '?')}: {config.get('runs', '?')} runs, "
         "mean and 95% band"
     )
+    from recorder.rerun.layout import LEGEND, VIEWER_PX, legend_room, time_windows
+
     horizon = config.get("horizon")
-    # The whole horizon, not a window around the time cursor.
-    axis = (
-        rrb.TimeAxis(
-            view_range=rrb.TimeRange(
-                start=rrb.TimeRangeBoundary.absolute(seq=0),
-                end=rrb.TimeRangeBoundary.absolute(seq=int(horizon)),
-            )
-        )
-        if isinstance(horizon, int) and horizon > 0
-        else None
-    )
-    legend = rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)
     names = policy_names(config)
+    # the whole horizon, not a window around the time cursor, and room right of it for the
+    # legend (recorder.rerun.layout's rule): the policies' names, or the arms'
+    tw = time_windows(1, horizon if isinstance(horizon, int) and horizon > 0 else None)
+    axis = tw.whole_axis(legend_room(names, VIEWER_PX))
+    legend = LEGEND
+    arm_names = list((config.get("instance") or {}).get("arms") or [])
     # the runs worth watching (SweepRerunSink.mark) have a tab of their own: one worst run
     # of 1,400 would flatten means of 20 in the overlay
     notable = [p for p in names if p in ((config.get("notable") or {}).get("cells") or {})]
@@ -125,22 +164,44 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
                       for p in notable), name="runs worth watching")] if notable else []),
         active_tab=0,
     )  # fmt: skip
-    pulls = [
-        rrb.TimeSeriesView(
+    arms = shown_arms(config)
+    K = len((config.get("instance") or {}).get("Y") or [])
+    arm_names += [str(k + 1) for k in range(len(arm_names), K)]
+    shares_axis = tw.whole_axis(legend_room(
+        [style.arm_legend(k, arm_names[k]) for k in arms],
+        VIEWER_PX if style.lines_for(K) else VIEWER_PX / 2,
+    ))  # fmt: skip
+    # tab titles share the width: the policy's name, with the quantity while there is room
+    few = len(names) <= 4
+
+    def pulls_view(p: str) -> rrb.View | rrb.Container:
+        lines = rrb.TimeSeriesView(
             origin=pulls_path(p),
-            name=f"pull share per arm [fraction], {p}",
-            axis_x=axis,
+            contents=[f"$origin/{k + 1}" for k in arms],
+            name=f"pull share {style.SHARE_UNIT}, {p}" if few else p,
+            axis_x=shares_axis,
             plot_legend=legend,
+        )
+        if style.lines_for(K):
+            return lines
+        return rrb.Horizontal(
+            rrb.BarChartView(origin=share_path(p), name=f"{p}: pull share of every arm at "
+                             "the cursor", plot_legend=rrb.PlotLegend(visible=False)),
+            rrb.TimeSeriesView(origin=pulls_path(p), contents=[f"$origin/{k + 1}" for k in arms],
+                               name=f"{p}: pull share, arms that matter", axis_x=shares_axis,
+                               plot_legend=legend),
+            name=f"pull share {style.SHARE_UNIT}, {p}" if few else p,
         )  # fmt: skip
-        for p in names
-    ]
+
+    pulls = [pulls_view(p) for p in names]
     parts: list[rrb.Container | rrb.View] = [top]
     if pulls:
         parts.append(rrb.Tabs(*pulls, active_tab=0, name="pull share per arm"))
     return rrb.Blueprint(
         rrb.Vertical(*parts, row_shares=[3, 2] if pulls else None),
-        rrb.TimePanel(timeline=TIMELINE),
-        collapse_panels=False,
+        # the recording list (where its name shows) open, the time panel as a scrubber
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        rrb.SelectionPanel(state="hidden"),
     )
 
 
@@ -153,6 +214,9 @@ __all__ = [
     "policy_names",
     "pulls_path",
     "regret_path",
+    "share_path",
+    "shown_arms",
     "sweep_blueprint",
     "sweep_recording_id",
+    "sweep_recording_name",
 ]

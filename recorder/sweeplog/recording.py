@@ -26,17 +26,17 @@ import rerun as rr
 from corraoi.errors import WriteError
 from corraoi.experiments.montecarlo import SweepPoint
 from corraoi.files.partial import PartialFile, reason
+from recorder import style
 from recorder.rerun.names import TIMELINE
 from recorder.rerun.output import check_rrd, finish_recording, first_line
 from recorder.sink import Sink
 from recorder.style import (
     MARKER_AOI_AWARE,
     WIDTH_AOI_AWARE,
-    WIDTH_ARM,
     WIDTH_BAND,
     WIDTH_MAIN,
     arm_color,
-    arm_label,
+    arm_legend,
     config_colors,
     is_aoi_aware,
     lighter,
@@ -50,8 +50,11 @@ from .layout import (
     policy_names,
     pulls_path,
     regret_path,
+    share_path,
+    shown_arms,
     sweep_blueprint,
     sweep_recording_id,
+    sweep_recording_name,
 )
 
 #: Line widths (UI points) of the mean curves (AoI-aware and band: recorder.style).
@@ -59,13 +62,25 @@ WIDTH_BASE = WIDTH_MAIN
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
 AOI_AWARE_MARKER_SIZE = MARKER_AOI_AWARE
+#: Widths of the pull-share lines of the arms shown, first arm widest, the last one
+#: thinnest: where two arms' shares coincide, the thinner line lies inside the wider one
+#: and both colours show (Rerun draws the later entity on top).
+SHARE_WIDEST, SHARE_THINNEST = 5.0, 1.25
 
 
 def _arm_labels(config: dict[str, Any]) -> list[str]:
     inst = config.get("instance") or {}
     K = len(inst.get("Y", []))
     names = list(inst.get("arms") or [str(k + 1) for k in range(K)])
-    return [arm_label(k, names[k]) for k in range(K)]
+    return [arm_legend(k, names[k]) for k in range(K)]
+
+
+def share_widths(n: int) -> list[float]:
+    """Line widths of ``n`` pull-share lines, widest first (:data:`SHARE_WIDEST`)."""
+    if n <= 1:
+        return [style.WIDTH_ARM] * n
+    step = (SHARE_WIDEST - SHARE_THINNEST) / (n - 1)
+    return [round(SHARE_WIDEST - i * step, 3) for i in range(n)]
 
 
 def open_sweep_recording(
@@ -109,6 +124,10 @@ class SweepRerunSink(Sink):
         self.flush_every = int(flush_every)
         self.arm_labels = _arm_labels(config)
         self.K = len(self.arm_labels)
+        self._lines = style.lines_for(self.K)
+        #: the arms drawn as lines, and their colours and widths (widest first)
+        self._shown = shown_arms(config) if self.K else []
+        self._widths = dict(zip(self._shown, share_widths(len(self._shown)), strict=True))
         self._buffer: list[SweepPoint] = []
         self._styled: set[str] = set()
         self._colors = config_colors(config)  # a policy's own colour, where it has one
@@ -136,6 +155,7 @@ class SweepRerunSink(Sink):
             application_id, recording_id=recording_id or sweep_recording_id(config)
         )
         rec.set_log_time_enabled(False)
+        rec.send_recording_name(sweep_recording_name(out.path, config))
         try:
             rec.save(out.partial, default_blueprint=sweep_blueprint(config))
         except (OSError, RuntimeError) as exc:
@@ -184,7 +204,18 @@ class SweepRerunSink(Sink):
         static(f"{regret_path(name)}/lo", line(lighter(color, 0.45), WIDTH_BAND, name))
         static(f"{regret_path(name)}/hi", line(lighter(color, 0.45), WIDTH_BAND, name))
         for k, label in enumerate(self.arm_labels):
-            static(pulls_path(name, k + 1), line(arm_color(k), WIDTH_ARM, label))
+            if self._lines:
+                rgb = arm_color(k)
+            elif k in self._widths:
+                rgb = style.focus_color(self._shown.index(k))
+            else:
+                rgb = style.BAR_IN_SET_COLOR
+            static(pulls_path(name, k + 1), line(rgb, self._widths.get(k, style.WIDTH_ARM), label))
+        if not self._lines:
+            from recorder.rerun.static import bars
+
+            bars(rec, share_path(name), color, np.arange(1, self.K + 1, dtype=np.float64),
+                 width=0.9)  # fmt: skip
 
     # ------------------------------------------------------------------ data
 
@@ -235,6 +266,13 @@ class SweepRerunSink(Sink):
         send(estimator_path(name), t, est)
         for k in range(self.K):
             send(pulls_path(name, k + 1), t, np.ascontiguousarray(share[:, k]))
+        if not self._lines and t.size:
+            from recorder.rerun.static import tensor_batch
+
+            rec.send_columns(
+                share_path(name), indexes=[rr.TimeColumn(TIMELINE, sequence=t)],
+                columns=[rr.ComponentColumn(rr.BarChart.descriptor_values(), tensor_batch(share))],
+            )  # fmt: skip
 
     def mark(self, policy: str, kind: str, run: int, seed: int, t: np.ndarray,
              regret: np.ndarray) -> None:  # fmt: skip
