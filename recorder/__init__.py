@@ -26,8 +26,8 @@ if TYPE_CHECKING:
     from recorder.rerun.sink import RerunSink
 
 #: the Rerun parts, by the module that defines each (imported on first use)
-_LAZY = {"RerunSink": "rerun_sink", "RrdOutput": "rrd_output", "new_recording": "rerun_names",
-         "one_run_blueprint": "rerun_layout"}  # fmt: skip
+_LAZY = {"RerunSink": "rerun.sink", "RrdOutput": "rerun.output", "new_recording": "rerun.names",
+         "one_run_blueprint": "rerun.layout"}  # fmt: skip
 
 
 def __getattr__(name: str) -> Any:

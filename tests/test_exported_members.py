@@ -50,3 +50,19 @@ def test_every_function_of_the_face_documents_parameters_return_and_errors():
         assert inspect.getdoc(cls)
         for attr in ("_repr_html_",):
             assert callable(getattr(cls, attr)), (cls, attr)
+
+
+def test_every_packages_all_resolves():
+    """Each package's ``__all__`` (a wing's public names, some imported lazily) names only
+    what its package gives: a module moved under a lazy import is caught here."""
+    import importlib
+    import pkgutil
+
+    for top in ("corraoi", "recorder", "viewer"):
+        root = importlib.import_module(top)
+        packages = [root] + [importlib.import_module(m.name)
+                             for m in pkgutil.walk_packages(root.__path__, f"{top}.")
+                             if m.ispkg]  # fmt: skip
+        for pkg in packages:
+            for name in getattr(pkg, "__all__", ()):
+                assert getattr(pkg, name, None) is not None, f"{pkg.__name__}.{name}"
