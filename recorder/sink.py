@@ -57,7 +57,72 @@ class Sink:
             self.abort()
 
 
+class RunRecording(Sink):
+    """One run's Rerun recording (an ``.rrd`` file and/or a viewer), whoever writes it:
+    this process (:class:`recorder.rerun.sink.LocalRecording`) or a forked worker
+    (:class:`recorder.rerun.worker.RemoteRecording`). ``record_run`` hands either the run's
+    blocks like any other sink.
+
+    :meth:`close` returns the ``.rrd`` path (None without a file) once the file is complete
+    and in place, or raises :class:`~corraoi.errors.WriteError` (the file left at its
+    ``.partial`` name) or :class:`~corraoi.errors.ViewerError`; :meth:`abort` stops, leaving
+    the ``.partial`` (deleted with ``discard``). As a context manager: a normal exit closes,
+    keeping a viewer's failure in :attr:`problem` (the file is complete) instead of raising
+    it; Ctrl-C closes with the slots so far; any other exception aborts (discarding a file
+    that holds no slot) and is the one raised, not the abort's own.
+    """
+
+    #: the ``.rrd`` file's final path, None without one
+    path: Path | None = None
+    #: what close() returned: the file's path once it is in place
+    result: Path | None = None
+    #: a viewer that could not be reached (the file, if any, is complete)
+    problem: str | None = None
+    #: whether any block was written
+    written: bool = False
+    #: the WriteError close() raised on a normal exit (the file left at ``.partial``)
+    error: Exception | None = None
+
+    def write(self, block: Any) -> None:
+        self._write(block)
+        self.written = True
+
+    def _write(self, block: Any) -> None:
+        raise NotImplementedError
+
+    def abort(self, *, discard: bool | None = None) -> Any:
+        raise NotImplementedError
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        from corraoi.errors import ViewerError, WriteError
+
+        if exc_type is None:
+            try:
+                self.result = self.close()
+            except ViewerError as err:
+                self.result, self.problem = self.path, str(err)
+            except WriteError as err:
+                self.error = err
+                raise
+        elif issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
+            try:
+                self.result = self.close()  # the slots so far, in a complete file
+            except (ViewerError, WriteError):
+                pass
+        else:
+            try:  # the run's own error is the one to report, not the abort's
+                self.abort(discard=not self.written)
+            except (ViewerError, WriteError):
+                pass
+
+
 __all__ = [
+    "RunRecording",
     "Sink",
     "made_again",
 ]

@@ -9,23 +9,22 @@ the group's Rerun recording (``benchmarks/bench_start.py``, the ``sweep -o`` row
 figure is the one :func:`viewer.figure.draw_figure` draws in-process: only the process
 differs.
 
-``FigureWorker.start()`` returns None where a process cannot be forked safely (no ``fork``,
-or other threads running); :class:`corraoi.face.outputs.FolderOutputs` then draws
+``FigureWorker.start()`` returns None where a process cannot be forked safely
+(:func:`corraoi.forked.can_fork`); :class:`corraoi.face.outputs.FolderOutputs` then draws
 in-process. Nothing is lost when the worker fails: a figure it did not deliver (it died,
 did not answer, or its answer could not be read) is drawn in this process instead. The
-worker ignores Ctrl-C, SIGTERM and SIGHUP (the parent decides); a parent that dies
-without a word takes the worker with it, mid-figure if need be (:func:`die_with_parent`).
+worker is a :class:`corraoi.forked.ForkedWorker`: it ignores Ctrl-C, SIGTERM and SIGHUP
+(the parent decides), and a parent that dies without a word takes it with it, mid-figure
+if need be.
 """
 
 from __future__ import annotations
 
-import os
-import signal
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from recorder.rerun.worker import die_with_parent, fork_context
+from corraoi.forked import ForkedWorker, can_fork
 
 #: Seconds the parent waits for one figure before drawing it itself.
 _ANSWER = 120.0
@@ -34,20 +33,16 @@ _ANSWER = 120.0
 class FigureWorker:
     """A worker process that imports matplotlib now and draws sweep figures when asked."""
 
-    def __init__(self, ctx: Any) -> None:
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, self._conn, os.getpid()),
-                                 daemon=True, name="corraoi-figures")  # fmt: skip
-        self._proc.start()
-        child.close()
+    def __init__(self) -> None:
+        self._worker = ForkedWorker(_serve, "corraoi-figures")
+        self._conn = self._worker.conn
         self._pending: list[tuple[Path, Path]] = []
         self._alive = True
 
     @classmethod
     def start(cls) -> FigureWorker | None:
         """A worker, or None where one cannot be forked safely."""
-        ctx = fork_context()
-        return cls(ctx) if ctx is not None else None
+        return cls() if can_fork() else None
 
     def draw(self, log: Path, out: Path) -> None:
         """Ask for ``out`` drawn from the sweep log ``log``; :meth:`results` delivers it."""
@@ -81,9 +76,7 @@ class FigureWorker:
         return done
 
     def _kill(self, out: Path) -> None:
-        if self._proc.is_alive():
-            self._proc.kill()
-            self._proc.join(1.0)
+        self._worker.kill()
         from corraoi.files.partial import partial_path
 
         partial_path(out).unlink(missing_ok=True)  # a drawing cut short
@@ -94,15 +87,12 @@ class FigureWorker:
         holds nothing else. It is killed rather than asked to quit, which it would hear only
         after importing matplotlib (about a second): an interrupted sweep still ends within
         one (issue 19). Safe twice."""
-        if self._proc.is_alive():
-            self._proc.kill()
-        self._proc.join(1.0)
+        self._worker.stop()
         from corraoi.files.partial import partial_path
 
         for _, out in self._pending:  # a drawing cut short
             partial_path(out).unlink(missing_ok=True)
         self._pending = []
-        self._conn.close()
 
     def __enter__(self) -> FigureWorker:
         return self
@@ -129,12 +119,8 @@ def draw_from_log(log: str, out: str) -> BaseException | None:
     return None
 
 
-def _serve(conn: Any, parents_end: Any, parent: int) -> None:
+def _serve(conn: Any) -> None:
     """The worker's loop: import matplotlib, then draw what the parent asks for."""
-    die_with_parent(parent)
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_IGN)
-    parents_end.close()  # else the pipe would stay open here when the parent dies
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
         from matplotlib.figure import Figure  # noqa: F401

@@ -27,11 +27,10 @@ from corraoi.errors import (
     PolicyRuntimeError,
     SweepMismatch,
     UsageError,
-    ViewerError,
     WriteError,
 )
 from corraoi.provenance import Provenance
-from recorder.sink import Sink
+from recorder.sink import RunRecording, Sink
 from recorder.slotlog.sink import McapSink
 
 if TYPE_CHECKING:
@@ -89,37 +88,35 @@ def record_run(
 
     from .slots import slots_of
 
-    problem: str | None = None
-    rrd_error: WriteError | None = None
     slots = 0
-    rrd_path: Path | None = None
     provenance = Provenance.of([config.policy], backend=config.streams, notes=notes)
-    with McapSink(mcap, config, overwrite=overwrite, provenance=provenance) as log, \
-            ExitStack() as more:  # fmt: skip
-        extra = [more.enter_context(s) for s in sinks]  # each closed, or aborted, with the run
-        output: Any = None
-        sink: Any = None  # in this process: the RerunSink in front of ``output``
-        if rrd is not None or viewer_url is not None:
-            where = None if rrd is None else Path(rrd)
-            if rerun is not None:
-                output = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
-                                    overwrite=overwrite)  # fmt: skip
-            else:
-                from recorder.rerun.output import RrdOutput
-                from recorder.rerun.sink import RerunSink
-
-                output = RrdOutput(config, rrd_path=where, viewer_url=viewer_url,
+    recording: RunRecording | None = None
+    if rrd is not None or viewer_url is not None:
+        where = None if rrd is None else Path(rrd)
+        if rerun is not None:
+            recording = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
                                    overwrite=overwrite)  # fmt: skip
-                sink = RerunSink(output.recording, config.label, config)
-        try:
+        else:
+            from recorder.rerun.sink import LocalRecording
+
+            recording = LocalRecording(config, rrd_path=where, viewer_url=viewer_url,
+                                       overwrite=overwrite)  # fmt: skip
+    log: McapSink | None = None
+    try:
+        # every sink closes with the run, or aborts when it fails (each as its class says);
+        # the recording is left last, so that the MCAP log is finished whatever it says
+        with ExitStack() as stack:
+            if recording is not None:
+                stack.enter_context(recording)
+            log = stack.enter_context(McapSink(mcap, config, overwrite=overwrite,
+                                               provenance=provenance))  # fmt: skip
+            every: list[Sink] = [log]
+            if recording is not None:
+                every.append(recording)
+            every += [stack.enter_context(s) for s in sinks]
             for block in slots_of(config):  # the engine's, or a GPU sweep's own run
-                log.write(block)
-                if sink is not None:
+                for sink in every:
                     sink.write(block)
-                elif output is not None:
-                    output.write(block)
-                for other in extra:
-                    other.write(block)
                 slots = int(block.t[-1])
                 mismatch = row_mismatch(expect, block) if expect else None
                 if mismatch is not None:  # after the block is in the log: it shows it
@@ -129,35 +126,13 @@ def record_run(
                     on_block(block)
                 if should_stop is not None and should_stop():
                     break
-        except BaseException as exc:
-            if output is not None:
-                if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-                    try:
-                        if sink is not None:
-                            sink.close()  # send the slots it still holds (up to a batch)
-                        output.close()
-                    except (ViewerError, WriteError):
-                        pass
-                else:
-                    try:  # the run's own error is the one to report, not the abort's
-                        output.abort(discard=slots == 0)
-                    except (ViewerError, WriteError):
-                        pass
-            raise
-        if output is not None:
-            if sink is not None:
-                sink.close()
-            try:
-                rrd_path = output.close()
-            except ViewerError as exc:
-                rrd_path = output.path
-                problem = str(exc)
-            except WriteError as exc:  # the MCAP log is still finished properly
-                rrd_error = exc
-    if rrd_error is not None:
-        if log.finished:
-            raise WriteError(f"{rrd_error} (the MCAP log {log.path} is complete)")
-        raise rrd_error
+    except WriteError as exc:
+        if recording is not None and exc is recording.error and log is not None and log.finished:
+            raise WriteError(f"{exc} (the MCAP log {log.path} is complete)") from None
+        raise
+    assert log is not None
+    rrd_path = recording.result if recording is not None else None
+    problem = recording.problem if recording is not None else None
     return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
 
 

@@ -13,12 +13,12 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 from urllib.parse import quote, urlsplit
 
 from corraoi.errors import UsageError, ViewerError
+from corraoi.forked import death_signal
 
 DEFAULT_GRPC_PORT = 9876
 DEFAULT_WEB_PORT = 9090
@@ -176,7 +176,7 @@ class WebViewer:
                 stderr=subprocess.DEVNULL,
                 env=env,
                 start_new_session=True,  # Ctrl-C goes to us; we stop the server ourselves
-                preexec_fn=_die_with_parent(),  # one prctl call, see below
+                preexec_fn=death_signal(signal.SIGTERM),  # dies with us, even by SIGKILL
             )
         except OSError as exc:
             raise ViewerError(f"--serve-web: cannot run {cmd[0]}: {exc.strerror or exc}") from None
@@ -230,23 +230,3 @@ def _signal_group(proc: subprocess.Popen[bytes], sig: int) -> None:
             proc.send_signal(sig)
         except ProcessLookupError:
             pass
-
-
-def _die_with_parent() -> Callable[[], None] | None:
-    """On Linux, a function for ``preexec_fn`` that has the kernel send SIGTERM to the child
-    when we die, even by SIGKILL, so no server outlives ``corraoi record``. The libc
-    symbol is looked up here, in the parent: the child only makes one system call."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        import ctypes
-
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
-    pr_set_pdeathsig = 1
-
-    def set_death_signal() -> None:
-        prctl(pr_set_pdeathsig, signal.SIGTERM, 0, 0, 0)
-
-    return set_death_signal

@@ -15,13 +15,16 @@ is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.model.theory import analyse
 from recorder import style
-from recorder.sink import Sink
+from recorder.sink import RunRecording, Sink
 
 from .names import (
     TIMELINE,
@@ -29,7 +32,7 @@ from .names import (
     run_path,
     snapshot_every,
 )
-from .output import first_line
+from .output import RrdOutput, first_line
 from .static import log_focus, log_static, tensor_batch
 
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
@@ -259,7 +262,39 @@ class RerunSink(Sink):
         return self.problem
 
 
+class LocalRecording(RunRecording):
+    """One run's recording written in this process: an :class:`RrdOutput` (the file and/or
+    viewer) fed by a :class:`RerunSink` (:class:`~recorder.sink.RunRecording`'s meaning).
+    A forked worker writes its recordings with this class too."""
+
+    def __init__(
+        self,
+        config: RunConfig,
+        *,
+        rrd_path: str | os.PathLike[str] | None = None,
+        viewer_url: str | None = None,
+        overwrite: bool = False,
+    ) -> None:
+        self.output = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url,
+                                overwrite=overwrite)  # fmt: skip
+        self.path = self.output.path
+        self.sink = RerunSink(self.output.recording, config.label, config)
+
+    def _write(self, block: SlotBlock) -> None:
+        self.sink.write(block)
+
+    def close(self) -> Path | None:
+        """Send what the sink holds, then :meth:`RrdOutput.close` (which flushes, once)."""
+        if not self.output.closed:
+            self.sink.finish()
+        return self.output.close()
+
+    def abort(self, *, discard: bool | None = None) -> Path | None:
+        return self.output.abort(discard=discard)
+
+
 __all__ = [
     "BATCH",
+    "LocalRecording",
     "RerunSink",
 ]

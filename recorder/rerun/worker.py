@@ -11,32 +11,33 @@ in-process recording uses: the file is the same, only the process differs.
 
 ``with RerunWorker.start() as worker: rec = worker.open(config, rrd_path=...)``, then
 ``rec.write(block)`` for each block and ``rec.close()`` (or ``rec.abort()``) with
-:class:`RrdOutput`'s meaning: the file is renamed into place only when complete; a
+:class:`~recorder.sink.RunRecording`'s meaning: the file is renamed into place only when complete; a
 problem raises the same :class:`~corraoi.errors.WriteError` or
 :class:`~corraoi.errors.ViewerError`. :meth:`RerunWorker.start` returns None where
-``fork`` is not available (then record in-process).
+a process cannot be forked safely (:func:`corraoi.forked.can_fork`; then record in this
+process, :class:`~recorder.rerun.sink.LocalRecording`).
 
-The worker ignores Ctrl-C, SIGTERM and SIGHUP (the terminal sends them to the whole
-process group): the parent decides, and tells it to finish or to abort. A parent that
-dies without a word (SIGKILL) takes the worker with it (:func:`die_with_parent`; elsewhere
-the closed pipe makes it abort), leaving the ``.partial`` file, as an in-process recording
-killed at that moment would.
+The worker is a :class:`corraoi.forked.ForkedWorker`: it ignores Ctrl-C, SIGTERM and
+SIGHUP (the terminal sends them to the whole process group): the parent decides, and tells
+it to finish or to abort. A parent that dies without a word (SIGKILL) takes the worker
+with it (elsewhere the closed pipe makes it abort), leaving the ``.partial`` file, as an
+in-process recording killed at that moment would.
 """
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import pickle
-import signal
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import check_target
-from recorder.sink import Sink, made_again
+from corraoi.forked import ForkedWorker, can_fork
+from recorder.sink import RunRecording, made_again
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -47,57 +48,19 @@ _ANSWER = 60.0
 _ABORT_WAIT = 10.0
 
 
-def fork_context() -> Any:
-    """multiprocessing's ``fork`` context, or None where forking this process now is not
-    safe: no ``fork`` (Windows), or other threads running (one may hold a lock, the import
-    lock or a logger's, that the child would wait on for ever: a test runner's, a Dask
-    client's or an application's threads)."""
-    import threading
-
-    if "fork" not in multiprocessing.get_all_start_methods():
-        return None
-    if threading.active_count() > 1:
-        return None
-    return multiprocessing.get_context("fork")
-
-
-def die_with_parent(parent: int) -> None:
-    """Have the kernel kill this forked worker when its parent dies (Linux's
-    ``PR_SET_PDEATHSIG``); leave now if the parent ``parent`` is gone already.
-
-    Without it a worker whose parent was SIGKILLed finishes what it is doing first: a
-    figure it was drawing then lands in a sweep folder that a resumed sweep is writing, and
-    the locks it inherited (the folder's) outlive the parent. Elsewhere the closed pipe
-    still ends the worker, after its current task. (The signal follows the thread that
-    forked; the workers fork only a process with one thread, :func:`fork_context`.)"""
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux
-    if os.getppid() != parent:  # it died before the line above
-        os._exit(0)
-
-
 class RerunWorker:
     """A worker process that imports Rerun now and writes recordings when asked."""
 
     def __init__(self, before_import: Callable[[], None] | None = None) -> None:
-        ctx = multiprocessing.get_context("fork")
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve,
-                                 args=(child, self._conn, before_import, os.getpid()),
-                                 daemon=True, name="corraoi-rerun")  # fmt: skip
-        self._proc.start()
-        child.close()
+        self._worker = ForkedWorker(partial(_serve, before_import), "corraoi-rerun")
+        self._conn = self._worker.conn
         self._busy: RemoteRecording | None = None
 
     @classmethod
     def start(cls, before_import: Callable[[], None] | None = None) -> RerunWorker | None:
-        """A worker, or None where a process cannot be forked safely (:func:`fork_context`)."""
-        return cls(before_import) if fork_context() is not None else None
+        """A worker (``before_import()`` runs in it first), or None where a process cannot
+        be forked safely (:func:`corraoi.forked.can_fork`)."""
+        return cls(before_import) if can_fork() else None
 
     def open(
         self,
@@ -132,7 +95,7 @@ class RerunWorker:
         wait = wait or _ANSWER
         try:
             if not self._conn.poll(wait):
-                self._proc.kill()
+                self._worker.kill()
                 raise WriteError(f"the Rerun writer process did not answer in {wait:.0f} s"
                                  + _left(path))  # fmt: skip
             return self._conn.recv()
@@ -140,8 +103,7 @@ class RerunWorker:
             raise WriteError(self._gone(exc) + _left(path)) from None
 
     def _gone(self, exc: BaseException) -> str:
-        self._proc.join(1.0)
-        code = self._proc.exitcode
+        code = self._worker.exitcode()
         how = f"exit code {code}" if code is not None else type(exc).__name__
         return f"the Rerun writer process ended unexpectedly ({how})"
 
@@ -152,16 +114,7 @@ class RerunWorker:
                 self._busy.abort()
             except WriteError:
                 pass
-        if self._proc.is_alive():
-            try:
-                self._conn.send(("quit",))
-            except (OSError, EOFError):
-                pass
-            self._proc.join(5.0)
-            if self._proc.is_alive():
-                self._proc.kill()
-                self._proc.join(1.0)
-        self._conn.close()
+        self._worker.stop(goodbye=("quit",))
 
     def __enter__(self) -> RerunWorker:
         return self
@@ -172,9 +125,9 @@ class RerunWorker:
         self.stop()
 
 
-class RemoteRecording(Sink):
+class RemoteRecording(RunRecording):
     """One run's recording in a :class:`RerunWorker`: ``write``, then ``close`` or
-    ``abort``, with :class:`~recorder.rerun.output.RrdOutput`'s meaning."""
+    ``abort``, with :class:`~recorder.sink.RunRecording`'s meaning."""
 
     def __init__(self, worker: RerunWorker, path: Path | None) -> None:
         self._worker = worker
@@ -192,7 +145,7 @@ class RemoteRecording(Sink):
             except WriteError as exc:
                 self._lost = exc
 
-    def write(self, block: Any) -> None:
+    def _write(self, block: Any) -> None:
         if self.closed:
             raise ValueError("RemoteRecording: write() after close()")
         self._send(("write", block))
@@ -232,21 +185,13 @@ def _left(path: Path | None) -> str:
     return f"; the incomplete file is left as {partial_path(path)}"
 
 
-def _serve(
-    conn: Any, parents_end: Any, before_import: Callable[[], None] | None, parent: int
-) -> None:
+def _serve(before_import: Callable[[], None] | None, conn: Any) -> None:
     """The worker's loop: import Rerun, then carry out the parent's messages."""
-    die_with_parent(parent)
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_IGN)
-    parents_end.close()  # else the pipe would stay open here when the parent dies
     if before_import is not None:
         before_import()
-    from .output import RrdOutput
-    from .sink import RerunSink
+    from .sink import LocalRecording
 
-    output: RrdOutput | None = None
-    sink: RerunSink | None = None
+    rec: LocalRecording | None = None
     failure: BaseException | None = None  # what went wrong since "open"
 
     def reply(value: Any) -> None:
@@ -259,46 +204,44 @@ def _serve(
         try:
             message = conn.recv()
         except (EOFError, OSError):  # the parent is gone: leave the .partial file
-            if output is not None:
-                output.abort()
+            if rec is not None:
+                rec.abort()
             return
         op = message[0]
         if op == "open":
             config, path, viewer_url, overwrite = message[1:]
-            output, sink, failure = None, None, None
+            rec, failure = None, None
             try:
-                output = RrdOutput(config, rrd_path=path, viewer_url=viewer_url,
-                                   overwrite=overwrite)  # fmt: skip
-                sink = RerunSink(output.recording, config.label, config)
+                rec = LocalRecording(config, rrd_path=path, viewer_url=viewer_url,
+                                     overwrite=overwrite)  # fmt: skip
             except Exception as exc:  # noqa: BLE001 - reported to the parent at close
                 failure = exc
         elif op == "write":
-            if sink is not None and failure is None:
+            if rec is not None and failure is None:
                 try:
-                    sink.write(message[1])
+                    rec.write(message[1])
                 except Exception as exc:  # noqa: BLE001 - reported to the parent at close
                     failure = exc
         elif op == "close":
-            if failure is not None or output is None or sink is None:
-                if output is not None:
-                    output.abort()
+            if failure is not None or rec is None:
+                if rec is not None:
+                    rec.abort()
                 if not isinstance(failure, (WriteError, ViewerError)):
                     failure = WriteError(str(failure or "no recording was open"))
                 reply(failure)
             else:
                 try:
-                    sink.finish()  # the slots it holds; output.close() flushes them, once
-                    reply(output.close())
+                    reply(rec.close())
                 except Exception as exc:  # noqa: BLE001 - WriteError, ViewerError
                     reply(exc)
-            output, sink = None, None
+            rec = None
         elif op == "abort":
-            reply(output.abort(discard=message[1]) if output is not None else None)
-            output, sink = None, None
+            reply(rec.abort(discard=message[1]) if rec is not None else None)
+            rec = None
         elif op == "quit":
-            if output is not None:
-                output.abort()
+            if rec is not None:
+                rec.abort()
             return
 
 
-__all__ = ["RemoteRecording", "RerunWorker", "fork_context"]
+__all__ = ["RemoteRecording", "RerunWorker"]
