@@ -7,6 +7,13 @@ PYTHONPATH, alternating the two so that both see the same machine; the table the
 column for each.
 
     python benchmarks/bench_start.py [--repeat 5] [--baseline /tmp/base] [--skip-cold]
+                                     [--no-workers] [--only ROW,ROW]
+
+``--no-workers`` times every command a second time with ``CORRAOI_WORKERS=0`` (no forked
+worker: the Rerun writer of ``record``, the figure drawer of ``sweep -o`` and the log
+reader of ``replay`` and ``compare`` do their jobs in the command's own process),
+alternating with the default, in a column of its own: what each worker buys.
+``--only`` keeps the rows whose name starts with one of the words given.
 
 Python's bytecode is compiled first (``compileall``) for both checkouts, as an installed
 package has it: a sandbox with PYTHONDONTWRITEBYTECODE would otherwise pay for parsing
@@ -36,9 +43,15 @@ ALL24 = ["sweep", "-i", "I1", "-p", BUILTINS, "--runs", "20", "-T", "1000", "--j
 
 
 def corraoi(
-    root: Path, args: list[str], cache: Path, cwd: Path, ok: tuple[int, ...] = (0,)
+    root: Path,
+    args: list[str],
+    cache: Path,
+    cwd: Path,
+    ok: tuple[int, ...] = (0,),
+    env_extra: dict[str, str] | None = None,
 ) -> float:
-    env = {**os.environ, "PYTHONPATH": str(root), "CORRAOI_CACHE_DIR": str(cache)}
+    env = {**os.environ, "PYTHONPATH": str(root), "CORRAOI_CACHE_DIR": str(cache),
+           **(env_extra or {})}  # fmt: skip
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "corraoi.cli", *args], cwd=cwd, env=env,
                           capture_output=True, text=True)  # fmt: skip
@@ -53,22 +66,29 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--baseline", type=Path, help="another checkout to time beside this one")
     ap.add_argument("--skip-cold", action="store_true", help="leave out the empty-cache rows")
+    ap.add_argument("--no-workers", action="store_true",
+                    help="also time every command with CORRAOI_WORKERS=0 (no forked worker)")
+    ap.add_argument("--only", default="", help="rows whose name starts with these words")
     args = ap.parse_args()
     roots = {"now": ROOT}
     if args.baseline is not None:
         roots = {"before": args.baseline.resolve(), "now": ROOT}
+    if args.no_workers:
+        roots["no workers"] = ROOT
+    envs = {k: ({"CORRAOI_WORKERS": "0"} if k == "no workers" else {}) for k in roots}
+    only = tuple(w.strip() for w in args.only.split(",") if w.strip())
     for root in roots.values():
         for pkg in ("corraoi", "recorder", "viewer"):
             compileall.compile_dir(str(root / pkg), quiet=1)
     work = Path(tempfile.mkdtemp(prefix="corraoi-bench-start-"))
-    caches = {k: work / f"cache-{k}" for k in roots}
+    caches = {k: work / f"cache-{root.name}-{hash(root)}" for k, root in roots.items()}
     rows: dict[str, dict[str, list[float]]] = {}
 
     def add(row: str, key: str, seconds: float) -> None:
         rows.setdefault(row, {}).setdefault(key, []).append(seconds)
 
     try:
-        if not args.skip_cold:
+        if not args.skip_cold and not only:
             for _ in range(max(1, args.repeat // 2)):
                 for key, root in roots.items():
                     cold = work / f"cold-{key}"
@@ -84,9 +104,10 @@ def main() -> None:
                     add("all 24 built-ins (empty cache)", key, corraoi(root, ALL24, cold, work))
                     shutil.rmtree(cold, ignore_errors=True)
         for key, root in roots.items():  # warm each cache and make the logs
+            name = key.replace(" ", "-")
             corraoi(root, ALL24, caches[key], work)
             for pol in ("ucb", "cucb"):
-                corraoi(root, ["record", "--policy", pol, "-T", "3000", "-o", f"{pol}-{key}.mcap",
+                corraoi(root, ["record", "--policy", pol, "-T", "3000", "-o", f"{pol}-{name}.mcap",
                                "--no-rrd", "--force"], caches[key], work)  # fmt: skip
         commands = {
             "record --policy cucb (10,000 slots, MCAP + .rrd)":
@@ -109,11 +130,15 @@ def main() -> None:
                 lambda k: ["sweep", "--policy", "all", "-o", f"a-{k}", "--force"],
             "--help": lambda k: ["--help"],
         }  # fmt: skip
+        if only:
+            commands = {r: m for r, m in commands.items() if r.startswith(only)}
         for _ in range(args.repeat):
             for row, make in commands.items():
                 for key, root in roots.items():
                     ok = (0, 1) if row.startswith("diff") else (0,)  # diff: 1 = they differ
-                    add(row, key, corraoi(root, make(key), caches[key], work, ok=ok))
+                    name = key.replace(" ", "-")
+                    add(row, key, corraoi(root, make(name), caches[key], work, ok=ok,
+                                          env_extra=envs[key]))  # fmt: skip
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
