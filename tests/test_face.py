@@ -143,6 +143,32 @@ def test_sweep_record_equals_the_sweeps_row_and_load_gives_the_same_types(tmp_pa
     assert "face-eps-first" in html and "<table>" in html
 
 
+def test_record_each_records_every_cells_run_once_and_compare_takes_them(tmp_path: Path) -> None:
+    sw = corraoi.sweep("I1", ["ucb", "cucb"], runs=10, horizon=600, seed=7,
+                       out=tmp_path / "sw")  # fmt: skip
+    said: list[str] = []
+    runs = sw.record_each("median", folder=tmp_path / "runs", say=said.append)
+    assert [r.log.config.policy.name for r in runs] == ["ucb", "cucb"] and len(said) == 2
+    rows = sw.runs
+    for r in runs:
+        name = r.log.config.policy.name
+        n = sw.notable["cells"][name]["median"]["run"]
+        row = rows[(rows["policy"] == name) & (rows["run"] == n) & (rows["t"] == 600)]
+        assert r.summary.regret == row["regret"].item() and r.log.config.seed == 7 + n
+    stamps = [r.path.stat().st_mtime_ns for r in runs]
+    again = sw.record_each("median", folder=tmp_path / "runs", say=said.append)
+    assert len(said) == 2 and [r.path.stat().st_mtime_ns for r in again] == stamps  # reused
+    import shutil
+
+    shutil.copyfile(runs[1].path, runs[0].path)  # another run under the first one's name
+    with pytest.raises(corraoi.OutputError, match="holds another run"):
+        sw.record_each("median", folder=tmp_path / "runs")
+    runs = sw.record_each("median", folder=tmp_path / "runs", force=True)
+    assert runs[0].log.config.policy.name == "ucb"
+    cmp = corraoi.compare(runs)
+    assert [c.summary.regret for c in cmp.runs] == [r.summary.regret for r in runs]
+
+
 def test_diff_and_compare_take_runs(tmp_path: Path) -> None:
     a = corraoi.record("ucb", seed=2, horizon=700, path=tmp_path / "a.mcap", rrd=False)
     b = corraoi.record("cucb", seed=2, horizon=700, path=tmp_path / "b.mcap", rrd=False)

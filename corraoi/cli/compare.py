@@ -125,41 +125,15 @@ def compare(
 
 def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool, *,
                  kept_code: bool = False, allow_changed_code: bool = False) -> tuple[Path, ...]:
-    """``compare --from``: the chosen runs of the sweep, recorded into ``runs/`` (MCAP only;
-    a log already there with the same run and complete is used as it is)."""
-    from corraoi.engine.threads import set_workers
-    from corraoi.errors import LogError, OutputError
-    from corraoi.experiments.drill import choose
-    from corraoi.face.recording import record_drill
-    from corraoi.face.resolve import TRACE_READERS
-    from corraoi.text import safe_name
-    from recorder.slotlog.reader import open_log
+    """``compare --from``: the chosen runs of the sweep, recorded into ``runs/``
+    (:meth:`corraoi.face.sweeps.Sweep.record_each`)."""
+    from corraoi.face.sweeps import Sweep
 
-    drills = choose(folder, run, cells=cells, warn=warn, kept_code=kept_code,
-                    allow_changed_code=allow_changed_code,
-                    trace_readers=TRACE_READERS)  # fmt: skip
-    plans = [(d, Path("runs") / f"{safe_name(d.name)}.mcap") for d in drills]
-    todo = []
-    for d, path in plans:
-        if path.is_file():
-            try:
-                log = open_log(path, verify=False)
-                same = log.status == "complete" and log.config.to_dict() == d.config.to_dict()
-            except LogError:
-                same = False
-            if same:
-                continue
-            if not force:
-                raise OutputError(f"{path}: already exists and holds another run; use --force "
-                                  "to overwrite it")  # fmt: skip
-        todo.append((d, path))
-    set_workers(1)  # one run has nothing to spread over threads
-    for d, path in todo:
-        click.echo(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
-                   f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
-                   f"{d.config.seed}, {d.choice})", err=True)  # fmt: skip
-        record_drill(d, path, overwrite=True)
-    return tuple(path for _, path in plans)
+    runs = Sweep(folder).record_each(run, cells=cells, force=force, kept_code=kept_code,
+                                     allow_changed_code=allow_changed_code,
+                                     say=lambda line: click.echo(line, err=True),
+                                     warn=warn)  # fmt: skip
+    return tuple(r.path for r in runs)
 
 
 __all__ = ["compare"]

@@ -41,7 +41,8 @@ class Sweep(SweepData):
     * ``.notable``: per policy its worst, median and best run, and the pairs of policies with
       the widest paired gaps;
     * ``.record(which)``: one of those runs (or run N) recorded slot by slot, a
-      :class:`corraoi.Run` whose regret equals the sweep's row;
+      :class:`corraoi.Run` whose regret equals the sweep's row; ``.record_each(which)``:
+      that run of every cell (what ``corraoi compare --from`` compares);
     * ``.figure(path)``: the sweep figure.
     """
 
@@ -108,6 +109,64 @@ class Sweep(SweepData):
         (done,) = record_plans(plans)
         assert done.mcap is not None
         return Run(done.mcap, rrd=done.rrd, summary=done.summary)
+
+    def record_each(
+        self,
+        which: int | str = "worst",
+        *,
+        cells: Sequence[str] = (),
+        folder: str | os.PathLike[str] = "runs",
+        force: bool = False,
+        kept_code: bool = False,
+        allow_changed_code: bool = False,
+        say: Callable[[str], None] | None = None,
+        warn: Callable[[str], None] = python_warn,
+    ) -> list[Run]:
+        """The chosen run (``which``, as for :meth:`record`) of every cell of this sweep (or
+        of ``cells`` only), each recorded slot by slot into ``folder`` (MCAP only, named after
+        the run), as ``corraoi compare --from`` does before it compares them. A log already
+        there that holds the same run, complete, is used as it is; one holding another run
+        is an :class:`~corraoi.errors.OutputError` unless ``force``. Each run's regret must
+        equal the sweep's row (:class:`~corraoi.errors.SweepMismatch`). ``say`` is told of
+        each run as it starts; ``warn`` of what the choice notices (a
+        :class:`~corraoi.errors.CorraoiWarning` by default)."""
+        from corraoi.engine.threads import set_workers
+        from corraoi.errors import LogError, OutputError
+        from corraoi.experiments.drill import choose
+        from corraoi.text import safe_name, safe_text
+        from recorder.slotlog.reader import open_log
+
+        from .recording import record_drill
+        from .resolve import TRACE_READERS
+        from .runs import Run
+
+        drills = choose(self.folder, which, cells=tuple(cells), warn=warn,
+                        kept_code=kept_code, allow_changed_code=allow_changed_code,
+                        trace_readers=TRACE_READERS)  # fmt: skip
+        plans = [(d, Path(folder) / f"{safe_name(d.name)}.mcap") for d in drills]
+        todo = []
+        for d, path in plans:
+            if path.is_file():
+                try:
+                    log = open_log(path, verify=False)
+                    same = (log.status == "complete"
+                            and log.config.to_dict() == d.config.to_dict())  # fmt: skip
+                except LogError:
+                    same = False
+                if same:
+                    continue
+                if not force:
+                    raise OutputError(f"{path}: already exists and holds another run; use "
+                                      "force (--force) to overwrite it")  # fmt: skip
+            todo.append((d, path))
+        set_workers(1)  # one run has nothing to spread over threads
+        for d, path in todo:
+            if say is not None:
+                say(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
+                    f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
+                    f"{d.config.seed}, {d.choice})")  # fmt: skip
+            record_drill(d, path, overwrite=True)
+        return [Run(path) for _, path in plans]
 
     def figure(self, path: str | os.PathLike[str], *, log_x: bool = False,
                log_y: bool = False) -> Path:  # fmt: skip
