@@ -31,6 +31,8 @@ from typing import Any
 
 #: ``0`` (or ``off``): fork no worker, do every job in this process.
 ENV = "CORRAOI_WORKERS"
+#: The signals a terminal sends to the whole process group: the parent's to handle.
+_TERMINAL = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
 
 
 def can_fork() -> bool:
@@ -105,9 +107,16 @@ class ForkedWorker:
                 stream.flush()
             except (OSError, ValueError, AttributeError):
                 pass
-        with warnings.catch_warnings():  # Python 3.12+ warns of a fork with threads
-            warnings.simplefilter("ignore", DeprecationWarning)
-            self.proc.start()
+        # a signal that came during the fork would be raised inside the fork's own hooks
+        # (logging's lock release), where Python can only print it and lose it: it waits
+        # until the fork is done, then the parent's handler takes it
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL)
+        try:
+            with warnings.catch_warnings():  # Python 3.12+ warns of a fork with threads
+                warnings.simplefilter("ignore", DeprecationWarning)
+                self.proc.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
         child.close()
 
     def alive(self) -> bool:
@@ -139,8 +148,9 @@ class ForkedWorker:
 
 def _child(serve: Callable[[Any], None], conn: Any, parents_end: Any, parent: int) -> None:
     die_with_parent(parent)
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    for sig in _TERMINAL:
         signal.signal(sig, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _TERMINAL)  # blocked over the fork
     parents_end.close()  # else the pipe would stay open here when the parent dies
     try:
         serve(conn)

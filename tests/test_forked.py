@@ -99,3 +99,22 @@ def test_workers_off_does_every_job_in_this_process(monkeypatch):
         seen.append(item)
         assert multiprocessing.active_children() == []  # read by a thread of this process
     assert seen == [0, 1, 2, 3, 4]
+
+
+def test_a_signal_during_the_fork_reaches_the_parents_handler_after_it():
+    # Ctrl-C landing in the fork's own hooks (logging's lock release runs there) used to be
+    # printed as "Exception ignored ... KeyboardInterrupt" and lost
+    code = (
+        "import os, signal, time\n"
+        "from corraoi.forked import ForkedWorker\n"
+        "os.register_at_fork(after_in_parent=lambda: os.kill(os.getpid(), signal.SIGINT))\n"
+        "try:\n"
+        "    w = ForkedWorker(lambda conn: None, 'corraoi-test')\n"
+        "    time.sleep(5)\n"
+        "    print('not interrupted')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted after the fork')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "interrupted after the fork", out.stderr
+    assert "Exception ignored" not in out.stderr and "Traceback" not in out.stderr

@@ -233,6 +233,7 @@ def test_read_ahead_hands_on_errors_and_stops_early(mode, monkeypatch):
     from viewer import readahead
 
     monkeypatch.setenv(readahead.ENV, mode)
+    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
     got = []
     with pytest.raises(LogError, match="boom: chunk at byte 7"):
         for x in readahead.read_ahead(_items_then_boom):
@@ -255,6 +256,7 @@ def test_a_reader_process_that_dies_is_an_error(monkeypatch):
 
     from viewer import readahead
 
+    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
     if not readahead._can_fork():
         pytest.skip("no fork here: the reader runs in a thread")
 
@@ -278,6 +280,7 @@ def test_replay_whose_reader_is_killed_is_one_line_and_no_rrd(tmp_path, monkeypa
     from recorder.slotlog.reader import RunLog
     from viewer import readahead
 
+    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
     if not readahead._can_fork():
         pytest.skip("no fork here: the reader runs in a thread")
     assert CliRunner().invoke(main, ["record", "-T", "3000", "--no-rrd", "-o",
