@@ -83,9 +83,9 @@ class Run(RunData):
              *, atol: float = 0.0) -> DiffReport:  # fmt: skip
         """Slot by slot against ``other`` (a Run or a log's path): the first divergence per
         field (``fields``, default all), as :func:`corraoi.diff`."""
-        from .views import diff
+        from viewer.diffs import diff
 
-        return diff(self, other, fields=fields, atol=atol)
+        return diff(self.log, log_of(other, "other"), fields=fields, atol=atol)
 
 
     def __repr__(self) -> str:
@@ -127,4 +127,10 @@ def as_run(value: Run | str | os.PathLike[str], what: str = "run") -> Run:
                      f"{type(value).__name__}")  # fmt: skip
 
 
-__all__ = ["Run", "as_run"]
+def log_of(value: Run | RunLog | str | os.PathLike[str], what: str = "run") -> RunLog:
+    """The slot log of a Run, a ``RunLog`` or a log's path (:func:`as_run`'s UsageError for
+    anything else)."""
+    return value if isinstance(value, RunLog) else as_run(value, what).log
+
+
+__all__ = ["Run", "as_run", "log_of"]

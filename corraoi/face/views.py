@@ -6,28 +6,16 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from corraoi.errors import UsageError
+
+from .runs import Run, log_of
 
 if TYPE_CHECKING:
     from viewer.compare import Comparison
     from viewer.diff_report import DiffReport
 
-    from .runs import Run
-
-
-
-def _log(value: Any, what: str) -> Any:
-    from recorder.slotlog.reader import RunLog
-
-    log = getattr(value, "log", None)  # a corraoi.Run
-    if isinstance(log, RunLog):
-        return log
-    if isinstance(value, (str, os.PathLike, RunLog)):
-        return value
-    raise UsageError(f"{what}: expected a corraoi.Run or a slot log's path, got "
-                     f"{type(value).__name__}")  # fmt: skip
 
 
 def compare(
@@ -48,7 +36,7 @@ def compare(
 
     if isinstance(runs, (str, os.PathLike)) or not isinstance(runs, Sequence) or not runs:
         raise UsageError("runs: expected a list of runs or slot logs to compare")
-    logs = [_log(r, f"runs[{i}]") for i, r in enumerate(runs)]
+    logs = [log_of(r, f"runs[{i}]") for i, r in enumerate(runs)]
     return compare_logs(logs, rrd_path=rrd, viewer_url=viewer, overwrite=force)
 
 
@@ -67,7 +55,7 @@ def diff(
     cannot be read."""
     from viewer.diffs import diff as diff_logs
 
-    return diff_logs(_log(a, "a"), _log(b, "b"), fields=fields, atol=atol)
+    return diff_logs(log_of(a, "a"), log_of(b, "b"), fields=fields, atol=atol)
 
 
 __all__ = ["compare", "diff"]
