@@ -202,10 +202,10 @@ def test_kernel_source_variants_differ_only_where_they_should():
 def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path, monkeypatch):
     """A first test run's record and sweep kernels go to one pool (no core idles between two
     batches), the longer sweep kernels first; the notice counts families and kernels."""
-    from corraoi.engine import kernel_pool
+    from corraoi.engine import kernel_cache, kernel_pool
 
     monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(kernels, "_LOADED", {})  # as in a fresh process (whatever ran before)
+    monkeypatch.setattr(kernel_cache, "_LOADED", {})  # as in a fresh process (whatever ran)
     started: list[str] = []
 
     class Done:  # a worker that has finished at once
