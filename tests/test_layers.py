@@ -34,8 +34,6 @@ HEAVY = ("numba", "rerun", "pandas", "pyarrow", "matplotlib")
 #: What is still owed, with why; each is paid in this round and taken off (the tests fail on a
 #: debt that is paid but still listed, so that the list stays true).
 OWED_CLIMBS: dict[str, str] = {}
-OWED_WING_CIRCLES = {frozenset({"corraoi.experiments", "corraoi.gpu"}):
-                     "the GPU runner runs a grid's chunks: moves to experiments.backends"}
 
 
 def _modules() -> dict[str, Path]:
@@ -50,12 +48,14 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _runtime_imports(tree: ast.Module) -> list[ast.Import | ast.ImportFrom]:
+def _runtime_imports(tree: ast.Module, typing: bool = False) -> list[ast.Import | ast.ImportFrom]:
+    """The imports of ``tree``, those under ``if TYPE_CHECKING:`` only with ``typing``."""
     found: list[ast.Import | ast.ImportFrom] = []
 
     def visit(node: ast.AST) -> None:
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            if (not typing and isinstance(child, ast.If)
+                    and "TYPE_CHECKING" in ast.unparse(child.test)):  # fmt: skip
                 for other in child.orelse:
                     visit(other)
                 continue
@@ -82,11 +82,11 @@ def _known(name: str) -> str | None:
     return name or None
 
 
-def _edges() -> dict[str, set[str]]:
+def _edges(typing: bool = False) -> dict[str, set[str]]:
     edges: dict[str, set[str]] = {}
     for name, path in MODULES.items():
         targets: set[str] = set()
-        for node in _runtime_imports(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in _runtime_imports(ast.parse(path.read_text(encoding="utf-8")), typing):
             if isinstance(node, ast.Import):
                 wanted = [a.name for a in node.names]
             else:
@@ -163,23 +163,21 @@ def test_only_the_top_floor_imports_the_recorder_or_the_viewer():
     assert set(OWED_CLIMBS) <= set(wrong), "paid: take it off OWED_CLIMBS"
 
 
-def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
-    edges = _edges()
+def _rooms(edges: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The wings of ``corraoi`` and the wings each imports."""
     rooms: dict[str, set[str]] = {}
     for src, targets in edges.items():
         if not src.startswith("corraoi.") or src == "corraoi.__main__":
             continue
         room = rooms.setdefault(_wing(src), set())
         room |= {_wing(t) for t in targets if t.startswith("corraoi.") and _wing(t) != _wing(src)}
-    circles = _circles(rooms)
-    assert circles == set(OWED_WING_CIRCLES)
-    for circle in circles:  # counted as one room while owed
-        one = "+".join(sorted(circle))
-        rooms[one] = set().union(*(rooms.pop(r) for r in circle)) - circle
-        for targets in rooms.values():
-            if targets & circle:
-                targets -= circle
-                targets.add(one)
+    return rooms
+
+
+def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
+    edges = _edges()
+    rooms = _rooms(edges)
+    assert _circles(rooms) == set()
     floors: dict[str, int] = {}
 
     def floor(room: str) -> int:
@@ -200,6 +198,17 @@ def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
             return depth[m]
 
         assert max(map(down, inner), default=0) <= 8, (wing, depth)
+
+
+def test_the_gpu_backend_knows_nothing_of_the_experiments_even_for_types():
+    """The GPU backend runs one policy's runs from plain data; which runs of a grid, in
+    which order, is the experiments' (``experiments.backends``): no module of
+    ``corraoi.gpu`` names ``corraoi.experiments``, typing imports counted too."""
+    edges = _edges(typing=True)
+    assert "corraoi.experiments.grid" in edges["corraoi.experiments.backends"]  # they are seen
+    gpu = {t for m, ts in edges.items() if m.startswith("corraoi.gpu") for t in ts}
+    assert "corraoi.engine.problem" in gpu
+    assert {t for t in gpu if t.startswith("corraoi.experiments")} == set()
 
 
 def test_the_checks_see_a_circle_and_a_climb():
