@@ -24,9 +24,10 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.errors import ConfigError
+from corraoi.experiments.backends import settle
 from corraoi.experiments.grid import build_grid
 from corraoi.experiments.montecarlo import run_policy
-from corraoi.gpu import GpuUnavailable, choose_backend
+from corraoi.gpu import GpuUnavailable
 from corraoi.gpu.device import (
     DEVICE_ENV,
     FAMILIES,
@@ -626,7 +627,7 @@ def _grid(policies: list[str], backend: str):  # type: ignore[no-untyped-def]
 
 def test_auto_falls_back_to_the_cpu_with_a_notice_without_cupy(no_cupy: None):
     notes: list[str] = []
-    grid = choose_backend(_grid(["ucb"], "auto"), warn=notes.append)
+    grid = settle(_grid(["ucb"], "auto"), None, warn=notes.append)
     assert grid.backend == "cpu"
     assert notes == ['--backend auto: running on the CPU (CuPy is not installed '
                      '(pip install "corraoi[gpu]", for CUDA 13))']  # fmt: skip
@@ -635,7 +636,7 @@ def test_auto_falls_back_to_the_cpu_with_a_notice_without_cupy(no_cupy: None):
 def test_gpu_without_cupy_is_one_clear_line(no_cupy: None):
     with pytest.raises(GpuUnavailable, match=r"^--backend gpu: CuPy is not installed .*; run "
                        r"with --backend cpu$"):  # fmt: skip
-        choose_backend(_grid(["ucb"], "gpu"))
+        settle(_grid(["ucb"], "gpu"), None)
     res = run("sweep", "-p", "ucb", "-n", "3", "-T", "100", "--backend", "gpu")
     assert res.exit_code == 2
     lines = res.output.strip().splitlines()
@@ -644,13 +645,13 @@ def test_gpu_without_cupy_is_one_clear_line(no_cupy: None):
 
 
 def test_auto_picks_the_gpu_when_it_can_and_the_cpu_for_a_plug_in(emulate_env: None):
-    assert choose_backend(_grid(["ucb", "cts"], "auto")).backend == "gpu"
+    assert settle(_grid(["ucb", "cts"], "auto"), None).backend == "gpu"
     notes: list[str] = []
     plug = f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy"
-    assert choose_backend(_grid(["ucb", plug], "auto"), warn=notes.append).backend == "cpu"
+    assert settle(_grid(["ucb", plug], "auto"), None, warn=notes.append).backend == "cpu"
     assert "policy eps-greedy has a plain-Python policy" in notes[0]
     with pytest.raises(GpuUnavailable, match="eps-greedy"):
-        choose_backend(_grid([plug], "gpu"))
+        settle(_grid([plug], "gpu"), None)
 
 
 def test_a_bad_device_setting_is_refused(monkeypatch: pytest.MonkeyPatch):

@@ -202,10 +202,10 @@ def test_kernel_source_variants_differ_only_where_they_should():
 def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path, monkeypatch):
     """A first test run's record and sweep kernels go to one pool (no core idles between two
     batches), the longer sweep kernels first; the notice counts families and kernels."""
-    from corraoi.engine import kernel_pool
+    from corraoi.engine import kernel_cache, kernel_pool
 
     monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(kernels, "_LOADED", {})  # as in a fresh process (whatever ran before)
+    monkeypatch.setattr(kernel_cache, "_LOADED", {})  # as in a fresh process (whatever ran)
     started: list[str] = []
 
     class Done:  # a worker that has finished at once
@@ -276,3 +276,26 @@ def test_every_sampler_a_kernel_can_call_is_inlined():
             seen.append(name)
             assert obj.targetoptions.get("inline") == "always", f"{module.__name__}.{name}"
     assert {"argmax_random", "beta", "gamma", "integer", "uniform", "ucb_score"} <= set(seen)
+
+
+def test_the_cache_folder_falls_back_to_the_temp_folder_when_it_cannot_be_written(
+    tmp_path: Path, monkeypatch
+):
+    """kernel_cache.folder: under $CORRAOI_CACHE_DIR (a subfolder for the emulated GPU's
+    libraries), else, where that cannot be made or written, one folder in the system's temp
+    folder -- never an error."""
+    import tempfile
+
+    from corraoi._version import __version__
+    from corraoi.engine import kernel_cache
+
+    monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
+    assert kernel_cache.folder() == tmp_path / "cache" / f"kernels-{__version__}"
+    gpu = kernel_cache.folder("gpu-emulation")
+    assert gpu == tmp_path / "cache" / f"kernels-{__version__}" / "gpu-emulation" and gpu.is_dir()
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    monkeypatch.setenv("CORRAOI_CACHE_DIR", str(blocked))
+    fallback = Path(tempfile.gettempdir()) / f"corraoi-kernels-{__version__}-{os.getuid()}"
+    assert kernel_cache.folder() == fallback == kernel_cache.folder("gpu-emulation")
+    assert fallback.is_dir()

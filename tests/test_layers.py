@@ -34,9 +34,6 @@ HEAVY = ("numba", "rerun", "pandas", "pyarrow", "matplotlib")
 #: What is still owed, with why; each is paid in this round and taken off (the tests fail on a
 #: debt that is paid but still listed, so that the list stays true).
 OWED_CLIMBS: dict[str, str] = {}
-OWED_WING_CIRCLES = {frozenset({"corraoi.experiments", "corraoi.gpu"}):
-                     "the GPU runner runs a grid's chunks: moves to experiments.backends"}
-OWED_PRIVATE = {"corraoi.engine.kernel_pool", "corraoi.gpu.device"}
 
 
 def _modules() -> dict[str, Path]:
@@ -51,12 +48,14 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _runtime_imports(tree: ast.Module) -> list[ast.Import | ast.ImportFrom]:
+def _runtime_imports(tree: ast.Module, typing: bool = False) -> list[ast.Import | ast.ImportFrom]:
+    """The imports of ``tree``, those under ``if TYPE_CHECKING:`` only with ``typing``."""
     found: list[ast.Import | ast.ImportFrom] = []
 
     def visit(node: ast.AST) -> None:
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            if (not typing and isinstance(child, ast.If)
+                    and "TYPE_CHECKING" in ast.unparse(child.test)):  # fmt: skip
                 for other in child.orelse:
                     visit(other)
                 continue
@@ -83,11 +82,11 @@ def _known(name: str) -> str | None:
     return name or None
 
 
-def _edges() -> dict[str, set[str]]:
+def _edges(typing: bool = False) -> dict[str, set[str]]:
     edges: dict[str, set[str]] = {}
     for name, path in MODULES.items():
         targets: set[str] = set()
-        for node in _runtime_imports(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in _runtime_imports(ast.parse(path.read_text(encoding="utf-8")), typing):
             if isinstance(node, ast.Import):
                 wanted = [a.name for a in node.names]
             else:
@@ -164,23 +163,21 @@ def test_only_the_top_floor_imports_the_recorder_or_the_viewer():
     assert set(OWED_CLIMBS) <= set(wrong), "paid: take it off OWED_CLIMBS"
 
 
-def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
-    edges = _edges()
+def _rooms(edges: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The wings of ``corraoi`` and the wings each imports."""
     rooms: dict[str, set[str]] = {}
     for src, targets in edges.items():
         if not src.startswith("corraoi.") or src == "corraoi.__main__":
             continue
         room = rooms.setdefault(_wing(src), set())
         room |= {_wing(t) for t in targets if t.startswith("corraoi.") and _wing(t) != _wing(src)}
-    circles = _circles(rooms)
-    assert circles == set(OWED_WING_CIRCLES)
-    for circle in circles:  # counted as one room while owed
-        one = "+".join(sorted(circle))
-        rooms[one] = set().union(*(rooms.pop(r) for r in circle)) - circle
-        for targets in rooms.values():
-            if targets & circle:
-                targets -= circle
-                targets.add(one)
+    return rooms
+
+
+def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
+    edges = _edges()
+    rooms = _rooms(edges)
+    assert _circles(rooms) == set()
     floors: dict[str, int] = {}
 
     def floor(room: str) -> int:
@@ -201,6 +198,17 @@ def test_corraois_wings_have_no_circle_and_stand_at_most_8_floors():
             return depth[m]
 
         assert max(map(down, inner), default=0) <= 8, (wing, depth)
+
+
+def test_the_gpu_backend_knows_nothing_of_the_experiments_even_for_types():
+    """The GPU backend runs one policy's runs from plain data; which runs of a grid, in
+    which order, is the experiments' (``experiments.backends``): no module of
+    ``corraoi.gpu`` names ``corraoi.experiments``, typing imports counted too."""
+    edges = _edges(typing=True)
+    assert "corraoi.experiments.grid" in edges["corraoi.experiments.backends"]  # they are seen
+    gpu = {t for m, ts in edges.items() if m.startswith("corraoi.gpu") for t in ts}
+    assert "corraoi.engine.problem" in gpu
+    assert {t for t in gpu if t.startswith("corraoi.experiments")} == set()
 
 
 def test_the_checks_see_a_circle_and_a_climb():
@@ -257,33 +265,81 @@ def test_no_module_re_exports_what_it_imports():
     assert shims == {}
 
 
+def _dotted(node: ast.AST) -> str | None:
+    """``a.b.c`` for a chain of names and attributes, else None."""
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        base = _dotted(node.value)
+        return None if base is None else f"{base}.{node.attr}"
+    return None
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def _private_reaches(name: str, tree: ast.Module) -> list[str]:
+    """Where module ``name`` (its ``tree``) uses another module's private name: imported
+    (``from x import _y``), or read through a module (``x._y``, ``a.b.x._y``), also in the
+    Python code of a string (a worker's ``python -c`` script)."""
+    found = []
+    modules: dict[str, str] = {}  # a local name or dotted path -> the module it is
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = _base(name, node)
+            if base.split(".")[0] not in PACKAGES:
+                continue
+            for a in node.names:
+                if f"{base}.{a.name}" in MODULES:
+                    modules[a.asname or a.name] = f"{base}.{a.name}"
+                elif _private(a.name) and base != name:
+                    found.append(f"{name}: from {base} import {a.name}")
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name in MODULES:
+                    modules[a.asname or a.name] = a.name
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr):
+            base = _dotted(node.value)
+            if base in modules and modules[base] != name:
+                found.append(f"{name}: {modules[base]}.{node.attr}")
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) \
+                and "import" in node.value:  # fmt: skip
+            try:
+                code = ast.parse(node.value)
+            except SyntaxError:
+                continue
+            found += [f"{f} (in a string)" for f in _private_reaches(name, code)]
+    return found
+
+
 def test_no_module_imports_another_modules_private_names():
     found = []
     for name, path in MODULES.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
-        modules: dict[str, str] = {}
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom):
-                base = _base(name, node)
-                if base.split(".")[0] not in PACKAGES:
-                    continue
-                for a in node.names:
-                    if f"{base}.{a.name}" in MODULES:
-                        modules[a.asname or a.name] = f"{base}.{a.name}"
-                    elif a.name.startswith("_") and not a.name.startswith("__") and base != name:
-                        found.append(f"{name}: from {base} import {a.name}")
-            elif isinstance(node, ast.Import):
-                for a in node.names:
-                    if a.name in MODULES and a.asname:
-                        modules[a.asname] = a.name
-        for node in ast.walk(tree):
-            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-                    and node.value.id in modules and node.attr.startswith("_")
-                    and not node.attr.startswith("__")):  # fmt: skip
-                found.append(f"{name}: {modules[node.value.id]}.{node.attr}")
-    owing = {f.split(":")[0] for f in found}
-    assert owing - OWED_PRIVATE == set(), found
-    assert OWED_PRIVATE <= owing, "paid: take it off OWED_PRIVATE"
+        found += _private_reaches(name, ast.parse(path.read_text(encoding="utf-8")))
+    assert found == []
+
+
+def test_the_private_check_sees_each_way_in():
+    """The check itself: an import, a module's attribute, a dotted path and a worker's
+    script each reach a private name; a module's own privates and dunders do not."""
+    code = (
+        "from corraoi.engine.kernels import _x, __version__\n"
+        "from corraoi.engine import kernels\n"
+        "import corraoi.engine.kernel_cache\n"
+        "kernels._y(); kernels.__doc__\n"
+        "corraoi.engine.kernel_cache._z\n"
+        "WORKER = 'from corraoi.engine import kernels\\nkernels._w()'\n"
+    )
+    found = _private_reaches("corraoi.gpu.device", ast.parse(code))
+    assert sorted(found) == [
+        "corraoi.gpu.device: corraoi.engine.kernel_cache._z",
+        "corraoi.gpu.device: corraoi.engine.kernels._w (in a string)",
+        "corraoi.gpu.device: corraoi.engine.kernels._y",
+        "corraoi.gpu.device: from corraoi.engine.kernels import _x",
+    ]
+    assert _private_reaches("corraoi.engine.kernels", ast.parse(code))[1:] == []
 
 
 def test_no_string_names_a_module_of_recorder_or_viewer_below_the_top_floor():

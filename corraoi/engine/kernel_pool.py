@@ -5,8 +5,8 @@ each compiled in seconds by one core. :func:`prepare` compiles the ones the cach
 worker processes, one kernel each and one per core at a time, with one notice and a progress
 line (through :data:`corraoi.engine.kernels.on_compile`). The caller then loads each from the cache;
 a kernel a worker could not compile is compiled in-process when it is needed, and reported
-there with its policy's name. Kernel locks (:mod:`corraoi.engine.kernels`) make a kernel that two
-processes need at once compile once.
+there with its policy's name. Kernel locks (:mod:`corraoi.engine.kernel_cache`) make a kernel that
+two processes need at once compile once.
 
 (Workers that each compile kernel after kernel, paying numba's import once per core rather
 than once per kernel, were measured: all 24 built-ins' 14 kernels from an empty cache in
@@ -24,18 +24,20 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from corraoi.errors import KernelError
 from corraoi.policies.api import CompiledPolicy
 from corraoi.policies.loading import PLUGIN_MODULE_PREFIX
 
-from . import kernels
+from . import kernel_cache, kernels
 
 # A worker: compile one generated kernel module into the shared cache. A failure is left to
 # the parent (module docstring).
 _WORKER = (
     "import sys\n"
     "from pathlib import Path\n"
-    "from corraoi.engine import kernels\n"
-    "kernels._load(Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), sys.argv[2])\n"
+    "from corraoi.engine import kernel_cache, kernels\n"
+    "kernel_cache.load(Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), sys.argv[2],\n"
+    "                  warm=kernels.warm_args)\n"
 )
 
 
@@ -46,21 +48,20 @@ def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bo
     sweep kernels (False) or both (``(True, False)``: one pool, the sweep kernels first as
     they take longest, so that no core waits for the other at the end)."""
     kinds = sorted({record} if isinstance(record, bool) else set(record))  # False first
-    folder = kernels._writable(kernels.cache_dir())
+    folder = kernel_cache.folder()
     todo: dict[str, tuple[Path, str]] = {}
     policies = list(policies)
     for kind in kinds:
         for policy in policies:
             try:
                 modname, source = kernels.kernel_source(policy, record=kind)
-            except kernels.KernelError:
+            except KernelError:
                 continue  # reported by kernel_for with the policy's name
-            if (modname in kernels._LOADED or modname in todo
-                    or kernels._is_cached(folder, modname)):  # fmt: skip
+            if modname in todo or kernel_cache.ready(folder, modname):
                 continue
             if not all(_importable(ref) for ref in kernels.hooks_of(policy)):
                 continue
-            todo[modname] = (kernels._write_source(folder, modname, source), policy.name)
+            todo[modname] = (kernel_cache.write_source(folder, modname, source), policy.name)
     if len(todo) < 2:
         return  # one kernel compiles as fast in this process
     start = time.perf_counter()

@@ -14,29 +14,16 @@ kernels shaped by their job (the template's docstring): the serial record kernel
 one-run ``corraoi record`` compiles in about 3 s, and the sweep kernel, without the per-slot
 recording path. A command compiles only the one it uses; when several families must compile
 (a first ``--policy all``), :func:`corraoi.engine.kernel_pool.prepare` compiles them in worker
-processes at once. A lock
-file per kernel makes two processes that share a fresh cache compile it once, and a damaged
-cache entry is rebuilt with one notice.
-
-The cache folder is ``$CORRAOI_CACHE_DIR``, else ``$XDG_CACHE_HOME/corraoi``, else
-``~/.cache/corraoi``; a folder that cannot be written falls back to the system's temp folder.
+processes at once. Where the copies are kept, locked, checked and compiled:
+:mod:`corraoi.engine.kernel_cache`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import hashlib
 import importlib
-import importlib.util
-import json
-import os
 import sys
-import tempfile
-import threading
-import time
-import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +32,8 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.errors import KernelError
 from corraoi.policies.api import CompiledPolicy
+
+from . import kernel_cache
 
 #: Called with a one-line notice before a kernel is compiled (not when it loads from cache).
 #: The CLI prints it; the library stays quiet.
@@ -60,31 +49,6 @@ _HOOK_LINES = (
 #: Seconds this process spent compiling kernels (speed figures such as record's slots/s
 #: leave them out).
 compile_seconds = 0.0
-_LOADED: dict[str, Any] = {}
-_LOCK = threading.Lock()
-
-
-def cache_dir() -> Path:
-    """Where generated kernels (and numba's cache of them) live."""
-    env = os.environ.get("CORRAOI_CACHE_DIR")
-    if env:
-        base = Path(env)
-    else:
-        xdg = os.environ.get("XDG_CACHE_HOME")
-        base = (Path(xdg) if xdg else Path.home() / ".cache") / "corraoi"
-    return base / f"kernels-{__version__}"
-
-
-def _writable(folder: Path) -> Path:
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=folder):  # a name of its own: threads probe at once
-            pass
-        return folder
-    except OSError:
-        fallback = Path(tempfile.gettempdir()) / f"corraoi-kernels-{__version__}-{os.getuid()}"
-        fallback.mkdir(parents=True, exist_ok=True)
-        return fallback
 
 
 def load_hook(ref: Any, role: str, policy: type[CompiledPolicy]) -> Any:
@@ -194,66 +158,6 @@ def _sweep_decorator(text: str) -> str:
     return _kernel.SWEEP_DECORATOR
 
 
-def _index_files(folder: Path, modname: str) -> list[Path]:
-    pycache = folder / "__pycache__"
-    if not pycache.is_dir():
-        return []
-    return [p for p in pycache.iterdir() if p.name.startswith(f"{modname}.advance")]
-
-
-def _is_cached(folder: Path, modname: str) -> bool:
-    return any(p.suffix == ".nbi" for p in _index_files(folder, modname))
-
-
-def _sums_file(folder: Path, modname: str) -> Path:
-    return folder / f".{modname}.sha256"
-
-
-def _sums(folder: Path, modname: str) -> dict[str, str]:
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(_index_files(folder, modname))}  # fmt: skip
-
-
-def _write_sums(folder: Path, modname: str) -> None:
-    """Record the sha256 of every file numba cached for a kernel just compiled."""
-    from corraoi.files.partial import PartialFile
-
-    data = json.dumps(_sums(folder, modname), sort_keys=True).encode()
-    PartialFile.write_bytes(_sums_file(folder, modname), data, what="kernel cache checksums")
-
-
-def _damaged(folder: Path, modname: str) -> str:
-    """Why a kernel's cached files cannot be trusted, as the end of a sentence ("" when they
-    can, or when there are none): integrity is checked before numba loads machine code, so a
-    truncated, altered or foreign file is rebuilt instead of being run."""
-    if not _index_files(folder, modname):
-        return ""
-    try:
-        want = json.loads(_sums_file(folder, modname).read_text(encoding="utf-8"))
-        have = _sums(folder, modname)
-    except (OSError, ValueError, RecursionError):
-        return "has no checksums (cached by an older corraoi, or its checksums were lost)"
-    return "" if want == have else "is damaged (its files do not match their checksums)"
-
-
-def _clear_index(folder: Path, modname: str) -> None:
-    for f in _index_files(folder, modname):
-        f.unlink(missing_ok=True)
-    _sums_file(folder, modname).unlink(missing_ok=True)
-
-
-@contextlib.contextmanager
-def _locked(folder: Path, modname: str) -> Iterator[None]:
-    """Hold an exclusive lock on one kernel's lock file: a second process that needs the
-    same kernel waits here and then loads what the first compiled (compiled once)."""
-    fd = os.open(folder / f".{modname}.lock", os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)  # closing releases the lock
-
-
 def warm_args(K: int = 2) -> tuple[Any, ...]:
     """Arguments of a zero-slot ``advance`` call with the types the engine passes (so the
     compiled signature is the one the engine will look up in the cache)."""
@@ -274,79 +178,12 @@ def warm_args(K: int = 2) -> tuple[Any, ...]:
     )  # fmt: skip
 
 
-def _load(folder: Path, modname: str, path: Path, what: str) -> Any:
-    """Import the generated module and compile (or load) its ``advance`` under the lock.
-
-    A damaged cache entry (a truncated or foreign file in ``__pycache__``) is deleted and the
-    kernel rebuilt, with one notice; it never ends the command.
-    """
-    global compile_seconds
-    from numba.core.errors import NumbaPerformanceWarning
-
-    with _locked(folder, modname):
-        damaged = _damaged(folder, modname)  # checked before numba loads any of it
-        if damaged:
-            if on_compile is not None:
-                on_compile(f"the cached engine for {what} {damaged}; rebuilding it")
-            _clear_index(folder, modname)
-        compiling = not _is_cached(folder, modname)
-        if compiling and on_compile is not None and not damaged:  # said above if damaged
-            on_compile(f"compiling the engine for {what} (first use; cached in {folder})")
-        for attempt in (0, 1):
-            sys.modules.pop(modname, None)
-            spec = importlib.util.spec_from_file_location(modname, path)
-            assert spec is not None and spec.loader is not None
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[modname] = module
-            start = time.perf_counter()
-            try:
-                with warnings.catch_warnings():
-                    # the sweep kernel asks for parallel=True for its IR passes, not for
-                    # parfors: numba's "no transformation for parallel execution" is expected
-                    warnings.simplefilter("ignore", NumbaPerformanceWarning)
-                    spec.loader.exec_module(module)
-                    module.advance(*warm_args())
-            except KernelError:
-                raise
-            except Exception as exc:
-                if attempt == 1 or not _index_files(folder, modname):
-                    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()][:2]
-                    why = " ".join(" ".join(lines).split())[:400]  # numba's errors run long
-                    raise KernelError(f"the engine for {what} cannot be built in {folder}: "
-                                      f"{type(exc).__name__}: {why}") from exc  # fmt: skip
-                if on_compile is not None:
-                    on_compile(
-                        f"the cached engine for {what} is damaged "
-                        f"({type(exc).__name__}); rebuilding it"
-                    )
-                _clear_index(folder, modname)
-                compiling = True
-                continue
-            if compiling:
-                compile_seconds += time.perf_counter() - start
-                _write_sums(folder, modname)
-            return module.advance
-    raise AssertionError("unreachable")
-
-
-def _write_source(folder: Path, modname: str, source: str) -> Path:
-    path = folder / f"{modname}.py"
-    if not path.is_file() or path.read_text(encoding="utf-8") != source:
-        tmp = folder / f".{modname}.{os.getpid()}.tmp"
-        tmp.write_text(source, encoding="utf-8")
-        os.replace(tmp, path)  # atomic: concurrent processes write the same bytes
-    return path
-
-
 def kernel_for(policy: type[CompiledPolicy], *, record: bool) -> Any:
     """The compiled ``advance`` of ``policy``'s family: the record kernel (per-slot columns)
     or the sweep kernel (finals and snapshots only), built, cached and loaded on demand."""
+    global compile_seconds
     modname, source = kernel_source(policy, record=record)
-    with _LOCK:
-        if modname in _LOADED:
-            return _LOADED[modname]
-        folder = _writable(cache_dir())
-        path = _write_source(folder, modname, source)
-        kernel = _load(folder, modname, path, policy.name)
-        _LOADED[modname] = kernel
-        return kernel
+    kernel, took = kernel_cache.kernel(modname, source, policy.name, warm=warm_args,
+                                       say=on_compile)  # fmt: skip
+    compile_seconds += took
+    return kernel

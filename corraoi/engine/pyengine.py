@@ -1,5 +1,7 @@
-"""The plain-Python tier: a :class:`corraoi.policies.Policy` driven slot by slot, vectorised
-over runs.
+"""The plain-Python tier's parts: what a :class:`corraoi.policies.Policy` sees
+(:class:`RunState`, :class:`Streams`), the check of what it returns, the bookkeeping of a
+slot, and its failures in one line. :class:`corraoi.engine.simulation.Simulation` drives it
+slot by slot, vectorised over runs.
 
 Each slot: the hidden states of every run (drawn in blocks from the runs' latent streams by
 the same compiled function as the built-ins' kernel, so a plug-in run on seed s sees exactly
@@ -20,8 +22,6 @@ from numba import njit
 
 from corraoi.errors import CorraoiError, PolicyRuntimeError
 from corraoi.rng import argmax_random, beta, integer, normal, uniform
-
-from ._kernel import draw_states
 
 
 @njit(cache=True)
@@ -229,70 +229,6 @@ def check_arms(
     return ai, cand
 
 
-def advance_python(
-    sim: Any,
-    nslots: int,
-    record: bool,
-    out: Any,
-    snap_t: np.ndarray,
-    s_regret: np.ndarray,
-    s_aoisum: np.ndarray,
-    s_pulls: np.ndarray,
-) -> tuple[int, PolicyRuntimeError | None]:
-    """Advance the runs of ``sim`` (an :class:`corraoi.engine.simulation.Simulation` of a
-    plain-Python
-    policy) slot by slot, writing each slot's columns into ``out`` when recording and the
-    snapshots at ``snap_t``; returns (slots done, the plug-in's failure or None)."""
-    policy, state = sim._py, sim._state
-    name = sim.policy.name
-    R, K = sim.pulls.shape
-    xs = np.empty((R, nslots), dtype=np.int64)
-    draw_states(sim._cdf_rows, sim._kind, sim._trace, sim.lat, sim.xprev, sim.t,
-                nslots, xs)  # fmt: skip
-    Y = sim._Y
-    mu = state.mu_hat
-    rew = np.empty(R, dtype=np.int8)
-    state.pulls, state.successes, state.aoi = sim.pulls, sim.succ, sim.aoi
-    if sim.t == 0:
-        try:
-            _call(name, 0, policy.reset, state)
-        except PolicyRuntimeError as exc:
-            return 0, exc
-    si = 0
-    for j in range(nslots):
-        t = sim.t + j + 1
-        state.t = t
-        try:
-            picked = _call(name, t, policy.select, t, state)
-            arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t, who=sim.run_name)
-        except PolicyRuntimeError as exc:
-            return j, exc
-        x = xs[:, j]
-        apply_slot(arms, x, Y, sim.best, sim.pulls, sim.succ, mu, sim.aoi,
-                   sim.oracle_aoi, sim.regret, sim.aoisum, rew)  # fmt: skip
-        if record:
-            out.x[:, j] = x
-            out.arm[:, j] = arms
-            out.succ[:, j] = rew == 1
-            out.aoi[:, j] = sim.aoi
-            out.oaoi[:, j] = sim.oracle_aoi
-            out.regret[:, j] = sim.regret
-            out.override[:, j] = False
-            out.cand[:, j] = True if cand is None else cand
-            out.pulls[:, j] = sim.pulls
-            out.muhat[:, j] = mu
-        if si < snap_t.size and snap_t[si] == t:
-            s_regret[:, si] = sim.regret
-            s_aoisum[:, si] = sim.aoisum
-            s_pulls[:, si] = sim.pulls
-            si += 1
-        try:
-            _call(name, t, policy.update, t, arms, rew, state)
-        except PolicyRuntimeError as exc:
-            return j + 1, exc  # the slot itself happened
-    return nslots, None
-
-
 def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:
     """A compiled hook's fault the kernel noted (``corraoi.engine._kernel``'s ``err``), in the
     plain-Python tier's words: one line naming the policy, the slot and the run."""
@@ -326,18 +262,3 @@ def construct(cls: Any, spec: Any) -> Any:
         raise PolicyRuntimeError(f"policy {spec.name}: creating it ({cls.__name__}.__init__) "
                                  f"raised {type(exc).__name__}"
                                  + (f": {detail}" if detail else "")) from None  # fmt: skip
-
-
-def _call(name: str, t: int, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
-    try:
-        return func(*args)
-    except (CorraoiError, KeyboardInterrupt):
-        raise
-    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        what = getattr(func, "__name__", "policy")
-        detail = " ".join(str(exc).split())
-        raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
-            + (f": {detail}" if detail else "")
-        ) from exc

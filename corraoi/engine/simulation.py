@@ -25,9 +25,10 @@ from corraoi.policies.spec import PolicySpec
 from corraoi.rng import streams_for_seeds
 
 from . import threads
+from ._kernel import draw_states
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import RunState, Streams, advance_python, construct, hook_fault, hook_raised
+from .pyengine import RunState, Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
 
 __all__ = [
     "RunsBlock",
@@ -77,7 +78,8 @@ class Simulation:
     """The state of R runs of one policy on one instance, advanced by :meth:`advance`.
 
     Compiled policies run in their family's kernel (:mod:`corraoi.engine.kernels`); plain-Python
-    policies (:class:`corraoi.policies.Policy`) slot by slot, vectorised over runs.
+    policies (:class:`corraoi.policies.Policy`) slot by slot, vectorised over runs, with the
+    parts of :mod:`corraoi.engine.pyengine`.
     """
 
     def __init__(
@@ -226,6 +228,62 @@ class Simulation:
 
         threads.run_slices(run, slices)
 
+    def _run_python(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+                    s_regret: np.ndarray, s_aoisum: np.ndarray,
+                    s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
+        """Advance every run of a plain-Python policy slot by slot, writing each slot's
+        columns into ``out`` when recording and the snapshots at ``snap_t``; returns (slots
+        done, the plug-in's failure or None)."""
+        policy, state = self._py, self._state
+        name = self.policy.name
+        R, K = self.pulls.shape
+        xs = np.empty((R, nslots), dtype=np.int64)
+        draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
+                    nslots, xs)  # fmt: skip
+        Y = self._Y
+        mu = state.mu_hat
+        rew = np.empty(R, dtype=np.int8)
+        state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
+        if self.t == 0:
+            try:
+                _call(name, 0, policy.reset, state)
+            except PolicyRuntimeError as exc:
+                return 0, exc
+        si = 0
+        for j in range(nslots):
+            t = self.t + j + 1
+            state.t = t
+            try:
+                picked = _call(name, t, policy.select, t, state)
+                arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t,
+                                        who=self.run_name)  # fmt: skip
+            except PolicyRuntimeError as exc:
+                return j, exc
+            x = xs[:, j]
+            apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
+                       self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
+            if record:
+                out.x[:, j] = x
+                out.arm[:, j] = arms
+                out.succ[:, j] = rew == 1
+                out.aoi[:, j] = self.aoi
+                out.oaoi[:, j] = self.oracle_aoi
+                out.regret[:, j] = self.regret
+                out.override[:, j] = False
+                out.cand[:, j] = True if cand is None else cand
+                out.pulls[:, j] = self.pulls
+                out.muhat[:, j] = mu
+            if si < snap_t.size and snap_t[si] == t:
+                s_regret[:, si] = self.regret
+                s_aoisum[:, si] = self.aoisum
+                s_pulls[:, si] = self.pulls
+                si += 1
+            try:
+                _call(name, t, policy.update, t, arms, rew, state)
+            except PolicyRuntimeError as exc:
+                return j + 1, exc  # the slot itself happened
+        return nslots, None
+
     @property
     def runs(self) -> int:
         return int(self.seeds.size)
@@ -270,9 +328,8 @@ class Simulation:
             done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
                                                s_pulls)  # fmt: skip
         else:
-            done, failure = advance_python(
-                self, nslots, record, out, snap_t, s_regret, s_aoisum, s_pulls
-            )
+            done, failure = self._run_python(nslots, record, out, snap_t, s_regret, s_aoisum,
+                                             s_pulls)  # fmt: skip
         if failure is not None:  # keep the slots before the failing one
             nslots = done
             out.trim(done)
@@ -389,3 +446,18 @@ def simulate_run(
     """One run, block by block (what ``corraoi record`` streams to its sinks)."""
     for b in simulate(instance, policy, [seed], horizon, block=block, channel=channel):
         yield b.run(0)
+
+
+def _call(name: str, t: int, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
+    try:
+        return func(*args)
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
+        what = getattr(func, "__name__", "policy")
+        detail = " ".join(str(exc).split())
+        raise PolicyRuntimeError(
+            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
+            + (f": {detail}" if detail else "")
+        ) from exc

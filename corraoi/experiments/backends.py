@@ -4,11 +4,12 @@
 * :class:`OnDask`: the CPU engine on the workers of a ``dask.distributed`` client
   (``corraoi/experiments/cluster.py``);
 * :class:`OnGpu`: the built-in policies' CUDA kernel, one thread per run
-  (``corraoi/gpu/runner.py``).
+  (:mod:`corraoi.gpu`: it runs one policy's runs; which runs, in which order, is here).
 
 A backend takes the chunks to run as (cell, chunk) pairs and hands each finished
 :class:`corraoi.experiments.folder.ChunkResult` to ``on_done`` (in any order); it never calls back
-into the sweep. :func:`choose` settles ``--backend`` (cpu, gpu, auto) and the scheduler.
+into the sweep. :func:`settle` settles ``--backend`` (cpu, gpu, auto) and :func:`choose` the
+backend that runs a settled grid.
 """
 
 from __future__ import annotations
@@ -17,11 +18,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, GpuUnavailable
 
 from .grid import Cell, Chunk, Grid
 
 if TYPE_CHECKING:
+    from corraoi.gpu.device import Device
+    from corraoi.gpu.runner import DeviceRun
+
     from .folder import ChunkResult
 
 #: Why a GPU sweep and a Dask client do not go together.
@@ -92,9 +96,49 @@ class OnGpu:
 
     def run(self, grid: Grid, todo: Sequence[tuple[Cell, Chunk]], *, on_done: OnDone,
             on_slots: OnSlots | None) -> None:  # fmt: skip
-        from corraoi.gpu.runner import execute
+        """Run the chunks ``todo`` on the device, group by group. With a baseline, its runs
+        of each chunk's range run first and stay on the device, so that every other
+        policy's paired moments are computed there."""
+        from corraoi.gpu import get_device
 
-        execute(grid, todo, on_done=on_done, on_slots=on_slots)
+        from .folder import ChunkResult
+
+        dev = get_device()
+        for cells in grid.groups().values():
+            keys = {c.key for c in cells}
+            work = [(c, ch) for c, ch in todo if c.key in keys]
+            if not work:
+                continue
+            base = next((c for c in cells if c.policy.name == grid.baseline), None)
+            work.sort(key=lambda item: base is None or item[0].key != base.key)
+            kept: dict[tuple[int, int], Any] = {}
+            for cell, chunk in work:
+                span = (chunk.start, chunk.stop)
+                is_base = base is not None and cell.key == base.key
+                against = None
+                if base is not None and not is_base:
+                    if span not in kept:  # the baseline's runs were saved earlier (--resume)
+                        kept[span] = _on_device(grid, base, chunk, dev, keep=True).kept
+                    against = kept[span]
+                result = _on_device(grid, cell, chunk, dev, baseline=against, keep=is_base,
+                                    on_slots=on_slots)  # fmt: skip
+                if is_base:
+                    kept[span] = result.kept
+                on_done(ChunkResult.from_device(chunk, result, grid.baseline))
+
+
+def _on_device(grid: Grid, cell: Cell, chunk: Chunk, dev: Device, *, baseline: Any = None,
+               keep: bool = False, on_slots: OnSlots | None = None) -> DeviceRun:  # fmt: skip
+    """The runs of ``chunk``'s range of ``cell`` on the device (seeds from the grid's)."""
+    from corraoi.gpu.runner import simulate
+
+    from .chunks import checkpoints_of
+
+    return simulate(
+        cell.instance, cell.policy, seed0=grid.seed + chunk.start, runs=chunk.stop - chunk.start,
+        horizon=cell.horizon, checkpoints=checkpoints_of(grid, cell.horizon),
+        channel=cell.channel, baseline=baseline, keep=keep, on_slots=on_slots, device=dev,
+    )  # fmt: skip
 
 
 def settle(grid: Grid, backend: str | None, *, client: Any = None,
@@ -105,13 +149,40 @@ def settle(grid: Grid, backend: str | None, *, client: Any = None,
     refused."""
     if backend is not None and backend != grid.backend:
         grid = replace(grid, backend=backend)
-    if grid.backend != "cpu":
-        from corraoi.gpu import choose_backend
-
-        grid = choose_backend(grid, warn=warn)
-        if grid.backend == "gpu" and client is not None:
+    if grid.backend == "cpu":
+        return grid
+    problem = _gpu_problem(grid)
+    if problem is None:
+        if client is not None:
             raise ConfigError(GPU_NOT_ON_CLUSTER)
-    return grid
+        return replace(grid, backend="gpu")
+    if grid.backend == "gpu":
+        raise GpuUnavailable(f"--backend gpu: {problem}; run with --backend cpu")
+    if warn is not None:
+        warn(f"--backend auto: running on the CPU ({problem})")
+    return replace(grid, backend="cpu")
+
+
+def _gpu_problem(grid: Grid) -> str | None:
+    """Why the GPU backend cannot run ``grid`` here, or None when it can: a policy without
+    a GPU form, too many arms, or no device (CuPy missing, no CUDA device)."""
+    from corraoi.gpu import get_device
+    from corraoi.gpu.runner import gpu_problem
+
+    seen: set[tuple[str, int]] = set()
+    for cell in grid.cells:
+        key = (cell.policy.qualname, cell.instance.K)
+        if key in seen:
+            continue
+        seen.add(key)
+        problem = gpu_problem(cell.policy, cell.instance.K)
+        if problem is not None:
+            return problem
+    try:
+        get_device()
+    except GpuUnavailable as exc:
+        return str(exc)
+    return None
 
 
 def choose(grid: Grid, *, client: Any = None, workers: int | None = None,

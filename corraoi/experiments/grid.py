@@ -120,7 +120,7 @@ class Grid:
     checkpoints: int = 200
     baseline: str | None = None
     #: Where the cells run: "cpu" (the engine), "gpu" (corraoi.gpu), or "auto" (resolved to
-    #: one of them by :func:`corraoi.gpu.choose_backend` before the sweep starts).
+    #: one of them by :func:`corraoi.experiments.backends.settle` before the sweep starts).
     backend: str = "cpu"
 
     def __post_init__(self) -> None:

@@ -208,9 +208,9 @@ def settle_backend(grid: Grid, warn: Callable[[str], None] | None = None) -> Gri
     CPU) and ``gpu`` checked (:class:`~corraoi.errors.GpuUnavailable` says why not)."""
     if grid.backend == "cpu":
         return grid
-    from corraoi.gpu import choose_backend
+    from corraoi.experiments.backends import settle
 
-    return choose_backend(grid, warn=warn)
+    return settle(grid, None, warn=warn)
 
 
 def check_grid(grid: Grid, out: Path | None, *, allow_huge: bool = False) -> str:

@@ -291,21 +291,19 @@ class EmulatedDevice(Device):
         return ctypes.CDLL(str(self._build(K)))
 
     def _build(self, K: int) -> Path:
-        from corraoi.engine.kernels import _locked, _writable, cache_dir
+        from corraoi.engine import kernel_cache, kernels
 
         text = source()
         flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}")
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
-        folder = _writable(cache_dir() / "gpu-emulation")  # else the system's temp folder
+        folder = kernel_cache.folder("gpu-emulation")  # else the system's temp folder
         lib = folder / f"kernel-K{K}-{digest}.so"
         if _intact(lib):  # checked before it is mapped: a cut-short library is never loaded
             return lib
-        with _locked(folder, lib.stem):  # two processes on a fresh cache: one compiles
+        with kernel_cache.locked(folder, lib.stem):  # two processes, a fresh cache: one compiles
             if _intact(lib):
                 return lib
             if lib.exists():
-                from corraoi.engine import kernels
-
                 if kernels.on_compile is not None:
                     kernels.on_compile(f"the cached GPU-emulation library {lib.name} is damaged "
                                        "or unverified; rebuilding it")  # fmt: skip

@@ -1,4 +1,4 @@
-"""Simulating runs on a device (:mod:`corraoi.gpu.device`) and running a grid's chunks there.
+"""Simulating runs on a device (:mod:`corraoi.gpu.device`): one policy's runs, with their seeds.
 
 A policy's runs advance launch by launch; each launch captures every run's regret, AoI sum
 and pulls at the checkpoints it passes into device buffers, which are reduced on the device
@@ -20,7 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -35,10 +35,6 @@ from corraoi.stats import Moments
 
 from .checkpoints import Checkpoints, buffer_bytes
 from .device import MAX_ARMS, Device, entry_name, entry_names, get_device
-
-if TYPE_CHECKING:
-    from corraoi.experiments.folder import ChunkResult
-    from corraoi.experiments.grid import Cell, Chunk, Grid
 
 
 @dataclass
@@ -304,63 +300,3 @@ def _memory_error(exc: Exception, R: int, policy: PolicySpec) -> Exception:
             "split them with --chunk"
         )
     return exc
-
-
-# ---------------------------------------------------------------------------- a grid
-
-
-def execute(
-    grid: Grid,
-    todo: Sequence[tuple[Cell, Chunk]],
-    *,
-    on_done: Callable[[ChunkResult], None],
-    on_slots: Callable[[int], None] | None = None,
-    device: Device | None = None,
-) -> None:
-    """Run the chunks ``todo`` of ``grid`` on the device, group by group. With a baseline,
-    its runs of each chunk's range run first and stay on the device, so that every other
-    policy's paired moments are computed there."""
-    from corraoi.experiments.folder import ChunkResult
-
-    dev = device if device is not None else get_device()
-    for cells in grid.groups().values():
-        keys = {c.key for c in cells}
-        work = [(c, ch) for c, ch in todo if c.key in keys]
-        if not work:
-            continue
-        base = next((c for c in cells if c.policy.name == grid.baseline), None)
-        work.sort(key=lambda item: base is None or item[0].key != base.key)
-        kept: dict[tuple[int, int], Any] = {}
-        for cell, chunk in work:
-            span = (chunk.start, chunk.stop)
-            is_base = base is not None and cell.key == base.key
-            against = None
-            if base is not None and not is_base:
-                if span not in kept:  # the baseline's runs were saved earlier (--resume)
-                    kept[span] = _run_cell(grid, base, chunk, dev, keep=True).kept
-                against = kept[span]
-            result = _run_cell(grid, cell, chunk, dev, baseline=against, keep=is_base,
-                               on_slots=on_slots)  # fmt: skip
-            if is_base:
-                kept[span] = result.kept
-            on_done(ChunkResult.from_device(chunk, result, grid.baseline))
-
-
-def _run_cell(
-    grid: Grid,
-    cell: Cell,
-    chunk: Chunk,
-    dev: Device,
-    *,
-    baseline: Any = None,
-    keep: bool = False,
-    on_slots: Callable[[int], None] | None = None,
-) -> DeviceRun:
-    """The runs of ``chunk``'s range of ``cell`` (seeds from the grid's)."""
-    from corraoi.experiments.chunks import checkpoints_of
-
-    return simulate(
-        cell.instance, cell.policy, seed0=grid.seed + chunk.start, runs=chunk.stop - chunk.start,
-        horizon=cell.horizon, checkpoints=checkpoints_of(grid, cell.horizon),
-        channel=cell.channel, baseline=baseline, keep=keep, on_slots=on_slots, device=dev,
-    )  # fmt: skip
