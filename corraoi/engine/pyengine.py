@@ -1,7 +1,8 @@
-"""The plain-Python tier's parts: what a :class:`corraoi.policies.Policy` sees
-(:class:`RunState`, :class:`Streams`), the check of what it returns, the bookkeeping of a
-slot, and its failures in one line. :class:`corraoi.engine.simulation.Simulation` drives it
-slot by slot, vectorised over runs.
+"""The plain-Python tier's parts: the runs' random streams a :class:`corraoi.policies.Policy`
+draws from (:class:`Streams`, the engine's side of :class:`~corraoi.policies.api.RunStreams`;
+the rest of what it sees is :class:`~corraoi.policies.api.RunState`), the check of what it
+returns, the bookkeeping of a slot, and its failures in one line.
+:class:`corraoi.engine.simulation.Simulation` drives it slot by slot, vectorised over runs.
 
 Each slot: the hidden states of every run (drawn in blocks from the runs' latent streams by
 the same compiled function as the built-ins' kernel, so a plug-in run on seed s sees exactly
@@ -150,26 +151,6 @@ class Streams:
         else:
             _argmax(self._pol, vals, np.ascontiguousarray(mask, dtype=np.bool_), out)
         return out
-
-
-class RunState:
-    """What a plain-Python policy sees (read-only arrays; arms are 0-based).
-
-    ``t`` the current slot (1-based); ``runs``, ``arms`` (K); ``pulls`` and ``successes``
-    (runs, K) int64 before this slot; ``mu_hat`` (runs, K) their ratio (0 for unpulled arms);
-    ``aoi`` (runs,) the current age; ``seeds`` (runs,); ``rng`` the runs' :class:`Streams`.
-    """
-
-    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: Streams) -> None:
-        self.t = 0
-        self.runs = runs
-        self.arms = arms
-        self.seeds = seeds
-        self.rng = rng
-        self.pulls = np.zeros((runs, arms), dtype=np.int64)
-        self.successes = np.zeros((runs, arms), dtype=np.int64)
-        self.mu_hat = np.zeros((runs, arms))
-        self.aoi = np.ones(runs, dtype=np.int64)
 
 
 def check_arms(

@@ -21,6 +21,7 @@ from corraoi.limits import check_seed
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
+from corraoi.policies.api import RunState
 from corraoi.policies.spec import PolicySpec
 from corraoi.rng import streams_for_seeds
 
@@ -28,7 +29,7 @@ from . import threads
 from ._kernel import draw_states
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import RunState, Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
 
 __all__ = [
     "RunsBlock",

@@ -17,14 +17,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
 from corraoi.errors import PolicyError
-
-if TYPE_CHECKING:
-    from corraoi.engine.pyengine import RunState
 
 RGB = tuple[int, int, int]
 BUILTIN_PREFIX = "corraoi:"
@@ -162,12 +159,62 @@ class CompiledPolicy(PolicyBase):
         return 0
 
 
+class RunStreams(Protocol):
+    """The runs' own random streams (``state.rng``), vectorised: every method returns one
+    value (or row) per run, drawn from that run's stream only (the engine's
+    :class:`corraoi.engine.pyengine.Streams`)."""
+
+    @property
+    def runs(self) -> int: ...
+
+    def random(self, size: int | None = None) -> np.ndarray:
+        """Uniforms in [0, 1): shape (runs,) or (runs, size)."""
+        ...
+
+    def integers(self, high: int | np.ndarray) -> np.ndarray:
+        """A uniform integer in [0, high) per run (``high`` a scalar or (runs,), >= 1)."""
+        ...
+
+    def normal(self, size: int | None = None) -> np.ndarray:
+        """Standard normals: shape (runs,) or (runs, size)."""
+        ...
+
+    def beta(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Beta(a, b) samples of shape (runs, K) for shape parameters >= 1 of that shape."""
+        ...
+
+    def argmax(self, values: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Per run, the index of the largest value (among ``mask``), ties uniformly at
+        random -- the rule the built-ins use."""
+        ...
+
+
+class RunState:
+    """What a plain-Python policy sees (read-only arrays; arms are 0-based).
+
+    ``t`` the current slot (1-based); ``runs``, ``arms`` (K); ``pulls`` and ``successes``
+    (runs, K) int64 before this slot; ``mu_hat`` (runs, K) their ratio (0 for unpulled arms);
+    ``aoi`` (runs,) the current age; ``seeds`` (runs,); ``rng`` the runs' streams.
+    """
+
+    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams) -> None:
+        self.t = 0
+        self.runs = runs
+        self.arms = arms
+        self.seeds = seeds
+        self.rng = rng
+        self.pulls = np.zeros((runs, arms), dtype=np.int64)
+        self.successes = np.zeros((runs, arms), dtype=np.int64)
+        self.mu_hat = np.zeros((runs, arms))
+        self.aoi = np.ones(runs, dtype=np.int64)
+
+
 class Policy(PolicyBase):
     """A plain-Python policy, vectorised over runs. Subclass it and define :meth:`select`.
 
     Parameters arrive as attributes (``self.epsilon``). The engine calls :meth:`reset` once
     before slot 1, :meth:`select` every slot and :meth:`update` after it; ``state`` (a
-    :class:`corraoi.engine.pyengine.RunState`) holds the history as arrays of shape (runs, K) and
+    :class:`RunState`) holds the history as arrays of shape (runs, K) and
     the runs' own random streams (``state.rng``). Plain-Python policies log every arm as a
     candidate and no AoI-aware override unless ``select`` returns ``(arms, candidates)``.
     """
