@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from corraoi.model.instance import Instance
 
     from .runs import Run
+    from .show import Shown
 
 
 class Sweep(SweepData):
@@ -117,6 +118,13 @@ class Sweep(SweepData):
         from viewer.figure import draw_figure
 
         return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
+
+    def show(self, **options: Any) -> Shown:
+        """The sweep's Rerun recording (``sweep.rrd``) in the viewer: :func:`corraoi.show`
+        (the same ``options``; in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
+        from .show import show
+
+        return show(self, **options)
 
 
     def __repr__(self) -> str:
