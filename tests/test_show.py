@@ -187,7 +187,8 @@ def test_the_widget_assets_are_served_from_the_installed_package(tmp_path):
     assert urlsplit(res["url"]).hostname == "127.0.0.1"
     assert res["env"] == res["esm"] == res["url"]  # the widget loads from there, not the web
     static = Path(res["static"])
-    for name, ctype in (("widget.js", "text/javascript"), ("re_viewer_bg.wasm", "application/wasm")):
+    types = (("widget.js", "text/javascript"), ("re_viewer_bg.wasm", "application/wasm"))
+    for name, ctype in types:
         digest = hashlib.sha256((static / name).read_bytes()).hexdigest()
         assert res["got"][name] == [digest, ctype, "*"], name
     assert res["listing"] == 404

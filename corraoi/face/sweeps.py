@@ -142,9 +142,12 @@ class Sweep(SweepData):
                 return format(v, fmt) if isinstance(v, (int, float)) else ""
 
             rows.append((name, num("regret_mean", ",.1f"), num("regret_ci95", ",.1f"),
-                         num("estimator_mean", ",.1f"), num("best_share", ".3f")))  # fmt: skip
+                         num("estimator_mean", ",.1f"), num("best_arm_share", ".3f")))  # fmt: skip
         head = ("policy", "AoI regret at T", "95% +-", "paper's estimator", "best-arm share")
-        title = (f"{summary.get('instance', '')}, {summary.get('runs', '')} runs, "
+        instance = summary.get("instance", "")
+        if isinstance(instance, dict):  # summary.json holds the whole instance
+            instance = instance.get("name", "")
+        title = (f"{instance}, {summary.get('runs', '')} runs, "
                  f"T = {summary.get('horizon', '')}: {self.folder}")  # fmt: skip
         cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
