@@ -51,7 +51,7 @@ def find_chromium() -> str:
 class Chromium:
     """Headless Chromium driven over ``--remote-debugging-pipe`` (fds 3 and 4)."""
 
-    def __init__(self, exe: str) -> None:
+    def __init__(self, exe: str, extra_args: list[str] | None = None) -> None:
         self.profile = tempfile.mkdtemp(prefix="corraoi-chromium-")
         to_r, self._to_w = os.pipe()
         self._from_r, from_w = os.pipe()
@@ -65,7 +65,7 @@ class Chromium:
             [exe, "--headless", "--no-sandbox", "--enable-unsafe-swiftshader",
              "--use-angle=swiftshader", "--remote-debugging-pipe", "--no-first-run",
              "--disable-dev-shm-usage", f"--user-data-dir={self.profile}",
-             f"--window-size={WIDTH},{HEIGHT}", "about:blank"],
+             f"--window-size={WIDTH},{HEIGHT}", *(extra_args or []), "about:blank"],
             preexec_fn=child_fds,
             close_fds=False,
             stdin=subprocess.DEVNULL,
@@ -110,8 +110,12 @@ class Chromium:
         self.call("Emulation.setDeviceMetricsOverride", metrics)
         self.call("Page.navigate", {"url": url})
 
-    def screenshot(self) -> bytes:
-        return base64.b64decode(self.call("Page.captureScreenshot", {"format": "png"})["data"])
+    def screenshot(self, clip: dict | None = None) -> bytes:
+        """The page (or the ``clip`` rectangle: x, y, width, height in CSS pixels) as PNG."""
+        params: dict = {"format": "png"}
+        if clip is not None:
+            params["clip"] = {**clip, "scale": 1}
+        return base64.b64decode(self.call("Page.captureScreenshot", params)["data"])
 
     def close(self) -> None:
         try:
