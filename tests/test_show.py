@@ -19,7 +19,7 @@ import pytest
 
 import corraoi
 from corraoi.errors import LogError, MissingExtraError, UsageError, ViewerError
-from corraoi.face.show import Shown, in_kernel, recordings_of
+from corraoi.face.viewing import Shown, in_kernel
 
 from .rrd_util import RERUN
 
@@ -34,6 +34,12 @@ def listening(port: int) -> bool:
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> corraoi.Run:
     folder = tmp_path_factory.mktemp("show")
     return corraoi.record("cucb", "I1", seed=1, horizon=1500, path=folder / "cucb.mcap")
+
+
+def recordings_of(target) -> list[Path]:
+    """What ``corraoi.show(target)`` shows (the web viewer, stopped again)."""
+    with corraoi.show(target) as shown:
+        return shown.recordings
 
 
 def test_outside_a_kernel_it_serves_the_web_viewer_on_loopback_and_close_stops_it(recorded):
@@ -70,7 +76,7 @@ def test_run_show_and_sweep_show_go_through_corraoi_show(tmp_path):
     # a path to the folder or its sweep log: the same recording
     for p in (tmp_path / "sw", tmp_path / "sw" / "sweep.mcap"):
         assert recordings_of(p) == [tmp_path / "sw" / "sweep.rrd"], p
-    assert recordings_of(corraoi.load(tmp_path / "sw")) == [tmp_path / "sw" / "sweep.rrd"]
+    assert corraoi.load(tmp_path / "sw").recordings() == [tmp_path / "sw" / "sweep.rrd"]
 
 
 def test_a_log_without_its_rrd_gets_the_replayed_one_beside_it(tmp_path, recorded):
@@ -83,7 +89,7 @@ def test_a_log_without_its_rrd_gets_the_replayed_one_beside_it(tmp_path, recorde
     assert same.returncode == 0, same.stdout + same.stderr
     # an .rrd path is shown as it is; a run with one is not replayed again
     mtime = (tmp_path / "a.rrd").stat().st_mtime_ns
-    assert recordings_of(corraoi.load(tmp_path / "a.mcap")) == [tmp_path / "a.rrd"]
+    assert corraoi.load(tmp_path / "a.mcap").recording() == tmp_path / "a.rrd"
     assert recordings_of(tmp_path / "a.rrd") == [tmp_path / "a.rrd"]
     assert (tmp_path / "a.rrd").stat().st_mtime_ns == mtime
 
@@ -159,7 +165,7 @@ def test_the_widget_assets_are_served_from_the_installed_package(tmp_path):
                         '(pip install -e ".[notebook]")')  # fmt: skip
     script = textwrap.dedent("""
         import hashlib, json, os, urllib.request
-        from corraoi.face.show import serve_widget_assets
+        from corraoi.face.viewing import serve_widget_assets
         url = serve_widget_assets()
         import rerun_notebook
         got = {}

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from viewer.diff_report import DiffReport
     from viewer.summary import RunSummary
 
-    from .show import Shown
+    from .viewing import Shown
 
 
 
@@ -88,12 +88,27 @@ class Run(RunData):
 
         return diff(self, other, fields=fields, atol=atol)
 
-    def show(self, **options: Any) -> Shown:
-        """This run in the Rerun viewer, from its ``.rrd``: :func:`corraoi.show` (the same
-        ``options``; in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
-        from .show import show
+    def recording(self) -> Path:
+        """The run's Rerun recording: its ``.rrd``, else one replayed from the log to the
+        place beside it (as ``corraoi replay`` does; nothing is simulated). Raises
+        :class:`~corraoi.errors.LogError` for a recording that is missing or not one."""
+        from .viewing import checked_rrd
 
-        return show(self, **options)
+        if self.rrd is not None:
+            return checked_rrd(self.rrd)
+        from viewer.replay import replay
+
+        done = replay(self.log, rrd_path=rrd_beside(self.path))
+        assert done.path is not None
+        self.rrd = done.path
+        return done.path
+
+    def show(self, **options: Any) -> Shown:
+        """This run in the Rerun viewer, from :meth:`recording`: :func:`corraoi.show` with
+        the same ``options`` (in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
+        from .viewing import open_viewer
+
+        return open_viewer(lambda: [self.recording()], **options)
 
     def __repr__(self) -> str:
         where = f", slots {self.window[0]}..{self.window[1]}" if self.window else ""

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from corraoi.model.instance import Instance
 
     from .runs import Run
-    from .show import Shown
+    from .viewing import Shown
 
 
 class Sweep(SweepData):
@@ -119,12 +119,26 @@ class Sweep(SweepData):
 
         return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
 
-    def show(self, **options: Any) -> Shown:
-        """The sweep's Rerun recording (``sweep.rrd``) in the viewer: :func:`corraoi.show`
-        (the same ``options``; in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
-        from .show import show
+    def recordings(self) -> list[Path]:
+        """The sweep's Rerun recording (``sweep.rrd``); for a grid's folder, each group's.
+        Raises :class:`~corraoi.errors.LogError` for a folder without one."""
+        from corraoi.errors import LogError
 
-        return show(self, **options)
+        from .viewing import checked_rrd
+
+        if self.rrd is not None:
+            return [checked_rrd(self.rrd)]
+        groups = sorted(self.folder.glob("*/sweep.rrd"))
+        if groups:
+            return [checked_rrd(p) for p in groups]
+        raise LogError(f"{self.folder}: no Rerun recording (sweep.rrd) in this sweep folder")
+
+    def show(self, **options: Any) -> Shown:
+        """The sweep's :meth:`recordings` in the Rerun viewer: :func:`corraoi.show` with the
+        same ``options`` (in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
+        from .viewing import open_viewer
+
+        return open_viewer(self.recordings, **options)
 
 
     def __repr__(self) -> str:
