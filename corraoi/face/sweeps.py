@@ -84,7 +84,7 @@ class Sweep(SweepData):
         them."""
         from corraoi.experiments.drill import choose
 
-        from .recording import plan_files, record_plans, refuse
+        from .recording import Outlets, plan_files, record_plans, refuse
         from .resolve import TRACE_READERS, policies
         from .runs import Run
 
@@ -106,7 +106,7 @@ class Sweep(SweepData):
         plans = plan_files([drills[0].config], path, rrd_path, no_rrd=rrd is False,
                            drills=drills)  # fmt: skip
         refuse(plans, force=force, hint="force=True")
-        (done,) = record_plans(plans)
+        (done,) = record_plans(plans, Outlets(overwrite=force))
         assert done.mcap is not None
         return Run(done.mcap, rrd=done.rrd, summary=done.summary)
 
