@@ -33,9 +33,10 @@ def test_the_analysis_notebook_runs(tmp_path: Path):
     last = nb.cells[-1].outputs
     try:
         import rerun_notebook  # noqa: F401
-    except ImportError:
-        assert "rerun-notebook is not installed" in "".join(o.get("text", "") for o in last)
-    else:  # the Rerun viewer widget was displayed inline
+    except ImportError:  # corraoi.show said what to install, in one line
+        said = "".join(o.get("text", "") for o in last)
+        assert 'pip install "corraoi[notebook]"' in said and said.count("\n") == 1, said
+    else:  # the Rerun viewer widget was displayed inline (corraoi.show)
         assert any("application/vnd.jupyter.widget-view+json" in o.get("data", {}) for o in last)
 
 
