@@ -8,6 +8,7 @@ The Python face, as complete as the command line::
     sw = corraoi.sweep("I1", ["ucb", "cucb"], runs=200, out="sweeps/I1")   # a Sweep
     worst = sw.record("worst", policy="cucb")   # that run, slot by slot
     corraoi.diff(run, worst).identical
+    corraoi.show(worst)   # in Jupyter the Rerun viewer inline, elsewhere served on 127.0.0.1
 
 Every name here is imported on first use, so ``import corraoi`` stays as fast as Python's
 own start (numba, Rerun and pandas load only when a call needs them). Errors are
@@ -38,6 +39,7 @@ if TYPE_CHECKING:
     from .face.load import load
     from .face.recording import record
     from .face.runs import Run
+    from .face.show import show
     from .face.sweeps import Sweep, sweep
     from .face.views import compare, diff
     from .model.instance import Instance
@@ -52,6 +54,7 @@ _LAZY = {
     "diff": "corraoi.face.views",
     "Run": "corraoi.face.runs",
     "Sweep": "corraoi.face.sweeps",
+    "show": "corraoi.face.show",
     "Instance": "corraoi.model.instance",
     "Policy": "corraoi.policies",
     "CompiledPolicy": "corraoi.policies",
@@ -97,5 +100,6 @@ __all__ = [
     "load",
     "record",
     "register",
+    "show",
     "sweep",
 ]

@@ -39,7 +39,8 @@ def find_chromium() -> str | None:
 class Chromium:
     """Headless Chromium driven over ``--remote-debugging-pipe`` (fds 3 and 4)."""
 
-    def __init__(self, exe: str, width: int = WIDTH, height: int = HEIGHT) -> None:
+    def __init__(self, exe: str, width: int = WIDTH, height: int = HEIGHT,
+                 extra_args: list[str] | None = None) -> None:  # fmt: skip
         self.width, self.height = width, height
         self.profile = tempfile.mkdtemp(prefix="corraoi-chromium-")
         to_r, self._to_w = os.pipe()
@@ -54,7 +55,7 @@ class Chromium:
             [exe, "--headless", "--no-sandbox", "--enable-unsafe-swiftshader",
              "--use-angle=swiftshader", "--remote-debugging-pipe", "--no-first-run",
              "--disable-dev-shm-usage", f"--user-data-dir={self.profile}",
-             f"--window-size={width},{height}", "about:blank"],
+             f"--window-size={width},{height}", *(extra_args or []), "about:blank"],
             preexec_fn=child_fds,
             close_fds=False,
             stdin=subprocess.DEVNULL,
@@ -100,8 +101,12 @@ class Chromium:
         self.call("Emulation.setDeviceMetricsOverride", metrics)
         self.call("Page.navigate", {"url": url})
 
-    def screenshot(self, timeout: float = 60) -> bytes:
-        shot = self.call("Page.captureScreenshot", {"format": "png"}, timeout=timeout)
+    def screenshot(self, timeout: float = 60, clip: dict | None = None) -> bytes:
+        """The page (or the ``clip`` rectangle: x, y, width, height in CSS pixels) as PNG."""
+        params: dict = {"format": "png"}
+        if clip is not None:
+            params["clip"] = {**clip, "scale": 1}
+        shot = self.call("Page.captureScreenshot", params, timeout=timeout)
         return base64.b64decode(shot["data"])
 
     def close(self) -> None:

@@ -40,3 +40,8 @@ def test_every_example_runs_in_order(tmp_path: Path) -> None:
     assert "True" in text  # the worst run's regret equals the sweep's, the paired path
     assert (tmp_path / "sweeps" / "py" / "summary.json").is_file()
     assert (tmp_path / "runs" / "ucb-vs-cucb.rrd").is_file()
+    # show: served on the loopback, the recording Sweep.record wrote, stopped by close()
+    url = next(line for line in text if line.startswith("http://"))
+    assert url.startswith("http://127.0.0.1:") and "rerun%2Bhttp%3A%2F%2F127.0.0.1" in url
+    assert repr([namespace["worst"].rrd]) in text  # type: ignore[attr-defined]
+    assert namespace["shown"].closed  # type: ignore[attr-defined]

@@ -12,7 +12,7 @@ EXPECTED = [
     "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
     "InstanceError", "LogError", "OutputError", "Param", "Policy", "PolicyError", "Run",
     "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "load", "record",
-    "register", "sweep",
+    "register", "show", "sweep",
 ]  # fmt: skip
 
 
@@ -36,7 +36,7 @@ def test_every_error_is_in_corraoi_errors_under_corraoi_error():
 
 
 def test_every_function_of_the_face_documents_parameters_return_and_errors():
-    for name in ("record", "sweep", "load", "compare", "diff"):
+    for name in ("record", "sweep", "load", "compare", "diff", "show"):
         func = getattr(corraoi, name)
         doc = inspect.getdoc(func) or ""
         assert doc, name
@@ -48,7 +48,7 @@ def test_every_function_of_the_face_documents_parameters_return_and_errors():
         assert "return" in doc.lower(), name
     for cls in (corraoi.Run, corraoi.Sweep):
         assert inspect.getdoc(cls)
-        for attr in ("_repr_html_",):
+        for attr in ("_repr_html_", "show"):
             assert callable(getattr(cls, attr)), (cls, attr)
 
 

@@ -141,6 +141,14 @@ def test_sweep_record_equals_the_sweeps_row_and_load_gives_the_same_types(tmp_pa
     # the same run, recorded by the command line from the folder (the class is importable)
     html = sw._repr_html_()
     assert "face-eps-first" in html and "<table>" in html
+    assert "<p>I2, 12 runs, T = 800: " in html  # the instance's name, not its dict
+    share = sw.summary["policies"]["ucb"]["best_arm_share"]
+    assert f"<td>{share:.3f}</td>" in html
+    # recorded again to the same place: refused, unless force=True
+    with pytest.raises(corraoi.OutputError, match="force=True"):
+        sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap")
+    again = sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap", force=True)
+    assert again.summary.regret == worst.summary.regret and again.complete
 
 
 def test_record_each_records_every_cells_run_once_and_compare_takes_them(tmp_path: Path) -> None:

@@ -10,7 +10,7 @@ import os
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from corraoi.errors import UsageError
 from recorder.slotlog.frames import RunData
@@ -19,6 +19,8 @@ from recorder.slotlog.reader import RunLog
 if TYPE_CHECKING:
     from viewer.diff_report import DiffReport
     from viewer.summary import RunSummary
+
+    from .viewing import Shown
 
 
 
@@ -48,8 +50,7 @@ class Run(RunData):
         if rrd is not None:
             self.rrd: Path | None = Path(rrd)
         else:
-            beside = self.path.with_name(self.path.name.removesuffix(".partial")).with_suffix(
-                ".rrd")  # fmt: skip
+            beside = rrd_beside(self.path)
             self.rrd = beside if beside.is_file() else None
         if summary is not None and slots is None:
             self.__dict__["summary"] = summary  # measured while it was recorded
@@ -87,6 +88,27 @@ class Run(RunData):
 
         return diff(self.log, log_of(other, "other"), fields=fields, atol=atol)
 
+    def recording(self) -> Path:
+        """The run's Rerun recording: its ``.rrd``, else one replayed from the log to the
+        place beside it (as ``corraoi replay`` does; nothing is simulated). Raises
+        :class:`~corraoi.errors.LogError` for a recording that is missing or not one."""
+        from .viewing import checked_rrd
+
+        if self.rrd is not None:
+            return checked_rrd(self.rrd)
+        from viewer.replay import replay
+
+        done = replay(self.log, rrd_path=rrd_beside(self.path))
+        assert done.path is not None
+        self.rrd = done.path
+        return done.path
+
+    def show(self, **options: Any) -> Shown:
+        """This run in the Rerun viewer, from :meth:`recording`: :func:`corraoi.show` with
+        the same ``options`` (in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
+        from .viewing import open_viewer
+
+        return open_viewer(lambda: [self.recording()], **options)
 
     def __repr__(self) -> str:
         where = f", slots {self.window[0]}..{self.window[1]}" if self.window else ""
@@ -117,6 +139,12 @@ class Run(RunData):
         return f"<table>{body}</table>"
 
 
+def rrd_beside(log: Path) -> Path:
+    """Where a slot log's Rerun recording lies: ``run.mcap`` (or ``run.mcap.partial``) ->
+    ``run.rrd``."""
+    return log.with_name(log.name.removesuffix(".partial")).with_suffix(".rrd")
+
+
 def as_run(value: Run | str | os.PathLike[str], what: str = "run") -> Run:
     """A Run from a Run or a slot log's path (UsageError for anything else)."""
     if isinstance(value, Run):
@@ -133,4 +161,4 @@ def log_of(value: Run | RunLog | str | os.PathLike[str], what: str = "run") -> R
     return value if isinstance(value, RunLog) else as_run(value, what).log
 
 
-__all__ = ["Run", "as_run", "log_of"]
+__all__ = ["Run", "as_run", "log_of", "rrd_beside"]

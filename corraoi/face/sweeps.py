@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from corraoi.model.instance import Instance
 
     from .runs import Run
+    from .viewing import Shown
 
 
 class Sweep(SweepData):
@@ -84,7 +85,7 @@ class Sweep(SweepData):
         them."""
         from corraoi.experiments.drill import choose
 
-        from .recording import plan_files, record_plans, refuse
+        from .recording import Outlets, plan_files, record_plans, refuse
         from .resolve import TRACE_READERS, policies
         from .runs import Run
 
@@ -106,7 +107,7 @@ class Sweep(SweepData):
         plans = plan_files([drills[0].config], path, rrd_path, no_rrd=rrd is False,
                            drills=drills)  # fmt: skip
         refuse(plans, force=force, hint="force=True")
-        (done,) = record_plans(plans)
+        (done,) = record_plans(plans, Outlets(overwrite=force))
         assert done.mcap is not None
         return Run(done.mcap, rrd=done.rrd, summary=done.summary)
 
@@ -177,6 +178,27 @@ class Sweep(SweepData):
 
         return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
 
+    def recordings(self) -> list[Path]:
+        """The sweep's Rerun recording (``sweep.rrd``); for a grid's folder, each group's.
+        Raises :class:`~corraoi.errors.LogError` for a folder without one."""
+        from corraoi.errors import LogError
+
+        from .viewing import checked_rrd
+
+        if self.rrd is not None:
+            return [checked_rrd(self.rrd)]
+        groups = sorted(self.folder.glob("*/sweep.rrd"))
+        if groups:
+            return [checked_rrd(p) for p in groups]
+        raise LogError(f"{self.folder}: no Rerun recording (sweep.rrd) in this sweep folder")
+
+    def show(self, **options: Any) -> Shown:
+        """The sweep's :meth:`recordings` in the Rerun viewer: :func:`corraoi.show` with the
+        same ``options`` (in Jupyter a widget, elsewhere a web viewer on 127.0.0.1)."""
+        from .viewing import open_viewer
+
+        return open_viewer(self.recordings, **options)
+
 
     def __repr__(self) -> str:
         return f"Sweep({str(self.folder)!r})"
@@ -193,9 +215,12 @@ class Sweep(SweepData):
                 return format(v, fmt) if isinstance(v, (int, float)) else ""
 
             rows.append((name, num("regret_mean", ",.1f"), num("regret_ci95", ",.1f"),
-                         num("estimator_mean", ",.1f"), num("best_share", ".3f")))  # fmt: skip
+                         num("estimator_mean", ",.1f"), num("best_arm_share", ".3f")))  # fmt: skip
         head = ("policy", "AoI regret at T", "95% +-", "paper's estimator", "best-arm share")
-        title = (f"{summary.get('instance', '')}, {summary.get('runs', '')} runs, "
+        instance = summary.get("instance", "")
+        if isinstance(instance, dict):  # summary.json holds the whole instance
+            instance = instance.get("name", "")
+        title = (f"{instance}, {summary.get('runs', '')} runs, "
                  f"T = {summary.get('horizon', '')}: {self.folder}")  # fmt: skip
         cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
