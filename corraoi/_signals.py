@@ -46,6 +46,19 @@ def _hook(kind: type[BaseException], exc: BaseException, tb: TracebackType | Non
 _previous_hook = sys.excepthook
 
 
+def _unraisable(info: sys.UnraisableHookArgs) -> None:
+    """A KeyboardInterrupt the handler raised where Python can only print it (a weakref
+    callback, a fork's hooks, a finaliser in numba's cache) is remembered in :data:`asked`
+    and raised again at the next check: printing "Exception ignored ... Traceback" would
+    break the one-line promise."""
+    if asked is not None and isinstance(info.exc_value, KeyboardInterrupt):
+        return
+    _previous_unraisable(info)
+
+
+_previous_unraisable = sys.unraisablehook
+
+
 def quiet_exit(code: int = INTERRUPTED) -> None:
     """Say ``corraoi: interrupted`` on stderr and leave at once with ``code``."""
     try:
@@ -83,6 +96,7 @@ def install() -> None:
     except ValueError:  # not the main thread
         return
     sys.excepthook = _hook
+    sys.unraisablehook = _unraisable
     _installed = True
 
 

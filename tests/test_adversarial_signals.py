@@ -147,3 +147,27 @@ def test_a_ctrl_c_that_no_command_caught_is_one_line_without_a_blank_one(tmp_pat
     proc = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True,
                           text=True, timeout=60)  # fmt: skip
     assert (proc.returncode, proc.stderr) == (130, "corraoi: interrupted\n")
+
+
+def test_an_interrupt_python_can_only_print_is_kept_quiet_and_raised_at_the_next_check():
+    """A signal whose KeyboardInterrupt lands where Python swallows it (here a fork's own
+    hook; in the wild a finaliser in numba's cache) prints no traceback, and the command
+    still stops at its next check (corraoi._signals.raise_if_asked)."""
+    code = (
+        "import os, signal\n"
+        "from corraoi import _signals\n"
+        "_signals.install()\n"
+        "os.register_at_fork(after_in_parent=lambda: os.kill(os.getpid(), signal.SIGTERM))\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    os._exit(0)\n"
+        "os.waitpid(pid, 0)\n"
+        "try:\n"
+        "    _signals.raise_if_asked()\n"
+        "    print('lost')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('raised at the check')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "raised at the check"
+    assert out.stderr == ""
