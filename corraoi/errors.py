@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 from typing import Any
 
@@ -84,20 +83,6 @@ class SweepMismatch(CorraoiError):
     engine or the code changed since the sweep): the log is finished as failed, saying so."""
 
     exit_code = 1
-
-
-class ReaderStopped(CorraoiError):
-    """The forked log reader died (killed, out of memory): one line, exit 1, what was sent
-    so far stays with the consumer."""
-
-    exit_code = 1
-
-    def __init__(self, exitcode: int | None) -> None:
-        how = (f"killed by {signal.Signals(-exitcode).name}" if exitcode is not None
-               and exitcode < 0 and -exitcode in signal.valid_signals()
-               else f"exit {exitcode}")  # fmt: skip
-        super().__init__(f"the log reader process stopped unexpectedly ({how}); nothing was "
-                         "written as complete (run the command again)")
 
 
 class ResultsError(LogError):

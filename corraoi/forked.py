@@ -1,11 +1,10 @@
 """Forked worker processes: one object and one safety rule for every process corraoi forks.
 
-corraoi forks three workers, each to put a slow import or a second job on the other core
-while this process goes on (``docs/performance.md`` has what each buys): the Rerun writer
-of ``corraoi record`` (:mod:`recorder.rerun.worker`), the figure drawer of ``corraoi sweep
--o`` (:mod:`viewer.figure_worker`) and the log reader of ``replay`` and ``compare``
-(:mod:`viewer.readahead`). Each is a :class:`ForkedWorker`: a process serving one end of a
-pipe.
+corraoi forks two workers, each to put a slow import on the other core while this process
+goes on (``docs/performance.md`` has what each buys, measured with ``CORRAOI_WORKERS=0``):
+the Rerun writer of ``corraoi record`` (:mod:`recorder.rerun.worker`) and the figure
+drawer of ``corraoi sweep -o`` (:mod:`viewer.figure_worker`). Each is a
+:class:`ForkedWorker`: a process serving one end of a pipe.
 
 The rule, :func:`can_fork`: fork only where ``fork`` exists and this process runs one
 thread. A lock another thread holds at the fork (the import lock, a logger's, a test
@@ -16,7 +15,8 @@ child never outlives its parent: the kernel kills it when the parent dies, even 
 sends to the whole process group: the parent decides, and asks it to finish or kills it.
 
 ``CORRAOI_WORKERS=0`` in the environment forks nothing (every job in this process):
-``benchmarks/bench_start.py --no-workers`` times the commands so.
+``benchmarks/bench_start.py --no-workers`` times the commands so. (A third worker, the log
+reader of ``replay`` and ``compare``, bought at most 5% and was retired for a thread.)
 """
 
 from __future__ import annotations

@@ -225,80 +225,22 @@ def _items_then_boom():
     raise LogError("boom: chunk at byte 7 is damaged")
 
 
-@pytest.mark.parametrize("mode", ["fork", "thread"])
-def test_read_ahead_hands_on_errors_and_stops_early(mode, monkeypatch):
+def test_read_ahead_hands_on_errors_and_stops_early():
     import threading
 
     from corraoi.errors import LogError
     from viewer import readahead
 
-    monkeypatch.setenv(readahead.ENV, mode)
-    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
     got = []
     with pytest.raises(LogError, match="boom: chunk at byte 7"):
-        for x in readahead.read_ahead(_items_then_boom):
+        for x in readahead.read_ahead(_items_then_boom()):
             got.append(x)
     assert got == [1, 2]
     before = threading.active_count()
-    for x in readahead.read_ahead(lambda: iter(range(10**7)), depth=2):
+    for x in readahead.read_ahead(iter(range(10**7)), depth=2):
         if x == 3:
             break
-    assert threading.active_count() <= before
-    if mode == "fork" and readahead._can_fork():
-        import multiprocessing
-
-        assert multiprocessing.active_children() == []  # the reader process was stopped
-    assert list(readahead.read_ahead(lambda: [{"a": 1}, (2, b"x")])) == [{"a": 1}, (2, b"x")]
+    assert threading.active_count() <= before  # the reader thread was stopped
+    assert list(readahead.read_ahead([{"a": 1}, (2, b"x")])) == [{"a": 1}, (2, b"x")]
 
 
-def test_a_reader_process_that_dies_is_an_error(monkeypatch):
-    import os
-
-    from viewer import readahead
-
-    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
-    if not readahead._can_fork():
-        pytest.skip("no fork here: the reader runs in a thread")
-
-    def die():
-        yield 1
-        os._exit(3)
-
-    with pytest.raises(readahead.ReaderStopped, match=r"stopped unexpectedly \(exit 3\)"):
-        list(readahead.read_ahead(die))
-
-
-def test_replay_whose_reader_is_killed_is_one_line_and_no_rrd(tmp_path, monkeypatch):
-    """Issue 32, case 4: the read-ahead process of ``replay`` killed: exit 1, one line, no
-    traceback, no .rrd (nor a .partial left presented as anything)."""
-    import os
-    import signal
-
-    from click.testing import CliRunner
-
-    from corraoi.cli import main
-    from recorder.slotlog.reader import RunLog
-    from viewer import readahead
-
-    monkeypatch.setattr(readahead, "can_fork", lambda: True)  # whatever threads earlier tests left
-    if not readahead._can_fork():
-        pytest.skip("no fork here: the reader runs in a thread")
-    assert CliRunner().invoke(main, ["record", "-T", "3000", "--no-rrd", "-o",
-                                     str(tmp_path / "r.mcap")]).exit_code == 0  # fmt: skip
-    real = RunLog.blocks
-    parent = os.getpid()
-
-    def killed(self, block=1000):
-        for i, b in enumerate(real(self, block)):
-            if i == 1 and os.getpid() != parent:  # in the reader process only
-                os.kill(os.getpid(), signal.SIGKILL)
-            yield b
-
-    monkeypatch.setattr(RunLog, "blocks", killed)
-    res = CliRunner().invoke(main, ["replay", str(tmp_path / "r.mcap"), "-o",
-                                    str(tmp_path / "r.rrd")])  # fmt: skip
-    assert res.exit_code == 1, res.output
-    assert res.output.strip() == ("corraoi: error: the log reader process stopped unexpectedly "
-                                  "(killed by SIGKILL); nothing was written as complete (run "
-                                  "the command again)")  # fmt: skip
-    assert not (tmp_path / "r.rrd").exists()

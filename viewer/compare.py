@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,7 +30,6 @@ from .summary import RunSummary, SummaryAccumulator
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
-    from corraoi.engine.block import SlotBlock
     from recorder.slotlog.reader import RunLog
 
 #: Slots per block handed to the sinks.
@@ -265,9 +264,7 @@ def compare(
         accs = [SummaryAccumulator(r.config) for r in runs]
         opened = [r.log for r in runs]
 
-        def every() -> Iterator[tuple[int, SlotBlock]]:
-            return ((i, b) for i, log in enumerate(opened) for b in log.blocks(block))
-
+        every = ((i, b) for i, log in enumerate(opened) for b in log.blocks(block))
         aoi_max = 1.0
         for i, b in read_ahead(every):  # the next blocks are read while these are sent
             sinks[i].write(b)

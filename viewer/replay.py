@@ -68,7 +68,7 @@ def replay(
     )  # fmt: skip
     try:
         sink = RerunSink(out.recording, out.label, config)
-        for b in read_ahead(lambda: run.blocks(block)):
+        for b in read_ahead(run.blocks(block)):
             sink.write(b)
             if on_block is not None:
                 on_block(len(b))
