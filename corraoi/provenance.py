@@ -28,7 +28,8 @@ from ._version import __version__
 
 _HERE = Path(__file__).resolve().parent
 #: The sources that decide what the engines compute, slot for slot (their hash is logged).
-KERNEL_SOURCES = ("engine/_kernel.py", "rng.py", "model/candidates.py", "engine/simulation.py",
+KERNEL_SOURCES = ("engine/_kernel.py", "rng.py", "engine/seeds.py", "model/candidates.py",
+                  "engine/simulation.py",
                   "engine/pyengine.py", "engine/problem.py", "model/channels.py",
                   "policies/hooks.py", "policies/builtin_hooks.py", "gpu/kernel.cu",
                   "gpu/runner.py")  # fmt: skip

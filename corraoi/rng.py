@@ -191,31 +191,3 @@ def streams_for_seed(seed: int) -> tuple[np.ndarray, np.ndarray]:
     lat = np.random.SFC64(lat_ss).state["state"]["state"]
     pol = np.random.SFC64(pol_ss).state["state"]["state"]
     return np.array(lat, dtype=np.uint64), np.array(pol, dtype=np.uint64)
-
-
-_STREAMS_CACHE: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-_STREAMS_CACHE_MAX = 1 << 16
-
-
-def streams_for_seeds(seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(latent, policy) states of many seeds: ((R, 4), (R, 4)) uint64.
-
-    ``SeedSequence.spawn`` costs about 37 us a seed and every policy of a sweep needs the same
-    seeds, so states are memoised (up to 65,536 seeds; the arrays are copied out).
-    """
-    R = len(seeds)
-    lat = np.empty((R, 4), dtype=np.uint64)
-    pol = np.empty((R, 4), dtype=np.uint64)
-    from corraoi._signals import raise_if_asked
-
-    for i, s in enumerate(seeds):
-        if i % 1024 == 1023:
-            raise_if_asked()  # 100,000 seeds take seconds: a signal is answered meanwhile
-        key = int(s)
-        pair = _STREAMS_CACHE.get(key)
-        if pair is None:
-            pair = streams_for_seed(key)
-            if len(_STREAMS_CACHE) < _STREAMS_CACHE_MAX:
-                _STREAMS_CACHE[key] = pair
-        lat[i], pol[i] = pair
-    return lat, pol

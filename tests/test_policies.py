@@ -66,6 +66,21 @@ def test_params_defaults_and_validation():
     assert specs[0].params == {"c": 3.0} and specs[1].params == {"beta": 0.5}
 
 
+def test_a_param_declared_with_the_wrong_types_is_one_line():
+    from corraoi.policies import Param
+
+    with pytest.raises(PolicyError, match=r"Param high: expected a number, got 'exploration' "
+                                          r"\(Param\(default, help, low, high"):  # fmt: skip
+        Param(0.1, 0, 1, "exploration")  # type: ignore[arg-type]
+    with pytest.raises(PolicyError, match="Param help: expected text, got 0"):
+        Param(0.1, 0)  # type: ignore[arg-type]
+    with pytest.raises(PolicyError, match="Param default: expected a number, got '0.1'"):
+        Param("0.1")  # type: ignore[arg-type]
+    with pytest.raises(PolicyError, match="Param integer: expected True or False, got 'yes'"):
+        Param(1.0, "n", 0, 10, integer="yes")  # type: ignore[arg-type]
+    assert Param(3, "k", 1, 10, integer=True).range_text() == "an integer in [1, 10]"
+
+
 def test_param_assignments_go_to_every_policy_that_declares_them():
     specs = make_policies(["ucb", "sw-ucb", "ts"], parse_param_assignments(["c=1.5", "window=50"]))
     assert [s.params for s in specs] == [{"c": 1.5}, {"window": 50.0, "c": 1.5}, {}]

@@ -23,13 +23,13 @@ from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies.api import RunState
 from corraoi.policies.spec import PolicySpec
-from corraoi.rng import streams_for_seeds
 
 from . import threads
 from ._kernel import draw_states
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
 from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .seeds import streams_for_seeds
 
 __all__ = [
     "RunsBlock",

@@ -44,6 +44,21 @@ class Param:
     integer: bool = False
 
     def __post_init__(self) -> None:
+        for field in ("default", "low", "high"):
+            value = getattr(self, field)
+            if field != "default" and value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                                  np.floating)):  # fmt: skip
+                raise PolicyError(f"Param {field}: expected a number, got {value!r} "
+                                  "(Param(default, help, low, high, ...))")  # fmt: skip
+        if not isinstance(self.help, str):
+            raise PolicyError(f"Param help: expected text, got {self.help!r} "
+                              "(Param(default, help, low, high, ...))")  # fmt: skip
+        for field in ("open_low", "open_high", "integer"):
+            if not isinstance(getattr(self, field), (bool, np.bool_)):
+                raise PolicyError(f"Param {field}: expected True or False, got "
+                                  f"{getattr(self, field)!r}")  # fmt: skip
         if self.check(float(self.default)) is not None:
             raise PolicyError(f"parameter default {self.default!r} is outside {self.range_text()}")
 
