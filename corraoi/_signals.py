@@ -14,14 +14,16 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from types import FrameType, TracebackType
 
 INTERRUPTED = 130
 _installed = False
 #: The signal that asked the command to stop, once one has (never reset): the
 #: KeyboardInterrupt a handler raises can land where Python swallows it (a weakref callback
-#: inside an import: "Exception ignored in ..."), so the engine asks here between its pieces
-#: of work and raises again (:func:`raise_if_asked`). An interrupt is never lost.
+#: inside an import: "Exception ignored in ..."); such a one is sent again (``_unraisable``),
+#: and the engine also asks here between its pieces of work (:func:`raise_if_asked`). An
+#: interrupt is never lost.
 asked: int | None = None
 
 
@@ -47,11 +49,17 @@ _previous_hook = sys.excepthook
 
 
 def _unraisable(info: sys.UnraisableHookArgs) -> None:
-    """A KeyboardInterrupt the handler raised where Python can only print it (a weakref
-    callback, a fork's hooks, a finaliser in numba's cache) is remembered in :data:`asked`
-    and raised again at the next check: printing "Exception ignored ... Traceback" would
-    break the one-line promise."""
+    """A KeyboardInterrupt the handler raised where Python can only print it and go on (a
+    finaliser, a weakref callback, a fork's hooks) is sent again: the signal is sent anew,
+    and its handler runs once that code has returned, where the interrupt is an exception
+    the command handles. Printing "Exception ignored ... Traceback" and going on would have
+    broken the one-line promise and lost the interrupt (a replay ran to its end, exit 0)."""
     if asked is not None and isinstance(info.exc_value, KeyboardInterrupt):
+        # from another thread, a moment later: raised here, or at once, the handler would
+        # run inside this hook again (where it is swallowed too)
+        again = threading.Timer(0.01, os.kill, args=(os.getpid(), asked))
+        again.daemon = True
+        again.start()
         return
     _previous_unraisable(info)
 
