@@ -166,7 +166,7 @@ def test_the_quickstart_notebook_shows_the_run_in_jupyterlab_in_chromium(tmp_pat
 
             (tmp_path / "page.png").write_bytes(browser.screenshot())
             Image.open(tmp_path / "page.png").convert("RGB").quantize(colors=256).save(
-                keep, optimize=True
+                QUICKSTART.parent.parent.parent / keep, optimize=True  # relative: to the checkout
             )
         assert state.get("rect"), f"no Rerun widget drawn in the show cell: {state}"
         missing = {p: n for p, n in found.items() if n < 30}
