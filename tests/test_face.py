@@ -129,6 +129,9 @@ def test_sweep_record_equals_the_sweeps_row_and_load_gives_the_same_types(tmp_pa
     sw = corraoi.sweep("I2", ["ucb", EpsilonFirst], runs=12, horizon=800, seed=50,
                        out=tmp_path / "sw")  # fmt: skip
     assert isinstance(sw, corraoi.Sweep) and isinstance(corraoi.load(sw.folder), corraoi.Sweep)
+    by_results = corraoi.load(sw.folder / "results.parquet")  # a partitioned folder
+    assert isinstance(by_results, corraoi.Sweep) and by_results.folder == sw.folder
+    assert len(by_results.runs) == len(sw.runs) > 0
     with pytest.raises(corraoi.CorraoiError, match="names 2 runs"):
         sw.record("worst")
     worst = sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap")

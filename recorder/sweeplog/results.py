@@ -207,10 +207,10 @@ def read_results(path: str | os.PathLike[str]) -> pd.DataFrame:
 
 def is_sweep_path(p: Path) -> bool:
     """Whether ``p`` is a sweep folder, its results, or a sweep log (not a slot log)."""
+    if p.suffix == ".parquet":  # results.parquet: a file, or a partitioned folder
+        return True
     if p.is_dir():
         return any((p / f).exists() for f in (RESULTS_FILE, "sweep.mcap", "summary.json"))
-    if p.suffix == ".parquet":
-        return True
     return p.is_file() and _first_metadata(p) == SWEEP_METADATA
 
 
