@@ -36,6 +36,19 @@ def find_chromium() -> str | None:
     return None
 
 
+def chromium_or_skip() -> str:
+    """The Chromium executable; the calling test skips with one line where there is none."""
+    import pytest
+
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip(
+            "no Chromium found (looked for " + ", ".join(CHROMIUM_NAMES) + "); .ci/run "
+            "installs Debian's chromium where it can (apt-get install chromium)"
+        )
+    return exe
+
+
 class Chromium:
     """Headless Chromium driven over ``--remote-debugging-pipe`` (fds 3 and 4)."""
 

@@ -30,11 +30,10 @@ import pytest
 from recorder import style
 
 from .browser import (
-    CHROMIUM_NAMES,
     Chromium,
+    chromium_or_skip,
     colour_pixels,
     drawn_share,
-    find_chromium,
     free_port,
     listening,
     save_palette_png,
@@ -49,16 +48,6 @@ MARKS = (
     ("failure marker", style.FAILURE_COLOR),
     *((f"arm {k + 1}", style.arm_color(k)) for k in range(4)),
 )
-
-
-def chromium() -> str:
-    exe = find_chromium()
-    if exe is None:
-        pytest.skip(
-            "no Chromium found (looked for " + ", ".join(CHROMIUM_NAMES) + "); .ci/run "
-            "installs Debian's chromium where it can (apt-get install chromium)"
-        )
-    return exe
 
 
 def record_rrd(tmp_path: Path, instance: str, policy: str, horizon: int) -> Path:
@@ -86,7 +75,7 @@ def _screenshot(path: Path, wanted: dict[str, tuple[int, int, int]], least: int,
                 ) -> tuple[dict[str, int], float, bytes]:  # fmt: skip
     """The pixels of each wanted colour, the share of drawn pixels and the screenshot,
     once every colour shows (or after a minute and a half)."""
-    exe = chromium()
+    exe = chromium_or_skip()
     with serve_rrd(path) as url:
         browser = Chromium(exe)
         try:
@@ -125,7 +114,7 @@ def test_a_run_of_64_arms_draws_bars_strips_and_the_arms_that_matter(tmp_path):
 
 @pytest.mark.slow
 def test_compare_shows_every_run_in_the_web_viewer(tmp_path, record_mcap):
-    exe = chromium()
+    exe = chromium_or_skip()
     logs = [str(record_mcap(p, seed=2, horizon=1500)[0]) for p in POLICIES]
     web_port = free_port()
     server = subprocess.Popen(

@@ -30,13 +30,13 @@ import pytest
 from recorder import style
 
 from .browser import (
-    CHROMIUM_NAMES,
     Chromium,
+    chromium_or_skip,
     colour_pixels,
     drawn_share,
-    find_chromium,
     free_port,
     listening,
+    save_palette_png,
 )
 
 QUICKSTART = Path(__file__).resolve().parent.parent / "docs" / "examples" / "quickstart.ipynb"
@@ -87,10 +87,7 @@ def evaluate(browser: Chromium, expression: str, timeout: float = 30) -> object:
 
 @pytest.mark.slow
 def test_the_quickstart_notebook_shows_the_run_in_jupyterlab_in_chromium(tmp_path):
-    exe = find_chromium()
-    if exe is None:
-        pytest.skip("no Chromium found (looked for " + ", ".join(CHROMIUM_NAMES) + "); .ci/run "
-                    "installs Debian's chromium where it can (apt-get install chromium)")
+    exe = chromium_or_skip()
     _jupyterlab_or_skip()
     root = tmp_path / "lab"
     root.mkdir()
@@ -162,12 +159,8 @@ def test_the_quickstart_notebook_shows_the_run_in_jupyterlab_in_chromium(tmp_pat
         (tmp_path / "widget.png").write_bytes(png)
         keep = os.environ.get("CORRAOI_NOTEBOOK_SCREENSHOT_TO")
         if keep:
-            from PIL import Image
-
-            (tmp_path / "page.png").write_bytes(browser.screenshot())
-            Image.open(tmp_path / "page.png").convert("RGB").quantize(colors=256).save(
-                QUICKSTART.parent.parent.parent / keep, optimize=True  # relative: to the checkout
-            )
+            checkout = QUICKSTART.parent.parent.parent  # a relative path is the checkout's
+            save_palette_png(browser.screenshot(), checkout / keep)
         assert state.get("rect"), f"no Rerun widget drawn in the show cell: {state}"
         missing = {p: n for p, n in found.items() if n < 30}
         assert not missing, f"colours missing from the widget: {missing} (all: {found})"
