@@ -132,42 +132,29 @@ class Sweep(SweepData):
         each run as it starts; ``warn`` of what the choice notices (a
         :class:`~corraoi.errors.CorraoiWarning` by default)."""
         from corraoi.engine.threads import set_workers
-        from corraoi.errors import LogError, OutputError
         from corraoi.experiments.drill import choose
         from corraoi.text import safe_name, safe_text
-        from recorder.slotlog.reader import open_log
 
-        from .recording import record_drill
+        from .recording import Plan, record_drill, refuse, up_to_date
         from .resolve import TRACE_READERS
         from .runs import Run
 
         drills = choose(self.folder, which, cells=tuple(cells), warn=warn,
                         kept_code=kept_code, allow_changed_code=allow_changed_code,
                         trace_readers=TRACE_READERS)  # fmt: skip
-        plans = [(d, Path(folder) / f"{safe_name(d.name)}.mcap") for d in drills]
-        todo = []
-        for d, path in plans:
-            if path.is_file():
-                try:
-                    log = open_log(path, verify=False)
-                    same = (log.status == "complete"
-                            and log.config.to_dict() == d.config.to_dict())  # fmt: skip
-                except LogError:
-                    same = False
-                if same:
-                    continue
-                if not force:
-                    raise OutputError(f"{path}: already exists and holds another run; use "
-                                      "force (--force) to overwrite it")  # fmt: skip
-            todo.append((d, path))
+        plans = [Plan(d.config, Path(folder) / f"{safe_name(d.name)}.mcap", None, drill=d)
+                 for d in drills]  # fmt: skip
+        todo = [p for p in plans if not up_to_date(p)]
+        refuse(todo, force=force, hint="force (--force)")
         set_workers(1)  # one run has nothing to spread over threads
-        for d, path in todo:
+        for p in todo:
+            d = p.drill
             if say is not None:
-                say(f"recording {safe_text(path)} ({safe_text(d.config.instance.name)} "
+                say(f"recording {safe_text(p.mcap)} ({safe_text(d.config.instance.name)} "
                     f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
                     f"{d.config.seed}, {d.choice})")  # fmt: skip
-            record_drill(d, path, overwrite=True)
-        return [Run(path) for _, path in plans]
+            record_drill(d, p.mcap, overwrite=True)
+        return [Run(p.mcap) for p in plans]
 
     def figure(self, path: str | os.PathLike[str], *, log_x: bool = False,
                log_y: bool = False) -> Path:  # fmt: skip
