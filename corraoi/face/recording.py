@@ -84,10 +84,10 @@ def record_run(
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
     the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
     finished as failed with that line. ``notes`` go into the log's provenance."""
-    from corraoi.experiments.drill import row_mismatch
-
     from .slots import slots_of
 
+    if expect:  # a drill-down's check (the module is not imported by a plain record)
+        from corraoi.experiments.drill import row_mismatch
     slots = 0
     provenance = Provenance.of([config.policy], backend=config.streams, notes=notes)
     recording: RunRecording | None = None
