@@ -14,7 +14,6 @@ import textwrap
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -184,14 +183,14 @@ def test_allow_changed_code_says_whether_the_run_still_equals_the_sweeps_row(swe
             in res.stdout)  # fmt: skip
 
     # Python: Sweep.record(..., allow_changed_code=True) says it as a warning
-    code = textwrap.dedent(f"""
+    code = textwrap.dedent("""
         import warnings, corraoi
         with warnings.catch_warnings(record=True) as seen:
             warnings.simplefilter("always")
             corraoi.load("sw").record(3, cell="greedyish", path="py.mcap", rrd=False,
                                       allow_changed_code=True)
         print([str(w.message) for w in seen if "sweep's row" in str(w.message)])
-        print({{w.category.__name__ for w in seen}})
+        print({w.category.__name__ for w in seen})
     """)
     res = subprocess.run([sys.executable, "-c", code], cwd=tmp, capture_output=True,
                          text=True, timeout=300)  # fmt: skip
@@ -261,7 +260,7 @@ def test_without_rerun_sdk_each_command_that_needs_it_is_one_line(tmp_path: Path
     res = subprocess.run([sys.executable, "-c", NO_RERUN, json.dumps(commands)], cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)  # fmt: skip
     assert res.returncode == 0, res.stderr
-    for args, (code, out, err, exc) in zip(commands, json.loads(res.stdout), strict=True):
+    for args, (code, _out, err, exc) in zip(commands, json.loads(res.stdout), strict=True):
         assert code == 1 and "Traceback" not in err and "ModuleNotFoundError" not in exc, (
             args, err, exc)  # fmt: skip
         (line,) = err.strip().splitlines()
@@ -269,4 +268,4 @@ def test_without_rerun_sdk_each_command_that_needs_it_is_one_line(tmp_path: Path
         assert 'needs it, pip install "rerun-sdk' in line, line
     # refused before the sweep ran, before the run was recorded
     assert not (tmp_path / "sw").exists() and not list(tmp_path.glob("r.*"))
-    assert np.all([not (tmp_path / n).exists() for n in ("u.rrd", "c.rrd")])
+    assert not (tmp_path / "u.rrd").exists() and not (tmp_path / "c.rrd").exists()
