@@ -33,7 +33,9 @@ def load(path: str | os.PathLike[str], *, slots: tuple[int, int] | None = None) 
     Raises :class:`~corraoi.errors.LogError` for a file that is not a readable corraoi log,
     :class:`~corraoi.errors.UsageError` for ``slots`` of a sweep.
     """
-    arguments.path(path, name="path", kind=UsageError, what="the path of a slot log or a sweep folder")
+    arguments.path(
+        path, name="path", kind=UsageError, what="the path of a slot log or a sweep folder"
+    )
     slots = arguments.optional(arguments.window, slots, name="slots")
     from recorder.sweeplog.results import is_sweep_path
 

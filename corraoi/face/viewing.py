@@ -291,4 +291,5 @@ def serve_widget_assets() -> str | None:
         return _assets_url
 
 
-__all__ = ["Shown", "check_options", "checked_rrd", "in_kernel", "open_viewer", "serve_widget_assets"]
+__all__ = ["Shown", "check_options", "checked_rrd", "in_kernel", "open_viewer",
+           "serve_widget_assets"]  # fmt: skip
