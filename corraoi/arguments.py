@@ -57,7 +57,10 @@ T = TypeVar("T")
 
 def shown(value: object) -> str:
     """``repr(value)`` on one line, cut to :data:`SHOWN` characters."""
-    text = repr(value)
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a caller's object whose repr fails is still named
+        text = f"<{_typename(value)} object>"
     if not text.isprintable():
         text = text.encode("unicode_escape").decode("ascii")
     return text if len(text) <= SHOWN else f"{text[: SHOWN - 3]}..."

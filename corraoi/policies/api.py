@@ -166,7 +166,7 @@ def check_declaration(cls: type[PolicyBase]) -> type[PolicyBase]:
                              "a corraoi.Param")  # fmt: skip
     color = cls.color
     if color is not None and not (
-        isinstance(color, tuple) and len(color) == 3
+        isinstance(color, (tuple, list)) and len(color) == 3
         and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255 for c in color)
     ):  # fmt: skip
         raise wrong_type(PolicyError, f"{where}.color", color,
