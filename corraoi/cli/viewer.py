@@ -39,10 +39,12 @@ def diff(
 ) -> None:
     """Compare two recorded runs slot by slot.
 
-    Configuration differences come first, then per field the first slot where the runs
-    diverge and how many slots differ, then the final figures of both. Exit status as
-    diff(1): 0 identical, 1 different, 2 trouble (a file that is not a readable log, a
-    bad option).
+    Runs that are not paired (another instance, channel or seed: they did not see one
+    hidden path) are said so on the first line. Configuration differences come next, then
+    per field the first slot where the runs diverge and how many slots differ, then the
+    final figures of both. Exit status as diff(1): 0 identical, 1 different (runs that are
+    not paired always are: their configurations differ), 2 trouble (a file that is not a
+    readable log, a bad option).
 
     \b
     Examples:

@@ -50,6 +50,9 @@ class Drill:
     expect: tuple[tuple[int, float], ...] = ()
     #: what the log says beside the run (recorded with code other than the sweep's)
     notes: tuple[str, ...] = ()
+    #: the sweep's row of a run recorded with other code (``--allow-changed-code``): not
+    #: checked as it runs, only compared once it is recorded (:func:`row_verdict`)
+    row: tuple[tuple[int, float], ...] = ()
 
     @property
     def name(self) -> str:
@@ -70,6 +73,22 @@ def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
                 return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
                         f"says {want:g}: the engine or the code changed since the sweep")
     return None
+
+
+def row_verdict(drill: Drill, slots: int, regret: float | None) -> str | None:
+    """Whether a run recorded with changed code (``drill.row``) still gives the sweep's
+    regret at its last slot ``slots`` (``regret``): one line saying it is equal to the sweep's
+    row or differs from it; None when there is nothing to compare (no row, a run cut short
+    of a checkpoint)."""
+    want = dict(drill.row).get(slots)
+    if want is None or regret is None:
+        return None
+    label = drill.cell if drill.cell is not None else drill.config.policy.label
+    what = f"{drill.config.instance.name} {label} run {drill.run}, recorded with changed code"
+    if float(regret) == want:
+        return f"{what}: equal to the sweep's row (regret {want:g} at slot {slots})"
+    return (f"{what}: differs from the sweep's row: regret {float(regret):g} vs {want:g} at "
+            f"slot {slots}")
 
 
 def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, str | None]:
@@ -109,12 +128,31 @@ def parse_run(text: str | int) -> str | int:
                           f"{', '.join(CHOICES)}") from None  # fmt: skip
 
 
+def split_policy_words(path: str | Path, values: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``--policy`` words (names or comma lists) for the sweep folder ``path``, split into the
+    labels its own table prints for its cells (``eps-greedy``, ``cucb(c=2)``: what
+    :func:`choose` takes as ``swept_labels``) and the rest (policies to resolve as anywhere). A
+    plug-in's label is no registered name in a new process: it is the sweep's to resolve."""
+    import re
+
+    _, grid, _ = sweep_root(path)
+    known = set(grid.labels().values())
+    labels: list[str] = []
+    rest: list[str] = []
+    for value in values:  # a label's own commas are inside its parentheses
+        for word in (w.strip() for w in re.split(r",(?![^()]*\))", value)):
+            if word:
+                (labels if word in known else rest).append(word)
+    return list(dict.fromkeys(labels)), rest
+
+
 def choose(
     path: str | Path,
     run: str | int,
     *,
     cells: Sequence[str] = (),
     policies: Sequence[PolicySpec] = (),
+    swept_labels: Sequence[str] = (),
     warn: Any = None,
     kept_code: bool = False,
     allow_changed_code: bool = False,
@@ -125,8 +163,10 @@ def choose(
     ``cells``: labels (``cucb``, ``cucb(c=2)``), instance names or ``INSTANCE/LABEL`` that
     restrict the sweep's cells. ``policies``: those the sweep ran select its cells; any
     other is added on the chosen run (paired: the same seed, so the same hidden path),
-    said through ``warn``. ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel`
-    (a trace channel's file is read again).
+    said through ``warn``. ``swept_labels``: cells named by the labels the sweep's table
+    prints (:func:`split_policy_words`), selected as ``policies`` select theirs.
+    ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel` (a trace
+    channel's file is read again).
 
     A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
     hashes, the way out; :mod:`corraoi.experiments.kept_code`), unless ``kept_code`` (the
@@ -143,15 +183,21 @@ def choose(
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
                           f"0..{grid.runs - 1}")  # fmt: skip
+    named = tuple(swept_labels)
     labels = grid.labels()
+    unknown = [w for w in named if w not in labels.values()]
+    if unknown:
+        raise ConfigError(f"--policy {unknown[0]!r}: no cell of the sweep in {root} has that "
+                          f"label (its labels: {', '.join(dict.fromkeys(labels.values()))})")
     groups = {k: v for k, v in grid.groups().items() if group is None or k[0] == group}
     swept = {c.policy.name for g in groups.values() for c in g}
     extra = [s for s in policies if s.name not in swept]
-    names = [s.name for s in policies if s.name in swept] if policies else None
-    chosen = _select(groups, labels, cells, names, root)
+    names = [s.name for s in policies if s.name in swept] if policies or named else None
+    chosen = _select(groups, labels, cells, names, root, named)
     if not any(chosen.values()) and not (extra and isinstance(what, int)):
         raise ConfigError(
-            f"--policy {', '.join(s.name for s in policies)}: not in the sweep in {root} (its "
+            f"--policy {', '.join([*named, *(s.name for s in policies)])}: not in the sweep "
+            f"in {root} (its "
             f"policies: {', '.join(sorted(swept))}); a {what} run is chosen among the sweep's "
             "policies: name one of them too, or give --run N"
         )
@@ -198,6 +244,7 @@ def _select(
     cells: Sequence[str],
     names: Sequence[str] | None,
     root: Path,
+    named: Sequence[str] = (),
 ) -> dict[tuple[str, int], list[Cell]]:
     def matches(cell: Cell, text: str) -> bool:
         inst, _, label = text.rpartition("/")
@@ -216,7 +263,8 @@ def _select(
         keep = [c for c in members if not cells or any(matches(c, t) for t in cells)]
         if cells and not keep:
             continue  # a group --cell leaves out
-        out[key] = keep if names is None else [c for c in keep if c.policy.name in names]
+        out[key] = keep if names is None else [c for c in keep if c.policy.name in names
+                                               or labels[c.key] in named]  # fmt: skip
     return out
 
 
@@ -314,8 +362,9 @@ def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
            what: str | int, streams: str = "cpu", allow_changed: bool = False,
            trace_readers: Mapping[str, TraceReader] | None = None) -> Drill:  # fmt: skip
     """With ``allow_changed`` (--allow-changed-code) a plug-in whose code changed runs as it
-    is now: the spec names that code, the log says so, and nothing is checked against the
-    sweep's row; otherwise the run must give the sweep's regret again (``expect``)."""
+    is now: the spec names that code, the log says so, and the sweep's row is kept to say
+    afterwards whether the run still equals it (``row``); otherwise the run must give the
+    sweep's regret again (``expect``)."""
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
         channel = _reload_trace(cell, root, trace_readers)
@@ -328,12 +377,16 @@ def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
             where = spec.qualname.removeprefix("file:").rpartition(":")[0] or spec.qualname
             notes = (changed_note(where, spec.digest, now.digest),)
             spec = now
-    if label is not None and not notes:
-        expect = expected_row(root, grid, cell, run)
+    row: tuple[tuple[int, float], ...] = ()
+    if label is not None:  # changed code: compared once recorded, not a check that stops it
+        if notes:
+            row = expected_row(root, grid, cell, run)
+        else:
+            expect = expected_row(root, grid, cell, run)
     config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
                        streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
-    return Drill(config, run, choice, label, root, expect, notes)
+    return Drill(config, run, choice, label, root, expect, notes, row)
 
 
 def expected_row(root: Path, grid: Grid, cell: Cell, run: int) -> tuple[tuple[int, float], ...]:

@@ -79,16 +79,19 @@ class Sweep(SweepData):
     ) -> Run:
         """Record one run of this sweep slot by slot, as ``corraoi record --from`` does (the
         same files): ``which`` is a run index or ``worst``, ``median``, ``best``; ``policy``
-        (a name, a class, ...) and ``cell`` (a label such as ``cucb(c=2)``, or
-        ``INSTANCE/LABEL``) say whose. The run's regret must equal the sweep's row
-        (:class:`~corraoi.errors.SweepMismatch` if not: the engine or the code changed).
+        (a label the sweep's table prints, a name, a class, ...) and ``cell`` (a label such
+        as ``cucb(c=2)``, or ``INSTANCE/LABEL``) say whose. The run's regret must equal the
+        sweep's row (:class:`~corraoi.errors.SweepMismatch` if not: the engine or the code
+        changed).
 
         ``path``: the slot log (default ``runs/<folder>-<instance>-<label>-run<N>-<which>.mcap``),
         ``rrd`` as for :func:`corraoi.record`. A plug-in edited since the sweep is refused
-        unless ``kept_code`` (the folder's copy runs) or ``allow_changed_code``. Where
+        unless ``kept_code`` (the folder's copy runs) or ``allow_changed_code`` (the code as
+        it is now runs, and a :class:`~corraoi.errors.CorraoiWarning` says whether its regret
+        is still equal to the sweep's row or differs from it). Where
         ``which`` names runs of several cells, :class:`~corraoi.errors.CorraoiError` lists
         them."""
-        from corraoi.experiments.drill import choose
+        from corraoi.experiments.drill import choose, row_verdict, split_policy_words
 
         from .recording import Outlets, plan_files, record_plans, refuse
         from .resolve import TRACE_READERS, policies
@@ -102,10 +105,15 @@ class Sweep(SweepData):
         for name, value in (("force", force), ("kept_code", kept_code),
                             ("allow_changed_code", allow_changed_code)):  # fmt: skip
             arguments.flag(value, name=name)
-        specs = policies(policy) if policy is not None else []
+        given = _listed(policy) if policy is not None else []
+        # the labels the sweep's table prints name its cells; anything else is a policy
+        labels = split_policy_words(self.folder, [p for p in given if isinstance(p, str)])[0]
+        rest = [p for p in given if not (isinstance(p, str) and p in labels)]
+        specs = policies(rest) if rest else []
         cells = (cell,) if cell is not None else ()
-        drills = choose(self.folder, which, cells=cells, policies=specs, warn=python_warn,
-                        kept_code=kept_code, allow_changed_code=allow_changed_code,
+        drills = choose(self.folder, which, cells=cells, policies=specs, swept_labels=labels,
+                        warn=python_warn, kept_code=kept_code,
+                        allow_changed_code=allow_changed_code,
                         trace_readers=TRACE_READERS)  # fmt: skip
         if len(drills) != 1:
             listed = "; ".join(f"{d.config.instance.name}/{d.cell or d.config.policy.label} "
@@ -122,6 +130,13 @@ class Sweep(SweepData):
         refuse(plans, force=force, hint="force=True")
         (done,) = record_plans(plans, Outlets(overwrite=force))
         assert done.mcap is not None
+        verdict = row_verdict(drills[0], done.slots, done.regret)  # changed code: still equal?
+        if verdict is not None:
+            import warnings
+
+            from corraoi.errors import CorraoiWarning
+
+            warnings.warn(verdict, CorraoiWarning, stacklevel=2)
         return Run(done.mcap, rrd=done.rrd, summary=done.summary)
 
     def record_each(

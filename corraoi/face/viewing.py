@@ -194,21 +194,42 @@ def _web(recordings: list[Path], *, web_port: int) -> Shown:
 
 
 def _send(recordings: list[Path], url: str) -> None:
-    """Load each recording, unchanged (its own application and recording id), into the
-    server at ``url``, which keeps it for every viewer that connects."""
+    """Load each recording, unchanged, into the server at ``url``, which keeps it for every
+    viewer that connects. Each goes through a stream of the file's own application and
+    recording id (:func:`store_of`), so the viewer lists the run and nothing beside it (a
+    stream of its own would be an empty source of that name)."""
     import rerun as rr
 
-    stream = rr.RecordingStream("corraoi-show", send_properties=False)
-    try:
-        stream.connect_grpc(url)
-        for p in recordings:
+    for p in recordings:
+        app, rec = store_of(p)
+        stream = rr.RecordingStream(app, recording_id=rec, send_properties=False)
+        try:
+            stream.connect_grpc(url)
             stream.log_file_from_path(p)
-        stream.flush()
+            stream.flush()
+        except Exception as exc:  # noqa: BLE001 - rerun raises several kinds here
+            raise ViewerError(f"show: cannot send {p} to the viewer at {url}: "
+                              f"{exc}") from None  # fmt: skip
+        finally:
+            stream.disconnect()
+
+
+def store_of(rrd: Path) -> tuple[str, str | None]:
+    """(application id, recording id) of the recording the ``.rrd`` file holds (its first,
+    if several); a file without one (a blueprint alone) gives ``corraoi`` and None."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():  # a file from before footers: read whole, not said
+            warnings.simplefilter("ignore")
+            entries = RrdReader(rrd).recordings()
     except Exception as exc:  # noqa: BLE001 - rerun raises several kinds here
-        raise ViewerError(f"show: cannot send {recordings[0]} to the viewer at {url}: "
-                          f"{exc}") from None  # fmt: skip
-    finally:
-        stream.disconnect()
+        raise LogError(f"{rrd}: cannot read the Rerun recording ({exc})") from None
+    if not entries:
+        return "corraoi", None
+    return entries[0].application_id, entries[0].recording_id
 
 
 def _native(recordings: list[Path]) -> Shown:
