@@ -111,6 +111,9 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("record", {"params": [1]}, PolicyTypeError, "params [1]: expected a dict"),
     ("record", {"params": {"c": "x"}}, PolicyTypeError, "params['c'] 'x': expected a number"),
     ("record", {"channel": 3}, ConfigTypeError, "channel 3: expected iid, markov or trace:"),
+    ("record", {"channel": "markof"}, ConfigValueError, "channel 'markof': expected iid, markov"),
+    ("record", {"policy": "no-such-policy"}, PolicyValueError, "unknown policy 'no-such-policy'"),
+    ("record", {"instance": "I9"}, InstanceValueError, "I9: no such instance file"),
     ("record", {"path": 3}, OutputTypeError, "path 3: expected a path"),
     ("record", {"path": ""}, OutputValueError, "path '': empty"),
     (

@@ -24,7 +24,6 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import (
-    ConfigError,
     OutputError,
     PolicyError,
     PolicyRuntimeError,
@@ -451,8 +450,7 @@ def record(
         raise arguments.wrong_type(PolicyError, "policy", policy, f"one policy "
                                    f"({resolve.POLICY_LIKE}); corraoi.sweep takes several")
     seed, horizon = check_seed(seed, floats=True), check_horizon(horizon, floats=True)
-    arguments.optional(arguments.text, channel, name="channel", kind=ConfigError,
-                       expected=resolve.CHANNEL_WORDS)  # fmt: skip
+    resolve.channel_word(channel)
     arguments.optional(arguments.path, path, name="path")
     arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
     arguments.flag(force, name="force")

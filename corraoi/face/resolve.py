@@ -17,8 +17,8 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from corraoi.arguments import number, path, text, wrong_type, wrong_value
-from corraoi.errors import CorraoiWarning, InstanceError, PolicyError
+from corraoi.arguments import number, optional, path, text, wrong_type, wrong_value
+from corraoi.errors import ConfigError, CorraoiWarning, InstanceError, PolicyError
 from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicyBase, PolicySpec, make_policies, register
@@ -37,6 +37,16 @@ POLICY_LIKE = ("a policy name, a FILE.py:Class or module:Class word, or a corrao
                "corraoi.CompiledPolicy class or instance")  # fmt: skip
 #: A parameter's value: a number, or (for sweeps) several.
 ParamValue = float | Sequence[float]
+
+
+def channel_word(value: object, name: str = "channel") -> str | None:
+    """A ``channel`` argument checked before anything is done: None (the instance's
+    default), ``iid``, ``markov`` or ``trace:PATH`` (:data:`CHANNEL_WORDS`)."""
+    word = optional(text, value, name=name, kind=ConfigError, empty=True, expected=CHANNEL_WORDS)
+    kind = (word or "").strip()
+    if kind and kind not in ("iid", "markov") and not kind.startswith("trace:"):
+        raise wrong_value(ConfigError, name, value, CHANNEL_WORDS)
+    return word
 
 
 def channel(spec: str | None, instance: Instance) -> Channel:
@@ -173,6 +183,7 @@ __all__ = [
     "ParamValue",
     "PolicyLike",
     "channel",
+    "channel_word",
     "flat_params",
     "instance",
     "policies",

@@ -418,8 +418,7 @@ def sweep(
     arguments.optional(arguments.text, scheduler if isinstance(scheduler, str) else None,
                        name="scheduler", kind=ConfigError,
                        expected="'local:N', 'tcp://HOST:PORT', a dask.distributed.Client or None")
-    arguments.optional(arguments.text, channel, name="channel", kind=ConfigError,
-                       expected=resolve.CHANNEL_WORDS)  # fmt: skip
+    resolve.channel_word(channel)
     arguments.optional(arguments.text, baseline, name="baseline", kind=PolicyError,
                        expected="the name of one of the swept policies")  # fmt: skip
     chunk = limits.check_int(chunk, name="chunk", lo=0, hi=limits.MAX_RUNS, floats=True,
