@@ -232,13 +232,16 @@ def path_or_flag(value: object, *, name: str, kind: type[UsageError] = OutputErr
 def index_or_word(value: object, *, name: str, words: Sequence[str],
                   kind: type[UsageError] = UsageError) -> int | str:  # fmt: skip
     """``value``: an index (an integer >= 0, :func:`integer`) or one of ``words`` (any
-    case)."""
+    case); a ``str`` of an integer (what a command line gives) is that integer, its range
+    left to the caller, which knows how many there are."""
     said = f"an index (0, 1, ...) or one of {', '.join(words)}"
     if isinstance(value, str):
         word = value.strip().lower()
-        if word not in words:
-            raise wrong_value(kind, name, value, said)
-        return word
+        if word in words:
+            return word
+        if word.removeprefix("-").isascii() and word.removeprefix("-").isdigit():
+            return int(word)
+        raise wrong_value(kind, name, value, said)
     if isinstance(value, bool) or value is None or isinstance(value, (bytes, Sequence, Mapping)):
         raise wrong_type(kind, name, value, said)
     return integer(value, name=name, lo=0, kind=kind)
