@@ -496,3 +496,24 @@ def test_the_python_api_page_says_what_each_call_raises():
     assert {n for n in named if not hasattr(errors, n)} == {"AssertionError"}
     for kind, (typed, valued) in KINDS.items():
         assert f"| `{kind.__name__}` | `{typed.__name__}` | `{valued.__name__}` |" in page
+
+
+def test_a_params_table_changed_after_the_class_statement_is_refused_where_it_is_registered(
+    tmp_path,
+):
+    """The class statement checks the table; registering (what record and sweep do with a
+    class) checks it again, so a table replaced afterwards is refused there too."""
+
+    class Later(Policy):
+        name = "args-later"
+        params = {"epsilon": Param(0.1, "exploration", low=0, high=1)}
+
+        def select(self, t, state):
+            return state.rng.integers(state.arms)
+
+    Later.params = {"epsilon": 0.1}  # type: ignore[dict-item]
+    with pytest.raises(PolicyTypeError, match=r"Later\.params\['epsilon'\] 0\.1: expected a "):
+        corraoi.register(Later)
+    with pytest.raises(PolicyTypeError, match=r"Later\.params\['epsilon'\] 0\.1"):
+        corraoi.record(Later, horizon=50, path=tmp_path / "later.mcap")
+    assert list(tmp_path.iterdir()) == []
