@@ -131,7 +131,7 @@ def test_a_log_without_its_rrd_gets_the_replayed_one_beside_it(tmp_path, recorde
 @pytest.mark.parametrize(
     ("make", "error", "words"),
     [
-        (lambda p: 42, UsageError, "show: expected a corraoi.Run, a corraoi.Sweep, or the path"),
+        (lambda p: 42, UsageError, "target 42: expected a corraoi.Run, a corraoi.Sweep, or the"),
         (lambda p: p / "nope.mcap", LogError, "nope.mcap: no such file or folder"),
         (lambda p: p, LogError, "a folder without a sweep"),
         (lambda p: _write(p / "x.rrd", b"hello"), LogError, "not a Rerun recording"),

@@ -22,8 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi import arguments
 from corraoi.errors import (
     OutputError,
+    PolicyError,
     PolicyRuntimeError,
     SweepMismatch,
     UsageError,
@@ -390,6 +392,10 @@ def _record_one(
 # ---------------------------------------------------------------------------- the face
 
 
+#: What every sink has (:class:`recorder.sink.Sink`): written to, closed, and a context manager.
+SINK_METHODS = ("write", "close", "__enter__", "__exit__")
+
+
 def record(
     policy: PolicyLike,
     instance: str | os.PathLike[str] | Instance = "I1",
@@ -440,6 +446,19 @@ def record(
     from . import resolve
     from .runs import Run
 
+    if isinstance(policy, (list, tuple)):  # the arguments checked before anything is done
+        raise arguments.wrong_type(PolicyError, "policy", policy, f"one policy "
+                                   f"({resolve.POLICY_LIKE}); corraoi.sweep takes several")
+    seed, horizon = check_seed(seed, floats=True), check_horizon(horizon, floats=True)
+    resolve.channel_word(channel)
+    arguments.optional(arguments.path, path, name="path")
+    arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
+    arguments.flag(force, name="force")
+    arguments.optional(arguments.text, viewer, name="viewer",
+                       expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
+    arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
+    arguments.optional(arguments.callback, on_block, name="on_block")
+    arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
     check_seed(seed, name="seed")
     check_horizon(horizon)
@@ -470,6 +489,7 @@ def record(
 
 __all__ = [
     "DEFAULT_OUT",
+    "SINK_METHODS",
     "FROM_OUT",
     "Outlets",
     "Plan",

@@ -20,7 +20,8 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from corraoi.errors import ConfigError, CorraoiError, UsageError
+from corraoi import arguments
+from corraoi.errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError
 from recorder.sweeplog.results import SweepData
 
 from .resolve import PolicyLike, python_warn
@@ -46,6 +47,10 @@ class Sweep(SweepData):
       that run of every cell (what ``corraoi compare --from`` compares);
     * ``.figure(path)``: the sweep figure.
     """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(arguments.path(path, name="path", kind=UsageError,
+                                        what="a sweep folder's path"))  # fmt: skip
 
     @property
     def notable(self) -> dict[str, Any] | None:
@@ -92,6 +97,14 @@ class Sweep(SweepData):
         from .resolve import TRACE_READERS, policies
         from .runs import Run
 
+        which = check_which(which)  # the arguments checked before anything is done
+        arguments.optional(arguments.text, cell, name="cell",
+                           expected="a cell's label (cucb(c=2)) or INSTANCE/LABEL")  # fmt: skip
+        arguments.optional(arguments.path, path, name="path")
+        arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
+        for name, value in (("force", force), ("kept_code", kept_code),
+                            ("allow_changed_code", allow_changed_code)):  # fmt: skip
+            arguments.flag(value, name=name)
         given = _listed(policy) if policy is not None else []
         # the labels the sweep's table prints name its cells; anything else is a policy
         labels = split_policy_words(self.folder, [p for p in given if isinstance(p, str)])[0]
@@ -154,6 +167,14 @@ class Sweep(SweepData):
         from .resolve import TRACE_READERS
         from .runs import Run
 
+        which = check_which(which)  # the arguments checked before anything is done
+        cells = arguments.names(cells, name="cells", empty=True, what="cells' labels")
+        arguments.path(folder, name="folder", what="a folder's path")
+        for name, value in (("force", force), ("kept_code", kept_code),
+                            ("allow_changed_code", allow_changed_code)):  # fmt: skip
+            arguments.flag(value, name=name)
+        arguments.optional(arguments.callback, say, name="say")
+        arguments.callback(warn, name="warn")
         drills = choose(self.folder, which, cells=tuple(cells), warn=warn,
                         kept_code=kept_code, allow_changed_code=allow_changed_code,
                         trace_readers=TRACE_READERS)  # fmt: skip
@@ -178,6 +199,9 @@ class Sweep(SweepData):
         from recorder.sweeplog.read import read_sweep
         from viewer.figure import draw_figure
 
+        arguments.path(path, name="path", what="the figure's path")
+        arguments.flag(log_x, name="log_x")
+        arguments.flag(log_y, name="log_y")
         return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
 
     def recordings(self) -> list[Path]:
@@ -228,6 +252,14 @@ class Sweep(SweepData):
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
                        for r in rows)  # fmt: skip
         return f"<p>{html.escape(title)}</p><table><tr>{cells}</tr>{body}</table>"
+
+
+def check_which(which: object) -> int | str:
+    """``which`` of :meth:`Sweep.record` and :meth:`Sweep.record_each`: a run index or
+    ``worst``, ``median``, ``best`` (:func:`corraoi.arguments.index_or_word`)."""
+    from corraoi.experiments.notable import CHOICES
+
+    return arguments.index_or_word(which, name="which", words=CHOICES)
 
 
 def settle_backend(grid: Grid, warn: Callable[[str], None] | None = None) -> Grid:
@@ -362,12 +394,44 @@ def sweep(
     Ctrl-C (KeyboardInterrupt) keeps the finished chunks: ``resume=True`` continues.
     """
     from corraoi import limits
-    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.grid import BACKENDS, build_grid
 
     from . import resolve
 
+    # the arguments checked before anything is done (corraoi.arguments)
+    if isinstance(instances, (list, tuple)) and not instances:
+        raise arguments.wrong_value(InstanceError, "instances", instances,
+                                    "at least one instance", "empty")  # fmt: skip
+    if isinstance(horizon, (list, tuple)) and not horizon:
+        raise arguments.wrong_value(ConfigError, "horizon", horizon, "at least one horizon",
+                                    "empty")  # fmt: skip
+    runs = limits.check_int(runs, name="runs", lo=1, hi=limits.MAX_RUNS, floats=True)
+    horizon = [limits.check_horizon(h, name="horizon" if not isinstance(horizon, (list, tuple))
+                                    else f"horizon[{i}]", floats=True)
+               for i, h in enumerate(_listed(horizon))]  # fmt: skip
+    seed = limits.check_seed(seed, runs=runs, floats=True)
+    arguments.optional(arguments.path, out, name="out", what="the sweep folder's path")
+    arguments.text(backend, name="backend", kind=ConfigError, choices=BACKENDS)
+    if scheduler is not None and not (isinstance(scheduler, str) or hasattr(scheduler, "submit")):
+        raise arguments.wrong_type(ConfigError, "scheduler", scheduler, "'local:N', "
+                                   "'tcp://HOST:PORT', a dask.distributed.Client or None")
+    arguments.optional(arguments.text, scheduler if isinstance(scheduler, str) else None,
+                       name="scheduler", kind=ConfigError,
+                       expected="'local:N', 'tcp://HOST:PORT', a dask.distributed.Client or None")
+    resolve.channel_word(channel)
+    arguments.optional(arguments.text, baseline, name="baseline", kind=PolicyError,
+                       expected="the name of one of the swept policies")  # fmt: skip
+    chunk = limits.check_int(chunk, name="chunk", lo=0, hi=limits.MAX_RUNS, floats=True,
+                             why="runs per chunk; 0 chooses")  # fmt: skip
+    checkpoints = limits.check_int(checkpoints, name="checkpoints", lo=2,
+                                   hi=limits.MAX_CHECKPOINTS, floats=True)  # fmt: skip
+    for name, value in (("resume", resume), ("force", force), ("allow_huge", allow_huge)):
+        arguments.flag(value, name=name)
+    workers = arguments.optional(limits.check_int, workers, name="workers", lo=1,
+                                 hi=limits.MAX_WORKERS, floats=True)  # fmt: skip
+    arguments.optional(arguments.callback, on_slots, name="on_slots")
     insts = [resolve.instance(i) for i in _listed(instances)]
-    words, scoped = resolve.policy_words(policies, params)
+    words, scoped = resolve.policy_words(policies, params, "policies")
     horizons = [int(h) for h in _listed(horizon)]
     given = {k: v if isinstance(v, list) else [v]
              for k, v in {**scoped, **resolve.flat_params(params, several=True)}.items()}

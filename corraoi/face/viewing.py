@@ -22,6 +22,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from corraoi import arguments
 from corraoi.errors import LogError, UsageError, ViewerError
 
 #: The first bytes of every Rerun recording file (0.41: ``RRF2``).
@@ -103,6 +104,8 @@ def open_viewer(
     """Open the viewer :func:`corraoi.show` describes on the recordings ``find()`` returns,
     called once the viewer is known to be possible (so that nothing is replayed for a
     viewer that cannot open)."""
+    web_port = check_options(spawn=spawn, notebook=notebook, web_port=web_port, width=width,
+                             height=height)  # fmt: skip
     if spawn and notebook:
         raise UsageError("show: spawn=True opens a native window, notebook=True a widget; "
                          "choose one")  # fmt: skip
@@ -124,6 +127,25 @@ def open_viewer(
     if in_notebook:
         return _widget(recordings, width=width, height=height)
     return _web(recordings, web_port=web_port)
+
+
+def check_options(*, spawn: object, notebook: object, web_port: object, width: object,
+                  height: object) -> int:  # fmt: skip
+    """The viewer's options of :func:`corraoi.show`, ``Run.show`` and ``Sweep.show``, checked
+    (:mod:`corraoi.arguments`); returns ``web_port`` as an int (0: any free port)."""
+    from corraoi.limits import MAX_PORT
+
+    arguments.flag(spawn, name="spawn")
+    arguments.optional(arguments.flag, notebook, name="notebook")
+    port = arguments.integer(web_port, name="web_port", lo=0, hi=MAX_PORT,
+                             why="a TCP port; 0 for any free one")  # fmt: skip
+    if width != "auto":
+        if isinstance(width, str):
+            raise arguments.wrong_value(UsageError, "width", width,
+                                        "a width in pixels (an integer >= 1) or 'auto'")
+        arguments.integer(width, name="width", lo=1, why="pixels, or 'auto'")
+    arguments.integer(height, name="height", lo=1, why="pixels")
+    return port
 
 
 def checked_rrd(p: Path) -> Path:
@@ -158,10 +180,11 @@ def _execution_count() -> int | None:
 
 def _web(recordings: list[Path], *, web_port: int) -> Shown:
     """``rerun --serve-web`` on 127.0.0.1 (the ``--serve-web`` server), fed the recordings."""
-    from recorder.live.viewers import WebViewer
+    from recorder.live.viewers import WebViewer, free_port
 
     os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
-    web = WebViewer(web_port=web_port).start()
+    # 0: any free port, as in socket: one is bound and read back, so that the URL names it
+    web = WebViewer(web_port=web_port or free_port(0)).start()
     try:
         _send(recordings, web.grpc_url)
     except BaseException:
@@ -289,4 +312,5 @@ def serve_widget_assets() -> str | None:
         return _assets_url
 
 
-__all__ = ["Shown", "checked_rrd", "in_kernel", "open_viewer", "serve_widget_assets"]
+__all__ = ["Shown", "check_options", "checked_rrd", "in_kernel", "open_viewer",
+           "serve_widget_assets"]  # fmt: skip

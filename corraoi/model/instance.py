@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import InstanceError
+from corraoi.errors import InstanceError, InstanceValueError
 
 P_TOLERANCE = 1e-9
 
@@ -244,7 +244,7 @@ def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
     path = Path(text)
     if not path.exists():
         known = ", ".join(BUILTINS)
-        raise InstanceError(f"{text}: no such instance file (built-in instances: {known})")
+        raise InstanceValueError(f"{text}: no such instance file (built-in instances: {known})")
     if path.is_dir():
         raise InstanceError(f"{text}: is a directory, expected an instance file")
     raw = _read_regular(path, text)

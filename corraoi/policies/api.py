@@ -21,7 +21,8 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from corraoi.errors import PolicyError
+from corraoi.arguments import flag, number, optional, text, wrong_type, wrong_value
+from corraoi.errors import PolicyError, PolicyTypeError
 
 RGB = tuple[int, int, int]
 BUILTIN_PREFIX = "corraoi:"
@@ -44,23 +45,23 @@ class Param:
     integer: bool = False
 
     def __post_init__(self) -> None:
-        for field in ("default", "low", "high"):
-            value = getattr(self, field)
-            if field != "default" and value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
-                                                                  np.floating)):  # fmt: skip
-                raise PolicyError(f"Param {field}: expected a number, got {value!r} "
-                                  "(Param(default, help, low, high, ...))")  # fmt: skip
-        if not isinstance(self.help, str):
-            raise PolicyError(f"Param help: expected text, got {self.help!r} "
-                              "(Param(default, help, low, high, ...))")  # fmt: skip
+        hint = " (Param(default, help, low, high, ...))"
+        number(self.default, name="Param default", kind=PolicyError, finite=False,
+               expected="a number" + hint)  # fmt: skip
+        for bound in ("low", "high"):
+            optional(number, getattr(self, bound), name=f"Param {bound}", kind=PolicyError,
+                     finite=False, expected="a number or None" + hint)  # fmt: skip
+        text(self.help, name="Param help", kind=PolicyError, empty=True,
+             expected="a line of text" + hint)  # fmt: skip
         for field in ("open_low", "open_high", "integer"):
-            if not isinstance(getattr(self, field), (bool, np.bool_)):
-                raise PolicyError(f"Param {field}: expected True or False, got "
-                                  f"{getattr(self, field)!r}")  # fmt: skip
-        if self.check(float(self.default)) is not None:
-            raise PolicyError(f"parameter default {self.default!r} is outside {self.range_text()}")
+            flag(getattr(self, field), name=f"Param {field}", kind=PolicyError)
+        if self.low is not None and self.high is not None and self.low > self.high:
+            raise wrong_value(PolicyError, "Param low", self.low,
+                              f"a low bound <= high ({self.high!r})")  # fmt: skip
+        problem = self.check(float(self.default))
+        if problem is not None:
+            why = "out of range" if problem.startswith("must be in") else problem
+            raise wrong_value(PolicyError, "Param default", self.default, self.range_text(), why)
 
     def range_text(self) -> str:
         lo = "-inf" if self.low is None else f"{self.low:g}"
@@ -129,12 +130,48 @@ class PolicyBase:
     paper: ClassVar[bool] = False
     tier: ClassVar[str] = ""
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        check_declaration(cls)
+
     @classmethod
     def describe(cls) -> str:
         if cls.summary:
             return cls.summary
         doc = (cls.__doc__ or "").strip().splitlines()
         return doc[0].strip() if doc else ""
+
+
+def check_declaration(cls: type[PolicyBase]) -> type[PolicyBase]:
+    """A policy class's declarations checked as it is declared (and again where it is
+    registered): ``params`` a table of parameter names to :class:`Param`, ``name``,
+    ``label``, ``summary`` and ``reference`` text, ``color`` an RGB triple or None.
+    :class:`~corraoi.errors.PolicyTypeError` / ``PolicyValueError`` name what is wrong."""
+    where = cls.__qualname__
+    for attr in ("name", "label", "summary", "reference"):
+        text(getattr(cls, attr), name=f"{where}.{attr}", kind=PolicyError, empty=True)
+    table = cls.params
+    if not isinstance(table, Mapping):
+        raise wrong_type(PolicyError, f"{where}.params", table,
+                         'a dict of parameter names to corraoi.Param (e.g. {"epsilon": '
+                         'Param(0.1, "exploration", low=0, high=1)})')  # fmt: skip
+    for key, decl in table.items():
+        if not isinstance(key, str) or not key.isidentifier():
+            raise wrong_value(PolicyError, f"{where}.params key", key,
+                              "a parameter name (a Python identifier)")  # fmt: skip
+        if not isinstance(decl, Param):
+            raise wrong_type(PolicyError, f"{where}.params[{key!r}]", decl,
+                             f'a corraoi.Param (e.g. Param({decl!r}, "help", low=..., '
+                             "high=...))" if isinstance(decl, (int, float)) else
+                             "a corraoi.Param")  # fmt: skip
+    color = cls.color
+    if color is not None and not (
+        isinstance(color, (tuple, list)) and len(color) == 3
+        and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255 for c in color)
+    ):  # fmt: skip
+        raise wrong_type(PolicyError, f"{where}.color", color,
+                         "None or an (r, g, b) tuple of integers 0..255")  # fmt: skip
+    return cls
 
 
 class CompiledPolicy(PolicyBase):
@@ -237,7 +274,19 @@ class Policy(PolicyBase):
     tier: ClassVar[str] = "python"
 
     def __init__(self, **params: float) -> None:
+        cls = type(self)
         for key, value in params.items():
+            decl = cls.params.get(key)
+            if decl is None:
+                declared = ", ".join(cls.params) or "none"
+                raise PolicyTypeError(f"{cls.__qualname__}({key}=...): not a parameter it "
+                                      f"declares (it declares: {declared})")  # fmt: skip
+            x = number(value, name=f"{cls.__qualname__}({key}=...)", kind=PolicyError,
+                       finite=False)  # fmt: skip
+            problem = decl.check(x)
+            if problem is not None:
+                raise wrong_value(PolicyError, f"{cls.__qualname__}({key}=...)", value,
+                                  decl.range_text(), problem)  # fmt: skip
             setattr(self, key, value)
 
     def reset(self, state: RunState) -> None:

@@ -16,14 +16,14 @@ import importlib.util
 import os
 import sys
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from corraoi.errors import CodeChanged, PolicyError
+from corraoi.errors import CodeChanged, PolicyError, PolicyTypeError
 
-from .api import CompiledPolicy, Policy, PolicyBase
+from .api import CompiledPolicy, Policy, PolicyBase, check_declaration
 
 PLUGIN_MODULE_PREFIX = "corraoi_plugin_"
 
@@ -35,12 +35,11 @@ def one_line(exc: BaseException) -> str:
 
 def check_class(obj: Any, where: str) -> type[PolicyBase]:
     if not (isinstance(obj, type) and issubclass(obj, (CompiledPolicy, Policy))):
-        raise PolicyError(
+        raise PolicyTypeError(
             f"{where}: {obj!r} is not a policy class (expected a subclass of "
             "corraoi.policies.Policy or corraoi.policies.CompiledPolicy)"
         )
-    if not isinstance(obj.params, Mapping):
-        raise PolicyError(f"{where}: params must be a dict of name -> Param")
+    check_declaration(obj)  # again: a class attribute may have changed since it was declared
     if issubclass(obj, CompiledPolicy) and obj.score is None and obj.forced is None:
         raise PolicyError(f"{where}: a compiled policy needs a score (or forced) hook")
     if issubclass(obj, Policy) and obj.select is Policy.select:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from corraoi._version import __version__
-from corraoi.errors import PolicyError
+from corraoi.errors import PolicyError, PolicyValueError
 
 from .api import BUILTIN_PREFIX, PolicyBase
 from .loading import (
@@ -215,7 +215,7 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
             modname = ep.value.split(":")[0]
             return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname),
                             module_digest(modname))  # fmt: skip
-    raise PolicyError(unknown_policy_message(raw))
+    raise PolicyValueError(unknown_policy_message(raw))
 
 
 def _file_without_class(raw: str) -> str:
