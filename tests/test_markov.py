@@ -119,6 +119,10 @@ GOOD = {"transition": [[0.9, 0.1], [0.3, 0.7]], "Y": [[1, 0], [0, 1]]}
             "the chain is reducible: state x2 cannot be reached from state x1",
         ),
         ({"transition": [[0.0, 1.0], [1.0, 0.0]]}, "the chain is periodic with period 2"),
+        (  # an absorbing last state: checked before its stationary law is solved for
+            {"transition": [[0.9, 0.1], [0.0, 1.0]]},
+            "the chain is reducible: state x1 cannot be reached from state x2",
+        ),
         ({"transition": [[0.9, "x"], [0.3, 0.7]]}, "transition row 1: 'x' is not a finite number"),
         ({"transition": "no"}, "transition must be a list of rows"),
     ],

@@ -172,8 +172,10 @@ class Instance:
             P = check_transition(transition, n_given, where)
             if "p" not in data:
                 states = data.get("states")
-                named = isinstance(states, list) and len(states) == P.shape[0]
-                check_chain(P, where, [str(v) for v in states] if named else None)
+                names = None
+                if isinstance(states, list) and len(states) == P.shape[0]:
+                    names = [str(v) for v in states]
+                check_chain(P, where, names)
                 data = {**data, "p": [float(v) for v in stationary(P)]}
         p, Y = data["p"], data["Y"]
         if not isinstance(p, list) or not all(_is_number(v) for v in p):
