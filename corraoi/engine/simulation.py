@@ -28,7 +28,15 @@ from . import threads
 from ._kernel import draw_states
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .pyengine import (
+    Streams,
+    apply_slot,
+    check_arms,
+    construct,
+    hook_fault,
+    hook_raised,
+    policy_raised,
+)
 from .seeds import streams_for_seeds
 
 __all__ = [
@@ -138,8 +146,13 @@ class Simulation:
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
             self._py = construct(self.cls, pb.policy)
-            rng = Streams(self.pol, self.ncache)
-            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
+            self._mu = np.zeros((R, K))
+            self._clock = np.zeros(1, dtype=np.int64)  # the slot state.t shows
+            # the policy sees these arrays through read-only views
+            self._state = RunState(runs=R, arms=K, seeds=seed_arr,
+                                   rng=Streams(self.pol, self.ncache), pulls=self.pulls,
+                                   successes=self.succ, mu_hat=self._mu, aoi=self.aoi,
+                                   clock=self._clock)  # fmt: skip
 
     def kernel(self, record: bool) -> Any:
         """The compiled kernel this simulation uses: the record kernel (per-slot columns) or
@@ -242,25 +255,24 @@ class Simulation:
         draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
                     nslots, xs)  # fmt: skip
         Y = self._Y
-        mu = state.mu_hat
-        rew = np.empty(R, dtype=np.int8)
-        state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
+        mu = self._mu
         if self.t == 0:
             try:
-                _call(name, 0, policy.reset, state)
+                _call(name, 0, state, policy.reset, state)
             except PolicyRuntimeError as exc:
                 return 0, exc
         si = 0
         for j in range(nslots):
             t = self.t + j + 1
-            state.t = t
+            self._clock[0] = t
             try:
-                picked = _call(name, t, policy.select, t, state)
+                picked = _call(name, t, state, policy.select, t, state)
                 arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t,
                                         who=self.run_name)  # fmt: skip
             except PolicyRuntimeError as exc:
                 return j, exc
             x = xs[:, j]
+            rew = np.empty(R, dtype=np.int8)  # new each slot: the policy may keep it
             apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
                        self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
             if record:
@@ -279,8 +291,11 @@ class Simulation:
                 s_aoisum[:, si] = self.aoisum
                 s_pulls[:, si] = self.pulls
                 si += 1
+            rew.flags.writeable = False
+            played = arms.view()
+            played.flags.writeable = False
             try:
-                _call(name, t, policy.update, t, arms, rew, state)
+                _call(name, t, state, policy.update, t, played, rew, state)
             except PolicyRuntimeError as exc:
                 return j + 1, exc  # the slot itself happened
         return nslots, None
@@ -449,16 +464,12 @@ def simulate_run(
         yield b.run(0)
 
 
-def _call(name: str, t: int, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
+def _call(name: str, t: int, state: RunState, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot
+    (and the field of ``state`` for a write into it)."""
     try:
         return func(*args)
     except (CorraoiError, KeyboardInterrupt):
         raise
     except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        what = getattr(func, "__name__", "policy")
-        detail = " ".join(str(exc).split())
-        raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
-            + (f": {detail}" if detail else "")
-        ) from exc
+        raise policy_raised(name, t, func, exc, state) from exc
