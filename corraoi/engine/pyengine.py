@@ -241,6 +241,34 @@ def hook_raised(name: str, first: int, last: int, exc: BaseException) -> PolicyR
                               f"{type(exc).__name__}" + (f": {detail}" if detail else ""))
 
 
+def counts_written(name: str, t0: int, arm: np.ndarray, success: np.ndarray, pulls: np.ndarray,
+                   mu_hat: np.ndarray, pulls0: np.ndarray, succ0: np.ndarray,
+                   who: Any) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
+    """The record path's check that a compiled plug-in's hooks left the engine's counts
+    alone: the logged ``pulls`` and ``mu_hat`` (R, B, K) of slots ``t0 + 1..`` must follow
+    the arms played and their successes from the counts ``pulls0``/``succ0`` (R, K) before.
+    None, or (slots before the first that does not, the PolicyRuntimeError naming it and
+    ``who(r)``)."""
+    played = arm[:, :, None] == np.arange(pulls.shape[2])
+    want = pulls0[:, None, :] + np.cumsum(played, axis=1)
+    wins = succ0[:, None, :] + np.cumsum(played & success[:, :, None], axis=1)
+    mu = np.divide(wins, want, out=np.zeros(want.shape), where=want > 0)
+    bad = ((pulls != want) | (mu_hat != mu)).any(axis=2)
+    if not bad.any():
+        return None
+    first = np.where(bad.any(axis=1), bad.argmax(axis=1), bad.shape[1])
+    r = int(first.argmin())
+    return int(first[r]), hook_wrote(name, f"slot {t0 + int(first[r]) + 1}", "npull or nsucc",
+                                     who(r))  # fmt: skip
+
+
+def hook_wrote(name: str, when: str, what: str, who: str = "") -> PolicyRuntimeError:
+    """A compiled hook that wrote into an array it may only read, in one line."""
+    return PolicyRuntimeError(f"policy {name}, {when}: a compiled hook wrote into {what}"
+                              + (f" for {who}" if who else "") + "; hooks may write only "
+                              "vals (score) and ps, and read the rest")  # fmt: skip
+
+
 def construct(cls: Any, spec: Any) -> Any:
     """A plain-Python policy made with its parameters; whatever its ``__init__`` raises is
     one PolicyRuntimeError line naming the policy (before slot 1: no log is left)."""

@@ -33,8 +33,10 @@ from .pyengine import (
     apply_slot,
     check_arms,
     construct,
+    counts_written,
     hook_fault,
     hook_raised,
+    hook_wrote,
     policy_raised,
 )
 from .seeds import streams_for_seeds
@@ -139,6 +141,9 @@ class Simulation:
             self._kernels: dict[bool, Any] = {}
             self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
             self._params = pb.params
+            # a plug-in's hooks are checked for writes into params and the counts (the
+            # built-ins are not: no cost)
+            self._given: np.ndarray | None = None if pb.policy.builtin else pb.params.copy()
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
             self._pclass = pb.pclass
             self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
@@ -179,6 +184,7 @@ class Simulation:
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
+        check = self._given is not None
         while done < nslots:
             t0 = self.t + done
             n, slices = threads.plan(self._rate, R, nslots - done)
@@ -190,6 +196,7 @@ class Simulation:
                 st = np.ascontiguousarray(snap_t[i0:i1])
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
+            counts = (self.pulls.copy(), self.succ.copy()) if check and record else None
             start = time.perf_counter()
             try:
                 self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
@@ -207,6 +214,9 @@ class Simulation:
                     full[:, i0:i1] = part
             if self._err[:, 0].any():
                 return self._fault(K)
+            wrote = self._hooks_wrote(counts, piece, t0, n) if check else None
+            if wrote is not None:
+                return done + wrote[0], wrote[1]
             done += n
         return nslots, None
 
@@ -218,6 +228,25 @@ class Simulation:
         t, what, value = (int(v) for v in self._err[r])
         self._err[:] = 0
         return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
+
+    def _hooks_wrote(self, counts: tuple[np.ndarray, np.ndarray] | None, piece: _Outputs,
+                     t0: int, n: int) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
+        """Whether a plug-in's hooks wrote into what they may only read in slots
+        ``t0 + 1..t0 + n``: ``params``, or the counts (``npull``, ``nsucc``) -- the record
+        path finds the first such slot from the columns and the ``counts`` before them, the
+        sweep path checks that each run's pulls add up to its slots. None, or (slots before
+        it, the error)."""
+        name, when = self.policy.name, f"slots {t0 + 1}..{t0 + n}"
+        if self._given is not None and not np.array_equal(self._params, self._given):
+            return 0, hook_wrote(name, when, "params")
+        if counts is not None:
+            return counts_written(name, t0, piece.arm, piece.succ, piece.pulls, piece.muhat,
+                                  *counts, self.run_name)  # fmt: skip
+        wrong = (self.succ < 0) | (self.succ > self.pulls)
+        bad = (self.pulls.sum(axis=1) != t0 + n) | wrong.any(axis=1)
+        if bad.any():
+            return 0, hook_wrote(name, when, "npull or nsucc", self.run_name(int(bad.argmax())))
+        return None
 
     def run_name(self, r: int) -> str:
         """How a failure names run ``r`` of this batch: its number and its seed."""
