@@ -246,20 +246,32 @@ def counts_written(name: str, t0: int, arm: np.ndarray, success: np.ndarray, pul
                    who: Any) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
     """The record path's check that a compiled plug-in's hooks left the engine's counts
     alone: the logged ``pulls`` and ``mu_hat`` (R, B, K) of slots ``t0 + 1..`` must follow
-    the arms played and their successes from the counts ``pulls0``/``succ0`` (R, K) before.
-    None, or (slots before the first that does not, the PolicyRuntimeError naming it and
-    ``who(r)``)."""
-    played = arm[:, :, None] == np.arange(pulls.shape[2])
-    want = pulls0[:, None, :] + np.cumsum(played, axis=1)
-    wins = succ0[:, None, :] + np.cumsum(played & success[:, :, None], axis=1)
-    mu = np.divide(wins, want, out=np.zeros(want.shape), where=want > 0)
-    bad = ((pulls != want) | (mu_hat != mu)).any(axis=2)
-    if not bad.any():
-        return None
-    first = np.where(bad.any(axis=1), bad.argmax(axis=1), bad.shape[1])
+    the arms played and their successes from the counts ``pulls0``/``succ0`` (R, K) before
+    (which this advances). None, or (slots before the first that does not, the
+    PolicyRuntimeError naming it and ``who(r)``)."""
+    first = np.full(arm.shape[0], arm.shape[1], dtype=np.int64)
+    _first_off_count(arm, success, pulls, mu_hat, pulls0, succ0, first)
     r = int(first.argmin())
+    if first[r] == arm.shape[1]:
+        return None
     return int(first[r]), hook_wrote(name, f"slot {t0 + int(first[r]) + 1}", "npull or nsucc",
                                      who(r))  # fmt: skip
+
+
+@njit(cache=True)
+def _first_off_count(arm, success, pulls, muhat, n, s, first):
+    for r in range(arm.shape[0]):
+        for j in range(arm.shape[1]):
+            a = arm[r, j]
+            n[r, a] += 1
+            s[r, a] += success[r, j]
+            off = False
+            for k in range(n.shape[1]):
+                m = s[r, k] / n[r, k] if n[r, k] > 0 else 0.0
+                off = off or pulls[r, j, k] != n[r, k] or muhat[r, j, k] != m
+            if off:
+                first[r] = j
+                break
 
 
 def hook_wrote(name: str, when: str, what: str, who: str = "") -> PolicyRuntimeError:
