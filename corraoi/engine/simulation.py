@@ -28,7 +28,17 @@ from . import threads
 from ._kernel import draw_states
 from .block import FIELDS, Columns, SlotBlock
 from .problem import Problem
-from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .pyengine import (
+    Streams,
+    apply_slot,
+    check_arms,
+    construct,
+    counts_written,
+    hook_fault,
+    hook_raised,
+    hook_wrote,
+    policy_raised,
+)
 from .seeds import streams_for_seeds
 
 __all__ = [
@@ -131,6 +141,9 @@ class Simulation:
             self._kernels: dict[bool, Any] = {}
             self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
             self._params = pb.params
+            # a plug-in's hooks are checked for writes into params and the counts (the
+            # built-ins are not: no cost)
+            self._given: np.ndarray | None = None if pb.policy.builtin else pb.params.copy()
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
             self._pclass = pb.pclass
             self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
@@ -138,8 +151,13 @@ class Simulation:
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
             self._py = construct(self.cls, pb.policy)
-            rng = Streams(self.pol, self.ncache)
-            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
+            self._mu = np.zeros((R, K))
+            self._clock = np.zeros(1, dtype=np.int64)  # the slot state.t shows
+            # the policy sees these arrays through read-only views
+            self._state = RunState(runs=R, arms=K, seeds=seed_arr,
+                                   rng=Streams(self.pol, self.ncache), pulls=self.pulls,
+                                   successes=self.succ, mu_hat=self._mu, aoi=self.aoi,
+                                   clock=self._clock)  # fmt: skip
 
     def kernel(self, record: bool) -> Any:
         """The compiled kernel this simulation uses: the record kernel (per-slot columns) or
@@ -166,6 +184,7 @@ class Simulation:
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
+        check = self._given is not None
         while done < nslots:
             t0 = self.t + done
             n, slices = threads.plan(self._rate, R, nslots - done)
@@ -177,6 +196,7 @@ class Simulation:
                 st = np.ascontiguousarray(snap_t[i0:i1])
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
+            counts = (self.pulls.copy(), self.succ.copy()) if check and record else None
             start = time.perf_counter()
             try:
                 self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
@@ -194,6 +214,9 @@ class Simulation:
                     full[:, i0:i1] = part
             if self._err[:, 0].any():
                 return self._fault(K)
+            wrote = self._hooks_wrote(counts, piece, t0, n) if check else None
+            if wrote is not None:
+                return done + wrote[0], wrote[1]
             done += n
         return nslots, None
 
@@ -205,6 +228,25 @@ class Simulation:
         t, what, value = (int(v) for v in self._err[r])
         self._err[:] = 0
         return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
+
+    def _hooks_wrote(self, counts: tuple[np.ndarray, np.ndarray] | None, piece: _Outputs,
+                     t0: int, n: int) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
+        """Whether a plug-in's hooks wrote into what they may only read in slots
+        ``t0 + 1..t0 + n``: ``params``, or the counts (``npull``, ``nsucc``) -- the record
+        path finds the first such slot from the columns and the ``counts`` before them, the
+        sweep path checks that each run's pulls add up to its slots. None, or (slots before
+        it, the error)."""
+        name, when = self.policy.name, f"slots {t0 + 1}..{t0 + n}"
+        if self._given is not None and not np.array_equal(self._params, self._given):
+            return 0, hook_wrote(name, when, "params")
+        if counts is not None:
+            return counts_written(name, t0, piece.arm, piece.succ, piece.pulls, piece.muhat,
+                                  *counts, self.run_name)  # fmt: skip
+        wrong = (self.succ < 0) | (self.succ > self.pulls)
+        bad = (self.pulls.sum(axis=1) != t0 + n) | wrong.any(axis=1)
+        if bad.any():
+            return 0, hook_wrote(name, when, "npull or nsucc", self.run_name(int(bad.argmax())))
+        return None
 
     def run_name(self, r: int) -> str:
         """How a failure names run ``r`` of this batch: its number and its seed."""
@@ -242,25 +284,24 @@ class Simulation:
         draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
                     nslots, xs)  # fmt: skip
         Y = self._Y
-        mu = state.mu_hat
-        rew = np.empty(R, dtype=np.int8)
-        state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
+        mu = self._mu
         if self.t == 0:
             try:
-                _call(name, 0, policy.reset, state)
+                _call(name, 0, state, policy.reset, state)
             except PolicyRuntimeError as exc:
                 return 0, exc
         si = 0
         for j in range(nslots):
             t = self.t + j + 1
-            state.t = t
+            self._clock[0] = t
             try:
-                picked = _call(name, t, policy.select, t, state)
+                picked = _call(name, t, state, policy.select, t, state)
                 arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t,
                                         who=self.run_name)  # fmt: skip
             except PolicyRuntimeError as exc:
                 return j, exc
             x = xs[:, j]
+            rew = np.empty(R, dtype=np.int8)  # new each slot: the policy may keep it
             apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
                        self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
             if record:
@@ -279,8 +320,11 @@ class Simulation:
                 s_aoisum[:, si] = self.aoisum
                 s_pulls[:, si] = self.pulls
                 si += 1
+            rew.flags.writeable = False
+            played = arms.view()
+            played.flags.writeable = False
             try:
-                _call(name, t, policy.update, t, arms, rew, state)
+                _call(name, t, state, policy.update, t, played, rew, state)
             except PolicyRuntimeError as exc:
                 return j + 1, exc  # the slot itself happened
         return nslots, None
@@ -449,16 +493,12 @@ def simulate_run(
         yield b.run(0)
 
 
-def _call(name: str, t: int, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
+def _call(name: str, t: int, state: RunState, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot
+    (and the field of ``state`` for a write into it)."""
     try:
         return func(*args)
     except (CorraoiError, KeyboardInterrupt):
         raise
     except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        what = getattr(func, "__name__", "policy")
-        detail = " ".join(str(exc).split())
-        raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
-            + (f": {detail}" if detail else "")
-        ) from exc
+        raise policy_raised(name, t, func, exc, state) from exc

@@ -242,23 +242,68 @@ class RunStreams(Protocol):
 
 
 class RunState:
-    """What a plain-Python policy sees (read-only arrays; arms are 0-based).
+    """What a plain-Python policy sees: read-only, arms 0-based.
 
-    ``t`` the current slot (1-based); ``runs``, ``arms`` (K); ``pulls`` and ``successes``
-    (runs, K) int64 before this slot; ``mu_hat`` (runs, K) their ratio (0 for unpulled arms);
-    ``aoi`` (runs,) the current age; ``seeds`` (runs,); ``rng`` the runs' streams.
+    ``t`` the current slot (1-based; 0 in ``reset``); ``runs``, ``arms`` (K); ``seeds``
+    (runs,); ``pulls`` and ``successes`` (runs, K) int64 before this slot; ``mu_hat``
+    (runs, K) their ratio (0 for unpulled arms); ``aoi`` (runs,) the current age; ``rng`` the
+    runs' streams.
+
+    The arrays are read-only views of the engine's own: they follow the run as it advances
+    (keep ``state.pulls.copy()`` for a snapshot), and a write into one (``state.mu_hat[0] =
+    1``, ``state.aoi += 1``, ``np.copyto(state.pulls, 0)``) raises at once, as does setting
+    any attribute (``state.t = 0``); the engine then ends the run with one
+    :class:`~corraoi.errors.PolicyRuntimeError` naming the policy, the field and the slot.
     """
 
-    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams) -> None:
-        self.t = 0
-        self.runs = runs
-        self.arms = arms
-        self.seeds = seeds
-        self.rng = rng
-        self.pulls = np.zeros((runs, arms), dtype=np.int64)
-        self.successes = np.zeros((runs, arms), dtype=np.int64)
-        self.mu_hat = np.zeros((runs, arms))
-        self.aoi = np.ones(runs, dtype=np.int64)
+    #: The fields a policy reads (each read-only).
+    FIELDS: ClassVar[tuple[str, ...]] = ("t", "runs", "arms", "seeds", "pulls", "successes",
+                                         "mu_hat", "aoi", "rng")  # fmt: skip
+    __slots__ = ("_clock", "runs", "arms", "seeds", "rng", "pulls", "successes", "mu_hat",
+                 "aoi")  # fmt: skip
+    _clock: np.ndarray
+    runs: int
+    arms: int
+    seeds: np.ndarray
+    rng: RunStreams
+    pulls: np.ndarray
+    successes: np.ndarray
+    mu_hat: np.ndarray
+    aoi: np.ndarray
+
+    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams,
+                 pulls: np.ndarray, successes: np.ndarray, mu_hat: np.ndarray,
+                 aoi: np.ndarray, clock: np.ndarray) -> None:  # fmt: skip
+        """The engine's arrays, each shown through a read-only view (``clock``: a (1,) array
+        whose entry is the current slot)."""
+        put = object.__setattr__
+        put(self, "_clock", read_only(clock))
+        put(self, "runs", int(runs))
+        put(self, "arms", int(arms))
+        put(self, "seeds", read_only(seeds))
+        put(self, "rng", rng)
+        put(self, "pulls", read_only(pulls))
+        put(self, "successes", read_only(successes))
+        put(self, "mu_hat", read_only(mu_hat))
+        put(self, "aoi", read_only(aoi))
+
+    @property
+    def t(self) -> int:
+        return int(self._clock[0])
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"state.{name} is read-only", name=name, obj=self)
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"state.{name} is read-only", name=name, obj=self)
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A view of the C-contiguous array ``a`` that nothing can write through: its memory is a
+    read-only buffer, so even ``view.flags.writeable = True`` is refused. It sees every
+    later write into ``a``."""
+    ro = np.frombuffer(a.data.toreadonly(), dtype=a.dtype)
+    return ro.reshape(a.shape)
 
 
 class Policy(PolicyBase):
