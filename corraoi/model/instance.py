@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -100,6 +101,8 @@ class Instance:
         object.__setattr__(self, "Y", Yi)
         object.__setattr__(self, "arm_names", arms)
         object.__setattr__(self, "state_names", states)
+        if isinstance(self.name, str):  # one name, however its letters were composed
+            object.__setattr__(self, "name", unicodedata.normalize("NFC", self.name))
 
     @property
     def K(self) -> int:  # noqa: N802 - the paper's notation
