@@ -47,8 +47,11 @@ def from_sweep(
                          "parameters (with --policy they set those of a policy added)")
     specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
              if given else [])  # fmt: skip
+    from corraoi.experiments.drill import kept_code_scope
     from corraoi.face.resolve import TRACE_READERS
 
+    # the kept copies are handed over while this command runs (its runs are recorded later)
+    ctx.with_resource(kept_code_scope(folder, kept_code))
     return choose(folder, run, cells=cells, policies=specs, warn=warn, kept_code=kept_code,
                   allow_changed_code=allow_changed_code,
                   trace_readers=TRACE_READERS)  # fmt: skip

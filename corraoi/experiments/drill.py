@@ -11,6 +11,7 @@ from before they were named, from its parts (the per-run finals, no simulation).
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -22,7 +23,17 @@ from corraoi.errors import ConfigError, DamagedPart
 from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
 
-from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
+from .folder import (
+    CLI_WORDS,
+    MANIFEST,
+    PARTS,
+    CellRuns,
+    ChunkResult,
+    Words,
+    group_dirs,
+    read_manifest,
+    read_parts,
+)
 from .grid import Cell, Grid
 from .kept_code import (
     changed_note,
@@ -119,6 +130,7 @@ def choose(
     kept_code: bool = False,
     allow_changed_code: bool = False,
     trace_readers: Mapping[str, TraceReader] | None = None,
+    words: Words = CLI_WORDS,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
 
@@ -130,15 +142,17 @@ def choose(
 
     A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
     hashes, the way out; :mod:`corraoi.experiments.kept_code`), unless ``kept_code`` (the
-    sweep's copy runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    sweep's copy runs: record the drills inside :func:`kept_code_scope`) or
+    ``allow_changed_code`` (the current code runs, and the log says so). Each
     :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
+    The kept code runs under module names of its own: the session's modules, classes and
+    registrations stay the user's. ``words``: how refusals name the options.
     """
     root, grid, group = sweep_root(path)
     manifest = read_manifest_dict(root)
     if kept_code and allow_changed_code:
-        raise ConfigError("--kept-code and --allow-changed-code: choose one")
-    if kept_code:
-        use_kept_code(root, manifest)
+        raise ConfigError(f"{words.kept_code} and {words.allow_changed_code}: choose one")
+    kept = use_kept_code(root, manifest) if kept_code else contextlib.nullcontext()
     what = parse_run(run)
     if isinstance(what, int) and not 0 <= what < grid.runs:
         raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
@@ -168,7 +182,10 @@ def choose(
                 raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
                                   "kernel; leave it out of --policy")  # fmt: skip
     swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
-    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+    with kept:
+        notes = check_code(swept_specs, root, manifest, allow_changed=allow_changed_code,
+                           words=words)  # fmt: skip
+    for note in notes:
         if warn is not None:
             warn(note)
     streams = _streams(grid, warn)  # after every check: a refusal stays one line
@@ -190,6 +207,15 @@ def choose(
                                                       base.channel), None, r, what,
                                      streams, trace_readers=trace_readers))  # fmt: skip
     return drills
+
+
+def kept_code_scope(path: str | Path, kept_code: bool) -> contextlib.AbstractContextManager[Any]:
+    """The block in which the runs chosen from the sweep folder ``path`` with ``kept_code``
+    are chosen and recorded: its kept copies are handed over to the loader there, and only
+    there (:func:`corraoi.experiments.kept_code.use_kept_code`); nothing without."""
+    if not kept_code:
+        return contextlib.nullcontext()
+    return use_kept_code(sweep_root(path)[0])
 
 
 def _select(
