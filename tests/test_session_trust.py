@@ -231,3 +231,30 @@ def test_a_kept_copy_that_registers_itself_never_replaces_the_users_class(sessio
     sw.record("worst", kept_code=True, path="runs/kept.mcap", rrd=False)
     by_name = corraoi.record("rr-registers", horizon=200, path="runs/b.mcap", rrd=False)
     assert _pulls(by_name) == (200, 0, 0, 0)  # the user's registration, the file's code
+
+
+@pytest.mark.slow
+def test_an_edited_cell_in_a_kernel_is_another_run(tmp_path: Path):
+    """The same in a real notebook kernel (nbclient): the edited cell's run is refused, never
+    the old run returned; with force=True it records the edited code; the cell run once more
+    is up to date."""
+    for name in ("nbclient", "nbformat", "ipykernel"):
+        pytest.importorskip(name, reason=f'{name} is not installed (pip install -e ".[notebook]")')
+    import nbformat
+    from nbclient import NotebookClient
+
+    root = Path(__file__).resolve().parent.parent
+    record = ("try:\n    r = corraoi.record(RoundRobin, horizon=200, path='runs/rr.mcap', "
+              "rrd=False{})\n    print('pulls', tuple(int(p) for p in r.summary.pulls))\n"
+              "except corraoi.OutputError as exc:\n    print('refused', exc)")  # fmt: skip
+    cells = [f"import sys; sys.path.insert(0, {str(root)!r})\nimport corraoi", CELL,
+             record.format(""), EDITED, record.format(""), record.format(", force=True"),
+             record.format("")]  # fmt: skip
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in cells])
+    NotebookClient(nb, timeout=120, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()  # fmt: skip
+    said = ["".join(o.get("text", "") for o in c.outputs).strip() for c in nb.cells]
+    assert said[2] == "pulls (50, 50, 50, 50)", said
+    assert said[4].startswith("refused runs/rr.mcap: already exists and holds another run "
+                              "(the policy's code is sha256:"), said  # fmt: skip
+    assert said[5] == "pulls (200, 0, 0, 0)" and said[6] == "pulls (200, 0, 0, 0)", said

@@ -25,7 +25,7 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -211,8 +211,10 @@ def saved_outcome(folder: Path, grid: Grid, *, resume: bool = False,
             return None
     if asked.to_dict() != old.to_dict():
         return None
-    summaries = []
     dirs = group_dirs(old, folder)
+    if not _intact(folder, old, dirs.values()):
+        return None
+    summaries = []
     for key in old.groups():
         try:
             summary = json.loads((dirs[key] / "summary.json").read_text(encoding="utf-8"))
@@ -223,6 +225,26 @@ def saved_outcome(folder: Path, grid: Grid, *, resume: bool = False,
         summaries.append(summary)
     chunks = sum(len(old.chunks(c)) for c in old.cells)
     return SweepOutcome(old, summaries, [dirs[k] for k in old.groups()], 0, chunks)
+
+
+def _intact(folder: Path, grid: Grid, groups: Iterable[Path]) -> bool:
+    """Whether a complete folder still holds every file it wrote (by name and kind, none
+    read): each group's files, ``results.parquet``, a part for every run of every cell, and
+    nothing half-written (``.partial``). Otherwise a sweep into it writes what is missing."""
+    if any(folder.rglob("*.partial")) or not (folder / "results.parquet").is_dir():
+        return False
+    for d in groups:
+        for name in GROUP_FILES:
+            path = d / name
+            if path.is_symlink() or not path.is_file():
+                return False
+    made: dict[str, list[tuple[int, int]]] = {}
+    for f in (folder / PARTS).glob("*.npz"):
+        key, _, rest = f.stem.partition("-")
+        start, _, stop = rest.partition("-")
+        if start.isdigit() and stop.isdigit() and f.is_file() and not f.is_symlink():
+            made.setdefault(key, []).append((int(start), int(stop)))
+    return all(not grid.chunks(c, covered=made.get(c.key, [])) for c in grid.cells)
 
 
 def _sweep(

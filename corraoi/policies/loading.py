@@ -285,11 +285,26 @@ def class_source(cls: type) -> tuple[str, bytes]:
     if path and _defined_in(cls, str(path)):
         loaded = loaded_source(cls.__module__)
         if loaded is not None and _compiles_to(cls, loaded[1], loaded[0], whole=True):
-            return loaded
+            return loaded[0], loaded[1] + _bases_code(cls, cls.__module__)
     text = _class_text(cls)
     if text is not None and _compiles_to(cls, text.encode(), "<class>", whole=False):
-        return f"<{cls.__module__}>:{cls.__qualname__}", text.encode()
-    return f"<{cls.__module__}>:{cls.__qualname__}#code", code_text(cls)
+        return f"<{cls.__module__}>:{cls.__qualname__}", text.encode() + _bases_code(cls)
+    return f"<{cls.__module__}>:{cls.__qualname__}#code", code_text(cls) + _bases_code(cls)
+
+
+def _bases_code(cls: type, covered: str | None = None) -> bytes:
+    """The code of the classes a policy class inherits from, outside corraoi and the module
+    file ``covered`` already hashed (another cell's base class), appended to its own: they
+    run too."""
+    out = b""
+    for base in cls.__bases__:
+        if base.__module__ == covered or base.__module__.split(".")[0] in (
+            "corraoi", "builtins", "abc", "typing"
+        ):
+            continue
+        where, data = class_source(base)
+        out += f"\n# inherited from {where}\n".encode() + data
+    return out
 
 
 def _codes(cls: type) -> dict[str, CodeType]:
