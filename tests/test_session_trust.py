@@ -129,8 +129,9 @@ def test_a_module_edited_and_reloaded_is_another_run(session: Path):
         sys.modules.pop("rrmod", None)
 
 
-def test_a_log_of_other_engine_sources_is_not_up_to_date(session: Path,
-                                                         monkeypatch: pytest.MonkeyPatch):  # fmt: skip
+def test_a_log_of_other_engine_sources_is_not_up_to_date(
+    session: Path, monkeypatch: pytest.MonkeyPatch
+):
     import corraoi.provenance as provenance
 
     real = provenance.versions()
@@ -222,7 +223,9 @@ def test_kept_code_stays_in_its_sweep_and_a_later_call_runs_the_file(session: Pa
 
 
 def test_a_kept_copy_that_registers_itself_never_replaces_the_users_class(session: Path):
-    text = named(PLUGIN, "rr-registers").replace("from corraoi import Policy", "from corraoi import Policy, register")
+    text = named(PLUGIN, "rr-registers").replace(
+        "from corraoi import Policy", "from corraoi import Policy, register"
+    )
     text = text.replace("class RoundRobin", "@register\nclass RoundRobin")
     Path("rr.py").write_text(text)
     sw = _sweep("rr.py:RoundRobin", "sw")

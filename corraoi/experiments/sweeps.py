@@ -34,17 +34,17 @@ from corraoi.errors import ConfigError, DamagedPart
 
 from . import backends
 from .folder import (
+    CLI_WORDS,
     GROUP_FILES,
     MANIFEST,
     PARTS,
     CellRuns,
     ChunkResult,
+    Words,
     covered,
     group_dirs,
     merge_grids,
     read_manifest,
-    CLI_WORDS,
-    Words,
     read_parts,
     write_manifest,
     write_text,

@@ -292,15 +292,16 @@ def class_source(cls: type) -> tuple[str, bytes]:
     return f"<{cls.__module__}>:{cls.__qualname__}#code", code_text(cls) + _bases_code(cls)
 
 
+_NOT_USERS = ("corraoi", "builtins", "abc", "typing")
+
+
 def _bases_code(cls: type, covered: str | None = None) -> bytes:
     """The code of the classes a policy class inherits from, outside corraoi and the module
     file ``covered`` already hashed (another cell's base class), appended to its own: they
     run too."""
     out = b""
     for base in cls.__bases__:
-        if base.__module__ == covered or base.__module__.split(".")[0] in (
-            "corraoi", "builtins", "abc", "typing"
-        ):
+        if base.__module__ == covered or base.__module__.split(".")[0] in _NOT_USERS:
             continue
         where, data = class_source(base)
         out += f"\n# inherited from {where}\n".encode() + data
@@ -336,7 +337,7 @@ def _compiles_to(cls: type, source: bytes, filename: str, *, whole: bool) -> boo
     for code in _codes(cls).values():
         qual = getattr(code, "co_qualname", f"{cls.__qualname__}.{code.co_name}")
         if not whole and qual.startswith(f"{cls.__qualname__}."):  # as the text compiles alone
-            qual = cls.__name__ + qual[len(cls.__qualname__):]
+            qual = cls.__name__ + qual[len(cls.__qualname__) :]
         if found.get(qual) != _code_digest(code):
             return False
     return True
