@@ -163,6 +163,9 @@ def test_a_cell_run_twice_records_its_run_once(session: Path):
     before = os.stat(first.path).st_mtime_ns
     again = corraoi.load("sw").record("worst", policy=cls, rrd=False)  # the cell run again
     assert again.path == first.path and os.stat(first.path).st_mtime_ns == before
+    with pytest.raises(ConfigError) as info:  # Python's words, not the command line's
+        sw.record(99, policy=cls)
+    assert str(info.value).startswith("which=99: out of range") and "--" not in str(info.value)
     runs = sw.record_each("worst", folder="each")
     assert [r.path for r in sw.record_each("worst", folder="each")] == [r.path for r in runs]
 

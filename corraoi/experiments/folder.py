@@ -46,12 +46,16 @@ class Words:
     allow_changed_code: str = "--allow-changed-code"
     chunk: str = "--chunk"
     backend: str = "--backend"
+    #: which run of a sweep to record, whose cells, which policies (each followed by a value)
+    run: str = "--run "
+    cell: str = "--cell "
+    policy: str = "--policy "
 
 
 #: The command line's words, and Python's (``corraoi.sweep``, ``Sweep.record``).
 CLI_WORDS = Words()
 PYTHON_WORDS = Words("resume=True", "force=True", "kept_code=True", "allow_changed_code=True",
-                     "chunk=", "backend=")  # fmt: skip
+                     "chunk=", "backend=", "which=", "cell=", "policy=")  # fmt: skip
 
 
 @dataclass
