@@ -16,6 +16,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from types import CodeType, ModuleType
@@ -144,6 +145,13 @@ def has_source(path: Path, expect: str = "") -> bool:
                                 for h in _SOURCES.get(str(path.resolve()), {}))  # fmt: skip
 
 
+#: How many ``handed_over`` blocks hold each (path, sha256) and each pin: blocks may nest,
+#: and run at once in the threads of one Dask worker.
+_HOLDERS: dict[tuple[str, str], int] = {}
+_PIN_HOLDERS: dict[tuple[str, str], int] = {}
+_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def handed_over(sources: Mapping[str, bytes], *, pin: bool = False) -> Iterator[list[str]]:
     """Within the block, a spec that names the sha256 of one of ``sources`` (path: bytes)
@@ -151,23 +159,33 @@ def handed_over(sources: Mapping[str, bytes], *, pin: bool = False) -> Iterator[
     with ``pin``, so does a plug-in file named without a hash. The user's modules, classes
     and registrations are left alone, and after the block the files are what load. Yields
     the sha256 (hex) of each source."""
-    saved = {k: dict(v) for k, v in _SOURCES.items()}
-    pinned = dict(_PINNED)
-    digests = []
-    try:
+    held: list[tuple[str, str]] = []
+    with _LOCK:
         for path, data in sources.items():
-            digest = hashlib.sha256(data).hexdigest()
-            key = str(Path(path).resolve())
-            _SOURCES.setdefault(key, {})[digest] = bytes(data)
+            item = (str(Path(path).resolve()), hashlib.sha256(data).hexdigest())
+            _SOURCES.setdefault(item[0], {})[item[1]] = bytes(data)
+            _HOLDERS[item] = _HOLDERS.get(item, 0) + 1
             if pin:
-                _PINNED[key] = digest
-            digests.append(digest)
-        yield digests
+                _PINNED[item[0]] = item[1]
+                _PIN_HOLDERS[item] = _PIN_HOLDERS.get(item, 0) + 1
+            held.append(item)
+    try:
+        yield [digest for _, digest in held]
     finally:
-        _SOURCES.clear()
-        _SOURCES.update(saved)
-        _PINNED.clear()
-        _PINNED.update(pinned)
+        with _LOCK:
+            for item in held:
+                _HOLDERS[item] -= 1
+                if not _HOLDERS[item]:
+                    del _HOLDERS[item]
+                    _SOURCES.get(item[0], {}).pop(item[1], None)
+                    if not _SOURCES.get(item[0], True):
+                        del _SOURCES[item[0]]
+                if pin:
+                    _PIN_HOLDERS[item] -= 1
+                    if not _PIN_HOLDERS[item]:
+                        del _PIN_HOLDERS[item]
+                        if _PINNED.get(item[0]) == item[1]:
+                            del _PINNED[item[0]]
 
 
 #: A module attribute: the module is a copy of a plug-in file's source other than the file's
