@@ -400,8 +400,8 @@ def test_the_quick_start_twice_is_up_to_date(tmp_path, monkeypatch):
     assert (tmp_path / "runs/cucb-I1-s0.mcap").stat().st_mtime_ns == stamp
     other = cli("record", "--policy", "cucb", "-T", T + 1, "--no-rrd")
     assert one_line_error(other) == (
-        "corraoi: error: runs/cucb-I1-s0.mcap: already exists and holds another run (a "
-        "different configuration, or not complete); use --force to overwrite it"
+        "corraoi: error: runs/cucb-I1-s0.mcap: already exists and holds another run (its "
+        f"horizon is {T}, here {T + 1}); use --force to overwrite it"
     )
 
 

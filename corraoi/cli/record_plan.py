@@ -49,8 +49,11 @@ def from_sweep(
     labels, words = split_policy_words(folder, policy) if given else ([], [])
     specs = (make_policies(words, parse_param_assignments(param), c=c, beta=beta, warn=warn)
              if words else [])  # fmt: skip
+    from corraoi.experiments.drill import kept_code_scope
     from corraoi.face.resolve import TRACE_READERS
 
+    # the kept copies are handed over while this command runs (its runs are recorded later)
+    ctx.with_resource(kept_code_scope(folder, kept_code))
     return choose(folder, run, cells=cells, policies=specs, swept_labels=labels, warn=warn,
                   kept_code=kept_code, allow_changed_code=allow_changed_code,
                   trace_readers=TRACE_READERS)  # fmt: skip

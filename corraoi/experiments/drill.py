@@ -11,6 +11,7 @@ from before they were named, from its parts (the per-run finals, no simulation).
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -22,7 +23,17 @@ from corraoi.errors import ConfigError, DamagedPart
 from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
 
-from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
+from .folder import (
+    CLI_WORDS,
+    MANIFEST,
+    PARTS,
+    CellRuns,
+    ChunkResult,
+    Words,
+    group_dirs,
+    read_manifest,
+    read_parts,
+)
 from .grid import Cell, Grid
 from .kept_code import (
     changed_note,
@@ -114,7 +125,7 @@ def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, s
                       "folder `corraoi sweep -o` or `corraoi reproduce -o` wrote)")  # fmt: skip
 
 
-def parse_run(text: str | int) -> str | int:
+def parse_run(text: str | int, words: Words = CLI_WORDS) -> str | int:
     """``--run``: a run index (0-based) or one of :data:`CHOICES`."""
     if isinstance(text, int):
         return text
@@ -124,7 +135,7 @@ def parse_run(text: str | int) -> str | int:
     try:
         return int(t)
     except ValueError:
-        raise ConfigError(f"--run {text!r}: expected a run index (0, 1, ...) or one of "
+        raise ConfigError(f"{words.run}{text!r}: expected a run index (0, 1, ...) or one of "
                           f"{', '.join(CHOICES)}") from None  # fmt: skip
 
 
@@ -157,6 +168,7 @@ def choose(
     kept_code: bool = False,
     allow_changed_code: bool = False,
     trace_readers: Mapping[str, TraceReader] | None = None,
+    words: Words = CLI_WORDS,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
 
@@ -170,39 +182,40 @@ def choose(
 
     A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
     hashes, the way out; :mod:`corraoi.experiments.kept_code`), unless ``kept_code`` (the
-    sweep's copy runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    sweep's copy runs: record the drills inside :func:`kept_code_scope`) or
+    ``allow_changed_code`` (the current code runs, and the log says so). Each
     :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
+    The kept code runs under module names of its own: the session's modules, classes and
+    registrations stay the user's. ``words``: how refusals name the options.
     """
     root, grid, group = sweep_root(path)
     manifest = read_manifest_dict(root)
     if kept_code and allow_changed_code:
-        raise ConfigError("--kept-code and --allow-changed-code: choose one")
-    if kept_code:
-        use_kept_code(root, manifest)
-    what = parse_run(run)
+        raise ConfigError(f"{words.kept_code} and {words.allow_changed_code}: choose one")
+    kept = use_kept_code(root, manifest) if kept_code else contextlib.nullcontext()
+    what = parse_run(run, words)
     if isinstance(what, int) and not 0 <= what < grid.runs:
-        raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
+        raise ConfigError(f"{words.run}{what}: out of range; the sweep in {root} has runs "
                           f"0..{grid.runs - 1}")  # fmt: skip
     named = tuple(swept_labels)
     labels = grid.labels()
     unknown = [w for w in named if w not in labels.values()]
     if unknown:
-        raise ConfigError(f"--policy {unknown[0]!r}: no cell of the sweep in {root} has that "
+        raise ConfigError(f"{words.policy}{unknown[0]!r}: no cell of the sweep in {root} has that "
                           f"label (its labels: {', '.join(dict.fromkeys(labels.values()))})")
     groups = {k: v for k, v in grid.groups().items() if group is None or k[0] == group}
     swept = {c.policy.name for g in groups.values() for c in g}
     extra = [s for s in policies if s.name not in swept]
     names = [s.name for s in policies if s.name in swept] if policies or named else None
-    chosen = _select(groups, labels, cells, names, root, named)
+    chosen = _select(groups, labels, cells, names, root, named, words)
     if not any(chosen.values()) and not (extra and isinstance(what, int)):
         raise ConfigError(
-            f"--policy {', '.join([*named, *(s.name for s in policies)])}: not in the sweep "
-            f"in {root} (its "
-            f"policies: {', '.join(sorted(swept))}); a {what} run is chosen among the sweep's "
-            "policies: name one of them too, or give --run N"
+            f"{words.policy}{', '.join([*named, *(s.name for s in policies)])}: not in the "
+            f"sweep in {root} (its policies: {', '.join(sorted(swept))}); a {what} run is "
+            f"chosen among the sweep's policies: name one of them too, or give {words.run}N"
         )
-    picked = {key: _picks(root, grid, key, groups[key], members, labels, what) if members else []
-              for key, members in chosen.items()}  # fmt: skip
+    picked = {key: _picks(root, grid, key, groups[key], members, labels, what, words)
+              if members else [] for key, members in chosen.items()}  # fmt: skip
     if grid.backend == "gpu":  # every run is recorded with the GPU kernel: each needs its form
         from corraoi.gpu.runner import gpu_problem
 
@@ -212,9 +225,12 @@ def choose(
                             if (p := gpu_problem(spec, K)) is not None), None)  # fmt: skip
             if problem is not None:
                 raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
-                                  "kernel; leave it out of --policy")  # fmt: skip
+                                  f"kernel; leave it out of {words.policy.strip()}")  # fmt: skip
     swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
-    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+    with kept:
+        notes = check_code(swept_specs, root, manifest, allow_changed=allow_changed_code,
+                           words=words)  # fmt: skip
+    for note in notes:
         if warn is not None:
             warn(note)
     streams = _streams(grid, warn)  # after every check: a refusal stays one line
@@ -238,6 +254,15 @@ def choose(
     return drills
 
 
+def kept_code_scope(path: str | Path, kept_code: bool) -> contextlib.AbstractContextManager[Any]:
+    """The block in which the runs chosen from the sweep folder ``path`` with ``kept_code``
+    are chosen and recorded: its kept copies are handed over to the loader there, and only
+    there (:func:`corraoi.experiments.kept_code.use_kept_code`); nothing without."""
+    if not kept_code:
+        return contextlib.nullcontext()
+    return use_kept_code(sweep_root(path)[0])
+
+
 def _select(
     groups: dict[tuple[str, int], list[Cell]],
     labels: dict[str, str],
@@ -245,6 +270,7 @@ def _select(
     names: Sequence[str] | None,
     root: Path,
     named: Sequence[str] = (),
+    words: Words = CLI_WORDS,
 ) -> dict[tuple[str, int], list[Cell]]:
     def matches(cell: Cell, text: str) -> bool:
         inst, _, label = text.rpartition("/")
@@ -258,7 +284,8 @@ def _select(
         if not any(matches(c, text) for g in groups.values() for c in g):
             known = ", ".join(dict.fromkeys(f"{k[0]}/{labels[c.key]}"
                                             for k, g in groups.items() for c in g))  # fmt: skip
-            raise ConfigError(f"--cell {text!r}: no such cell in {root} (its cells: {known})")
+            raise ConfigError(f"{words.cell}{text!r}: no such cell in {root} (its cells: "
+                              f"{known})")  # fmt: skip
     for key, members in groups.items():
         keep = [c for c in members if not cells or any(matches(c, t) for t in cells)]
         if cells and not keep:
@@ -276,31 +303,36 @@ def _picks(
     members: list[Cell],
     labels: dict[str, str],
     what: str | int,
+    words: Words = CLI_WORDS,
 ) -> list[tuple[Cell, int]]:
     if isinstance(what, int):
         return [(c, what) for c in members]
-    notable = _notable(root, grid, key, group, labels)
+    notable = _notable(root, grid, key, group, labels, words)
     if what == "widest-gap":
         among = [labels[c.key] for c in members] if len(members) < len(group) else None
         gap = pick_pair(notable.get("pairs", []), among)
         if gap is None:
-            raise ConfigError(f"--run widest-gap: no pair of policies on one hidden path among "
-                              f"{', '.join(labels[c.key] for c in members)} in {root}")  # fmt: skip
+            raise ConfigError(f"{words.run}widest-gap: no pair of policies on one hidden path "
+                              f"among {', '.join(labels[c.key] for c in members)} in "
+                              f"{root}")  # fmt: skip
         by_label = {labels[c.key]: c for c in group}
-        return [(by_label[name], _run_of(gap, grid, root)) for name in gap["policies"]]
-    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root)) for c in members]
+        return [(by_label[name], _run_of(gap, grid, root, words)) for name in gap["policies"]]
+    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root, words))
+            for c in members]  # fmt: skip
 
 
-def _run_of(entry: Any, grid: Grid, root: Path) -> int:
+def _run_of(entry: Any, grid: Grid, root: Path, words: Words = CLI_WORDS) -> int:
     run = entry.get("run") if isinstance(entry, dict) else None
     if not isinstance(run, int) or not 0 <= run < grid.runs:
         raise ConfigError(f"{root}: its summary.json names run {run!r}, not one of the sweep's "
-                          f"0..{grid.runs - 1} (a damaged summary: sweep again with --resume)")
+                          f"0..{grid.runs - 1} (a damaged summary: sweep again with "
+                          f"{words.resume})")  # fmt: skip
     return run
 
 
 def _notable(
-    root: Path, grid: Grid, key: tuple[str, int], group: list[Cell], labels: dict[str, str]
+    root: Path, grid: Grid, key: tuple[str, int], group: list[Cell], labels: dict[str, str],
+    words: Words = CLI_WORDS,
 ) -> dict[str, Any]:
     """The group's notable runs: from its summary.json, else from the parts."""
     path = group_dirs(grid, root)[key] / "summary.json"
@@ -310,7 +342,8 @@ def _notable(
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError, RecursionError) as exc:
             why = " ".join(str(exc).split())[:120] or type(exc).__name__
-            raise ConfigError(f"{path}: unreadable ({why}); sweep again with --resume") from None
+            raise ConfigError(f"{path}: unreadable ({why}); sweep again with "
+                              f"{words.resume}") from None  # fmt: skip
         notable = data.get("notable") if isinstance(data, dict) else None
         if well_formed(notable, want):
             return notable  # type: ignore[return-value]
@@ -318,10 +351,10 @@ def _notable(
         parts = read_parts(root, grid)
         runs = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in group]
     except DamagedPart as exc:
-        raise ConfigError(f"{exc}; `corraoi sweep ... --resume` runs it again") from None
+        raise ConfigError(f"{exc}; a sweep with {words.resume} runs it again") from None
     except ConfigError as exc:
-        raise ConfigError(f"{root}: {exc}: finish the sweep with --resume, or give "
-                          "--run N") from None  # fmt: skip
+        raise ConfigError(f"{root}: {exc}: finish the sweep with {words.resume}, or give "
+                          f"{words.run}N") from None  # fmt: skip
     base = [r.label for r in runs if r.cell.policy.name == grid.baseline]
     return notable_runs([r.label for r in runs], [r.regret[:, -1] for r in runs],
                         [r.cell.channel.to_dict() for r in runs], seed=grid.seed,
