@@ -267,6 +267,7 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("Sweep.record_each", {"allow_changed_code": "x"}, ArgumentTypeError, "allow_changed_code"),
     ("Sweep.record_each", {"say": 3}, ArgumentTypeError, "say 3: expected a function"),
     ("Sweep.record_each", {"warn": None}, ArgumentTypeError, "warn None: expected a function"),
+    ("Sweep.record_each", {"words": "--force"}, ArgumentTypeError, "words '--force': expected"),
     ("Sweep.figure", {"path": 3}, OutputTypeError, "path 3: expected the figure's path"),
     ("Sweep.figure", {"log_x": 1}, ArgumentTypeError, "log_x 1: expected True or False"),
     ("Sweep.figure", {"log_y": "y"}, ArgumentTypeError, "log_y 'y': expected True or False"),

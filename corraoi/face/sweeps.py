@@ -178,8 +178,11 @@ class Sweep(SweepData):
         :class:`~corraoi.errors.CorraoiWarning` by default); ``words``: how refusals name the
         options (Python's unless told: ``corraoi compare --from`` gives the command line's)."""
         from corraoi.experiments.drill import kept_code_scope
-        from corraoi.experiments.folder import PYTHON_WORDS
+        from corraoi.experiments.folder import PYTHON_WORDS, Words
 
+        if words is not None and not isinstance(words, Words):
+            raise arguments.wrong_type(UsageError, "words", words,
+                                       "None or corraoi.experiments.folder.Words")  # fmt: skip
         words = words or PYTHON_WORDS
         with kept_code_scope(self.folder, kept_code):  # the kept copies run here, only here
             return self._record_each(which, cells, folder, force, kept_code,
