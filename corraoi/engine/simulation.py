@@ -26,9 +26,17 @@ from corraoi.policies.spec import PolicySpec
 
 from . import threads
 from ._kernel import draw_states
-from .block import FIELDS, Columns, SlotBlock
+from .block import Columns, Outputs, SlotBlock, absent_fill
 from .problem import Problem
-from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .pyengine import (
+    Streams,
+    apply_slot,
+    check_arms,
+    construct,
+    hook_fault,
+    hook_raised,
+    not_by_score,
+)
 from .seeds import streams_for_seeds
 
 __all__ = [
@@ -52,16 +60,18 @@ class RunsBlock(Columns):
         """Join consecutive blocks along the slot axis."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
+        names = [f for f in blocks[0].fields() if all(f in b.fields() for b in blocks)]
+        names += [f for b in blocks for f in b.fields() if f not in names]
         return cls(
             **{
-                f: np.concatenate([b.column(f) for b in blocks], axis=0 if f == "t" else 1)
-                for f in FIELDS
+                f: np.concatenate([absent_fill(b, f) for b in blocks], axis=0 if f == "t" else 1)
+                for f in dict.fromkeys(names)
             }  # fmt: skip
         )
 
     def run(self, i: int) -> SlotBlock:
         """Run ``i``'s columns (views, no copy)."""
-        per_run = {f: getattr(self, f)[i] for f in FIELDS if f != "t"}
+        per_run = {f: self.column(f)[i] for f in self.fields() if f != "t"}
         return SlotBlock(t=self.t, **per_run)
 
 
@@ -138,6 +148,8 @@ class Simulation:
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
             self._py = construct(self.cls, pb.policy)
+            #: the policy has given scores (Choice(..., scores=...)) at some slot
+            self._scored = False
             rng = Streams(self.pol, self.ncache)
             self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
 
@@ -152,7 +164,7 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
-    def _run_compiled(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+    def _run_compiled(self, nslots: int, record: bool, out: Outputs, snap_t: np.ndarray,
                       s_regret: np.ndarray, s_aoisum: np.ndarray,
                       s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run ``nslots`` slots in kernel calls of at most about
@@ -173,7 +185,7 @@ class Simulation:
             if n == nslots:  # one piece: straight into the caller's arrays
                 piece, st, snaps = out, snap_t, (s_regret, s_aoisum, s_pulls)
             else:  # column slices are not C arrays: separate arrays, copied back
-                piece = _Outputs(R, n if record else 0, K)
+                piece = Outputs(R, n if record else 0, K)
                 st = np.ascontiguousarray(snap_t[i0:i1])
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
@@ -188,8 +200,8 @@ class Simulation:
                                       self._rate)  # fmt: skip
             if piece is not out:
                 if record:
-                    for name, value in vars(piece).items():
-                        getattr(out, name)[:, done : done + n] = value
+                    for name, value in piece.columns.items():
+                        out[name][:, done : done + n] = value
                 for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
                     full[:, i0:i1] = part
             if self._err[:, 0].any():
@@ -210,14 +222,13 @@ class Simulation:
         """How a failure names run ``r`` of this batch: its number and its seed."""
         return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
 
-    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: _Outputs,
+    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: Outputs,
                      snap_t: np.ndarray, snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
                      slices: list[tuple[int, int]]) -> None:  # fmt: skip
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
                    self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
                    self._err)  # fmt: skip
-        outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
-                   out.cand, out.pulls, out.muhat)  # fmt: skip
+        outputs = out.buffers()
         common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
                   self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
                   self._params, t0, nslots)  # fmt: skip
@@ -229,7 +240,7 @@ class Simulation:
 
         threads.run_slices(run, slices)
 
-    def _run_python(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+    def _run_python(self, nslots: int, record: bool, out: Outputs, snap_t: np.ndarray,
                     s_regret: np.ndarray, s_aoisum: np.ndarray,
                     s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run of a plain-Python policy slot by slot, writing each slot's
@@ -256,24 +267,28 @@ class Simulation:
             state.t = t
             try:
                 picked = _call(name, t, policy.select, t, state)
-                arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t,
-                                        who=self.run_name)  # fmt: skip
+                arms, cand, scores = check_arms(picked, runs=R, arms=K, name=name, t=t,
+                                                who=self.run_name)  # fmt: skip
             except PolicyRuntimeError as exc:
                 return j, exc
             x = xs[:, j]
             apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
                        self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
             if record:
-                out.x[:, j] = x
-                out.arm[:, j] = arms
-                out.succ[:, j] = rew == 1
-                out.aoi[:, j] = self.aoi
-                out.oaoi[:, j] = self.oracle_aoi
-                out.regret[:, j] = self.regret
-                out.override[:, j] = False
-                out.cand[:, j] = True if cand is None else cand
-                out.pulls[:, j] = self.pulls
-                out.muhat[:, j] = mu
+                out["x"][:, j] = x
+                out["arm"][:, j] = arms
+                out["success"][:, j] = rew == 1
+                out["aoi"][:, j] = self.aoi
+                out["oracle_aoi"][:, j] = self.oracle_aoi
+                out["regret"][:, j] = self.regret
+                out["override"][:, j] = False
+                out["candidates"][:, j] = True if cand is None else cand
+                out["pulls"][:, j] = self.pulls
+                out["mu_hat"][:, j] = mu
+                if scores is not None:
+                    self._scored = True
+                out["score"][:, j] = np.nan if scores is None else scores
+                out["forced"][:, j] = True if scores is None else not_by_score(scores, arms)
             if si < snap_t.size and snap_t[si] == t:
                 s_regret[:, si] = self.regret
                 s_aoisum[:, si] = self.aoisum
@@ -323,7 +338,7 @@ class Simulation:
         s_aoisum = np.empty((R, S), dtype=np.int64)
         s_pulls = np.empty((R, S, K), dtype=np.int64)
         B = nslots if record else 0
-        out = _Outputs(R, B, K)
+        out = Outputs(R, B, K)
         aoisum_before = self.aoisum.copy() if record else None
         if self._py is None:
             done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
@@ -353,46 +368,36 @@ class Simulation:
                 raise failure
             return None, snaps
         assert aoisum_before is not None
-        estimator = aoisum_before[:, None] + np.cumsum(out.aoi, axis=1) - t[None, :] / self.mu_star
+        estimator = (
+            aoisum_before[:, None] + np.cumsum(out["aoi"], axis=1) - t[None, :] / self.mu_star
+        )
+        # what a run lacks: the override's threshold but for an AoI-aware policy; the
+        # score and forced of a plain-Python policy that gave no scores (so far)
+        compiled = self._py is None
+        scored = compiled or self._scored
         block = RunsBlock(
             t=t,
-            x=out.x.astype(np.int64),
-            arm=out.arm.astype(np.int64),
-            success=out.succ,
-            aoi=out.aoi,
-            oracle_aoi=out.oaoi,
-            regret=out.regret,
+            x=out["x"].astype(np.int64),
+            arm=out["arm"].astype(np.int64),
+            success=out["success"],
+            aoi=out["aoi"],
+            oracle_aoi=out["oracle_aoi"],
+            regret=out["regret"],
             estimator=estimator,
-            override=out.override,
-            mu_hat=out.muhat,
-            pulls=out.pulls,
-            candidates=out.cand,
+            override=out["override"],
+            mu_hat=out["mu_hat"],
+            pulls=out["pulls"],
+            candidates=out["candidates"],
+            forced=out["forced"] if scored else None,
+            override_threshold=(
+                out["override_threshold"] if compiled and self.cls.aoi_aware else None
+            ),
+            score=out["score"] if scored else None,
         )
         if failure is not None:
             failure.partial = block if nslots > 0 else None
             raise failure
         return block, snaps
-
-
-class _Outputs:
-    """Per-slot output columns of one advance (empty when not recording)."""
-
-    def __init__(self, R: int, B: int, K: int) -> None:
-        self.x = np.empty((R, B), dtype=np.int32)
-        self.arm = np.empty((R, B), dtype=np.int32)
-        self.succ = np.empty((R, B), dtype=np.bool_)
-        self.aoi = np.empty((R, B), dtype=np.int64)
-        self.oaoi = np.empty((R, B), dtype=np.int64)
-        self.regret = np.empty((R, B), dtype=np.int64)
-        self.override = np.empty((R, B), dtype=np.bool_)
-        self.cand = np.empty((R, B, K), dtype=np.bool_)
-        self.pulls = np.empty((R, B, K), dtype=np.int64)
-        self.muhat = np.empty((R, B, K), dtype=np.float64)
-
-    def trim(self, done: int) -> None:
-        """Keep the first ``done`` slots (a plug-in failed after them)."""
-        for name, value in vars(self).items():
-            setattr(self, name, value[:, :done])
 
 
 def check_seeds(seeds: Sequence[int] | np.ndarray) -> np.ndarray:

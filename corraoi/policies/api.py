@@ -224,6 +224,19 @@ class RunState:
         self.aoi = np.ones(runs, dtype=np.int64)
 
 
+@dataclass(frozen=True)
+class Choice:
+    """What a plain-Python policy's ``select`` may return instead of bare arms: the arm of
+    every run (runs,), and optionally the candidate set it chose from (runs, K) bool and the
+    score of every arm (runs, K) numbers, what it maximised (logged as ``score``; NaN for an
+    arm it did not score). A slot whose played arm does not have the highest score (or has
+    none) is logged ``forced``."""
+
+    arms: Any
+    candidates: Any = None
+    scores: Any = None
+
+
 class Policy(PolicyBase):
     """A plain-Python policy, vectorised over runs. Subclass it and define :meth:`select`.
 
@@ -231,7 +244,8 @@ class Policy(PolicyBase):
     before slot 1, :meth:`select` every slot and :meth:`update` after it; ``state`` (a
     :class:`RunState`) holds the history as arrays of shape (runs, K) and
     the runs' own random streams (``state.rng``). Plain-Python policies log every arm as a
-    candidate and no AoI-aware override unless ``select`` returns ``(arms, candidates)``.
+    candidate, no AoI-aware override and no score unless ``select`` returns
+    ``(arms, candidates)`` or a :class:`Choice` with candidates and scores.
     """
 
     tier: ClassVar[str] = "python"
