@@ -1,9 +1,15 @@
-"""Regenerate tests/golden/builtins.json: a short run of every built-in policy on fixed seeds.
+"""Regenerate tests/golden/builtins.json: a short run of every built-in policy on fixed seeds;
+and the field table of docs/log-format.md, from the slot record's declaration.
 
     python tests/golden/regenerate.py
 
 Run it only when a change to the engine or a policy changes the random streams on purpose,
 and say so in the changelog: the golden file pins every built-in's decisions slot by slot.
+(The table changes with corraoi/engine/slot_record.py: run it after a change there.)
+
+tests/golden/before-score.mcap is never regenerated: a slot log written by corraoi before
+the score existed (commit 2347ea6; aoi-aware-cucb on I1, seed 5, 1200 slots), which today's
+reader must keep reading (tests/test_slot_record.py).
 """
 
 from __future__ import annotations
@@ -50,7 +56,20 @@ def golden() -> dict[str, object]:
     return out
 
 
+def write_docs_table() -> Path:
+    """The slot record's table between its markers in docs/log-format.md."""
+    from corraoi.engine.slot_record import markdown_table
+
+    doc = HERE.parent.parent / "docs" / "log-format.md"
+    begin, end = "<!-- slot-record: begin -->\n", "<!-- slot-record: end -->"
+    text = doc.read_text(encoding="utf-8")
+    head, rest = text.split(begin, 1)
+    doc.write_text(head + begin + markdown_table() + end + rest.split(end, 1)[1], encoding="utf-8")
+    return doc
+
+
 if __name__ == "__main__":
+    print(f"wrote {write_docs_table()}")
     path = HERE / "builtins.json"
     path.write_text(json.dumps(golden(), indent=1, sort_keys=True) + "\n")
     print(f"wrote {path}")
