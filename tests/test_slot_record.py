@@ -23,8 +23,8 @@ from corraoi.engine.slot_record import (
     markdown_table,
 )
 from corraoi.errors import CorraoiWarning, LogError, PolicyRuntimeError
-from corraoi.model.instance import Instance, load_instance
 from corraoi.face.resolve import policies
+from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import Choice, Policy, builtins, make_policy
 from recorder.slotlog.encode import BlockEncoder
 from recorder.slotlog.reader import open_log
@@ -267,3 +267,16 @@ def test_the_gpu_capture_row_is_the_declared_one():
     assert CAPTURE_WIDTH == len(GPU_CAPTURE_ROW)
     # every captured value is a field, or what one derives from (the estimator from aoisum)
     assert set(GPU_CAPTURE_ROW) - set(NAMES) == {"aoisum"}
+
+
+def test_a_log_before_the_score_replays_without_the_why_entities(tmp_path):
+    pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    from viewer.replay import replay
+
+    out = tmp_path / "old.rrd"
+    replay(BEFORE, rrd_path=out)
+    entities = {chunk.entity_path for chunk in RrdReader(out).stream()}
+    assert any(e.endswith("/mu_hat") for e in entities)
+    assert not any("/why/" in e for e in entities)

@@ -63,6 +63,12 @@ class RunConfig:
         return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
 
     @property
+    def scored(self) -> bool:
+        """Its blocks carry ``score`` and ``forced``: a compiled policy's run on the CPU
+        engine (a plain-Python policy's only when its ``select`` returns them)."""
+        return self.streams == "cpu" and self.policy.tier == "compiled"
+
+    @property
     def label(self) -> str:
         gpu = "" if self.streams == "cpu" else "-gpu"
         return f"{self.policy.name}-{self.instance.name}-s{self.seed}{gpu}"
@@ -156,7 +162,8 @@ class SlotBlock(Columns):
             raise ValueError("no blocks to concatenate")
         names = [f for f in NAMES if any(f in b.fields() for b in blocks)]
         extra = list(dict.fromkeys(k for b in blocks for k in b.extra))
-        out = {f: np.concatenate([absent_fill(b, f) for b in blocks]) for f in names}
+        out: dict[str, Any] = {f: np.concatenate([absent_fill(b, f) for b in blocks])
+                               for f in names}  # fmt: skip
         out["extra"] = {k: np.concatenate([absent_fill(b, k) for b in blocks]) for k in extra}
         return cls(**out)
 

@@ -62,12 +62,11 @@ class RunsBlock(Columns):
             raise ValueError("no blocks to concatenate")
         names = [f for f in blocks[0].fields() if all(f in b.fields() for b in blocks)]
         names += [f for b in blocks for f in b.fields() if f not in names]
-        return cls(
-            **{
-                f: np.concatenate([absent_fill(b, f) for b in blocks], axis=0 if f == "t" else 1)
-                for f in dict.fromkeys(names)
-            }  # fmt: skip
-        )
+        cols: dict[str, Any] = {
+            f: np.concatenate([absent_fill(b, f) for b in blocks], axis=0 if f == "t" else 1)
+            for f in dict.fromkeys(names)
+        }
+        return cls(**cols)
 
     def run(self, i: int) -> SlotBlock:
         """Run ``i``'s columns (views, no copy)."""

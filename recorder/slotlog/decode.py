@@ -219,8 +219,8 @@ def decode_messages(
             f"{where}: {_slot_of(rows[bad.row], bad.row)}: {bad.field} is {bad.shown}, "
             f"expected {bad.expected}"
         ) from None
-    extra = {f: _unknown(cols[f]) for f in unknown}
-    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=extra)
+    kept = {f: _unknown(cols[f]) for f in unknown}
+    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=kept)
 
 
 def _count_bools(v: Any) -> int:

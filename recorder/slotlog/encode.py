@@ -35,7 +35,7 @@ def field_schema(f: SlotField, K: int, n: int) -> dict[str, Any]:
     def number(v: str) -> int | float:
         return bound[v] if v in bound else (float(v) if "." in v else int(v))
 
-    desc = f.meaning + (f", in {f.unit}" if f.unit and f.unit not in ("slot", "pulls") else "")
+    desc = f.meaning
     if not f.per_arm:  # "numbered 1..K": the run's own numbers
         desc = desc.replace("1..K", f"1..{K}").replace("1..n", f"1..{n}")
     if f.json == "candidate scores":
