@@ -280,3 +280,16 @@ def test_a_log_before_the_score_replays_without_the_why_entities(tmp_path):
     entities = {chunk.entity_path for chunk in RrdReader(out).stream()}
     assert any(e.endswith("/mu_hat") for e in entities)
     assert not any("/why/" in e for e in entities)
+
+
+def test_the_foxglove_layout_plots_declared_paths_and_the_score():
+    layout = json.loads((ROOT / "docs" / "foxglove-layout.json").read_text())
+    used = {
+        p["value"]
+        for panel in layout["configById"].values()
+        for p in panel.get("paths", [])
+        if p["value"].startswith(SLOT_TOPIC + ".")
+    }
+    declared = {f.foxglove for f in SLOT_RECORD if f.foxglove}
+    assert used <= declared, used - declared
+    assert {"/corraoi/slot.score[:]", "/corraoi/slot.forced"} <= used
