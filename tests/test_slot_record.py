@@ -293,3 +293,18 @@ def test_the_foxglove_layout_plots_declared_paths_and_the_score():
     declared = {f.foxglove for f in SLOT_RECORD if f.foxglove}
     assert used <= declared, used - declared
     assert {"/corraoi/slot.score[:]", "/corraoi/slot.forced"} <= used
+
+
+def test_the_score_is_an_option_on_by_default_up_to_64_arms(tmp_path):
+    from corraoi.face.recording import record
+
+    inst = load_instance("I1")
+    assert RunConfig(inst, make_policy("ucb"), 0, 10).score
+    off = RunConfig(inst, make_policy("ucb"), 0, 10, score=False)
+    assert off.to_dict()["score"] is False and RunConfig.from_dict(off.to_dict()) == off
+    assert "score" not in RunConfig(inst, make_policy("ucb"), 0, 10).to_dict()  # as before
+    rng = np.random.default_rng(1)
+    wide = Instance("wide-65", np.full(65, 1 / 65), (rng.random((65, 65)) < 0.3).astype(int))
+    assert not RunConfig(wide, make_policy("ucb"), 0, 10).score
+    run = record("ucb", inst, horizon=300, path=tmp_path / "off.mcap", rrd=False, score=False)
+    assert open_log(run.path).absent == OPTIONAL  # ucb: no threshold either

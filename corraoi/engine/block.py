@@ -27,6 +27,11 @@ SCALAR_FIELDS = tuple(f for f in FIELDS if f != "t" and not BY_NAME[f].per_arm)
 ARM_FIELDS = tuple(f for f in FIELDS if BY_NAME[f].per_arm)
 
 
+#: Up to this many arms a run logs its policy's scores (``score``, ``forced``) by default:
+#: a float32 per candidate and slot (benchmarks/bench_record.py's sizes: at 4 arms a log
+#: grows by about a quarter; at 256 arms it is 3 to 7 times as large).
+SCORE_ARMS = 64
+
 #: The values of :attr:`RunConfig.streams`.
 STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
 
@@ -45,6 +50,8 @@ class RunConfig:
     #: "gpu-emulated" (the GPU kernel's, captured on a CUDA device or on the host compiler:
     #: a run of a GPU sweep recorded again, corraoi.gpu.runner.capture_run)
     streams: str = "cpu"
+    #: log the policy's scores (``score``, ``forced``): by default up to SCORE_ARMS arms
+    score: bool | None = None
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
@@ -53,6 +60,8 @@ class RunConfig:
             raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
         if self.channel is None:
             object.__setattr__(self, "channel", default_channel(self.instance))
+        if self.score is None:
+            object.__setattr__(self, "score", self.instance.K <= SCORE_ARMS)
 
     @property
     def format_version(self) -> int:
@@ -66,7 +75,7 @@ class RunConfig:
     def scored(self) -> bool:
         """Its blocks carry ``score`` and ``forced``: a compiled policy's run on the CPU
         engine (a plain-Python policy's only when its ``select`` returns them)."""
-        return self.streams == "cpu" and self.policy.tier == "compiled"
+        return bool(self.score) and self.streams == "cpu" and self.policy.tier == "compiled"
 
     @property
     def label(self) -> str:
@@ -86,6 +95,8 @@ class RunConfig:
             out["channel"] = self.channel.to_dict()
         if self.streams != "cpu":  # logs of the CPU engine read as before
             out["streams"] = self.streams
+        if self.score != (self.instance.K <= SCORE_ARMS):  # the default is not written
+            out["score"] = bool(self.score)
         return out
 
     @classmethod
@@ -98,6 +109,7 @@ class RunConfig:
             version=str(data.get("version", "unknown")),
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
+            score=bool(data["score"]) if "score" in data else None,
         )
 
 

@@ -170,7 +170,7 @@ class BlockEncoder:
         if f.json == "arm set":
             return self._candidates(values)
         if f.json == "candidate scores":
-            return _candidate_scores(values, n)
+            return _drop_nulls(_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX), n))
         if f.json == "boolean":
             return _BOOLS[np.asarray(values, dtype=np.intp)].tolist()
         if f.json == "float32":  # JSON has no infinity: +-FLOAT32_MAX stand for it
@@ -195,12 +195,15 @@ class BlockEncoder:
         return b"".join(parts)[:-1].split(b"\n")
 
 
-def _candidate_scores(score: np.ndarray, n: int) -> list[bytes]:
-    """Each slot's scores of its candidates (the values that are not NaN), in arm order,
-    without the brackets; b"" for a slot not scored."""
-    texts = _rows(np.clip(score, -FLOAT32_MAX, FLOAT32_MAX), n)  # NaN stays NaN: null
-    return [t if b"null" not in t else b",".join(v for v in t.split(b",") if v != b"null")
-            for t in texts]  # fmt: skip
+def _drop_nulls(rows: list[bytes]) -> list[bytes]:
+    """Rows of numbers without their nulls (NaN: the arms outside the candidate set, a
+    slot not scored), by three replaces over the rows joined: after the first, a row has at
+    most one null left, its last item (``0.5,null`` or ``null``)."""
+    text = b"\n".join(rows)
+    if b"null" not in text:
+        return rows
+    text = text.replace(b"null,", b"").replace(b",null", b"")
+    return [b"" if row == b"null" else row for row in text.split(b"\n")]
 
 
 def _bracketed(f: SlotField) -> bool:
