@@ -197,13 +197,15 @@ class BlockEncoder:
 
 def _drop_nulls(rows: list[bytes]) -> list[bytes]:
     """Rows of numbers without their nulls (NaN: the arms outside the candidate set, a
-    slot not scored), by three replaces over the rows joined: after the first, a row has at
-    most one null left, its last item (``0.5,null`` or ``null``)."""
+    slot not scored), by replaces over the rows joined (no Python loop over the rows):
+    after the first two, a row has a null left only where it was all nulls."""
     text = b"\n".join(rows)
     if b"null" not in text:
         return rows
-    text = text.replace(b"null,", b"").replace(b",null", b"")
-    return [b"" if row == b"null" else row for row in text.split(b"\n")]
+    text = b"\n" + text.replace(b"null,", b"").replace(b",null", b"") + b"\n"
+    # "\nnull\nnull\n": the second match overlaps the first, hence twice
+    text = text.replace(b"\nnull\n", b"\n\n").replace(b"\nnull\n", b"\n\n")
+    return text[1:-1].split(b"\n")
 
 
 def _bracketed(f: SlotField) -> bool:
