@@ -308,3 +308,12 @@ def test_the_score_is_an_option_on_by_default_up_to_64_arms(tmp_path):
     assert not RunConfig(wide, make_policy("ucb"), 0, 10).score
     run = record("ucb", inst, horizon=300, path=tmp_path / "off.mcap", rrd=False, score=False)
     assert open_log(run.path).absent == OPTIONAL  # ucb: no threshold either
+
+
+def test_every_declared_rerun_entity_is_one_the_recording_has():
+    from recorder.rerun.names import ENTITIES, WHY
+
+    for f in SLOT_RECORD:
+        for part in filter(None, (p.strip() for p in f.entity.split(","))):
+            assert part.removesuffix("/<k>") in ENTITIES + WHY, (f.name, part)
+    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(OPTIONAL)
