@@ -170,7 +170,7 @@ class BlockEncoder:
         if f.json == "arm set":
             return self._candidates(values)
         if f.json == "candidate scores":
-            return _drop_nulls(_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX), n))
+            return _candidate_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX))
         if f.json == "boolean":
             return _BOOLS[np.asarray(values, dtype=np.intp)].tolist()
         if f.json == "float32":  # JSON has no infinity: +-FLOAT32_MAX stand for it
@@ -195,17 +195,15 @@ class BlockEncoder:
         return b"".join(parts)[:-1].split(b"\n")
 
 
-def _drop_nulls(rows: list[bytes]) -> list[bytes]:
-    """Rows of numbers without their nulls (NaN: the arms outside the candidate set, a
-    slot not scored), by replaces over the rows joined (no Python loop over the rows):
-    after the first two, a row has a null left only where it was all nulls."""
-    text = b"\n".join(rows)
-    if b"null" not in text:
-        return rows
-    text = b"\n" + text.replace(b"null,", b"").replace(b",null", b"") + b"\n"
-    # "\nnull\nnull\n": the second match overlaps the first, hence twice
-    text = text.replace(b"\nnull\n", b"\n\n").replace(b"\nnull\n", b"\n\n")
-    return text[1:-1].split(b"\n")
+def _candidate_rows(table: np.ndarray) -> list[bytes]:
+    """JSON text of each row of a (B, K) float32 table without its NaN items (the arms
+    outside the candidate set, a slot not scored) nor the brackets: the table written at
+    once (NaN as null), its nulls dropped by three replaces over the whole text (after the
+    first two a row keeps a null only where it was all nulls: ``[null]``), then split."""
+    text = orjson.dumps(np.ascontiguousarray(table), option=_NUMPY)
+    if b"null" in text:
+        text = text.replace(b"null,", b"").replace(b",null", b"").replace(b"[null]", b"[]")
+    return text[2:-2].split(b"],[")
 
 
 def _bracketed(f: SlotField) -> bool:
