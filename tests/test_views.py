@@ -28,7 +28,7 @@ from corraoi.model.theory import analyse  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
 from recorder import style  # noqa: E402
 from recorder.rerun.layout import one_run_blueprint, title_chars  # noqa: E402
-from recorder.rerun.names import ENTITIES, PRESENTATION, run_path, snapshot_every  # noqa: E402
+from recorder.rerun.names import ENTITIES, PRESENTATION, WHY, run_path, snapshot_every  # noqa: E402
 from recorder.rerun.output import RrdOutput  # noqa: E402
 from recorder.rerun.sink import RerunSink  # noqa: E402
 
@@ -148,11 +148,15 @@ def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
     all_views = views(one_run_blueprint(config.label, config))
     kinds = [v.class_identifier for v in all_views]
     contents = {c for v in all_views for c in v.contents}
+    # why this arm: the scores (the run is one that logs them), forced slots, lines
+    assert {"$origin/why/chosen", "$origin/why/forced"} <= contents
     if K <= style.LINES_UP_TO:  # a line per arm, its true mean dotted in its colour
         assert "BarChart" not in kinds
-        assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls"} <= contents
+        assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls",
+                "$origin/why/score/**"} <= contents  # fmt: skip
     else:  # bars at the cursor, strips, the arms that matter as lines
-        assert kinds.count("BarChart") == 2
+        assert kinds.count("BarChart") == 3  # means, pulls, scores
+        assert {"$origin/why/bars/**", "$origin/why/focus/**"} <= contents
         assert {"$origin/bars/mean", "$origin/bars/mean_true", "$origin/bars/mean_arm/**",
                 "$origin/bars/pulls", "$origin/bars/pulls_arm/**",
                 "$origin/focus/**"} <= contents  # fmt: skip
@@ -278,7 +282,7 @@ def test_1024_arms_record_and_draw(tmp_path):
     assert slots[-1] == 1200 and len(values[-1]) == 1024
     shown = np.isin(np.arange(1024), list(sink.focus))
     assert np.array_equal(np.array(values[-1])[~shown], ref.pulls[-1][~shown])
-    assert len(views(one_run_blueprint(config.label, config))) == 9
+    assert len(views(one_run_blueprint(config.label, config))) == 11  # with why this arm
 
 
 # ------------------------------------------------------------------ what is drawn
@@ -431,7 +435,9 @@ def test_logs_and_the_old_entities_are_unchanged_only_presentation_entities_are_
     old = {f"{base}/{e}" for e in ENTITIES if e != "candidates"} | {
         f"{base}/candidates/{k + 1}" for k in range(K)
     }
-    new = every - old
+    why = {e for e in every - old if e.startswith(f"{base}/why/")}  # the scores' view
+    assert why and all(any(e[len(base) + 1:].startswith(p) for p in WHY) for e in why)
+    new = every - old - why
     assert new == {f"{base}/arm/best"} | {f"{base}/true_means/{k + 1}" for k in range(K)}
     assert all(any(e[len(base) + 1:].startswith(p) for p in PRESENTATION) for e in new)
 

@@ -321,8 +321,8 @@ def _fmt(v: Any) -> str:
         return "(none)"
     if isinstance(v, float):
         return f"{v:.6g}"
-    if isinstance(v, list) and v and isinstance(v[0], float):
-        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+    if isinstance(v, list) and any(isinstance(x, float) for x in v):  # None: no value (NaN)
+        return "[" + ", ".join("-" if x is None else f"{x:.4g}" for x in v) + "]"
     return str(v)
 
 

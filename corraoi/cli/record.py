@@ -74,6 +74,9 @@ from .record_plan import from_sweep, say_where_from
 @foxglove_options
 @backend_option("Per-slot logs are a CPU feature: cpu (and auto) record on the CPU; gpu is "
                 "refused (the GPU backend is for sweeps, docs/gpu.md) [default: cpu].")
+@click.option("--score/--no-score", default=None,
+              help="Log what the policy maximised at every slot (score, forced) [default: "
+                   "up to 64 arms].")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -96,6 +99,7 @@ def record(
     foxglove: str | None,
     pace: float | None,
     backend: str | None,
+    score: bool | None,
     as_json: bool,
     from_: str | None,
     run: str | None,
@@ -151,7 +155,8 @@ def record(
         specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
         chan = resolve_channel(channel, inst)
         chan.check(inst, horizon)
-        configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
+        configs = [RunConfig(inst, spec, seed, horizon, channel=chan, score=score)
+                   for spec in specs]  # fmt: skip
     from corraoi.face.recording import plan_files
 
     plans = plan_files(configs, output, rrd, no_rrd, drills)

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from corraoi.errors import CorraoiError, PolicyRuntimeError
-from corraoi.policies.api import RunState
+from corraoi.policies.api import Choice, RunState
 from corraoi.rng import argmax_random, beta, integer, normal, uniform
 
 
@@ -165,15 +165,19 @@ class Streams:
 
 def check_arms(
     out: Any, *, runs: int, arms: int, name: str, t: int, who: Any = None
-) -> tuple[np.ndarray, Any]:
-    """(arms, candidates or None) from ``select``'s return, or PolicyRuntimeError naming the
-    policy, the slot and (``who(r)``, by default "run r") the run."""
-    cand = None
-    if isinstance(out, tuple):
+) -> tuple[np.ndarray, Any, Any]:
+    """(arms, candidates or None, scores or None) from ``select``'s return (arms, a pair
+    (arms, candidates) or a :class:`~corraoi.policies.api.Choice`), or PolicyRuntimeError
+    naming the policy, the slot and (``who(r)``, by default "run r") the run. Scores come
+    back as float32 (runs, K), NaN outside the candidate set."""
+    cand = scores = None
+    if isinstance(out, Choice):
+        out, cand, scores = out.arms, out.candidates, out.scores
+    elif isinstance(out, tuple):
         if len(out) != 2:
             raise PolicyRuntimeError(
                 f"policy {name}, slot {t}: select returned a tuple of {len(out)}; expected "
-                "arms or (arms, candidates)"
+                "arms, (arms, candidates) or Choice(arms, candidates, scores)"
             )
         out, cand = out
     a = np.asarray(out)
@@ -217,7 +221,35 @@ def check_arms(
             raise PolicyRuntimeError(
                 f"policy {name}, slot {t}: a played arm is not among its candidates"
             )
-    return ai, cand
+    if scores is not None:
+        v = np.asarray(scores)
+        if v.shape != (runs, arms) or v.dtype.kind not in "iuf":
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: scores must be an array of numbers of shape "
+                f"({runs}, {arms}), got {v.dtype} {v.shape}"
+            )
+        scores = v.astype(np.float32)
+        if cand is not None:
+            scores[~cand] = np.nan
+        member = np.ones((runs, arms), dtype=bool) if cand is None else cand
+        gap = np.isnan(scores) & member & ~np.isnan(scores).all(axis=1)[:, None]
+        if gap.any():
+            r, k = (int(i) for i in np.argwhere(gap)[0])
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: scores gave NaN to arm {k + 1}, a candidate, for "
+                f"{who(r) if who is not None else f'run {r}'}; a run's scores are a number "
+                "for every candidate (+inf is one), or NaN for all (not chosen by score)"
+            )
+    return ai, cand, scores
+
+
+def not_by_score(scores: np.ndarray, arms: np.ndarray) -> np.ndarray:
+    """Per run, whether the arm played was not chosen by the score: its score is NaN or
+    below the highest (what ``forced`` logs for a plain-Python policy's slot)."""
+    played = scores[np.arange(len(arms)), arms]
+    with np.errstate(invalid="ignore"):
+        top = np.where(np.isnan(scores), -np.inf, scores).max(axis=1)
+    return np.isnan(played) | (played < top)
 
 
 def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:

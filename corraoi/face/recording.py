@@ -466,6 +466,7 @@ def record(
     sinks: Sequence[Sink] = (),
     on_block: Callable[[Any], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    score: bool | None = None,
 ) -> Run:
     """Simulate one run and record every slot, as ``corraoi record`` does with the same
     arguments (the same bytes in the log); returns the recorded :class:`corraoi.Run`.
@@ -488,6 +489,8 @@ def record(
     further :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own);
     ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
     next block, the files finished with the slots so far (Ctrl-C does the same).
+    ``score``: log what the policy maximised at every slot (``score``, ``forced``; by
+    default up to 64 arms).
 
     Raises :class:`~corraoi.errors.PolicyError`, :class:`~corraoi.errors.InstanceError`,
     :class:`~corraoi.errors.ConfigError` (bad input, before anything runs),
@@ -520,7 +523,7 @@ def record(
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)
-    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan)
+    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score)
     if rrd is True:
         rrd = None
     if rrd is not None and not isinstance(rrd, (str, os.PathLike)) and rrd is not False:

@@ -306,6 +306,19 @@ def read_only(a: np.ndarray) -> np.ndarray:
     return ro.reshape(a.shape)
 
 
+@dataclass(frozen=True)
+class Choice:
+    """What a plain-Python policy's ``select`` may return instead of bare arms: the arm of
+    every run (runs,), and optionally the candidate set it chose from (runs, K) bool and the
+    score of every arm (runs, K) numbers, what it maximised (logged as ``score``; NaN for an
+    arm it did not score). A slot whose played arm does not have the highest score (or has
+    none) is logged ``forced``."""
+
+    arms: Any
+    candidates: Any = None
+    scores: Any = None
+
+
 class Policy(PolicyBase):
     """A plain-Python policy, vectorised over runs. Subclass it and define :meth:`select`.
 
@@ -313,7 +326,8 @@ class Policy(PolicyBase):
     before slot 1, :meth:`select` every slot and :meth:`update` after it; ``state`` (a
     :class:`RunState`) holds the history as arrays of shape (runs, K) and
     the runs' own random streams (``state.rng``). Plain-Python policies log every arm as a
-    candidate and no AoI-aware override unless ``select`` returns ``(arms, candidates)``.
+    candidate, no AoI-aware override and no score unless ``select`` returns
+    ``(arms, candidates)`` or a :class:`Choice` with candidates and scores.
     """
 
     tier: ClassVar[str] = "python"

@@ -19,6 +19,7 @@ import numpy as np
 import orjson
 
 from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
+from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, NAMES, OPTIONAL
 from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
@@ -28,8 +29,9 @@ from recorder.vocab import (
     SLOT_FORMAT_VERSION,
 )
 
-#: Message keys in the order the encoder writes them.
-MESSAGE_KEYS = FIELDS
+#: Message keys in the order the encoder writes them: the required fields, then those of
+#: the optional ones a run gives (corraoi.engine.slot_record).
+MESSAGE_KEYS = NAMES
 
 
 def empty_block(K: int) -> SlotBlock:
@@ -53,7 +55,6 @@ def empty_block(K: int) -> SlotBlock:
 #: Slot values are int64 in every array: a value beyond is refused by the reader.
 _I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
 _INT_FIELDS = ("t", "x", "arm", "aoi", "oracle_aoi", "regret")
-_N_KEYS = len(FIELDS)
 
 
 def _shown(value: Any) -> str:
@@ -167,39 +168,129 @@ def decode_messages(
     except orjson.JSONDecodeError:
         raise _json_error(payloads, where) from None
     B = len(rows)
-    # C-level checks first (map/set); the Python loop below runs only to name a bad row
-    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {_N_KEYS}
-    for i, r in enumerate(() if fine else rows):
-        if type(r) is not dict or len(r) != _N_KEYS:
+    first = rows[0] if type(rows[0]) is dict else {}
+    names = list(first)
+    missing = [f for f in FIELDS if f not in first]
+    if type(rows[0]) is dict and missing:  # a required field lacking in the log
+        raise LogError(
+            f"{where}: {_slot_of(first, 0)} lacks {', '.join(missing)}, a required "
+            f"field of the slot log (expected the fields {', '.join(FIELDS)})"
+        )
+    # C-level checks first (map/set); the Python loop below runs only to name a bad row.
+    # Every message of a chunk has the keys of its first; an optional field of the slot
+    # record may come and go (a plug-in that gave scores from some slot on).
+    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {len(names)}
+    cols: dict[str, list[Any]] = {}
+    if fine:
+        try:
+            cols = {f: [r[f] for r in rows] for f in names}
+        except KeyError:
+            fine = False
+    if not fine:
+        expect = set(names)
+        for i, r in enumerate(rows):
             if type(r) is not dict:
                 raise LogError(f"{where}: message {i + 1} is {_shown(r)}, expected a JSON object")
-            missing = [f for f in FIELDS if f not in r]
-            extra = sorted(k for k in r if k not in FIELDS)[:3]
-            what = f"lacks {', '.join(missing)}" if missing else f"has extra keys {extra}"
-            raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
-                           f"{', '.join(FIELDS)}")  # fmt: skip
-    try:
-        cols: dict[str, list[Any]] = {f: [r[f] for r in rows] for f in FIELDS}
-    except KeyError as exc:
-        raise LogError(f"{where}: a slot message lacks the field {exc}") from None
+            lacking = [f for f in names if f not in r and f not in OPTIONAL]
+            extra = sorted(k for k in r if k not in expect and k not in OPTIONAL)[:3]
+            if lacking or extra:
+                what = f"lacks {', '.join(lacking)}" if lacking else f"has extra keys {extra}"
+                raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
+                               f"{', '.join(names)}")  # fmt: skip
+        names += [f for f in OPTIONAL if f not in expect and any(f in r for r in rows)]
+        cols = {f: [r.get(f) for r in rows] for f in names}
+    unknown = [f for f in names if f not in BY_NAME]
     try:
         out = _columns(cols, B, K, n_states)
-        # a bool hidden in an integer column: numpy reads [1, true] as int64, so count them
-        # (every column now holds numbers or bools only; keys are fixed)
-        bools = joined.count(b"true") + joined.count(b"false")
-        if bools != 2 * B:
+        # a bool hidden in a number column: numpy reads [1, true] as int64, so count them
+        # (every known column now holds numbers, nulls or bools only; keys are fixed)
+        bools = 2 * B + sum(v is not None for v in cols.get("forced", ()))
+        bools += sum(_count_bools(v) for f in unknown for v in cols[f])
+        if joined.count(b"true") + joined.count(b"false") != bools:
             for f in (*_INT_FIELDS, "estimator", "mu_hat", "pulls", "candidates"):
                 for i, v in enumerate(cols[f]):
                     items = v if type(v) is list else [v]
                     if any(type(a) is bool for a in items):
                         raise _Bad(i, f, _shown(next(a for a in items if type(a) is bool)),
                                    "a number, not a bool")  # fmt: skip
+        optional = {f: _optional(f, cols[f], out["candidates"]) for f in names if f in OPTIONAL}
     except _Bad as bad:
         raise LogError(
             f"{where}: {_slot_of(rows[bad.row], bad.row)}: {bad.field} is {bad.shown}, "
             f"expected {bad.expected}"
         ) from None
-    return SlotBlock(**{f: out[f] for f in FIELDS})
+    kept = {f: _unknown(cols[f]) for f in unknown}
+    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=kept)
+
+
+def _count_bools(v: Any) -> int:
+    if type(v) is bool:
+        return 1
+    if type(v) is list:
+        return sum(_count_bools(a) for a in v)
+    if type(v) is dict:
+        return sum(_count_bools(a) for a in v.values())
+    return 0
+
+
+def _unknown(values: list[Any]) -> np.ndarray:
+    """A field this corraoi does not know (a newer one wrote it), kept as it reads."""
+    try:
+        arr = np.asarray(values)
+    except ValueError:  # ragged lists
+        arr = np.empty(len(values), dtype=object)
+        arr[:] = values
+    return arr
+
+
+_NUMBER = {float, int}
+
+
+def _optional(f: str, values: list[Any], cand: np.ndarray) -> np.ndarray:
+    """An optional field's column (``cand``: the slots' candidate sets); a slot that lacks
+    it (None: a chunk where it came or went) gets NaN, or False."""
+    decl = BY_NAME[f]
+    B, K = cand.shape
+    if decl.json == "boolean":
+        arr = np.asarray([False if v is None else v for v in values])
+        if arr.dtype != np.bool_ or arr.ndim != 1:
+            i = _first(values, lambda v: v is None or type(v) is bool)
+            raise _Bad(max(i, 0), f, _shown(values[max(i, 0)]), "a JSON bool (true or false)")
+        return arr
+    if decl.json == "float32":
+        vals = [np.nan if v is None else v for v in values]
+        if not set(map(type, vals)) <= _NUMBER:
+            i = _first(vals, lambda v: type(v) in _NUMBER)
+            raise _Bad(i, f, _shown(vals[i]), "a number")
+        return _infinite(np.asarray(vals, dtype=np.float64).astype(np.float32))
+    # "candidate scores": per slot [] or one number per candidate, in the candidates' order
+    rows = [[] if v is None else v for v in values]
+    counts = cand.sum(axis=1)
+    lengths = np.fromiter(map(len, rows), dtype=np.int64, count=B) if set(
+        map(type, rows)) == {list} else None  # fmt: skip
+    if lengths is None or ((lengths != 0) & (lengths != counts)).any():
+        for i, row in enumerate(rows):
+            if type(row) is not list or len(row) not in (0, counts[i]):
+                raise _Bad(i, f, _shown(row), f"a list of {counts[i]} numbers (one per "
+                           "candidate) or []")  # fmt: skip
+    flat = list(chain.from_iterable(rows))
+    if not set(map(type, flat)) <= _NUMBER:
+        for i, row in enumerate(rows):
+            j = _first(row, lambda a: type(a) in _NUMBER)
+            if j >= 0:
+                raise _Bad(i, f"{f}[{j + 1}]", _shown(row[j]), "a number")
+    out = np.full((B, K), np.nan, dtype=np.float32)
+    assert lengths is not None
+    scored = lengths > 0
+    out[cand & scored[:, None]] = _infinite(np.asarray(flat, dtype=np.float64).astype(np.float32))
+    return out
+
+
+def _infinite(arr: np.ndarray) -> np.ndarray:
+    """+-FLOAT32_MAX, how the log writes +-infinity, back to +-infinity."""
+    arr[arr >= FLOAT32_MAX] = np.inf
+    arr[arr <= -FLOAT32_MAX] = -np.inf
+    return arr
 
 
 def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[str, np.ndarray]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +21,10 @@ from pathlib import Path
 import numpy as np
 from mcap.records import Attachment, Header, Metadata
 
-from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
-from corraoi.errors import CorraoiError, LogError
+from corraoi._version import __version__
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.slot_record import OPTIONAL
+from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
 from recorder.vocab import (
     MESSAGE_ENCODING,
@@ -76,6 +79,9 @@ class RunLog:
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
+    #: the unknown slot fields already named in a warning
+    _unknown: list[str] = field(default_factory=list, repr=False)
+    _absent: tuple[str, ...] | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         return (f"RunLog({str(self.path)!r}, {self.config.label}, "
@@ -84,6 +90,16 @@ class RunLog:
     @property
     def label(self) -> str:
         return self.config.label
+
+    @property
+    def absent(self) -> tuple[str, ...]:
+        """The fields a run may lack (corraoi.engine.slot_record.OPTIONAL) that this log
+        lacks, as its first chunk shows (a log written before a field existed lacks it)."""
+        if self._absent is None:
+            first = next(iter(self._chunk_blocks()), None)
+            have = first.fields() if first is not None else ()
+            self._absent = tuple(f for f in OPTIONAL if f not in have)
+        return self._absent
 
     @property
     def horizon(self) -> int:
@@ -156,7 +172,7 @@ class RunLog:
             walker = Walker(f, self.path, stop_at=self._data_end)
             for offset in chunk_offsets(f, walker, lo, hi):
                 chunk = walker.chunk_at(offset)
-                part = _decode(chunk, self._channel_id, self.path, K, n)
+                part = self._noted(_decode(chunk, self._channel_id, self.path, K, n))
                 keep = (part.t >= first) & (part.t <= last)
                 if not keep.any():
                     continue
@@ -167,6 +183,21 @@ class RunLog:
         if expected != last + 1:
             raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
 
+    def _noted(self, part: SlotBlock) -> SlotBlock:
+        """``part``, after one warning per log naming the fields a newer corraoi wrote that
+        this one does not know (they are kept: ``SlotBlock.extra``, ``Run.slots``)."""
+        new = [f for f in part.extra if f not in self._unknown]
+        if new:
+            self._unknown.extend(new)
+            warnings.warn(
+                f"{self.path}: slot field{'s' if len(new) > 1 else ''} {', '.join(new)} "
+                f"unknown to corraoi {__version__} (written by corraoi "
+                f"{self.config.version}?): kept as read, not shown or compared",
+                CorraoiWarning,
+                stacklevel=3,
+            )
+        return part
+
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
         K, n = self.config.instance.K, self.config.instance.n_states
         expected = 1
@@ -176,7 +207,7 @@ class RunLog:
                 if kind != "chunk":
                     continue
                 assert isinstance(item, ChunkData)
-                part = _decode(item, self._channel_id, self.path, K, n)
+                part = self._noted(_decode(item, self._channel_id, self.path, K, n))
                 if not len(part):
                     continue
                 _follows(part, expected, self.path, item.offset)
@@ -395,4 +426,4 @@ def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
 
 
 def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
-    return SlotBlock(**{f: b.column(f)[start:stop] for f in FIELDS})
+    return b.slice(start, stop)

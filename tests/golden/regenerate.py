@@ -18,11 +18,17 @@ docs/model.md says what is guaranteed across machines.
 Run it only when a change to the engine, a policy or the log changes what they compute on
 purpose, and say so in the changelog: tests/test_golden.py, test_builtins.py,
 test_kernels.py and test_views.py compare against these files.
+
+The field table of docs/log-format.md is written from the slot record's declaration
+(corraoi/engine/slot_record.py) by the same command: run it after a change there.
+
+tests/golden/before-score.mcap is never regenerated: a slot log written by corraoi before
+the score existed (commit 2347ea6; aoi-aware-cucb on I1, seed 5, 1200 slots), which today's
+reader must keep reading (tests/test_slot_record.py).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import sys
@@ -116,9 +122,9 @@ def log_values(path: Path) -> dict[str, Any]:
     end = {k: json.loads(v) if k != "status" else v for k, v in log.end.items()}
     block = log.read_all()
     columns = {}
-    for f in dataclasses.fields(block):
-        col = np.asarray(getattr(block, f.name))
-        columns[f.name] = col.tolist() if col.dtype.kind == "f" else col.astype(int).tolist()
+    for name in block.fields():
+        col = np.asarray(block.column(name))
+        columns[name] = col.tolist() if col.dtype.kind == "f" else col.astype(int).tolist()
     return {"metadata": meta, "end": end, "columns": columns}
 
 
@@ -149,6 +155,18 @@ def logs() -> dict[str, object]:
             out[case_name(key)] = log_values(path)
             path.unlink()
     return out
+
+
+def write_docs_table() -> Path:
+    """The slot record's table between its markers in docs/log-format.md."""
+    from corraoi.engine.slot_record import markdown_table
+
+    doc = HERE.parent.parent / "docs" / "log-format.md"
+    begin, end = "<!-- slot-record: begin -->\n", "<!-- slot-record: end -->"
+    text = doc.read_text(encoding="utf-8")
+    head, rest = text.split(begin, 1)
+    doc.write_text(head + begin + markdown_table() + end + rest.split(end, 1)[1], encoding="utf-8")
+    return doc
 
 
 def differences(want: Any, got: Any, where: str = "", limit: int = 20) -> list[str]:
@@ -229,6 +247,8 @@ def main(argv: list[str]) -> int:
         else:
             path.write_text(dump(now) + "\n")
             print(f"wrote {path}")
+    if not check:
+        print(f"wrote {write_docs_table()}")
     if check:
         print("golden: differences found" if bad else "golden: every value as pinned")
     return 1 if bad else 0
