@@ -51,6 +51,10 @@ def test_streams_of_many_seeds_are_numpys_seed_by_seed():
         ss_lat, ss_pol = np.random.SeedSequence(seed).spawn(2)
         assert lat[i].tolist() == np.random.SFC64(ss_lat).state["state"]["state"].tolist()
         assert pol[i].tolist() == np.random.SFC64(ss_pol).state["state"]["state"].tolist()
+    for few in (seeds[-1:], seeds[-7:], seeds[-9:]):  # a few seeds: NumPy's, one by one
+        got = streams_for_seeds(few)
+        assert got[0].tolist() == lat[-few.size :].tolist()
+        assert got[1].tolist() == pol[-few.size :].tolist()
     with pytest.raises(ConfigError, match="non-negative"):
         streams_for_seeds(np.array([3, -1]))
 
