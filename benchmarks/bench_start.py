@@ -10,7 +10,9 @@ column for each.
                                      [--skip-cold] [--no-workers] [--only ROW,ROW] [--keep DIR]
 
 ``--against REV`` times the code of a git revision (its ``corraoi``, ``recorder`` and
-``viewer``, extracted with ``git archive``) as the baseline. The order of the checkouts flips
+``viewer``, extracted with ``git archive``) as the baseline; that copy is no git checkout, so
+its logs record no commit and it never asks git (``--baseline`` with ``git worktree add``
+times that too). The order of the checkouts flips
 every repeat. Each row is also timed in CPU seconds (user + system of the command and the
 processes it waited for), a second table: on a machine that others load, CPU time moves far
 less than wall time. ``--keep DIR`` keeps the kernel caches and logs in DIR and reuses them
