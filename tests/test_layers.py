@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import re
 import subprocess
 import sys
@@ -82,11 +83,56 @@ def _known(name: str) -> str | None:
     return name or None
 
 
+def _string_imports(name: str, tree: ast.Module) -> set[str]:
+    """The modules of ours that ``tree`` names in a string to be imported: the first argument
+    of ``import_module``, ``__import__`` or ``find_spec``, a ``"module:attr"`` seam (a hook
+    named by its module), the values of a lazy ``__getattr__`` table (also relative to the
+    package, as ``{"RerunSink": "rerun.sink"}``) and the imports of Python code in a string
+    (a worker's ``python -c`` script). A module's name as data (an entry-point group, a
+    metadata key, ``-m corraoi.cli`` recognised in ``argv``) is not an import."""
+    lazy = any(isinstance(n, ast.FunctionDef) and n.name == "__getattr__" for n in tree.body)
+    package = name if MODULES.get(name, Path()).name == "__init__.py" else name.rpartition(".")[0]
+    tables = {
+        id(v) for n in tree.body if lazy and isinstance(n, (ast.Assign, ast.AnnAssign))
+        and isinstance(n.value, ast.Dict) for v in n.value.values
+    }  # fmt: skip
+    called = {
+        id(n.args[0]) for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and n.args
+        and (_dotted(n.func) or "").rpartition(".")[2] in ("import_module", "__import__",
+                                                           "find_spec")
+    }  # fmt: skip
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Constant) and isinstance(node.value, str)):
+            continue
+        text, seam, _ = node.value.strip().partition(":")
+        if id(node) in tables and f"{package}.{text}" in MODULES:
+            found.add(f"{package}.{text}")
+        elif text in MODULES and (id(node) in called or id(node) in tables
+                                  or (seam and "." in text)):  # fmt: skip
+            found.add(text)
+        elif "import" in node.value:
+            try:
+                code = ast.parse(node.value)
+            except SyntaxError:
+                continue
+            for imp in _runtime_imports(code):
+                if isinstance(imp, ast.Import):
+                    found |= {a.name for a in imp.names}
+                elif not imp.level:
+                    found |= {imp.module or "", *(f"{imp.module}.{a.name}" for a in imp.names)}
+    return found
+
+
 def _edges(typing: bool = False) -> dict[str, set[str]]:
+    """Every module of ours and the modules of ours it imports: at module level, inside
+    functions, and named in strings to be imported (:func:`_string_imports`)."""
     edges: dict[str, set[str]] = {}
     for name, path in MODULES.items():
         targets: set[str] = set()
-        for node in _runtime_imports(ast.parse(path.read_text(encoding="utf-8")), typing):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in _runtime_imports(tree, typing):
             if isinstance(node, ast.Import):
                 wanted = [a.name for a in node.names]
             else:
@@ -95,6 +141,8 @@ def _edges(typing: bool = False) -> dict[str, set[str]]:
                 # `from . import x` of submodules depends on them, not on the package itself
                 wanted = subs if all(s in MODULES for s in subs) else [base, *subs]
             targets |= {t for w in wanted if (t := _known(w)) is not None and t != name}
+        targets |= {t for w in _string_imports(name, tree)
+                    if (t := _known(w)) is not None and t != name}  # fmt: skip
         edges[name] = targets
     return edges
 
@@ -147,20 +195,107 @@ def test_the_module_graph_has_no_cycle():
     assert _circles(_edges()) == set()
 
 
-def test_only_the_top_floor_imports_the_recorder_or_the_viewer():
-    wrong = {}
-    for src, targets in _edges().items():
-        pkg = src.split(".")[0]
-        bad = sorted(
-            t for t in targets
-            if (pkg == "corraoi" and not _is_top(src) and t.split(".")[0] != "corraoi")
-            or (pkg == "recorder" and (t.startswith("viewer") or _is_top(t)))
-            or (pkg == "viewer" and _is_top(t))
-        )  # fmt: skip
-        if bad:
-            wrong[src] = bad
+#: The floors of the three folders, lowest first: an import goes to a module of its own floor
+#: or of one below.
+FLOORS = ("corraoi's lower wings", "recorder", "viewer", "the top floor")
+
+
+def _floor(name: str) -> int:
+    if _is_top(name) or name == "corraoi.__main__":
+        return 3
+    return {"recorder": 1, "viewer": 2}.get(name.split(".")[0], 0)
+
+
+def _climbs(edges: dict[str, set[str]]) -> dict[str, list[str]]:
+    """Each module's imports of a module on a higher floor."""
+    wrong = {src: sorted(t for t in targets if _floor(t) > _floor(src))
+             for src, targets in edges.items()}  # fmt: skip
+    return {src: bad for src, bad in wrong.items() if bad}
+
+
+def test_imports_go_down_the_floors_of_the_three_folders():
+    """corraoi's lower wings < recorder < viewer < the top floor (``corraoi.face``,
+    ``corraoi.cli``, ``corraoi.testing``, ``corraoi.pytest_plugin``, the package's lazy
+    ``__init__``): no import climbs, inside functions and strings included."""
+    wrong = _climbs(_edges())
     assert set(wrong) - set(OWED_CLIMBS) == set(), wrong
     assert set(OWED_CLIMBS) <= set(wrong), "paid: take it off OWED_CLIMBS"
+
+
+def _reach(edges: dict[str, set[str]], start: str) -> set[str]:
+    seen, todo = set(), [start]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo += edges.get(m, ())
+    return seen
+
+
+def test_the_formats_import_no_experiment_module_even_for_types():
+    """The file formats store plain values (a sweep's points are ``corraoi.stats``'s, its
+    provenance is handed in): no module of the recorder reaches ``corraoi.experiments``,
+    typing imports and the imports of what it imports counted."""
+    edges = _edges(typing=True)
+    wrong = {m: sorted(t for t in _reach(edges, m) if t.startswith("corraoi.experiments"))
+             for m in edges if m.startswith("recorder")}  # fmt: skip
+    assert {m: ts for m, ts in wrong.items() if ts} == {}
+
+
+def test_recording_imports_no_viewer_module():
+    """The writer does not lean on the reader: what a run is recorded with (the face's
+    ``recording``, the recorder, what they import at module level) imports no module of
+    the viewer."""
+    edges = _edges()
+    assert not [t for t in edges["corraoi.face.recording"] if t.startswith("viewer")]
+    module_level: dict[str, set[str]] = {}
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        module_level[name] = {
+            t for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))
+            for w in ([a.name for a in node.names] if isinstance(node, ast.Import)
+                      else [_base(name, node), *(f"{_base(name, node)}.{a.name}"
+                                                 for a in node.names)])
+            if (t := _known(w)) is not None and t != name
+        }  # fmt: skip
+    assert not [t for t in _reach(module_level, "corraoi.face.recording") if t.startswith("viewer")]
+
+
+def test_a_plain_record_loads_no_viewer_module(tmp_path: Path):
+    """At run time too: ``corraoi.record`` (its summary measured as the blocks go by) loads
+    no module of the viewer, nor of the experiments."""
+    code = ("import sys, corraoi\n"
+            "run = corraoi.record('ucb', 'I1', seed=0, horizon=50, path='a.mcap', rrd=False)\n"
+            "assert run.summary.slots == 50\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'viewer'\n"
+            "             or m.startswith('corraoi.experiments')))")  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=tmp_path, env=env)  # fmt: skip
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_floor_check_sees_strings_and_lazy_tables():
+    """The check itself: a module named to ``import_module``, a lazy ``__getattr__`` table's
+    relative names and a worker's script are imports; a word that is only a folder's name
+    (a git pathspec) is not."""
+    code = (
+        "import importlib\n"
+        "_LAZY = {'RerunSink': 'rerun.sink'}\n"
+        "def __getattr__(name):\n"
+        "    return importlib.import_module('viewer.diffs')\n"
+        "WORKER = 'from corraoi.engine import kernels'\n"
+        "PATHS = ['corraoi', 'recorder', 'viewer', 'corraoi.cli']\n"
+        "SEAM = 'corraoi.face.load:load'\n"
+    )
+    found = _string_imports("recorder", ast.parse(code))
+    assert found >= {"recorder.rerun.sink", "viewer.diffs", "corraoi.engine.kernels",
+                     "corraoi.face.load"}  # fmt: skip
+    assert not found & {"corraoi", "recorder", "viewer", "corraoi.cli"}
+    assert "corraoi.face.recording" in _edges()["corraoi"]  # the package's lazy table
+    assert _climbs({"recorder.x": {"viewer.diffs", "corraoi.engine.block"},
+                    "viewer.y": {"recorder.x", "corraoi.face.load"}}) == {
+        "recorder.x": ["viewer.diffs"], "viewer.y": ["corraoi.face.load"]}  # fmt: skip
 
 
 def _rooms(edges: dict[str, set[str]]) -> dict[str, set[str]]:

@@ -15,7 +15,6 @@ from .diffs import diff
 from .info import log_info
 from .recover import Recovered, recover
 from .replay import Replayed, replay
-from .summary import RunSummary, summarize_blocks
 
 __all__ = [
     "Comparison",
@@ -23,11 +22,9 @@ __all__ = [
     "FieldDiff",
     "Recovered",
     "Replayed",
-    "RunSummary",
     "compare",
     "diff",
     "log_info",
     "recover",
     "replay",
-    "summarize_blocks",
 ]
