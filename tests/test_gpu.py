@@ -85,7 +85,7 @@ def no_cupy(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(DEVICE_ENV, raising=False)
     import corraoi.gpu.device as device
 
-    monkeypatch.setattr(device, "_DEVICES", {})
+    monkeypatch.setattr(device, "DEVICES", {})
 
 
 def run(*args: object):  # type: ignore[no-untyped-def]

@@ -154,7 +154,7 @@ def test_a_killed_record_leaves_no_worker_behind(tmp_path):
 _PROBE = """
 import json, os, sys
 import recorder.rerun.worker as w
-serve = w._serve
+serve = w.serve
 def spy(*args):
     try:
         serve(*args)
@@ -162,7 +162,7 @@ def spy(*args):
         heavy = sorted(m for m in ("numba", "rerun", "pandas", "pyarrow") if m in sys.modules)
         with open("child.json", "w") as f:
             json.dump(heavy, f)
-w._serve = spy
+w.serve = spy
 from corraoi.cli import main
 try:
     main(sys.argv[1:])

@@ -386,7 +386,8 @@ def _intact(lib: Path) -> bool:
 # ---------------------------------------------------------------------------- choosing
 
 
-_DEVICES: dict[str, Device] = {}
+#: the devices made in this process, by kind (a test swaps in an empty one)
+DEVICES: dict[str, Device] = {}
 _DEVICE_LOCK = threading.Lock()
 
 
@@ -399,7 +400,7 @@ def get_device() -> Device:
 def device_of(kind: str) -> Device:
     """The device ``kind`` ("cuda" or "emulate") of this process, made once."""
     with _DEVICE_LOCK:
-        device = _DEVICES.get(kind)
+        device = DEVICES.get(kind)
         if device is None:
             if kind == "emulate":
                 device = EmulatedDevice()
@@ -407,5 +408,5 @@ def device_of(kind: str) -> Device:
                 device = CudaDevice()
             else:
                 raise GpuUnavailable(f"{DEVICE_ENV}={kind!r}: expected 'cuda' or 'emulate'")
-            _DEVICES[kind] = device
+            DEVICES[kind] = device
         return device
