@@ -521,6 +521,92 @@ def test_no_string_names_a_module_of_recorder_or_viewer_below_the_top_floor():
         assert not found, (mod, found)
 
 
+#: A package's ``__init__.py`` is its front. ``corraoi.cli``'s is the command group itself
+#: (the console script's ``main``), not a front.
+FRONTS = sorted(m for m, p in MODULES.items() if p.name == "__init__.py" and m != "corraoi.cli")
+CALLERS = ("corraoi", "recorder", "viewer", "tests", "benchmarks")
+
+
+def _exported(path: Path) -> list[str] | None:
+    """A front's ``__all__`` (None without one)."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            return [e.value for e in ast.walk(node.value) if isinstance(e, ast.Constant)]
+    return None
+
+
+def _through_fronts() -> dict[str, set[str]]:
+    """Each front and the names its callers take through it: ``from front import x``,
+    ``front.x`` (also through an alias), in the code of the three folders, the tests and the
+    benchmarks (the front itself left out), and in the docs' and README's examples."""
+    exported = {f: set(_exported(MODULES[f]) or ()) for f in FRONTS}
+    used: dict[str, set[str]] = {f: set() for f in FRONTS}
+    for folder in CALLERS:
+        for path in (ROOT / folder).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            alias: dict[str, str] = {}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom):
+                    base = _base(name, node) if name in MODULES or not node.level else ""
+                    for a in node.names:
+                        sub = f"{base}.{a.name}"
+                        if base in used and base != name and (
+                            a.name in exported[base] or sub not in MODULES
+                        ):
+                            used[base].add(a.name)
+                        elif sub in used:
+                            alias[a.asname or a.name] = sub
+                elif isinstance(node, ast.Import):
+                    for a in node.names:  # `import x.y` binds x, and x.y.z is read as is
+                        if a.asname and a.name in used:
+                            alias[a.asname] = a.name
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Attribute):
+                    base = _dotted(node.value)
+                    base = alias.get(base or "", base) if base not in used else base
+                    if base in used and base != name:
+                        used[base].add(node.attr)
+    docs = "\n".join(p.read_text(encoding="utf-8")
+                     for p in [ROOT / "README.md", *(ROOT / "docs").glob("*.md")]
+                     if p.name != "changelog.md")  # history, not examples  # fmt: skip
+    for front in FRONTS:
+        for names in re.findall(rf"from {re.escape(front)} import ([\w, ]+)", docs):
+            used[front] |= {n.strip() for n in names.split(",")}
+        used[front] |= set(re.findall(rf"\b(?<![\w.]){re.escape(front)}\.(\w+)", docs))
+    return used
+
+
+def test_a_wings_front_names_its_public_api_or_is_empty():
+    """A front either names its public API (``__all__``, what its callers import from it)
+    or holds its docstring only, its callers importing its modules (docs/architecture.md
+    says which)."""
+    wrong = []
+    for front in FRONTS:
+        body = ast.parse(MODULES[front].read_text(encoding="utf-8")).body
+        rest = [n for n in body[1:] if not (isinstance(n, ast.ImportFrom)
+                                            and n.module == "__future__")]  # fmt: skip
+        if rest and _exported(MODULES[front]) is None:
+            wrong.append(front)
+    assert wrong == []
+
+
+def test_no_front_exports_a_name_nobody_imports():
+    used = _through_fronts()
+    unused = {f: sorted(set(_exported(MODULES[f]) or ()) - used[f]) for f in FRONTS}
+    assert {f: names for f, names in unused.items() if names} == {}
+
+
+def test_the_front_check_sees_each_way_through():
+    used = _through_fronts()
+    assert "make_policy" in used["corraoi.policies"]  # from corraoi.policies import make_policy
+    assert "record" in used["corraoi"]  # corraoi.record(...)
+    assert "get_device" in used["corraoi.gpu"]
+
+
 @pytest.mark.parametrize(
     "wing",
     sorted(m for m, p in MODULES.items() if p.name == "__init__.py" and m.count(".") == 1),
