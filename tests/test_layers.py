@@ -425,6 +425,7 @@ def _private_reaches(name: str, tree: ast.Module) -> list[str]:
     ``python -c`` script)."""
     found = []
     modules: dict[str, str] = {}  # a local name or dotted path -> the module it is
+    classes: dict[str, str] = {}  # a name imported from another module -> where it is
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             base = _base(name, node)
@@ -435,6 +436,8 @@ def _private_reaches(name: str, tree: ast.Module) -> list[str]:
                     modules[a.asname or a.name] = f"{base}.{a.name}"
                 elif _private(a.name) and base != name:
                     found.append(f"{name}: from {base} import {a.name}")
+                elif base != name:
+                    classes[a.asname or a.name] = f"{base}.{a.name}"
         elif isinstance(node, ast.Import):
             for a in node.names:
                 if a.name in MODULES:
@@ -444,6 +447,9 @@ def _private_reaches(name: str, tree: ast.Module) -> list[str]:
             base = _dotted(node.value)
             if base in modules and modules[base] != name:
                 found.append(f"{name}: {modules[base]}.{node.attr}")
+            made = node.value.func if isinstance(node.value, ast.Call) else node.value
+            if isinstance(made, ast.Name) and made.id in classes:  # Class._x, Class()._x
+                found.append(f"{name}: {classes[made.id]}.{node.attr}")
         elif (isinstance(node, ast.Call) and len(node.args) >= 2
               and (_dotted(node.func) or "").rpartition(".")[2] in _BY_NAME
               and isinstance(node.args[1], ast.Constant) and isinstance(node.args[1].value, str)
@@ -451,6 +457,8 @@ def _private_reaches(name: str, tree: ast.Module) -> list[str]:
             base = _dotted(node.args[0])
             if base in modules and modules[base] != name:
                 found.append(f"{name}: {modules[base]}.{node.args[1].value}")
+            elif base in classes:
+                found.append(f"{name}: {classes[base]}.{node.args[1].value}")
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) \
                 and "import" in node.value:  # fmt: skip
             try:
@@ -483,8 +491,9 @@ def test_no_test_or_benchmark_imports_a_private_name():
 
 
 def test_the_private_check_sees_each_way_in():
-    """The check itself: an import, a module's attribute, a dotted path and a worker's
-    script each reach a private name; a module's own privates and dunders do not."""
+    """The check itself: an import, a module's attribute, a dotted path, a monkeypatched
+    name, a class imported from another module (or its instance) and a worker's script
+    each reach a private name; a module's own privates and dunders do not."""
     code = (
         "from corraoi.engine.kernels import _x, __version__\n"
         "from corraoi.engine import kernels\n"
@@ -494,6 +503,8 @@ def test_the_private_check_sees_each_way_in():
         "WORKER = 'from corraoi.engine import kernels\\nkernels._w()'\n"
         "monkeypatch.setattr(kernel_cache, '_LOADED', {}); getattr(kernels, '__name__')\n"
         "import corraoi.engine.kernel_cache as kernel_cache\n"
+        "from corraoi.gpu.device import EmulatedDevice\n"
+        "EmulatedDevice()._b(3); setattr(EmulatedDevice, '_c', None); EmulatedDevice.build\n"
     )
     found = _private_reaches("corraoi.gpu.device", ast.parse(code))
     assert sorted(found) == [
@@ -506,6 +517,8 @@ def test_the_private_check_sees_each_way_in():
     assert sorted(_private_reaches("corraoi.engine.kernels", ast.parse(code))) == [
         "corraoi.engine.kernels: corraoi.engine.kernel_cache._LOADED",
         "corraoi.engine.kernels: corraoi.engine.kernel_cache._z",
+        "corraoi.engine.kernels: corraoi.gpu.device.EmulatedDevice._b",
+        "corraoi.engine.kernels: corraoi.gpu.device.EmulatedDevice._c",
     ]
 
 
