@@ -1,17 +1,20 @@
-"""The house's structure (issue 34), read from the source of the three packages.
+"""The house's structure (issues 34 and 41), read from the source of the three packages.
 
-Every import is counted, at module level and inside functions (``if TYPE_CHECKING:`` blocks
-are typing only and left out):
+Every import is counted, at module level, inside functions and named in a string to be
+imported (``import_module``, a lazy ``__getattr__`` table, a ``"module:attr"`` hook, a
+worker's script); ``if TYPE_CHECKING:`` blocks are typing only and left out unless said:
 
 * the module graph across ``corraoi``, ``recorder`` and ``viewer`` has no cycle;
-* only the top floor (``corraoi.face``, ``corraoi.cli``, ``corraoi.testing``,
-  ``corraoi.pytest_plugin`` and the package's lazy ``__init__``) imports ``recorder`` or
-  ``viewer``; the recorder never imports the viewer, nor the core's top floor;
+* imports go down the floors: corraoi's lower wings < ``recorder`` < ``viewer`` < the top
+  floor (``corraoi.face``, ``corraoi.cli``, ``corraoi.testing``, ``corraoi.pytest_plugin``
+  and the package's lazy ``__init__``); the file formats reach no module of the
+  experiments, typing included, and recording none of the viewer;
 * the wings of ``corraoi`` (its folders, and its ground-floor modules) import each other
   without a circle, and stand at most 8 floors high;
-* no module re-exports a name it imports (a wing's ``__init__.py`` is its public surface),
-  no module imports another's private name, and no string names a module of the layers
-  above to be imported later;
+* no module re-exports a name it imports (a wing's ``__init__.py`` is its front), no module,
+  test or benchmark reaches another's private name, and no string names a module of the
+  layers above to be imported later;
+* a front names its public API or nothing, and exports no name nobody imports;
 * a wing's ``__init__.py`` imports nothing heavy.
 """
 
