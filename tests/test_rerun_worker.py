@@ -80,8 +80,8 @@ def test_a_bad_rrd_path_is_refused_before_the_run(tmp_path):
 def test_a_worker_that_dies_is_one_line_and_the_mcap_log_is_complete(tmp_path):
     worker = _worker()
     try:
-        worker._worker.proc.kill()
-        worker._worker.proc.join(5)
+        worker.process.kill()
+        worker.process.join(5)
         with pytest.raises(WriteError) as err:
             record_run(_config(), tmp_path / "d.mcap", rrd=tmp_path / "d.rrd", rerun=worker)
     finally:

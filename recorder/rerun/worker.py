@@ -56,6 +56,11 @@ class RerunWorker:
         self._conn = self._worker.conn
         self._busy: RemoteRecording | None = None
 
+    @property
+    def process(self) -> Any:
+        """The worker's process (``pid``, ``is_alive()``, ``join()``)."""
+        return self._worker.proc
+
     @classmethod
     def start(cls, before_import: Callable[[], None] | None = None) -> RerunWorker | None:
         """A worker (``before_import()`` runs in it first), or None where a process cannot
