@@ -62,9 +62,7 @@ def test_a_log_cut_anywhere_is_read_up_to_its_last_complete_chunk(record_mcap, t
 
 
 def _prefix(block, n):
-    from recorder.slotlog.reader import _slice
-
-    return _slice(block, 0, n)
+    return block.slice(0, n)
 
 
 def _bad(path) -> str:

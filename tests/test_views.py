@@ -492,7 +492,7 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
 
 
 def test_a_sweep_of_many_arms_draws_bars_and_the_arms_that_matter(tmp_path):
-    from corraoi.experiments.montecarlo import SweepPoint
+    from corraoi.stats import SweepPoint
     from recorder.sweeplog.layout import shown_arms, sweep_blueprint
     from recorder.sweeplog.recording import SweepRerunSink
 

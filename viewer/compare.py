@@ -19,13 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi.engine.summary import RunSummary, SummaryAccumulator
 from corraoi.policies import RGB
 from recorder.style import REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
 from .runs import LogLike, as_log, require_slots, unique_labels
-from .summary import RunSummary, SummaryAccumulator
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .summary import RunSummary
+from corraoi.engine.summary import RunSummary
 
 #: What makes a run's hidden path (and the channel's answers on it): two runs are paired
 #: (common random numbers: ``diff`` compares the policies alone) only when these agree.

@@ -10,13 +10,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from corraoi.engine.summary import RunSummary, summarize_blocks
 from corraoi.experiments.notable import well_formed
 from corraoi.model.theory import analyse
 from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
 
 from .runs import LogLike, as_log
-from .summary import RunSummary, summarize_blocks
 
 
 def log_info(log: LogLike) -> dict[str, Any]:

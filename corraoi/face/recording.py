@@ -350,7 +350,7 @@ class Recorded:
     rrd: Path | None = None
     compile_s: float = 0.0
     viewer_problem: str | None = None
-    summary: Any = None  # viewer.summary.RunSummary, measured as the blocks went by
+    summary: Any = None  # corraoi.engine.summary.RunSummary, measured as the blocks went by
 
 
 def prepare_kernels(plans: Sequence[Plan]) -> None:
@@ -403,8 +403,8 @@ def _record_one(
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
+    from corraoi.engine.summary import SummaryAccumulator
     from corraoi.files.partial import partial_path
-    from viewer.summary import SummaryAccumulator
 
     config = plan.config
     summary = SummaryAccumulator(config)

@@ -141,8 +141,8 @@ class RunLog:
             have += len(part)
             while have >= block:
                 whole = pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
-                yield _slice(whole, 0, block)
-                rest = _slice(whole, block, len(whole))
+                yield whole.slice(0, block)
+                rest = whole.slice(block, len(whole))
                 pending = [rest] if len(rest) else []
                 have = len(rest)
         if have:
@@ -177,7 +177,7 @@ class RunLog:
                 if not keep.any():
                     continue
                 idx = np.flatnonzero(keep)
-                part = _slice(part, int(idx[0]), int(idx[-1]) + 1)
+                part = part.slice(int(idx[0]), int(idx[-1]) + 1)
                 expected = _follows(part, expected, self.path, offset)
                 yield part
         if expected != last + 1:
@@ -212,7 +212,7 @@ class RunLog:
                     continue
                 _follows(part, expected, self.path, item.offset)
                 if expected + len(part) - 1 > self.n_slots:
-                    part = _slice(part, 0, self.n_slots - expected + 1)
+                    part = part.slice(0, self.n_slots - expected + 1)
                 expected += len(part)
                 if len(part):
                     yield part
@@ -423,7 +423,3 @@ def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
         raise LogError(f"{p}: chunk at byte {offset}: slots are not consecutive (expected "
                        f"slot {expected}, got {int(t[0])}..{int(t[-1])})")  # fmt: skip
     return expected + len(t)
-
-
-def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
-    return b.slice(start, stop)

@@ -1,6 +1,7 @@
-"""Summary figures of one recorded run, accumulated block by block (one pass, no recompute).
+"""Summary figures of one run, accumulated block by block (one pass, no recompute): measured
+by the recording as the blocks go by, and by the viewer from a log's blocks.
 
-Every figure comes from the logged slots; nothing is simulated. Arms are 0-based in the
+Every figure comes from the slots; nothing is simulated. Arms are 0-based in the
 Python objects and numbered from 1 in ``to_dict()`` and in everything printed.
 """
 
