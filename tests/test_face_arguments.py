@@ -123,6 +123,7 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
         "rrd 3: expected the Rerun recording's path, None, True or False",
     ),  # fmt: skip
     ("record", {"force": "yes"}, ArgumentTypeError, "force 'yes': expected True or False"),
+    ("record", {"score": "on"}, ArgumentTypeError, "score 'on': expected True or False"),
     ("record", {"viewer": 9876}, ArgumentTypeError, "viewer 9876: expected a running Rerun"),
     ("record", {"sinks": "x"}, ArgumentTypeError, "sinks 'x': expected a list or tuple"),
     ("record", {"sinks": [3]}, ArgumentTypeError, "sinks[0] 3: expected a recorder.sink.Sink"),
