@@ -44,9 +44,10 @@ def library_name(version: str) -> str:
 #: Name of the slot-log format, stored under ``format`` in the run metadata.
 SLOT_FORMAT_NAME = "corraoi.slot-log"
 #: The newest version of the slot-log format this code reads and writes: a run is written
-#: as version 1 (built-in policy, i.i.d. channel) or 2 (a plug-in policy or a Markov/trace
-#: channel), ``RunConfig.format_version``.
-SLOT_FORMAT_VERSION = 2
+#: as version 1 (built-in policy, i.i.d. channel), 2 (a plug-in policy or a Markov/trace
+#: channel) or 3 (a log that leaves some per-slot columns absent: ``corraoi.Logger``'s),
+#: ``RunConfig.format_version``.
+SLOT_FORMAT_VERSION = 3
 SLOT_TOPIC = "/corraoi/slot"
 SLOT_SCHEMA_NAME = "corraoi.SlotEvent"
 #: Metadata record written when a slot log is opened: the run configuration.

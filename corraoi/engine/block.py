@@ -22,6 +22,10 @@ from corraoi.policies.spec import PolicySpec
 SCALAR_FIELDS = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "override")
 ARM_FIELDS = ("mu_hat", "pulls", "candidates")
 FIELDS = ("t",) + SCALAR_FIELDS + ARM_FIELDS
+#: The columns every log holds; a log written from another simulator or a testbed
+#: (``corraoi.Logger``) may leave any other column of :data:`FIELDS` absent
+#: (:attr:`RunConfig.absent`).
+ALWAYS_FIELDS = ("t", "arm", "success", "aoi")
 
 
 #: The values of :attr:`RunConfig.streams`.
@@ -42,12 +46,23 @@ class RunConfig:
     #: "gpu-emulated" (the GPU kernel's, captured on a CUDA device or on the host compiler:
     #: a run of a GPU sweep recorded again, corraoi.gpu.runner.capture_run)
     streams: str = "cpu"
+    #: the per-slot columns the log does not hold (a run logged by ``corraoi.Logger`` from a
+    #: loop that did not give them), in :data:`FIELDS` order; never one of ALWAYS_FIELDS
+    absent: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
         if self.streams not in STREAMS:
             raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
+        absent = set(self.absent)
+        wrong = sorted(absent - set(FIELDS) | absent & set(ALWAYS_FIELDS))
+        if wrong:
+            raise ConfigError(
+                f"absent fields {wrong}: expected fields of the slot record other than "
+                f"{', '.join(ALWAYS_FIELDS)}"
+            )
+        object.__setattr__(self, "absent", tuple(f for f in FIELDS if f in absent))
         if self.channel is None:
             object.__setattr__(self, "channel", default_channel(self.instance))
 
@@ -55,8 +70,11 @@ class RunConfig:
     def format_version(self) -> int:
         """The slot-log format version this run is written in: 1 for a built-in policy on an
         i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
-        non-i.i.d. channel (older readers refuse it instead of misreading it)."""
+        non-i.i.d. channel (older readers refuse it instead of misreading it), 3 when it leaves
+        a column absent."""
         assert self.channel is not None
+        if self.absent:
+            return 3
         return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
 
     @property
@@ -77,6 +95,8 @@ class RunConfig:
             out["channel"] = self.channel.to_dict()
         if self.streams != "cpu":  # logs of the CPU engine read as before
             out["streams"] = self.streams
+        if self.absent:
+            out["absent"] = list(self.absent)
         return out
 
     @classmethod
@@ -89,6 +109,7 @@ class RunConfig:
             version=str(data.get("version", "unknown")),
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
+            absent=tuple(str(f) for f in data.get("absent", ())),
         )
 
 

@@ -142,9 +142,10 @@ class RerunSink(Sink):
         n = len(block)
         send, base = self.recording.send_columns, self.base
         t = np.ascontiguousarray(block.t, dtype=np.int64)
+        absent = self.config.absent  # columns the run's log does not hold: not drawn
 
         def column(path: str, times: np.ndarray, values: np.ndarray) -> None:
-            if times.size:
+            if times.size and path.partition("/")[0] not in absent:
                 send(
                     f"{base}/{path}",
                     indexes=[rr.TimeColumn(TIMELINE, sequence=times)],

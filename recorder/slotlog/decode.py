@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import orjson
 
-from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock
 from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
@@ -53,7 +53,16 @@ def empty_block(K: int) -> SlotBlock:
 #: Slot values are int64 in every array: a value beyond is refused by the reader.
 _I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
 _INT_FIELDS = ("t", "x", "arm", "aoi", "oracle_aoi", "regret")
-_N_KEYS = len(FIELDS)
+
+
+def absent_column(name: str, B: int, K: int) -> np.ndarray:
+    """What a block holds for a column its log leaves absent (``RunConfig.absent``): NaN
+    for a number, -1 for an integer (no state, arm, age or count is -1), false for a bool.
+    Views leave such a column out; the value only keeps a ``SlotBlock`` whole."""
+    dtype = empty_block(K).column(name).dtype
+    shape = (B, K) if name in ARM_FIELDS else (B,)
+    fill: float | int | bool = np.nan if dtype.kind == "f" else (-1 if dtype.kind == "i" else False)
+    return np.full(shape, fill, dtype=dtype)
 
 
 def _shown(value: Any) -> str:
@@ -148,19 +157,26 @@ def _table(values: list[Any], field: str, K: int, ok: Any, expected: str) -> np.
 
 
 def decode_messages(
-    payloads: Sequence[bytes | memoryview], K: int, n_states: int, *, where: str
+    payloads: Sequence[bytes | memoryview],
+    K: int,
+    n_states: int,
+    *,
+    where: str,
+    absent: tuple[str, ...] = (),
 ) -> SlotBlock:
     """The SlotBlock of consecutive slot messages (JSON bytes), validated strictly.
 
     Every field must have its JSON type (an integer is never a bool or a float, a bool is
     never a number or a string), integers must fit int64, x in 1..n_states, arm in 1..K,
     aoi and oracle_aoi >= 1, pulls >= 0, mu_hat in [0, 1], candidates distinct arms in
-    1..K, exactly the fields of the schema. The first violation is one
-    :class:`LogError` naming ``where``, the slot, the field, the value and what was
+    1..K, exactly the fields of the schema (those of the log: every field but the
+    ``absent`` ones, which the block holds as :func:`absent_column`). The first violation
+    is one :class:`LogError` naming ``where``, the slot, the field, the value and what was
     expected.
     """
     if not payloads:
         return empty_block(K)
+    fields = [f for f in FIELDS if f not in absent] if absent else FIELDS
     joined = b"[" + b",".join(payloads) + b"]"
     try:
         rows = orjson.loads(joined)
@@ -168,28 +184,28 @@ def decode_messages(
         raise _json_error(payloads, where) from None
     B = len(rows)
     # C-level checks first (map/set); the Python loop below runs only to name a bad row
-    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {_N_KEYS}
+    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {len(fields)}
     for i, r in enumerate(() if fine else rows):
-        if type(r) is not dict or len(r) != _N_KEYS:
+        if type(r) is not dict or len(r) != len(fields):
             if type(r) is not dict:
                 raise LogError(f"{where}: message {i + 1} is {_shown(r)}, expected a JSON object")
-            missing = [f for f in FIELDS if f not in r]
-            extra = sorted(k for k in r if k not in FIELDS)[:3]
+            missing = [f for f in fields if f not in r]
+            extra = sorted(k for k in r if k not in fields)[:3]
             what = f"lacks {', '.join(missing)}" if missing else f"has extra keys {extra}"
             raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
-                           f"{', '.join(FIELDS)}")  # fmt: skip
+                           f"{', '.join(fields)}")  # fmt: skip
     try:
-        cols: dict[str, list[Any]] = {f: [r[f] for r in rows] for f in FIELDS}
+        cols: dict[str, list[Any]] = {f: [r[f] for r in rows] for f in fields}
     except KeyError as exc:
         raise LogError(f"{where}: a slot message lacks the field {exc}") from None
     try:
-        out = _columns(cols, B, K, n_states)
+        out = _columns(cols, B, K, n_states, absent)
         # a bool hidden in an integer column: numpy reads [1, true] as int64, so count them
         # (every column now holds numbers or bools only; keys are fixed)
         bools = joined.count(b"true") + joined.count(b"false")
         if bools != 2 * B:
             for f in (*_INT_FIELDS, "estimator", "mu_hat", "pulls", "candidates"):
-                for i, v in enumerate(cols[f]):
+                for i, v in enumerate(cols.get(f, ())):
                     items = v if type(v) is list else [v]
                     if any(type(a) is bool for a in items):
                         raise _Bad(i, f, _shown(next(a for a in items if type(a) is bool)),
@@ -202,31 +218,41 @@ def decode_messages(
     return SlotBlock(**{f: out[f] for f in FIELDS})
 
 
-def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[str, np.ndarray]:
+def _columns(
+    cols: dict[str, list[Any]], B: int, K: int, n_states: int, absent: tuple[str, ...] = ()
+) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for f in _INT_FIELDS:
-        out[f] = _int_column(cols[f], f)
+        if f in cols:
+            out[f] = _int_column(cols[f], f)
     for f in ("success", "override"):
-        out[f] = _bool_column(cols[f], f)
-    est = np.asarray(cols["estimator"])
-    if est.dtype.kind not in ("i", "f") or est.ndim != 1:
-        i = _first(cols["estimator"], _real)
-        raise _Bad(max(i, 0), "estimator", _shown(cols["estimator"][max(i, 0)]), "a number")
-    out["estimator"] = est.astype(np.float64, copy=False)
-    mu = _table(cols["mu_hat"], "mu_hat", K, _real, "a number in [0, 1]")
-    out["mu_hat"] = mu.astype(np.float64, copy=False)
-    out["pulls"] = _table(cols["pulls"], "pulls", K, _is_int, "integers >= 0")
+        if f in cols:
+            out[f] = _bool_column(cols[f], f)
+    if "estimator" in cols:
+        est = np.asarray(cols["estimator"])
+        if est.dtype.kind not in ("i", "f") or est.ndim != 1:
+            i = _first(cols["estimator"], _real)
+            raise _Bad(max(i, 0), "estimator", _shown(cols["estimator"][max(i, 0)]), "a number")
+        out["estimator"] = est.astype(np.float64, copy=False)
+    if "mu_hat" in cols:
+        mu = _table(cols["mu_hat"], "mu_hat", K, _real, "a number in [0, 1]")
+        out["mu_hat"] = mu.astype(np.float64, copy=False)
+    if "pulls" in cols:
+        out["pulls"] = _table(cols["pulls"], "pulls", K, _is_int, "integers >= 0")
     for f, lo, hi in (("x", 1, n_states), ("arm", 1, K), ("aoi", 1, None),
                       ("oracle_aoi", 1, None), ("t", 1, None)):  # fmt: skip
+        if f not in out:
+            continue
         col = out[f]
         bad = (col < lo) | (col > hi) if hi is not None else col < lo
         if bad.any():
             i = int(np.argmax(bad))
             want = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
             raise _Bad(i, f, str(int(col[i])), f"an integer {want}")
-    bounds: tuple[tuple[str, np.ndarray, float, float | None], ...] = (
-        ("mu_hat", out["mu_hat"], 0.0, 1.0),
-        ("pulls", out["pulls"], 0, None),
+    bounds: tuple[tuple[str, np.ndarray, float, float | None], ...] = tuple(
+        (f, out[f], low, high)
+        for f, low, high in (("mu_hat", 0.0, 1.0), ("pulls", 0, None))
+        if f in out
     )
     for f, arr, low, high in bounds:
         bad = (arr < low) | (arr > high) if high is not None else arr < low
@@ -234,9 +260,13 @@ def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[
             i, j = divmod(int(np.argmax(bad)), K)
             want = f"in [{low:g}, {high:g}]" if high is not None else f">= {low:g}"
             raise _Bad(i, f"{f}[{j + 1}]", repr(arr[i, j].item()), f"a value {want}")
-    out["candidates"] = _candidates(cols["candidates"], B, K)
-    out["x"] = out["x"] - 1
+    if "candidates" in cols:
+        out["candidates"] = _candidates(cols["candidates"], B, K)
+    if "x" in out:
+        out["x"] = out["x"] - 1
     out["arm"] = out["arm"] - 1
+    for f in absent:
+        out[f] = absent_column(f, B, K)
     return out
 
 
@@ -346,6 +376,7 @@ def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
 
 __all__ = [
     "MESSAGE_KEYS",
+    "absent_column",
     "check_agrees",
     "check_run_metadata",
     "decode_messages",

@@ -9,6 +9,7 @@ these names; ``docs/log-format.md`` is the human description.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -80,6 +81,8 @@ def slot_schema(config: RunConfig) -> dict[str, Any]:
             "uniqueItems": True,
         },
     }
+    for name in config.absent:  # a column the log leaves out is not in its messages
+        del properties[name]
     version = config.format_version  # the run's own: the schema says what its metadata says
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -125,22 +128,32 @@ def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[s
         "log_time": f"t * {NS_PER_SLOT} ns",
         "flush_every": str(flush_every),
         "config": json.dumps(config.to_dict(), sort_keys=True),
+        **({"absent": json.dumps(list(config.absent))} if config.absent else {}),
     }
 
 
 def end_metadata(
-    *, slots: int, horizon: int, last: SlotBlock | None, error: str | None = None
+    *,
+    slots: int,
+    horizon: int,
+    last: SlotBlock | None,
+    error: str | None = None,
+    absent: tuple[str, ...] = (),
 ) -> dict[str, str]:
     """The ``corraoi.end`` metadata record written by a writer that finished its file
-    (``error``: the run stopped on that error, status ``failed``)."""
+    (``error``: the run stopped on that error, status ``failed``; ``absent``: the run's
+    columns the log does not hold, left out here too)."""
     status = "complete" if slots >= horizon else "interrupted"
     out = {"status": "failed" if error is not None else status, "slots": str(slots)}
     if error is not None:
         out["error"] = error
     if last is not None and len(last):
-        out["regret"] = str(int(last.regret[-1]))
-        out["estimator"] = repr(float(last.estimator[-1]))
-        out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
+        if "regret" not in absent:
+            out["regret"] = str(int(last.regret[-1]))
+        if "estimator" not in absent:
+            out["estimator"] = repr(float(last.estimator[-1]))
+        if "pulls" not in absent:
+            out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
     return out
 
 
@@ -154,8 +167,11 @@ class BlockEncoder:
     as formatting each slot with ``bytes %`` (benchmarks/bench_record.py).
     """
 
-    def __init__(self, K: int) -> None:
+    def __init__(self, K: int, absent: tuple[str, ...] = ()) -> None:
         self.K = int(K)
+        #: the message's fields, in log order: all but the absent ones
+        self._fields = [f for f in _COLUMNS if f not in absent]
+        self._keys = _keys(self._fields)
         self._weights = (1 << np.arange(self.K, dtype=np.int64)) if self.K <= 62 else None
         self._sets: dict[int, bytes] = {}
 
@@ -177,45 +193,51 @@ class BlockEncoder:
         n = len(b)
         if n == 0:
             return []
-        columns: list[list[bytes]] = [
-            _items(b.t),
-            _items(b.x + 1),
-            _items(b.arm + 1),
-            _BOOLS[np.asarray(b.success, dtype=np.intp)].tolist(),
-            _items(b.aoi),
-            _items(b.oracle_aoi),
-            _items(b.regret),
-            _items(b.estimator),
-            _BOOLS[np.asarray(b.override, dtype=np.intp)].tolist(),
-            _rows(b.mu_hat, n),
-            _rows(b.pulls, n),
-            self._candidates(b.candidates),
-        ]
-        step = 2 * len(_KEYS) + 1
-        parts: list[bytes] = [b"}\n"] * (step * n)  # every message ends with "}\n"
-        for i, (key, column) in enumerate(zip(_KEYS, columns, strict=True)):
+        columns = [_COLUMNS[f](self, b, n) for f in self._fields]
+        keys, last = self._keys[:-1], self._keys[-1]
+        step = 2 * len(keys) + 1
+        parts: list[bytes] = [last] * (step * n)  # every message ends with "}\n"
+        for i, (key, column) in enumerate(zip(keys, columns, strict=True)):
             parts[2 * i :: step] = [key] * n
             parts[2 * i + 1 :: step] = column
         return b"".join(parts)[:-1].split(b"\n")
 
 
-#: The text before each value of a message; ``encode`` ends each with "}\n" and splits at
-#: the newlines (orjson escapes any newline inside a JSON string).
-_KEYS = (
-    b'{"t":',
-    b',"x":',
-    b',"arm":',
-    b',"success":',
-    b',"aoi":',
-    b',"oracle_aoi":',
-    b',"regret":',
-    b',"estimator":',
-    b',"override":',
-    b',"mu_hat":[',
-    b'],"pulls":[',
-    b'],"candidates":',
-)
 _BOOLS = np.array([b"false", b"true"], dtype=object)
+
+#: Each field's JSON texts for a block, in the order ``encode`` writes them
+#: (corraoi.engine.block.FIELDS's; tests/test_logger.py checks that the two agree).
+_COLUMNS: dict[str, Callable[[BlockEncoder, SlotBlock, int], list[bytes]]] = {
+    "t": lambda e, b, n: _items(b.t),
+    "x": lambda e, b, n: _items(b.x + 1),
+    "arm": lambda e, b, n: _items(b.arm + 1),
+    "success": lambda e, b, n: _BOOLS[np.asarray(b.success, dtype=np.intp)].tolist(),
+    "aoi": lambda e, b, n: _items(b.aoi),
+    "oracle_aoi": lambda e, b, n: _items(b.oracle_aoi),
+    "regret": lambda e, b, n: _items(b.regret),
+    "estimator": lambda e, b, n: _items(b.estimator),
+    "override": lambda e, b, n: _BOOLS[np.asarray(b.override, dtype=np.intp)].tolist(),
+    "mu_hat": lambda e, b, n: _rows(b.mu_hat, n),
+    "pulls": lambda e, b, n: _rows(b.pulls, n),
+    "candidates": lambda e, b, n: e._candidates(b.candidates),
+}
+_ROWS = ("mu_hat", "pulls")  # written without their brackets (_rows)
+
+
+def _keys(fields: list[str]) -> list[bytes]:
+    """The text before each value of a message of ``fields``; ``encode`` ends each message
+    with "}\n" and splits at the newlines (orjson escapes any newline inside a JSON
+    string). A table's brackets are part of the texts around its rows."""
+    out = []
+    before = b"{"
+    for f in fields:
+        text = before + b'"' + f.encode() + b'":'
+        if f in _ROWS:
+            text += b"["
+        out.append(text)
+        before = b"]," if f in _ROWS else b","
+    out.append(b"]}\n" if fields[-1] in _ROWS else b"}\n")
+    return out
 
 
 def _items(column: np.ndarray) -> list[bytes]:

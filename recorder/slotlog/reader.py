@@ -149,14 +149,14 @@ class RunLog:
         first, last = max(int(first), 1), min(int(last), self.n_slots)
         if first > last:
             return
-        K, n = self.config.instance.K, self.config.instance.n_states
+        K, n, absent = self.config.instance.K, self.config.instance.n_states, self.config.absent
         lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
         expected = first
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
             for offset in chunk_offsets(f, walker, lo, hi):
                 chunk = walker.chunk_at(offset)
-                part = _decode(chunk, self._channel_id, self.path, K, n)
+                part = _decode(chunk, self._channel_id, self.path, K, n, absent)
                 keep = (part.t >= first) & (part.t <= last)
                 if not keep.any():
                     continue
@@ -168,7 +168,7 @@ class RunLog:
             raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
 
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
-        K, n = self.config.instance.K, self.config.instance.n_states
+        K, n, absent = self.config.instance.K, self.config.instance.n_states, self.config.absent
         expected = 1
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
@@ -176,7 +176,7 @@ class RunLog:
                 if kind != "chunk":
                     continue
                 assert isinstance(item, ChunkData)
-                part = _decode(item, self._channel_id, self.path, K, n)
+                part = _decode(item, self._channel_id, self.path, K, n, absent)
                 if not len(part):
                     continue
                 _follows(part, expected, self.path, item.offset)
@@ -372,15 +372,18 @@ def _validate_chunk(
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     config = _config(p, run_md)
-    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
+    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states,
+                   config.absent)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 
 
-def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int) -> SlotBlock:
+def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int,
+            absent: tuple[str, ...] = ()) -> SlotBlock:  # fmt: skip
     """The slots of one chunk, decoded and validated (an empty block when it holds none)."""
     assert chunk.records is not None
     found = channel_payloads(chunk.records, channel_id, p, chunk.offset)
-    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}")
+    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}",
+                           absent=absent)  # fmt: skip
 
 
 def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
