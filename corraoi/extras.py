@@ -15,6 +15,7 @@ EXTRAS = {
     "foxglove": ("foxglove",),
     "gpu": ("cupy",),
     "notebook": ("rerun_notebook",),
+    "gym": ("gymnasium",),
 }
 
 

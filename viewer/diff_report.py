@@ -130,7 +130,7 @@ class DiffReport:
             rows.append((f"pulls arm {k + 1}", pa, pb, _minus(pb, pa)))
         rows += [
             ("best-arm share", a.best_share, b.best_share, _minus(b.best_share, a.best_share)),
-            ("overrides", a.overrides, b.overrides, b.overrides - a.overrides),
+            ("overrides", a.overrides, b.overrides, _minus(b.overrides, a.overrides)),
             ("on best arm from slot", a.settled_at, b.settled_at,
              _minus(b.settled_at, a.settled_at)),
         ]  # fmt: skip

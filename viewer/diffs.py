@@ -95,7 +95,11 @@ def diff(
             f"the runs have different numbers of arms ({Ka} and {Kb}): per-arm fields are "
             "not compared"
         )
-    state = {n: _FieldState(n, comparable=(n not in ARM_FIELDS or Ka == Kb)) for n in names}
+    absent = [n for n in names if n in la.config.absent or n in lb.config.absent]
+    if absent:  # a log written by corraoi.Logger without them: left out
+        warnings.append(f"{', '.join(absent)}: absent from a log, not compared")
+    state = {n: _FieldState(n, comparable=(n not in ARM_FIELDS or Ka == Kb))
+             for n in names if n not in absent}  # fmt: skip
     sa, sb = SummaryAccumulator(la.config), SummaryAccumulator(lb.config)
     for pa, pb in zip_longest(la.blocks(block), lb.blocks(block)):
         if pa is not None:

@@ -150,7 +150,7 @@ def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:
         ("pulls per arm", " ".join(str(v) for v in d["pulls"])),
         ("best arm", str(d["best_arm"])),
         ("share on best arm", opt(d["best_share"], "{:.2%}")),
-        ("AoI override slots", str(d["overrides"])),
+        ("AoI override slots", opt(d["overrides"])),
         ("on best arm from slot", opt(d["settled_at"])),
     ]
 

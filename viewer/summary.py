@@ -22,6 +22,8 @@ class RunSummary:
     ``settled_at`` is the first slot from which the run played the best arm in every slot
     up to its last recorded slot (``None`` when its last slot was not on the best arm or
     nothing was recorded). ``best_share`` is the share of recorded slots on the best arm.
+    A figure whose column the log leaves absent (``RunConfig.absent``: a log written by
+    ``corraoi.Logger`` without the hidden state, say) is None.
     """
 
     slots: int
@@ -30,7 +32,7 @@ class RunSummary:
     estimator: float | None
     pulls: tuple[int, ...]
     best_share: float | None
-    overrides: int
+    overrides: int | None
     settled_at: int | None
 
     def to_dict(self) -> dict[str, Any]:
@@ -53,6 +55,7 @@ class SummaryAccumulator:
     def __init__(self, config: RunConfig) -> None:
         self.K = config.instance.K
         self.best_arm = analyse(config.instance).best_arm
+        self.absent = config.absent
         self.slots = 0
         self.overrides = 0
         self.last_off_best = 0  # last slot whose arm was not the best arm (0: none yet)
@@ -79,7 +82,7 @@ class SummaryAccumulator:
                 estimator=None,
                 pulls=(0,) * self.K,
                 best_share=None,
-                overrides=0,
+                overrides=None if "override" in self.absent else 0,
                 settled_at=None,
             )
         pulls = tuple(int(v) for v in last.pulls[-1])
@@ -87,11 +90,11 @@ class SummaryAccumulator:
         return RunSummary(
             slots=self.slots,
             best_arm=self.best_arm,
-            regret=int(last.regret[-1]),
-            estimator=float(last.estimator[-1]),
+            regret=None if "regret" in self.absent else int(last.regret[-1]),
+            estimator=None if "estimator" in self.absent else float(last.estimator[-1]),
             pulls=pulls,
             best_share=pulls[self.best_arm] / self.slots,
-            overrides=self.overrides,
+            overrides=None if "override" in self.absent else self.overrides,
             settled_at=settled,
         )
 

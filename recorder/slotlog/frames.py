@@ -36,8 +36,9 @@ if TYPE_CHECKING:
 BATCH_SLOTS = 65_536
 
 
-def slot_columns(K: int) -> list[tuple[str, str]]:
-    """(name, dtype) of every column of the slots table of a run with K arms, in order."""
+def slot_columns(K: int, absent: tuple[str, ...] = ()) -> list[tuple[str, str]]:
+    """(name, dtype) of every column of the slots table of a run with K arms, in order;
+    those of its log's ``absent`` fields (``RunConfig.absent``) left out."""
     cols = [
         ("t", "int64"),
         ("x", "int64"),
@@ -52,13 +53,21 @@ def slot_columns(K: int) -> list[tuple[str, str]]:
     cols += [(f"pulls_{k}", "int64") for k in range(1, K + 1)]
     cols += [(f"cand_{k}", "bool") for k in range(1, K + 1)]
     cols.append(("override", "bool"))
-    return cols
+    return [c for c in cols if _field_of(c[0]) not in absent] if absent else cols
 
 
-def arrow_schema(K: int) -> pa.Schema:
+def _field_of(column: str) -> str:
+    """The slot record's field a column of the table shows (``mu_hat_2``: ``mu_hat``)."""
+    head, _, tail = column.rpartition("_")
+    if not tail.isdigit():
+        return column
+    return "candidates" if head == "cand" else head
+
+
+def arrow_schema(K: int, absent: tuple[str, ...] = ()) -> pa.Schema:
     pa = _pyarrow()
     types = {"int64": pa.int64(), "float64": pa.float64(), "bool": pa.bool_()}
-    return pa.schema([(name, types[dtype]) for name, dtype in slot_columns(K)])
+    return pa.schema([(name, types[dtype]) for name, dtype in slot_columns(K, absent)])
 
 
 def block_columns(block: SlotBlock) -> dict[str, np.ndarray]:
@@ -84,13 +93,14 @@ def block_columns(block: SlotBlock) -> dict[str, np.ndarray]:
     return out
 
 
-def block_batch(block: SlotBlock) -> pa.RecordBatch:
-    """One Arrow record batch of the block's slots (columns of :func:`slot_columns`)."""
+def block_batch(block: SlotBlock, absent: tuple[str, ...] = ()) -> pa.RecordBatch:
+    """One Arrow record batch of the block's slots (columns of :func:`slot_columns`, those
+    of the ``absent`` fields left out)."""
     pa = _pyarrow()
     K = block.mu_hat.shape[1]
     cols = block_columns(block)
-    arrays = [pa.array(cols[name]) for name, _ in slot_columns(K)]
-    return pa.RecordBatch.from_arrays(arrays, schema=arrow_schema(K))
+    arrays = [pa.array(cols[name]) for name, _ in slot_columns(K, absent)]
+    return pa.RecordBatch.from_arrays(arrays, schema=arrow_schema(K, absent))
 
 
 class RunData:
@@ -164,18 +174,19 @@ class RunData:
     def to_arrow(self, *, batch: int = BATCH_SLOTS) -> Iterator[pa.RecordBatch]:
         """Arrow record batches of the slots, streamed: memory bounded by one batch."""
         _pyarrow()
+        absent = self.log.config.absent
         for b in self.blocks(batch):
-            yield block_batch(b)
+            yield block_batch(b, absent)
 
     def arrow_schema(self) -> pa.Schema:
-        return arrow_schema(self.K)
+        return arrow_schema(self.K, self.log.config.absent)
 
     @cached_property
     def slots(self) -> pd.DataFrame:
         """One row per slot; dtypes as documented (``docs/analysis.md``)."""
         _pandas()
         pyarrow = _pyarrow()
-        table = pyarrow.Table.from_batches(list(self.to_arrow()), schema=arrow_schema(self.K))
+        table = pyarrow.Table.from_batches(list(self.to_arrow()), schema=self.arrow_schema())
         frame: pd.DataFrame = table.to_pandas()
         return frame
 

@@ -1,0 +1,208 @@
+"""The paper's model as a Gymnasium environment: ``corraoi/CorrelatedAoI-v0``.
+
+``import corraoi.gym`` registers it; Gymnasium's module prefix makes it in one call without
+that import (``import corraoi`` never imports gymnasium: it is the optional extra ``gym``)::
+
+    import gymnasium
+    env = gymnasium.make("corraoi.gym:corraoi/CorrelatedAoI-v0", instance="I1",
+                         horizon=10_000, record="runs/agent-{episode}.mcap")
+    obs, info = env.reset(seed=0)        # the hidden path of `corraoi record --seed 0`
+    obs, reward, terminated, truncated, info = env.step(1)   # arm 2
+
+* **action**: the arm, ``Discrete(K)``: 0..K-1 by Gymnasium's convention, arms 1..K in
+  the log and everywhere else in corraoi;
+* **observation**: what a scheduler legitimately sees after a slot: ``[success, age]``
+  (int64; before the first slot ``[0, 1]``), and with ``pseudo_rewards=True`` a dict of
+  that (``"slot"``) and the pseudo-rewards ``s[arm, k, success]`` of every arm ``k``
+  (``"pseudo_rewards"``) that the correlated model gives;
+* **reward**: minus the age after the slot (``reward="aoi"``), or minus the slot's regret
+  increment, age - oracle's age (``reward="regret"``): an episode's return is minus its
+  sum of ages, or minus its pathwise regret;
+* an episode is ``horizon`` slots: the last step says ``truncated``; ``terminated`` is
+  never set (the model has no end state);
+* **info**: ``t``, and what the agent must not use: the hidden state ``x`` (1..n), the
+  oracle's age and the pathwise regret so far;
+* ``reset(seed=s)``: the hidden path of seed ``s`` (the engine's draws, block by block, so
+  ``reset`` costs the same for any horizon): the run is paired with every built-in
+  policy's run of ``corraoi record --seed s`` on the same instance and channel. Without a
+  seed, the episode's seed is drawn from the environment's generator (``info["seed"]``);
+* ``record=PATH``: every step goes to a slot log through :class:`corraoi.Logger` (the
+  hidden state included); each ``reset`` starts a new log at that path, replacing the last
+  episode's, unless ``{episode}`` in it numbers them.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from corraoi.extras import require
+
+require("gym", "corraoi.gym (the Gymnasium environment)")
+
+import gymnasium  # noqa: E402
+import numpy as np  # noqa: E402
+from gymnasium import spaces  # noqa: E402
+
+from corraoi.engine.paths import HiddenPaths  # noqa: E402
+from corraoi.errors import SlotError, UsageError  # noqa: E402
+from corraoi.model.theory import analyse, policy_pseudo_rewards  # noqa: E402
+
+#: The id ``import corraoi.gym`` registers.
+ENV_ID = "corraoi/CorrelatedAoI-v0"
+#: What the reward is minus: the age, or the slot's regret increment.
+REWARDS = ("aoi", "regret")
+#: Slots of the hidden path drawn at a time.
+PATH_BLOCK = 4096
+
+
+class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
+    """One correlated AoI bandit run per episode (module docstring). ``instance``: what
+    :func:`corraoi.record` takes; ``channel``: ``iid``, ``markov`` or ``trace:PATH``;
+    ``policy``, ``source`` and ``version``: what the log (``record``) names as its writer."""
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(
+        self,
+        instance: Any = "I1",
+        horizon: int = 10_000,
+        *,
+        channel: str | None = None,
+        reward: str = "aoi",
+        pseudo_rewards: bool = False,
+        record: str | os.PathLike[str] | None = None,
+        policy: str = "agent",
+        source: str = "corraoi.gym " + ENV_ID,
+        version: str = "",
+    ) -> None:
+        from corraoi.face import resolve
+        from corraoi.limits import check_horizon
+
+        self.instance = resolve.instance(instance)
+        check_horizon(horizon)
+        self.horizon = int(horizon)
+        self.channel = resolve.channel(channel, self.instance)
+        self.channel.check(self.instance, self.horizon)
+        self._channel_word = channel
+        if reward not in REWARDS:
+            raise UsageError(f"reward {reward!r}: expected one of {', '.join(REWARDS)}")
+        self.reward_kind = reward
+        self.pseudo_rewards = bool(pseudo_rewards)
+        self.record = None if record is None else os.fspath(record)
+        self.policy, self.source, self.version = policy, source, version
+        K = self.instance.K
+        self.action_space = spaces.Discrete(K)
+        slot = spaces.Box(low=np.array([0, 1]), high=np.array([1, self.horizon + 1]),
+                          dtype=np.int64)  # fmt: skip
+        self.observation_space: spaces.Space[Any] = slot
+        if self.pseudo_rewards:
+            self.observation_space = spaces.Dict(
+                {"slot": slot, "pseudo_rewards": spaces.Box(0.0, 1.0, (K,), np.float64)}
+            )
+        theory = analyse(self.instance)
+        self._best = theory.best_arm
+        self._Y = np.asarray(self.instance.Y, dtype=bool).tolist()
+        self._pseudo = policy_pseudo_rewards(self.instance)  # s[l, k, r]
+        self._paths: HiddenPaths | None = None
+        self._xs: list[int] = []
+        self._t = 0
+        self._first = 0  # the slot before self._xs[0]
+        self._logger: Any = None
+        self._written: set[str] = set()  # paths this environment wrote: replaced freely
+        self.episode = -1
+        self.seed_of_episode: int | None = None
+
+    # ------------------------------------------------------------------ the API
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        from corraoi.limits import MAX_SEED, check_seed
+
+        super().reset(seed=seed)
+        self._close_log()
+        if seed is None:
+            seed = int(self.np_random.integers(0, MAX_SEED, endpoint=True))
+        check_seed(seed, name="seed")
+        self.seed_of_episode = int(seed)
+        self.episode += 1
+        self._paths = HiddenPaths(self.instance, [int(seed)], channel=self.channel)
+        self._xs, self._first, self._t = [], 0, 0
+        self._aoi, self._oracle_aoi, self._regret = 1, 1, 0
+        if self.record is not None:
+            self._open_log()
+        obs = self._observe(0, 1, None)
+        return obs, {"t": 0, "seed": self.seed_of_episode}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        t = self._t + 1
+        if self._paths is None:
+            raise UsageError("step() before reset(): call env.reset(seed=...) first")
+        if t > self.horizon:
+            raise UsageError(f"step() at slot {t}: the episode ended at its horizon "
+                             f"{self.horizon}; call env.reset() for the next")  # fmt: skip
+        try:
+            a = int(action)
+        except (TypeError, ValueError):
+            raise SlotError(f"slot {t}: action {action!r}: expected an arm 0..{len(self._Y) - 1}"
+                            ) from None  # fmt: skip
+        if not 0 <= a < len(self._Y) or isinstance(action, (bool, np.bool_)):
+            raise SlotError(f"slot {t}: action {action!r}: expected an arm "
+                            f"0..{len(self._Y) - 1} (Gymnasium numbers arms from 0)")  # fmt: skip
+        j = t - 1 - self._first
+        if j >= len(self._xs):
+            self._first = t - 1
+            self._xs = self._paths.draw(min(PATH_BLOCK, self.horizon - t + 1))[0].tolist()
+            j = 0
+        x = self._xs[j]
+        ok = self._Y[a][x]
+        aoi = 1 if ok else self._aoi + 1
+        oracle = 1 if self._Y[self._best][x] else self._oracle_aoi + 1
+        self._aoi, self._oracle_aoi = aoi, oracle
+        self._regret += aoi - oracle
+        self._t = t
+        if self._logger is not None:
+            self._logger.slot(a + 1, ok, x=x + 1)
+        reward = float(-aoi if self.reward_kind == "aoi" else oracle - aoi)
+        end = t == self.horizon
+        if end and self._logger is not None:
+            self._close_log()
+        info = {"t": t, "x": x + 1, "oracle_aoi": oracle, "regret": self._regret}
+        return self._observe(int(ok), aoi, a), reward, False, end, info
+
+    def close(self) -> None:
+        self._close_log()
+        super().close()
+
+    # ------------------------------------------------------------------ internals
+
+    def _observe(self, success: int, aoi: int, arm: int | None) -> Any:
+        slot = np.array([success, aoi], dtype=np.int64)
+        if not self.pseudo_rewards:
+            return slot
+        pseudo = (np.ones(len(self._Y)) if arm is None
+                  else self._pseudo[arm, :, success].astype(np.float64))  # fmt: skip
+        return {"slot": slot, "pseudo_rewards": pseudo}
+
+    def _open_log(self) -> None:
+        from corraoi.face.logger import Logger
+
+        assert self.record is not None and self.seed_of_episode is not None
+        path = self.record.replace("{episode}", str(self.episode))
+        self._logger = Logger(path, instance=self.instance, horizon=self.horizon,
+                              policy=self.policy, seed=self.seed_of_episode,
+                              channel=self._channel_word, source=self.source,
+                              version=self.version,
+                              overwrite=os.path.abspath(path) in self._written)  # fmt: skip
+        self._written.add(os.path.abspath(path))
+
+    def _close_log(self) -> None:
+        if self._logger is not None:
+            logger, self._logger = self._logger, None
+            logger.close()
+
+
+gymnasium.register(id=ENV_ID, entry_point="corraoi.gym:CorrelatedAoIEnv")
+
+__all__ = ["ENV_ID", "REWARDS", "CorrelatedAoIEnv"]
