@@ -337,9 +337,11 @@ class Logger:
             recording: RunRecording | None = None
             if self.rrd is not None:
                 recording = stack.enter_context(
-                    LocalRecording(self.config, rrd_path=self.rrd, overwrite=self.overwrite))
+                    LocalRecording(self.config, rrd_path=self.rrd, overwrite=self.overwrite)
+                )
             self._log = stack.enter_context(
-                McapSink(self.path, self.config, overwrite=self.overwrite, provenance=provenance))
+                McapSink(self.path, self.config, overwrite=self.overwrite, provenance=provenance)
+            )
             self._every = [self._log, *([recording] if recording is not None else []),
                            *(stack.enter_context(s) for s in self._sinks)]  # fmt: skip
         except BaseException:

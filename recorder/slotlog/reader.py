@@ -372,8 +372,7 @@ def _validate_chunk(
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     config = _config(p, run_md)
-    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states,
-                   config.absent)
+    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states, config.absent)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 
 
