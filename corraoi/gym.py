@@ -203,6 +203,121 @@ class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
             logger.close()
 
 
-gymnasium.register(id=ENV_ID, entry_point="corraoi.gym:CorrelatedAoIEnv")
+class CorrelatedAoIVectorEnv(gymnasium.vector.VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
+    """``num_envs`` runs of the model stepped at once, without a Python loop per run:
+    ``gymnasium.make_vec(ENV_ID, num_envs=256, vectorization_mode="vector_entry_point",
+    instance="I1", horizon=10_000)``. Each sub-environment is :class:`CorrelatedAoIEnv`'s
+    (the same observation, reward and info, as arrays over the runs), on its own hidden path:
+    ``reset(seed=s)`` gives sub-environment ``i`` the path of seed ``s + i`` (a sequence of
+    seeds gives each its own). The runs share the horizon, so every episode ends at once;
+    the next ``step`` starts new ones (Gymnasium's next-step autoreset) on seeds drawn from
+    the environment's generator. Neither ``record`` nor ``pseudo_rewards`` is offered here:
+    log a run through the plain environment."""
 
-__all__ = ["ENV_ID", "REWARDS", "CorrelatedAoIEnv"]
+    metadata: dict[str, Any] = {
+        "render_modes": [],
+        "autoreset_mode": gymnasium.vector.AutoresetMode.NEXT_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        instance: Any = "I1",
+        horizon: int = 10_000,
+        *,
+        channel: str | None = None,
+        reward: str = "aoi",
+    ) -> None:
+        from gymnasium.vector.utils import batch_space
+
+        single = CorrelatedAoIEnv(instance, horizon, channel=channel, reward=reward)
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise UsageError(f"num_envs {num_envs!r}: expected an integer >= 1")
+        self.num_envs = num_envs
+        self.instance, self.channel, self.horizon = single.instance, single.channel, single.horizon
+        self.reward_kind = single.reward_kind
+        self.single_action_space = single.action_space
+        self.single_observation_space = single.observation_space
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self._Y = np.asarray(self.instance.Y, dtype=bool)
+        self._best = analyse(self.instance).best_arm
+        self._paths: HiddenPaths | None = None
+        self._ended = False
+        self.seeds: np.ndarray | None = None
+
+    def reset(
+        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        from corraoi.limits import MAX_SEED, check_seed
+
+        N = self.num_envs
+        if seed is None or isinstance(seed, int):
+            super().reset(seed=seed)
+            first = (int(self.np_random.integers(0, MAX_SEED - N + 1, endpoint=True))
+                     if seed is None else seed)  # fmt: skip
+            check_seed(first, runs=N, name="seed")
+            seeds = np.arange(first, first + N, dtype=np.int64)
+        else:
+            seeds = np.asarray(seed, dtype=np.int64)
+            if seeds.shape != (N,):
+                raise UsageError(f"seed: {seeds.size} seeds for {N} sub-environments")
+            super().reset(seed=int(seeds[0]))
+        self.seeds = seeds
+        self._paths = HiddenPaths(self.instance, seeds, channel=self.channel)
+        self._xs = np.zeros((N, 0), dtype=np.int64)
+        self._first, self._t, self._ended = 0, 0, False
+        self._aoi = np.ones(N, dtype=np.int64)
+        self._oracle_aoi = np.ones(N, dtype=np.int64)
+        self._regret = np.zeros(N, dtype=np.int64)
+        obs = np.tile(np.array([0, 1], dtype=np.int64), (N, 1))
+        return obs, {"t": 0, "seed": seeds.copy()}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        N = self.num_envs
+        if self._paths is None:
+            raise UsageError("step() before reset(): call envs.reset(seed=...) first")
+        if self._ended:  # next-step autoreset: this step only starts the new episodes
+            obs, info = self.reset()
+            zeros = np.zeros(N, dtype=bool)
+            return obs, np.zeros(N), zeros, zeros.copy(), info
+        t = self._t + 1
+        arms = actions if actions.__class__ is np.ndarray else np.asarray(actions)
+        if arms.shape != (N,) or arms.dtype.kind not in "iu":
+            raise SlotError(f"slot {t}: actions of shape {arms.shape} ({arms.dtype}): expected "
+                            f"{N} integer arms, one per sub-environment")  # fmt: skip
+        if arms.min() < 0 or arms.max() >= self.instance.K:
+            i = int(np.argmax((arms < 0) | (arms >= self.instance.K)))
+            raise SlotError(f"slot {t}: sub-environment {i}: action {int(arms[i])}: expected an "
+                            f"arm 0..{self.instance.K - 1}")  # fmt: skip
+        j = t - 1 - self._first
+        if j >= self._xs.shape[1]:
+            self._first = t - 1
+            self._xs = self._paths.draw(min(PATH_BLOCK, self.horizon - t + 1))
+            j = 0
+        x = self._xs[:, j]
+        ok = self._Y[arms, x]
+        aoi = self._aoi + 1
+        aoi[ok] = 1
+        oracle = self._oracle_aoi + 1
+        oracle[self._Y[self._best, x]] = 1
+        self._aoi, self._oracle_aoi = aoi, oracle
+        self._regret += aoi - oracle
+        self._t = t
+        reward = np.negative(aoi if self.reward_kind == "aoi" else aoi - oracle,
+                             dtype=np.float64)  # fmt: skip
+        self._ended = t == self.horizon
+        obs = np.empty((N, 2), dtype=np.int64)
+        obs[:, 0] = ok
+        obs[:, 1] = aoi
+        info = {"t": t, "x": x + 1, "oracle_aoi": oracle, "regret": self._regret.copy()}
+        ended = np.ones(N, dtype=bool) if self._ended else np.zeros(N, dtype=bool)
+        return obs, reward, np.zeros(N, dtype=bool), ended, info
+
+
+gymnasium.register(id=ENV_ID, entry_point="corraoi.gym:CorrelatedAoIEnv",
+                   vector_entry_point="corraoi.gym:CorrelatedAoIVectorEnv")  # fmt: skip
+
+__all__ = ["ENV_ID", "REWARDS", "CorrelatedAoIEnv", "CorrelatedAoIVectorEnv"]

@@ -144,3 +144,29 @@ def test_import_corraoi_does_not_import_gymnasium():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          cwd=ROOT, check=True)  # fmt: skip
     assert out.stdout.strip() == "False"
+
+
+def test_the_vector_form_steps_each_sub_environments_own_paired_run():
+    N, H = 5, 300
+    envs = gymnasium.make_vec("corraoi/CorrelatedAoI-v0", num_envs=N, instance="I1", horizon=H,
+                              vectorization_mode="vector_entry_point")  # fmt: skip
+    obs, info = envs.reset(seed=40)
+    assert info["seed"].tolist() == [40, 41, 42, 43, 44] and obs.shape == (N, 2)
+    actions = np.random.default_rng(1).integers(0, 4, (H, N))
+    xs, ages = [], []
+    for t, arms in enumerate(actions, start=1):
+        obs, reward, terminated, truncated, info = envs.step(arms)
+        xs.append(info["x"])
+        ages.append(obs[:, 1])
+        assert not terminated.any() and truncated.all() == (t == H)
+    plain = gymnasium.make(MAKE, instance="I1", horizon=H).unwrapped
+    for i in (0, 3):
+        plain.reset(seed=40 + i)
+        steps = [plain.step(int(a)) for a in actions[:, i]]
+        assert [s[4]["x"] for s in steps] == [int(v[i]) for v in xs]
+        assert [int(s[0][1]) for s in steps] == [int(v[i]) for v in ages]
+        assert steps[-1][4]["regret"] == info["regret"][i]
+    obs, reward, terminated, truncated, info = envs.step(actions[0])  # next-step autoreset
+    assert obs.tolist() == [[0, 1]] * N and not truncated.any() and len(set(info["seed"])) == N
+    with pytest.raises(SlotError, match="slot 1: sub-environment 2: action 4"):
+        envs.step(np.array([0, 0, 4, 0, 0]))
