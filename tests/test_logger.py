@@ -236,3 +236,22 @@ def test_one_slot_at_a_time_is_fast(tmp_path):
             log.slot(2, t % 2 == 0)
         rate = 20_000 / (time.perf_counter() - start)
     assert rate > 10_000, rate
+
+
+def test_a_log_is_read_with_exactly_the_fields_it_says_it_holds(cucb):
+    from corraoi.engine.block import RunConfig
+    from corraoi.errors import ConfigError, LogError
+    from recorder.slotlog.decode import decode_messages
+
+    run, b = cucb
+    absent = ("x", "oracle_aoi", "regret")
+    whole, part = BlockEncoder(4).encode(b)[:3], BlockEncoder(4, absent).encode(b)[:3]
+    got = decode_messages(part, 4, 4, where="here", absent=absent)
+    assert np.array_equal(got.aoi, b.aoi[:3]) and (got.x == -1).all() and (got.regret == -1).all()
+    with pytest.raises(LogError, match="slot 1 has extra keys \\['oracle_aoi', 'regret', 'x'\\]"):
+        decode_messages(whole, 4, 4, where="here", absent=absent)
+    with pytest.raises(LogError, match="slot 1 lacks x, oracle_aoi, regret"):
+        decode_messages(part, 4, 4, where="here")
+    config = open_log(run.path).config
+    with pytest.raises(ConfigError, match="absent fields \\['aoi'\\]"):
+        RunConfig(config.instance, config.policy, 0, 10, absent=("aoi",))

@@ -43,8 +43,11 @@ if TYPE_CHECKING:
 #: The qualified name a policy logged by a Logger is given (it is no class corraoi can import).
 EXTERNAL_PREFIX = "external:"
 #: The optional per-slot fields a caller may give (besides arm, success and x), as
-#: ``SlotBlock`` names them; the others of FIELDS the Logger computes.
-GIVEN_FIELDS = ("override",) + ARM_FIELDS
+#: ``SlotBlock`` names them, in the order of :meth:`Logger.slot`'s arguments.
+GIVEN_FIELDS = ("override", "mu_hat", "pulls", "candidates")
+#: What the Logger computes from the arms and successes (with the instance's mu*), given or
+#: not; every other field of FIELDS that is not given is absent from the log.
+COMPUTED = ("t", "arm", "success", "aoi", "estimator", "mu_hat", "pulls")
 _DTYPES = {"override": bool, "mu_hat": np.float64, "pulls": np.int64, "candidates": bool}
 #: What the hidden state ``x`` makes computable: without it these are absent.
 NEEDS_X = ("x", "oracle_aoi", "regret")
@@ -320,11 +323,12 @@ class Logger:
             return
         from recorder.rerun.sink import LocalRecording
 
-        given = dict(zip(("x", *GIVEN_FIELDS), self._given or (False,) * 5, strict=True))
-        # mu_hat and pulls not given are computed from the arms and successes
-        absent = [f for f in GIVEN_FIELDS if not given[f] and f not in ("mu_hat", "pulls")]
-        if not given["x"]:
-            absent += NEEDS_X
+        names = ("x", *GIVEN_FIELDS)
+        given = dict(zip(names, self._given or (False,) * len(names), strict=True))
+        held = {*COMPUTED, *(f for f in GIVEN_FIELDS if given[f])}
+        if given["x"]:
+            held.update(NEEDS_X)
+        absent = [f for f in FIELDS if f not in held]
         base = self._base
         self.config = RunConfig(base.instance, base.policy, base.seed, base.horizon,
                                 channel=base.channel, absent=tuple(absent))  # fmt: skip
