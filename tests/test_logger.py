@@ -255,3 +255,22 @@ def test_a_log_is_read_with_exactly_the_fields_it_says_it_holds(cucb):
     config = open_log(run.path).config
     with pytest.raises(ConfigError, match="absent fields \\['aoi'\\]"):
         RunConfig(config.instance, config.policy, 0, 10, absent=("aoi",))
+
+
+def test_the_testbed_example_replays_its_csv_into_a_recording(tmp_path):
+    example = ROOT / "docs" / "examples"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, example / "testbed.py", example / "testbed.csv",
+                          "runs/testbed.mcap"], capture_output=True, text=True, env=env,
+                         cwd=tmp_path, check=True)  # fmt: skip
+    assert "runs/testbed.mcap: 1000 slots, recording runs/testbed.rrd" in out.stdout
+    rows = np.loadtxt(example / "testbed.csv", delimiter=",", skiprows=1, dtype=np.int64)
+    run = corraoi.load(tmp_path / "runs" / "testbed.mcap")
+    assert run.log.status == "complete" and (tmp_path / "runs" / "testbed.rrd").is_file()
+    ages, age = [], 1
+    for delivered in rows[:, 2]:
+        age = 1 if delivered else age + 1
+        ages.append(age)
+    assert run.slots["arm"].tolist() == rows[:, 1].tolist()
+    assert run.slots["aoi"].tolist() == ages
+    assert list(run.summary.pulls) == np.bincount(rows[:, 1] - 1, minlength=4).tolist()
