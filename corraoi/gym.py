@@ -28,7 +28,8 @@ that import (``import corraoi`` never imports gymnasium: it is the optional extr
   seed, the episode's seed is drawn from the environment's generator (``info["seed"]``);
 * ``record=PATH``: every step goes to a slot log through :class:`corraoi.Logger` (the
   hidden state included); each ``reset`` starts a new log at that path, replacing the last
-  episode's, unless ``{episode}`` in it numbers them.
+  episode's, unless ``{episode}`` in it numbers them. A file there before this environment
+  wrote it is refused, as ``corraoi record`` refuses it, unless ``force=True``.
 """
 
 from __future__ import annotations
@@ -59,7 +60,8 @@ PATH_BLOCK = 4096
 class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
     """One correlated AoI bandit run per episode (module docstring). ``instance``: what
     :func:`corraoi.record` takes; ``channel``: ``iid``, ``markov`` or ``trace:PATH``;
-    ``policy``, ``source`` and ``version``: what the log (``record``) names as its writer."""
+    ``policy``, ``source`` and ``version``: what the log (``record``) names as its writer;
+    ``force``: ``record`` may replace files that were there before."""
 
     metadata: dict[str, Any] = {"render_modes": []}
 
@@ -72,6 +74,7 @@ class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
         reward: str = "aoi",
         pseudo_rewards: bool = False,
         record: str | os.PathLike[str] | None = None,
+        force: bool = False,
         policy: str = "agent",
         source: str = "corraoi.gym " + ENV_ID,
         version: str = "",
@@ -90,6 +93,7 @@ class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
         self.reward_kind = reward
         self.pseudo_rewards = bool(pseudo_rewards)
         self.record = None if record is None else os.fspath(record)
+        self.force = bool(force)
         self.policy, self.source, self.version = policy, source, version
         K = self.instance.K
         self.action_space = spaces.Discrete(K)
@@ -190,11 +194,11 @@ class CorrelatedAoIEnv(gymnasium.Env[Any, np.int64]):
 
         assert self.record is not None and self.seed_of_episode is not None
         path = self.record.replace("{episode}", str(self.episode))
+        again = self.force or os.path.abspath(path) in self._written
         self._logger = Logger(path, instance=self.instance, horizon=self.horizon,
                               policy=self.policy, seed=self.seed_of_episode,
                               channel=self._channel_word, source=self.source,
-                              version=self.version,
-                              overwrite=os.path.abspath(path) in self._written)  # fmt: skip
+                              version=self.version, overwrite=again)  # fmt: skip
         self._written.add(os.path.abspath(path))
 
     def _close_log(self) -> None:

@@ -170,3 +170,16 @@ def test_the_vector_form_steps_each_sub_environments_own_paired_run():
     assert obs.tolist() == [[0, 1]] * N and not truncated.any() and len(set(info["seed"])) == N
     with pytest.raises(SlotError, match="slot 1: sub-environment 2: action 4"):
         envs.step(np.array([0, 0, 4, 0, 0]))
+
+
+def test_a_file_there_before_is_refused_unless_forced(tmp_path):
+    (tmp_path / "old.mcap").write_bytes(b"old")
+    env = gymnasium.make(MAKE, instance="I1", horizon=5, record=tmp_path / "old.mcap").unwrapped
+    with pytest.raises(corraoi.OutputError, match="already exists"):
+        env.reset(seed=0)
+    env = gymnasium.make(MAKE, instance="I1", horizon=5, record=tmp_path / "old.mcap",
+                         force=True).unwrapped  # fmt: skip
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(1)
+    assert open_log(tmp_path / "old.mcap").status == "complete"

@@ -221,6 +221,8 @@ def test_bad_arguments_are_refused_before_any_file(tmp_path):
         corraoi.Logger(tmp_path / "a.mcap", instance="I1", horizon=10, arms=3)
     with pytest.raises(corraoi.InstanceError):
         corraoi.Logger(tmp_path / "a.mcap", instance="nope", horizon=10)
+    with pytest.raises(corraoi.UsageError, match="needs the instance the slots were played on"):
+        corraoi.Logger(tmp_path / "a.mcap", instance=None, horizon=10)
     (tmp_path / "taken.mcap").write_bytes(b"x")
     with pytest.raises(corraoi.OutputError, match="already exists"):
         corraoi.Logger(tmp_path / "taken.mcap", instance="I1", horizon=10)

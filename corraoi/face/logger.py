@@ -114,6 +114,12 @@ class Logger:
         from . import resolve
         from .runs import rrd_beside
 
+        if instance is None:
+            raise UsageError(
+                "instance: corraoi.Logger needs the instance the slots were played on (a "
+                "built-in name, an instance file or a corraoi.Instance): its arms, best arm "
+                "and mu* define the log; a log without one is not supported"
+            )
         inst = resolve.instance(instance)
         if arms is not None and arms != inst.K:
             raise UsageError(f"arms {arms!r}: instance {inst.name} has {inst.K} arms")
