@@ -6,8 +6,9 @@ viewer in headless Chromium at 1600 x 900, keep a 256-colour PNG in ``docs/``.
 Makes (each from a fresh recording, seeds fixed):
 
 * ``run-k4.png``: ``record -p cucb`` on I1 (the quick start), 10,000 slots;
-* ``run-k16.png`` and ``run-k256.png``: cucb on random instances of 16 and 256 arms
-  (benchmarks/alternate.py's), 10,000 slots;
+* ``run-k16.png``, ``run-k64.png`` and ``run-k256.png``: cucb on random instances of 16,
+  64 and 256 arms (benchmarks/alternate.py's), 10,000 slots; every run with ``--score``
+  (its "why this arm" view; beyond 64 arms the score is off by default);
 * ``compare-screenshot.png``: ``compare`` of ucb, ts and cts-gauss on I1, seed 2, 1,500 slots;
 * ``sweep.png``: the sweep recording of ``sweep -i I1 -p ucb,cucb,cts -n 100 -T 10000``.
 
@@ -38,7 +39,7 @@ from tests.browser import (  # noqa: E402
     settled_screenshot,  # noqa: E402
 )
 
-SHOTS = ("run-k4", "run-k16", "run-k256", "compare", "sweep")
+SHOTS = ("run-k4", "run-k16", "run-k64", "run-k256", "compare", "sweep")
 
 
 def corraoi(*args: str, cwd: Path) -> None:
@@ -57,7 +58,7 @@ def recording(name: str, work: Path) -> Path:
         if arms != 4:
             instance = str(work / f"R{arms}.json")
             Path(instance).write_text(json.dumps(instance_for(arms).to_dict()))
-        corraoi("record", "-i", instance, "-p", "cucb", "-T", "10000", "-s", "1",
+        corraoi("record", "-i", instance, "-p", "cucb", "-T", "10000", "-s", "1", "--score",
                 "-o", f"{name}.mcap", "--rrd", f"{name}.rrd", "--force", cwd=work)  # fmt: skip
         return work / f"{name}.rrd"
     if name == "compare":

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from .face.sweeps import Sweep, sweep
     from .face.views import compare, diff
     from .model.instance import Instance
-    from .policies import CompiledPolicy, Param, Policy, register
+    from .policies import Choice, CompiledPolicy, Param, Policy, register
 
 #: The face's names, by the module that defines each (imported on first use).
 _LAZY = {
@@ -59,6 +59,7 @@ _LAZY = {
     "show": "corraoi.face.show",
     "Instance": "corraoi.model.instance",
     "Policy": "corraoi.policies",
+    "Choice": "corraoi.policies",
     "CompiledPolicy": "corraoi.policies",
     "Param": "corraoi.policies",
     "register": "corraoi.policies",
@@ -81,6 +82,7 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "Choice",
     "CompiledPolicy",
     "ConfigError",
     "CorraoiError",

@@ -48,6 +48,52 @@ class OutputError(UsageError):
     being written by another process, ..."""
 
 
+# A wrong argument of a Python call (corraoi.arguments checks them at the door) raises the
+# error of its kind that is also Python's TypeError (a wrong type) or ValueError (a value out
+# of range, a word not among those accepted), so that ``except TypeError`` catches it too.
+
+
+class ArgumentTypeError(UsageError, TypeError):
+    """An argument of the wrong type (a UsageError and a TypeError)."""
+
+
+class ArgumentValueError(UsageError, ValueError):
+    """An argument of the right type but a value that is not accepted (a UsageError and a
+    ValueError)."""
+
+
+class PolicyTypeError(PolicyError, ArgumentTypeError):
+    """A policy, a ``Param`` or a ``params`` table of the wrong type."""
+
+
+class PolicyValueError(PolicyError, ArgumentValueError):
+    """A policy, a ``Param`` or a ``params`` table with a value that is not accepted."""
+
+
+class InstanceTypeError(InstanceError, ArgumentTypeError):
+    """An ``instance`` argument of the wrong type."""
+
+
+class InstanceValueError(InstanceError, ArgumentValueError):
+    """An ``instance`` argument with a value that is not accepted (an empty list)."""
+
+
+class ConfigTypeError(ConfigError, ArgumentTypeError):
+    """A run setting (horizon, seed, runs, channel, workers, ...) of the wrong type."""
+
+
+class ConfigValueError(ConfigError, ArgumentValueError):
+    """A run setting out of its range (a horizon of 0, 2.5 runs, ...)."""
+
+
+class OutputTypeError(OutputError, ArgumentTypeError):
+    """An output path argument of the wrong type."""
+
+
+class OutputValueError(OutputError, ArgumentValueError):
+    """An output path argument that names no file (empty, a NUL byte)."""
+
+
 class WriteError(CorraoiError):
     """An I/O failure while writing a file (disk full, file too large, device gone, ...)."""
 

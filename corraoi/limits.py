@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from typing import Final
 
+from .arguments import integer
 from .errors import ConfigError
 
 #: The largest signed 64-bit integer: slot values, seeds and sums are stored as int64.
@@ -58,35 +59,24 @@ SWEEP_BYTES_PER_FIGURE: Final = 16
 SWEEP_BYTES_PER_FIGURE_ARM: Final = 8
 
 
-def check_int(value: object, *, name: str, lo: int, hi: int, why: str = "") -> int:
-    """``value`` as an int in ``lo..hi``, or a :class:`ConfigError` naming ``name``."""
-    because = f" ({why})" if why else ""
-    if isinstance(value, bool) or not isinstance(value, int):
-        try:
-            import numpy as np
-
-            if isinstance(value, np.integer):
-                value = int(value)
-        except ImportError:  # pragma: no cover - numpy is a dependency
-            pass
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ConfigError(f"{name} {value!r}: not an integer, expected {lo}..{hi}{because}")
-    if not lo <= value <= hi:
-        raise ConfigError(f"{name} {value}: out of range, expected {lo}..{hi}{because}")
-    return value
+def check_int(value: object, *, name: str, lo: int, hi: int, why: str = "",
+              floats: bool = False) -> int:  # fmt: skip
+    """``value`` as an int in ``lo..hi``, or a :class:`ConfigError` naming ``name`` (its
+    TypeError or ValueError variant: :func:`corraoi.arguments.integer`). ``floats``: a float
+    of integral value is taken too (what a Python caller may write: ``1e4``)."""
+    return integer(value, name=name, lo=lo, hi=hi, kind=ConfigError, why=why, floats=floats)
 
 
-def check_horizon(horizon: object, *, name: str = "horizon") -> int:
-    return check_int(
-        horizon, name=name, lo=1, hi=MAX_HORIZON, why="the AoI sums must fit in 64 bits"
-    )
+def check_horizon(horizon: object, *, name: str = "horizon", floats: bool = False) -> int:
+    return check_int(horizon, name=name, lo=1, hi=MAX_HORIZON,
+                     why="the AoI sums must fit in 64 bits", floats=floats)  # fmt: skip
 
 
-def check_seed(seed: object, *, runs: int = 1, name: str = "seed") -> int:
+def check_seed(seed: object, *, runs: int = 1, name: str = "seed", floats: bool = False) -> int:
     """A seed such that every seed of the batch (seed .. seed + runs - 1) is an int64."""
     top = MAX_SEED - max(int(runs), 1) + 1
     why = "seeds are 64-bit" + (f" and {runs} runs use seed .. seed+{runs - 1}" if runs > 1 else "")
-    return check_int(seed, name=name, lo=0, hi=top, why=why)
+    return check_int(seed, name=name, lo=0, hi=top, why=why, floats=floats)
 
 
 def physical_memory() -> int | None:

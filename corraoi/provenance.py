@@ -180,11 +180,13 @@ def sources_of(spec: Any) -> list[Source]:
     for name in modules:
         if name.split(".")[0] in ("corraoi", "recorder", "viewer"):
             continue
-        # the class's own module: a session without a file gives the class's text instead
+        # the class's own module: a session without a file gives the class's text instead,
+        # and a class without a text its code (policies.loading.class_source)
         loaded = class_source(cls) if name == cls.__module__ else loaded_source(name)
         if loaded is not None:
             path, data = loaded
             file = Path(path).name if not path.startswith("<") else (
+                f"{cls.__qualname__}.code.txt" if path.endswith("#code") else
                 f"{cls.__qualname__}.py")  # fmt: skip
             out.append(Source(spec.name, file, path, hashlib.sha256(data).hexdigest(),
                               data))  # fmt: skip

@@ -29,7 +29,8 @@ def corraoi_run(tmp_path: Path) -> Callable[..., Any]:
     Records one run with :func:`corraoi.record` into a fresh slot log under the test's
     ``tmp_path`` (no Rerun recording) and returns the :class:`corraoi.Run`, which is also
     the log's path (``os.fspath(run)``); each call writes a new file. ``policy`` is anything
-    :func:`corraoi.record` takes, a class defined in the test module included.
+    :func:`corraoi.record` takes, a class defined in the test module included. Its arguments
+    are :func:`corraoi.record`'s, checked there before anything runs (the errors it raises).
     """
     count = 0
 

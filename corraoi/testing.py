@@ -127,9 +127,25 @@ def policy_cases(
     one random instance per number of ``arms`` (some arm always has a positive mean)."""
     import numpy as np
 
+    from corraoi import arguments, limits
+    from corraoi.errors import InstanceError, PolicyError
     from corraoi.face.resolve import policies
     from corraoi.model.instance import Instance
 
+    # the arguments checked before anything is done (corraoi.arguments)
+    if isinstance(arms, (str, bytes)) or not isinstance(arms, Sequence):
+        raise arguments.wrong_type(InstanceError, "arms", arms, "a list of numbers of arms")
+    if not arms:
+        raise arguments.wrong_value(InstanceError, "arms", arms, "at least one number of arms",
+                                    "empty")  # fmt: skip
+    arms = [arguments.integer(K, name=f"arms[{i}]", lo=2, kind=InstanceError,
+                              why="an instance has at least 2 arms")
+            for i, K in enumerate(arms)]  # fmt: skip
+    horizon = limits.check_horizon(horizon, floats=True)
+    runs = limits.check_int(runs, name="runs", lo=1, hi=limits.MAX_RUNS, floats=True)
+    seed = limits.check_seed(seed, runs=runs, floats=True)
+    if isinstance(policy, (list, tuple)):
+        raise arguments.wrong_type(PolicyError, "policy", policy, "one policy")
     spec = policies(policy, params)[0]
     cases = []
     for K in arms:
@@ -151,8 +167,10 @@ def check_deterministic(case: PolicyCase, tmp_path: Any = None) -> None:
 
     again = RunsBlock.concat(list(simulate(case.instance, case.spec, case.seeds, case.horizon,
                                            block=max(1, case.horizon // 3))))  # fmt: skip
-    for f in ("x", "arm", "success", "aoi", "regret", "pulls", "candidates", "override"):
-        assert np.array_equal(case.batch.column(f), again.column(f)), (
+    assert case.batch.fields() == again.fields(), f"{case.where()}: fields differ"
+    for f in case.batch.fields():  # every field of the slot record the run logs
+        nan = case.batch.column(f).dtype.kind == "f"
+        assert np.array_equal(case.batch.column(f), again.column(f), equal_nan=nan), (
             f"{case.where()}: not deterministic for seed {case.seeds[0]}: field {f} differs "
             "between two simulations (or between block sizes)"
         )
@@ -238,6 +256,8 @@ def parametrize_with_checks(policies: Sequence[Any], **options: Any) -> Any:
     """
     import pytest
 
+    if isinstance(policies, str) or not isinstance(policies, Sequence):  # one, never letters
+        policies = [policies]
     items = [(case, check) for p in policies for case in policy_cases(p, **options)
              for check in CHECKS]  # fmt: skip
     ids = [f"{case}-{check.__name__.removeprefix('check_')}" for case, check in items]
@@ -266,7 +286,15 @@ def check_policy(
     equals the single run with seed ``seed + i``); sees the hidden path built-ins see on the
     same seed; and round-trips through a slot log, when ``tmp_path`` is given. One test per
     check, with readable ids: :func:`parametrize_with_checks`.
+
+    Raises the errors of :func:`corraoi.record` for arguments that are not accepted
+    (:class:`~corraoi.errors.PolicyError`, ``ConfigError``, ``InstanceError`` for ``arms``,
+    ``OutputError`` for ``tmp_path``), before anything runs; AssertionError for a check
+    that fails.
     """
+    from corraoi import arguments
+
+    arguments.optional(arguments.path, tmp_path, name="tmp_path", what="a folder's path")
     for case in policy_cases(policy, params=params, arms=arms, horizon=horizon, runs=runs,
                              seed=seed):  # fmt: skip
         for check in CHECKS:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,7 +67,9 @@ def export(
         rows = _write(target, fmt, table.schema, table.to_batches())
         return Exported(out_p, "runs", rows, fmt)
     run = RunData(src)
-    rows = _write(target, fmt, run.arrow_schema(), run.to_arrow())
+    batches = run.to_arrow()
+    first = next(batches, None)  # its columns: the fields the log holds
+    rows = _write(target, fmt, run.arrow_schema(), chain([first] if first else [], batches))
     return Exported(out_p, "slots", rows, fmt)
 
 

@@ -106,6 +106,14 @@ SUCCESS_NAME = "success"
 FAILURE_NAME = "failure"
 OVERRIDE_NAME = "AoI-aware override"
 STATE_NAME = "hidden state x"
+#: The "why this arm" view's series.
+SCORE_UNIT = "[score]"
+CHOSEN_NAME = "arm played: its score"
+FORCED_NAME = "forced (not by score)"
+THRESHOLD_NAME = f"override threshold 1/max mu_hat {AOI_UNIT}"
+FORCED_COLOR: RGB = (120, 120, 120)
+MARKER_CHOSEN = 4.0
+MARKER_FORCED = 4.0
 BEST_ARM_NAME = "best arm k*"
 
 

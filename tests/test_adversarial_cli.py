@@ -24,7 +24,7 @@ from corraoi.files import partial as partial_file
 from corraoi.files.locks import lock_holder
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from corraoi.text import safe_name, safe_text
+from corraoi.text import MAX_NAME, safe_name, safe_text
 from recorder.slotlog.reader import open_log
 from recorder.slotlog.sink import McapSink
 
@@ -90,20 +90,80 @@ def _I1() -> dict:
     }
 
 
+def _hash(name: str) -> str:
+    import hashlib
+    import unicodedata
+
+    return hashlib.sha256(unicodedata.normalize("NFC", name).encode()).hexdigest()[:8]
+
+
 @pytest.mark.parametrize(
     ("raw", "safe"),
     [
-        ("../../x", "__.._x"),
+        ("../../x", "__.._x-{h}"),
         ("cucb-I1-s0", "cucb-I1-s0"),
-        ("a b/c", "a_b_c"),
-        (".hidden", "_hidden"),
-        ("\x1b[2J", "_2J"),
-        ("", "_"),
-        ("é", "_"),
+        ("a b/c", "a_b_c-{h}"),
+        (".hidden", "_hidden-{h}"),
+        ("\x1b[2J", "_2J-{h}"),
+        ("", "_-{h}"),
+        ("é", "é"),
+        ("ucb-東京-s0", "ucb-東京-s0"),
+        ("my plugin.py", "my_plugin-{h}.py"),
+        ("x-0123abcd", "x-0123abcd-{h}"),  # looks hashed: hashed, so no lossy name gives it
     ],
 )
 def test_safe_name(raw, safe):
-    assert safe_name(raw) == safe
+    assert safe_name(raw) == safe.format(h=_hash(raw))
+
+
+def _named(name: str):
+    from corraoi.model.instance import Instance
+
+    return Instance(name, **_I1())
+
+
+def test_two_unicode_instance_names_get_two_files(tmp_path, monkeypatch):
+    import corraoi
+
+    monkeypatch.chdir(tmp_path)
+    tokyo = corraoi.record("ucb", _named("東京"), horizon=200, rrd=False)
+    osaka = corraoi.record("ucb", _named("大阪"), horizon=200, rrd=False)
+    assert (tokyo.path.name, osaka.path.name) == ("ucb-東京-s0.mcap", "ucb-大阪-s0.mcap")
+    assert files_under(tmp_path) == {"runs/ucb-東京-s0.mcap", "runs/ucb-大阪-s0.mcap"}
+
+
+def test_names_differing_only_in_replaced_characters_get_two_files(tmp_path, monkeypatch):
+    import corraoi
+
+    monkeypatch.chdir(tmp_path)
+    names = ["a/b", "a\\b", "a b", "a\x00b", "a_b"]
+    paths = {corraoi.record("ucb", _named(n), horizon=100, rrd=False).path for n in names}
+    assert len(paths) == len(names) and all(p.parent.name == "runs" for p in paths)
+    assert Path("runs/ucb-a_b-s0.mcap").resolve() in {p.resolve() for p in paths}
+
+
+def test_one_name_in_nfc_or_nfd_is_one_file_name(tmp_path, monkeypatch):
+    import unicodedata
+
+    import corraoi
+
+    nfc, nfd = "Zürich-é", unicodedata.normalize("NFD", "Zürich-é")
+    assert nfc != nfd and safe_name(nfc) == safe_name(nfd) == nfc
+    monkeypatch.chdir(tmp_path)
+    run = corraoi.record("ucb", _named(nfd), horizon=100, rrd=False)
+    assert os.listdir(tmp_path / "runs") == [f"ucb-{nfc}-s0.mcap"] and run.path.exists()
+
+
+def test_a_long_cjk_name_is_at_most_255_bytes_and_keeps_apart(tmp_path, monkeypatch):
+    import corraoi
+
+    long = "東" * 300
+    assert len(safe_name(long).encode()) <= MAX_NAME
+    assert safe_name(long) != safe_name(long + "京") and safe_name(long) != safe_name(long[:-1])
+    monkeypatch.chdir(tmp_path)
+    run = corraoi.record("ucb", _named(long), horizon=100, rrd=False)
+    assert len(run.path.name.encode()) <= 255 and run.path.name.startswith("ucb-東東")
+    assert len(f"{run.path.name}.partial".encode()) <= 255
 
 
 @pytest.mark.parametrize(
@@ -340,8 +400,8 @@ def test_the_quick_start_twice_is_up_to_date(tmp_path, monkeypatch):
     assert (tmp_path / "runs/cucb-I1-s0.mcap").stat().st_mtime_ns == stamp
     other = cli("record", "--policy", "cucb", "-T", T + 1, "--no-rrd")
     assert one_line_error(other) == (
-        "corraoi: error: runs/cucb-I1-s0.mcap: already exists and holds another run (a "
-        "different configuration, or not complete); use --force to overwrite it"
+        "corraoi: error: runs/cucb-I1-s0.mcap: already exists and holds another run (its "
+        f"horizon is {T}, here {T + 1}); use --force to overwrite it"
     )
 
 

@@ -82,8 +82,13 @@ def test_reproduce_small(tmp_path: Path):
         assert s["instance"]["name"] == inst and len(s["policies"]) == 12 and s["runs"] == 3
     text = (out / "summary.md").read_text()
     assert "Sweep: instance I1" in text and "Sweep: instance I2" in text
-    again = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")
-    assert again.exit_code == 2 and "already holds a sweep" in again.output
+    stamp = (out / "I1" / "summary.json").stat().st_mtime_ns
+    again = run("reproduce", "-o", str(out), "-n", "3", "-T", "200")  # up to date: read, not run
+    assert again.exit_code == 0, again.output
+    assert (out / "I1" / "summary.json").stat().st_mtime_ns == stamp
+    other = run("reproduce", "-o", str(out), "-n", "4", "-T", "200")  # another sweep: refused
+    assert other.exit_code == 2 and "already holds a sweep" in other.output
+    assert "--resume" in other.output and "--force" in other.output
 
 
 def test_an_instance_that_cannot_be_simulated_writes_nothing(tmp_path: Path):

@@ -9,7 +9,7 @@ import inspect
 import corraoi
 
 EXPECTED = [
-    "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
+    "Choice", "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
     "InstanceError", "LogError", "Logger", "OutputError", "Param", "Policy", "PolicyError", "Run",
     "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "load", "record",
     "register", "show", "sweep",

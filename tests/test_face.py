@@ -147,9 +147,10 @@ def test_sweep_record_equals_the_sweeps_row_and_load_gives_the_same_types(tmp_pa
     assert "<p>I2, 12 runs, T = 800: " in html  # the instance's name, not its dict
     share = sw.summary["policies"]["ucb"]["best_arm_share"]
     assert f"<td>{share:.3f}</td>" in html
-    # recorded again to the same place: refused, unless force=True
-    with pytest.raises(corraoi.OutputError, match="force=True"):
-        sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap")
+    # recorded again to the same place (a cell run again): the run it holds, nothing runs
+    stamp = worst.mcap.stat().st_mtime_ns
+    same = sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap")
+    assert same.mcap == worst.mcap and worst.mcap.stat().st_mtime_ns == stamp
     again = sw.record("worst", policy=EpsilonFirst, path=tmp_path / "w.mcap", force=True)
     assert again.summary.regret == worst.summary.regret and again.complete
 

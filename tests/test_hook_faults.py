@@ -144,3 +144,39 @@ def test_a_compiled_plugin_that_misbehaves_in_any_hook_is_one_line(tmp_path: Pat
         line = _error(_cli("sweep", "-p", f"{PLUGINS}:{ref}", "-n", 40, "-T", 3000, "-j", 2,
                            cwd=tmp_path))  # fmt: skip
         assert "a compiled hook raised ValueError: score gave up" in line
+
+
+@pytest.mark.parametrize("what", [1, 2, 3], ids=["npull", "nsucc", "a-pull-moved"])
+def test_a_hook_writing_the_counts_ends_the_record_at_its_slot(what: int):
+    sim = Simulation(load_instance("I1"), make_policy(f"{PLUGINS}:WritesCounts", what=what,
+                                                      at=7), range(3, 6), 200)  # fmt: skip
+    with pytest.raises(PolicyRuntimeError) as info:
+        sim.advance(200)
+    assert str(info.value) == (
+        "policy writes-counts, slot 7: a compiled hook wrote into npull or nsucc for run 0 "
+        "(seed 3); hooks may write only vals (score) and ps, and read the rest"
+    )
+    block = info.value.partial  # the slots before it, whose counts are the engine's
+    assert block is not None and block.t.tolist() == list(range(1, 7))
+
+
+def test_a_hook_writing_the_counts_is_caught_in_a_sweep_too():
+    sim = Simulation(load_instance("I1"), make_policy(f"{PLUGINS}:WritesCounts", what=1,
+                                                      at=50), range(4), 300)  # fmt: skip
+    says = r"^policy writes-counts, slots 1\.\.300: a compiled hook wrote into npull or nsucc "
+    with pytest.raises(PolicyRuntimeError, match=says + r"for run 0 \(seed 0\)"):
+        sim.advance_to(300)
+
+
+def test_a_hook_writing_its_parameters_ends_the_run(tmp_path: Path):
+    import corraoi
+
+    with pytest.raises(PolicyRuntimeError, match=r"slots 1001\.\.2000: a compiled hook wrote "
+                       r"into params; hooks may write only"):  # fmt: skip
+        corraoi.record(f"{PLUGINS}:WritesCounts", "I1", params={"what": 4, "at": 1500},
+                       horizon=2500, path=tmp_path / "p.mcap", rrd=False)  # fmt: skip
+    assert not (tmp_path / "p.mcap").exists()  # the blocks before it, marked failed
+    log = open_log(tmp_path / "p.mcap.partial", verify=False)
+    assert (log.status, log.n_slots) == ("failed", 1000)
+    clean = Simulation(load_instance("I1"), make_policy(f"{PLUGINS}:WritesCounts"), [0], 300)
+    assert clean.advance(300) is not None  # writing nothing: the checks pass

@@ -107,3 +107,14 @@ def test_array_validation():
         Instance("x", np.array([0.5, 0.5]), np.array([[1, 0]]))
     # within the 1e-9 tolerance is accepted
     Instance("x", np.array([0.5, 0.5 + 5e-10]), np.array([[1, 0], [0, 1]]))
+
+
+def test_an_instance_name_is_one_name_however_its_letters_are_composed():
+    import unicodedata
+
+    nfd = unicodedata.normalize("NFD", "Café-Zürich")
+    assert nfd != "Café-Zürich"
+    a = Instance(nfd, [0.5, 0.5], [[1, 0], [0, 1]])
+    b = Instance("Café-Zürich", [0.5, 0.5], [[1, 0], [0, 1]])
+    assert a.name == "Café-Zürich"
+    assert a == b and hash(a) == hash(b)

@@ -38,7 +38,9 @@ def children(pid: int) -> list[int]:
 class Kernel:
     """An IPython kernel in ``cwd`` and a blocking client to it."""
 
-    def __init__(self, cwd: Path) -> None:
+    def __init__(self, cwd: Path | None) -> None:
+        if cwd is None:  # a client handed in afterwards (tests of this class)
+            return
         from jupyter_client import KernelManager
 
         self.km = KernelManager(kernel_name="python3")
@@ -65,9 +67,23 @@ class Kernel:
                 out.append(msg["content"]["ename"])
             elif msg["msg_type"] == "status" and msg["content"]["execution_state"] == "idle":
                 break
-        reply = self.kc.get_shell_msg(timeout=30)
-        assert reply["parent_header"]["msg_id"] == msg_id
-        return reply["content"], "".join(out)
+        return self.reply(msg_id, deadline)["content"], "".join(out)
+
+    def reply(self, msg_id: str, deadline: float) -> dict[str, Any]:
+        """The shell reply to ``msg_id``. Replies to other requests are passed over: under
+        load ``wait_for_ready`` sends ``kernel_info`` again before the first reply comes, and
+        the extra replies wait on the shell channel for whoever reads it next."""
+        import queue
+
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                reply = self.kc.get_shell_msg(timeout=max(1.0, left))
+            except queue.Empty:
+                raise AssertionError(f"no reply to {msg_id} before the deadline") from None
+            if reply["parent_header"].get("msg_id") == msg_id:
+                return dict(reply)
+            assert time.monotonic() < deadline, f"no reply to {msg_id} before the deadline"
 
     def run(self, code: str, timeout: float = 120) -> str:
         content, out = self.result(self.start(code), timeout)
@@ -157,3 +173,37 @@ def test_an_interrupted_sweep_leaves_the_kernel_usable_and_resumable(tmp_path, k
     assert flag == "True" and int(rows) > 0
     assert json.loads((tmp_path / "cut" / "manifest.json").read_text())["status"] == "complete"
     assert no_children_soon(kernel) == []
+
+
+def test_a_cell_waits_for_its_own_reply_past_replies_to_other_requests():
+    """A busy machine: ``wait_for_ready`` asked twice for ``kernel_info`` and one reply was
+    left on the shell channel; the first cell's result is still its own reply (the fresh
+    clone's full run erred in its setup with "a kernel reply for another message id")."""
+    import queue
+
+    def msg(kind: str, parent: str, **content: Any) -> dict[str, Any]:
+        return {"msg_type": kind, "parent_header": {"msg_id": parent}, "content": content}
+
+    class Client:
+        shell = [msg("kernel_info_reply", "info-2", status="ok"),
+                 msg("execute_reply", "other", status="ok"),
+                 msg("execute_reply", "cell", status="ok", execution_count=1)]  # fmt: skip
+        iopub = [msg("status", "info-2", execution_state="idle"),
+                 msg("stream", "cell", text="42\n"),
+                 msg("status", "cell", execution_state="idle")]  # fmt: skip
+
+        def get_shell_msg(self, timeout: float) -> dict[str, Any]:
+            if not self.shell:
+                raise queue.Empty
+            return self.shell.pop(0)
+
+        def get_iopub_msg(self, timeout: float) -> dict[str, Any]:
+            return self.iopub.pop(0)
+
+    k = Kernel(None)
+    k.kc = Client()
+    content, out = k.result("cell", timeout=5)
+    assert content == {"status": "ok", "execution_count": 1} and out == "42\n"
+    k.kc.iopub.append(msg("status", "late", execution_state="idle"))
+    with pytest.raises(AssertionError, match="no reply to late"):  # the channel ran dry
+        k.result("late", timeout=0.1)

@@ -299,3 +299,72 @@ def test_the_cache_folder_falls_back_to_the_temp_folder_when_it_cannot_be_writte
     fallback = Path(tempfile.gettempdir()) / f"corraoi-kernels-{__version__}-{os.getuid()}"
     assert kernel_cache.folder() == fallback == kernel_cache.folder("gpu-emulation")
     assert fallback.is_dir()
+
+
+#: One run of a tiny kernel through the kernel cache, an interrupt injected at a moment of
+#: its compile (argv[1]): inside numba's temporary index or data file, between numba's index
+#: and its data, while corraoi writes the checksums, or none. Several moments in one process
+#: are a notebook whose cell is stopped again and again.
+_INTERRUPTED = """
+import json, sys
+import numba.core.caching as caching
+import corraoi.files.partial as partial
+from corraoi.engine import kernel_cache
+
+SOURCE = "from numba import njit\\n@njit(cache=True)\\ndef advance(x):\\n    return x * 2 + 1\\n"
+real = (caching.IndexDataCacheFile._save_index, caching.IndexDataCacheFile._save_data,
+        partial.PartialFile.write_bytes)
+
+def in_tmp(path_of):
+    def save(self, *args):
+        with self._open_for_write(path_of(self, *args)) as f:
+            f.write(b"half")
+            raise KeyboardInterrupt
+    return save
+
+def interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+INJECT = {
+    "index-tmp": ("_save_index", in_tmp(lambda self, overloads: self._index_path)),
+    "data-tmp": ("_save_data", in_tmp(lambda self, name, data: self._data_path(name))),
+    "no-data": ("_save_data", interrupt),
+}
+notes, took = [], []
+for moment in sys.argv[1].split(","):
+    cls = caching.IndexDataCacheFile
+    cls._save_index, cls._save_data, partial.PartialFile.write_bytes = real
+    if moment in INJECT:
+        setattr(cls, *INJECT[moment])
+    elif moment == "sums":
+        partial.PartialFile.write_bytes = staticmethod(interrupt)
+    try:
+        fn, seconds = kernel_cache.load(kernel_cache.folder(), "tiny_kernel",
+                                        kernel_cache.write_source(kernel_cache.folder(),
+                                                                  "tiny_kernel", SOURCE),
+                                        "the tiny kernel", warm=lambda: (20,), say=notes.append)
+        took.append(seconds)
+        assert fn(20) == 41
+    except KeyboardInterrupt:
+        took.append(None)
+print(json.dumps({"notes": notes, "took": took}))
+"""
+
+
+def test_a_compile_interrupted_again_and_again_ends_complete_on_the_next_run(tmp_path: Path):
+    """Interrupts at every moment of a compile, in fresh processes and in one process (a
+    notebook), leave nothing that is trusted; the next uninterrupted run compiles the entry
+    whole, saying why, and the run after it loads it without a word."""
+    cache = tmp_path / "cache"
+    runs = [_result(_python(_INTERRUPTED, cache, moments))
+            for moments in ("index-tmp,data-tmp", "no-data", "sums", "none", "none")]  # fmt: skip
+    assert [r["took"] for r in runs[:3]] == [[None, None], [None], [None]]
+    for r in runs[1:3]:  # each interrupted compile is told apart from an older corraoi's
+        assert r["notes"][0].endswith("was interrupted while it compiled; rebuilding it")
+    assert runs[3]["took"][0] > 0 and runs[3]["notes"] == [
+        "the cached engine for the tiny kernel was interrupted while it compiled; rebuilding it"
+    ]
+    assert runs[4] == {"notes": [], "took": [0.0]}  # complete: loaded, not compiled
+    left = sorted(p.name for p in cache.rglob("*tiny_kernel*"))
+    assert not [n for n in left if ".tmp" in n or n.endswith(".compiling")], left
+    assert any(n.endswith(".nbc") for n in left) and ".tiny_kernel.sha256" in left

@@ -3,6 +3,7 @@ time, with every promise of corraoi's own logs, read by every view."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -55,6 +56,11 @@ def _feed(log, b, *, split: int, fields=("x", "candidates", "override")) -> None
     log.slots(b.arm[rest] + 1, b.success[rest], **{f: block[f] for f in fields})
 
 
+def _lacks(log):
+    """The columns every block carries that the log lacks (its ``absent`` among FIELDS)."""
+    return tuple(f for f in FIELDS if f in log.absent)
+
+
 def test_a_logger_fed_cucbs_own_slots_writes_cucbs_run(cucb, tmp_path):
     run, b = cucb
     path = tmp_path / "again.mcap"
@@ -63,7 +69,7 @@ def test_a_logger_fed_cucbs_own_slots_writes_cucbs_run(cucb, tmp_path):
         _feed(log, b, split=1700)
     assert log.result == path and not Path(f"{path}.partial").exists()
     got = open_log(path)
-    assert got.status == "complete" and got.n_slots == T and got.config.absent == ()
+    assert got.status == "complete" and got.n_slots == T and _lacks(got) == ()
     again = got.read_all()
     assert [f for f in FIELDS if not np.array_equal(again.column(f), b.column(f))] == []
     assert corraoi.load(path).summary.regret == run.summary.regret
@@ -80,7 +86,7 @@ def test_without_the_optional_fields_the_age_and_regret_are_computed(cucb, tmp_p
     with corraoi.Logger(path, instance="I1", horizon=T, seed=3) as log:
         _feed(log, b, split=999, fields=("x",))
     got = corraoi.load(path)
-    assert got.log.config.absent == ("override", "candidates")
+    assert _lacks(got.log) == ("override", "candidates")
     assert got.log.format_version == 3
     for f in ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "mu_hat",
               "pulls"):  # fmt: skip
@@ -96,7 +102,7 @@ def test_without_x_what_needs_it_is_absent_from_every_view(cucb, tmp_path):
     with corraoi.Logger(path, instance="I1", horizon=T, policy="testbed", rrd=True) as log:
         _feed(log, b, split=2500, fields=())
     got = corraoi.load(path)
-    assert got.log.config.absent == ("x", "oracle_aoi", "regret", "override", "candidates")
+    assert _lacks(got.log) == ("x", "oracle_aoi", "regret", "override", "candidates")
     assert list(got.slots.columns)[:5] == ["t", "arm", "success", "aoi", "estimator"]
     assert np.array_equal(got.slots["aoi"].to_numpy(), b.aoi)
     assert got.summary.regret is None and got.summary.estimator == run.summary.estimator
@@ -105,7 +111,7 @@ def test_without_x_what_needs_it_is_absent_from_every_view(cucb, tmp_path):
     assert info.exit_code == 0, info.output
     assert "format version 3" in info.output and "pathwise regret        -" in info.output
     diff = cli("diff", path, run.path)
-    assert "x, oracle_aoi, regret, override, candidates: absent from a log" in diff.output
+    assert "only one of the runs logs x, oracle_aoi, regret, override, candidates" in diff.output
     assert "\n  arm                   -          0 of 3500" in diff.output  # the same arms
     compare = cli("compare", path, run.path, "--no-rrd")
     assert compare.exit_code == 0, compare.output
@@ -113,12 +119,13 @@ def test_without_x_what_needs_it_is_absent_from_every_view(cucb, tmp_path):
 
 
 def test_a_message_holds_the_slot_records_fields_but_the_absent_ones(cucb):
-    """The encoder writes FIELDS in order (one declaration each), less the absent ones."""
+    """The encoder writes the block's fields() in the slot record's order, less the absent."""
     _, b = cucb
     whole = json.loads(BlockEncoder(4).encode(b)[0])
-    assert tuple(whole) == FIELDS
-    part = json.loads(BlockEncoder(4, ("x", "mu_hat", "candidates")).encode(b)[0])
-    assert tuple(part) == tuple(f for f in FIELDS if f not in ("x", "mu_hat", "candidates"))
+    assert tuple(whole) == b.fields() == (*FIELDS, "forced", "score")
+    lacking = dataclasses.replace(b, absent=("x", "mu_hat", "candidates"))
+    part = json.loads(BlockEncoder(4).encode(lacking)[0])
+    assert tuple(part) == tuple(f for f in whole if f not in ("x", "mu_hat", "candidates"))
     assert part["pulls"] == whole["pulls"] and part["override"] == whole["override"]
 
 
@@ -212,7 +219,7 @@ def test_a_process_killed_mid_run_loses_at_most_one_block(tmp_path):
     recover = cli("recover", partial, "-o", tmp_path / "recovered.mcap")
     assert recover.exit_code == 0, recover.output
     done = open_log(tmp_path / "recovered.mcap")
-    assert done.finished and done.n_slots == 2000 and done.config.absent == got.config.absent
+    assert done.finished and done.n_slots == 2000 and done.absent == got.absent
     assert done.read_all().aoi[-1] == got.read_all().aoi[-1]
 
 
@@ -241,22 +248,25 @@ def test_one_slot_at_a_time_is_fast(tmp_path):
 
 
 def test_a_log_is_read_with_exactly_the_fields_it_says_it_holds(cucb):
-    from corraoi.engine.block import RunConfig
-    from corraoi.errors import ConfigError, LogError
+    """What a log lacks is what its first message lacks (the slot record says what may be
+    absent); a later message may not add or drop such a column, nor any log a required one."""
+    from corraoi.errors import LogError
     from recorder.slotlog.decode import decode_messages
 
     run, b = cucb
     absent = ("x", "oracle_aoi", "regret")
-    whole, part = BlockEncoder(4).encode(b)[:3], BlockEncoder(4, absent).encode(b)[:3]
-    got = decode_messages(part, 4, 4, where="here", absent=absent)
+    whole = BlockEncoder(4).encode(b)[:3]
+    part = BlockEncoder(4).encode(dataclasses.replace(b, absent=absent))[:3]
+    got = decode_messages(part, 4, 4, where="here")
+    assert got.absent == absent and "x" not in got.fields()
     assert np.array_equal(got.aoi, b.aoi[:3]) and (got.x == -1).all() and (got.regret == -1).all()
-    with pytest.raises(LogError, match="slot 1 has extra keys \\['oracle_aoi', 'regret', 'x'\\]"):
-        decode_messages(whole, 4, 4, where="here", absent=absent)
-    with pytest.raises(LogError, match="slot 1 lacks x, oracle_aoi, regret"):
-        decode_messages(part, 4, 4, where="here")
-    config = open_log(run.path).config
-    with pytest.raises(ConfigError, match="absent fields \\['aoi'\\]"):
-        RunConfig(config.instance, config.policy, 0, 10, absent=("aoi",))
+    with pytest.raises(LogError, match="slot 2 has extra keys \\['oracle_aoi', 'regret', 'x'\\]"):
+        decode_messages([part[0], whole[1]], 4, 4, where="here")
+    with pytest.raises(LogError, match="slot 2 lacks x, oracle_aoi, regret"):
+        decode_messages([whole[0], part[1]], 4, 4, where="here")
+    no_aoi = BlockEncoder(4).encode(dataclasses.replace(b, absent=("aoi",)))[:1]
+    with pytest.raises(LogError, match="slot 1 lacks aoi, a required field"):
+        decode_messages(no_aoi, 4, 4, where="here")
 
 
 def test_the_testbed_example_replays_its_csv_into_a_recording(tmp_path):

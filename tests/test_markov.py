@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -118,6 +119,10 @@ GOOD = {"transition": [[0.9, 0.1], [0.3, 0.7]], "Y": [[1, 0], [0, 1]]}
             "the chain is reducible: state x2 cannot be reached from state x1",
         ),
         ({"transition": [[0.0, 1.0], [1.0, 0.0]]}, "the chain is periodic with period 2"),
+        (  # an absorbing last state: checked before its stationary law is solved for
+            {"transition": [[0.9, 0.1], [0.0, 1.0]]},
+            "the chain is reducible: state x1 cannot be reached from state x2",
+        ),
         ({"transition": [[0.9, "x"], [0.3, 0.7]]}, "transition row 1: 'x' is not a finite number"),
         ({"transition": "no"}, "transition must be a list of rows"),
     ],
@@ -138,3 +143,83 @@ def test_p_given_and_matching_is_accepted_and_toml_works(tmp_path: Path):
     inst = load_instance(f)
     assert inst.name == "chain" and inst.transition is not None
     assert Instance.from_dict(inst.to_dict()) == inst
+
+
+def test_the_stationary_law_is_exact_for_a_small_chain():
+    """Up to EXACT_STATES states, each probability is the exact law of the chain as given
+    (its float entries as rationals) rounded once: checked against the Markov chain tree
+    theorem (pi_i is proportional to the sum, over the spanning trees directed to i, of the
+    product of their transition probabilities), an independent exact formula."""
+    from fractions import Fraction
+
+    from corraoi.model.markov import stationary
+
+    assert load_instance("GE").p.tolist() == [0.75, 0.25]  # LAPACK gave 0.7500000000000007
+    for P in ([[0.5, 0.3, 0.2], [0.1, 0.6, 0.3], [0.25, 0.25, 0.5]],
+              [[0.9, 0.07, 0.03], [0.11, 0.8, 0.09], [0.3, 0.3, 0.4]]):  # fmt: skip
+        q = [[Fraction(v) for v in row] for row in P]
+        w = [q[1][0] * q[2][0] + q[1][2] * q[2][0] + q[2][1] * q[1][0],
+             q[0][1] * q[2][1] + q[0][2] * q[2][1] + q[2][0] * q[0][1],
+             q[0][2] * q[1][2] + q[0][1] * q[1][2] + q[1][0] * q[0][2]]  # fmt: skip
+        want = [float(v / sum(w)) for v in w]
+        assert stationary(np.array(P)).tolist() == want
+
+
+def test_a_large_chain_s_stationary_law_is_its_fixed_point():
+    from corraoi.model.markov import EXACT_STATES, stationary
+
+    rng = np.random.default_rng(5)
+    n = 3 * EXACT_STATES  # the fixed-order float path
+    P = rng.random((n, n)) * (rng.random((n, n)) < 0.3) + np.eye(n) * 1e-3
+    P /= P.sum(axis=1, keepdims=True)
+    pi = stationary(P)
+    assert math.isclose(math.fsum(pi), 1.0, rel_tol=1e-15) and (pi > 0).all()
+    assert np.max(np.abs(pi @ P - pi) / pi) < 1e-13
+
+
+STATIONARY_PROBE = """
+import numpy as np
+from corraoi.model.instance import Instance, load_instance
+from corraoi.model.markov import stationary
+from corraoi.model.theory import analyse
+rng = np.random.default_rng(1)
+out = [load_instance("GE").p, analyse(load_instance("GE")).mu]
+for n in (7, 40, 300):
+    P = rng.random((n, n)); P /= P.sum(axis=1, keepdims=True)
+    out.append(stationary(P))
+p = rng.dirichlet(np.ones(200)); Y = (rng.random((50, 200)) < 0.4).astype(int)
+th = analyse(Instance("w", p, Y))
+out += [th.mu, th.phi]
+print(np.concatenate(out).tobytes().hex())
+"""
+
+
+def test_the_stationary_law_and_the_means_are_the_same_bits_whatever_the_cpu_kernels():
+    """The same chains and instance under the CPU kernels OpenBLAS and NumPy can choose here
+    (OPENBLAS_CORETYPE, NPY_DISABLE_CPU_FEATURES): the same bits, since no BLAS, LAPACK or
+    SIMD reduction computes them. (A least-squares stationary law moved with the core type:
+    0.7500000000000006 under Haswell's kernels, ...07 under SkylakeX's.)"""
+    import platform
+    import subprocess
+    import sys
+
+    root = str(Path(__file__).resolve().parent.parent)
+    flags = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    variants: list[dict[str, str]] = [{}]
+    if platform.machine() in ("x86_64", "AMD64"):
+        cores = {"Prescott": "sse3", "Nehalem": "sse4_2", "Sandybridge": "avx",
+                 "Haswell": "avx2", "SkylakeX": "avx512f"}  # fmt: skip
+        variants += [{"OPENBLAS_CORETYPE": c} for c, f in cores.items() if f" {f}" in flags]
+        variants += [{"NPY_DISABLE_CPU_FEATURES": "X86_V4"},
+                     {"NPY_DISABLE_CPU_FEATURES": "AVX512F AVX512_SKX"}]  # fmt: skip
+    seen = {}
+    for extra in variants:
+        env = {**os.environ, "PYTHONPATH": root, **extra}
+        res = subprocess.run([sys.executable, "-c", STATIONARY_PROBE], env=env,
+                             capture_output=True, text=True, timeout=120)  # fmt: skip
+        if res.returncode != 0 and extra.get("NPY_DISABLE_CPU_FEATURES"):
+            continue  # a NumPy that does not know these feature names
+        assert res.returncode == 0, res.stderr
+        seen[json.dumps(extra)] = res.stdout.strip()
+    assert len(seen) >= 2 or len(variants) == 1
+    assert len(set(seen.values())) == 1, {k: v[:32] for k, v in seen.items()}

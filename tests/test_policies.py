@@ -69,14 +69,14 @@ def test_params_defaults_and_validation():
 def test_a_param_declared_with_the_wrong_types_is_one_line():
     from corraoi.policies import Param
 
-    with pytest.raises(PolicyError, match=r"Param high: expected a number, got 'exploration' "
-                                          r"\(Param\(default, help, low, high"):  # fmt: skip
+    with pytest.raises(PolicyError, match=r"Param high 'exploration': expected a number or "
+                                          r"None \(Param\(default, help, low, high"):  # fmt: skip
         Param(0.1, 0, 1, "exploration")  # type: ignore[arg-type]
-    with pytest.raises(PolicyError, match="Param help: expected text, got 0"):
+    with pytest.raises(PolicyError, match="Param help 0: expected a line of text"):
         Param(0.1, 0)  # type: ignore[arg-type]
-    with pytest.raises(PolicyError, match="Param default: expected a number, got '0.1'"):
+    with pytest.raises(PolicyError, match="Param default '0.1': expected a number"):
         Param("0.1")  # type: ignore[arg-type]
-    with pytest.raises(PolicyError, match="Param integer: expected True or False, got 'yes'"):
+    with pytest.raises(PolicyError, match="Param integer 'yes': expected True or False"):
         Param(1.0, "n", 0, 10, integer="yes")  # type: ignore[arg-type]
     assert Param(3, "k", 1, 10, integer=True).range_text() == "an integer in [1, 10]"
 

@@ -106,3 +106,19 @@ def test_ziggurat_normal_matches_the_normal_law_in_the_body_the_wedges_and_the_t
     assert np.mean(z**4) == pytest.approx(3.0, abs=0.03)
     # the 52-bit magnitude and the sign bit are independent of the layer: no value repeats
     assert np.unique(z[:100_000]).size == 100_000
+
+
+def test_the_ziggurat_is_the_same_bits_whatever_the_c_library(monkeypatch):
+    """The normal sampler's layers are computed with correctly rounded exp and log, not the
+    C library's (within an ulp, its last bit differs between libraries and CPUs): a libm one
+    ulp off changes nothing, and the tables the sampler uses are those layers."""
+    import base64
+
+    want = rng.ziggurat_layers()
+    monkeypatch.setattr(math, "exp", lambda x: math.nextafter(np.exp(x), math.inf))
+    monkeypatch.setattr(math, "log", lambda x: math.nextafter(np.log(x), -math.inf))
+    assert np.array_equal(rng.ziggurat_layers(), want)
+    held = np.frombuffer(base64.b64decode(rng.ZIGGURAT_LAYERS), dtype="<f8").reshape(2, 257)
+    assert np.array_equal(held, want)
+    _, w, f, r = rng._ziggurat()
+    assert np.array_equal(w * float(1 << 52), want[0, :256]) and np.array_equal(f, want[1])

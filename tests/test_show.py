@@ -12,6 +12,7 @@ import sys
 import textwrap
 import time
 import urllib.request
+import warnings
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
@@ -65,6 +66,39 @@ def test_outside_a_kernel_it_serves_the_web_viewer_on_loopback_and_close_stops_i
     shown.close()  # twice is harmless
 
 
+def served_sources(grpc_url: str, into: Path) -> list[tuple[str, str]]:
+    """(application id, recording id) of every recording the server at ``grpc_url`` hands
+    a viewer that connects: ``rerun --connect URL --save FILE`` (no window) saves what it
+    gets; read once the run has arrived and a moment more has passed."""
+    from rerun.chunk import RrdReader
+
+    from recorder.live.viewers import rerun_binary
+
+    proc = subprocess.Popen([rerun_binary(), "--connect", grpc_url, "--save", str(into)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (into.is_file() and into.stat().st_size):
+            time.sleep(0.2)
+        time.sleep(2.0)  # whatever the server holds is sent at once; let it all arrive
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+    with warnings.catch_warnings():  # a saved stream has no footer: read whole
+        warnings.simplefilter("ignore")
+        return [(e.application_id, e.recording_id) for e in RrdReader(into).recordings()]
+
+
+def test_the_web_viewer_lists_the_run_and_no_empty_source_beside_it(tmp_path, recorded):
+    from rerun.chunk import RrdReader
+
+    (own,) = RrdReader(recorded.rrd).recordings()
+    with corraoi.show(recorded) as shown:
+        grpc = unquote(urlsplit(shown.url).query.split("url=", 1)[1])
+        sources = served_sources(grpc, tmp_path / "served.rrd")
+    assert sources == [(own.application_id, own.recording_id)]  # no "corraoi-show" beside it
+
+
 def test_run_show_and_sweep_show_go_through_corraoi_show(tmp_path):
     sw = corraoi.sweep("I1", ["ucb", "cucb"], runs=4, horizon=300, out=tmp_path / "sw")
     with sw.show() as shown:  # a context manager too
@@ -97,7 +131,7 @@ def test_a_log_without_its_rrd_gets_the_replayed_one_beside_it(tmp_path, recorde
 @pytest.mark.parametrize(
     ("make", "error", "words"),
     [
-        (lambda p: 42, UsageError, "show: expected a corraoi.Run, a corraoi.Sweep, or the path"),
+        (lambda p: 42, UsageError, "target 42: expected a corraoi.Run, a corraoi.Sweep, or the"),
         (lambda p: p / "nope.mcap", LogError, "nope.mcap: no such file or folder"),
         (lambda p: p, LogError, "a folder without a sweep"),
         (lambda p: _write(p / "x.rrd", b"hello"), LogError, "not a Rerun recording"),

@@ -9,7 +9,6 @@ sees is checked in a browser by tests/test_e2e_web.py.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import re
 import subprocess
@@ -29,7 +28,7 @@ from corraoi.model.theory import analyse  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
 from recorder import style  # noqa: E402
 from recorder.rerun.layout import one_run_blueprint, title_chars  # noqa: E402
-from recorder.rerun.names import ENTITIES, PRESENTATION, run_path, snapshot_every  # noqa: E402
+from recorder.rerun.names import ENTITIES, PRESENTATION, WHY, run_path, snapshot_every  # noqa: E402
 from recorder.rerun.output import RrdOutput  # noqa: E402
 from recorder.rerun.sink import RerunSink  # noqa: E402
 
@@ -149,11 +148,15 @@ def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
     all_views = views(one_run_blueprint(config.label, config))
     kinds = [v.class_identifier for v in all_views]
     contents = {c for v in all_views for c in v.contents}
+    # why this arm: the scores (the run is one that logs them), forced slots, lines
+    assert {"$origin/why/chosen", "$origin/why/forced"} <= contents
     if K <= style.LINES_UP_TO:  # a line per arm, its true mean dotted in its colour
         assert "BarChart" not in kinds
-        assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls"} <= contents
+        assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls",
+                "$origin/why/score/**"} <= contents  # fmt: skip
     else:  # bars at the cursor, strips, the arms that matter as lines
-        assert kinds.count("BarChart") == 2
+        assert kinds.count("BarChart") == 3  # means, pulls, scores
+        assert {"$origin/why/bars/**", "$origin/why/focus/**"} <= contents
         assert {"$origin/bars/mean", "$origin/bars/mean_true", "$origin/bars/mean_arm/**",
                 "$origin/bars/pulls", "$origin/bars/pulls_arm/**",
                 "$origin/focus/**"} <= contents  # fmt: skip
@@ -279,7 +282,7 @@ def test_1024_arms_record_and_draw(tmp_path):
     assert slots[-1] == 1200 and len(values[-1]) == 1024
     shown = np.isin(np.arange(1024), list(sink.focus))
     assert np.array_equal(np.array(values[-1])[~shown], ref.pulls[-1][~shown])
-    assert len(views(one_run_blueprint(config.label, config))) == 9
+    assert len(views(one_run_blueprint(config.label, config))) == 11  # with why this arm
 
 
 # ------------------------------------------------------------------ what is drawn
@@ -344,40 +347,23 @@ def test_true_means_are_dots_that_alternate_where_means_are_equal(tmp_path):
 
 # ------------------------------------------------------------------ content unchanged
 
-#: Digests of the MCAP logs and of the Rerun data of the entities that existed before the
-#: views' work (commit 224f28d), for two runs: what the views must not change. The first
-#: log's digest is 41c659a's: that commit made a version-1 log's schema ``$id`` say ``v1``
-#: (its messages are 224f28d's, byte for byte).
-BASELINE = {
-    ("I1", "aoi-aware-cucb", 5, 2600): (
-        "44010fc81a7757fd1b1301dc3ae7ffc75deb236096943c3652bb55fb5d84f343",
-        "83eadc00296651096162d7c37445eea692fd29e072f001b6c36e0bae5e7ed899",
-    ),
-    ("GE", "cts", 3, 2200): (
-        "a1f863dac7b7d95a658cc6dfc4c21f862172f62e25c6154503cb3cda734ce64b",
-        "243424eb6a894252fead91bdafcdf89f2d34931e429470addd0acdcf008e16b1",
-    ),
-}
+GOLDEN = Path(__file__).parent / "golden"
 
 
-def mcap_digest(path: Path) -> str:
-    from mcap.reader import make_reader
+def golden_module() -> Any:
+    import importlib.util
 
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for schema, channel, m in make_reader(f).iter_messages():
-            h.update(json.dumps([schema.name, schema.encoding, channel.topic,
-                                 channel.message_encoding, m.log_time, m.publish_time,
-                                 m.sequence]).encode())  # fmt: skip
-            h.update(schema.data)
-            h.update(m.data)
-    return h.hexdigest()
+    spec = importlib.util.spec_from_file_location("golden_regenerate", GOLDEN / "regenerate.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-def old_entities_digest(path: Path, base: str) -> tuple[str, set[str]]:
-    """The digest of every time-indexed Scalars column under ``base`` of the entities of
-    ``ENTITIES`` (the old ones), and the set of every entity under ``base``."""
-    old = tuple(f"{base}/{e}" for e in ENTITIES)
+def entities_by_value(path: Path, base: str) -> tuple[dict[str, tuple[list[int], list[Any]]],
+                                                      set[str]]:  # fmt: skip
+    """The time-indexed Scalars of every entity under ``base`` (slots sorted) and the set of
+    every entity under ``base``."""
     rows: dict[str, tuple[list[int], list[Any]]] = {}
     every = set()
     for chunk in RrdReader(path).stream():
@@ -385,46 +371,73 @@ def old_entities_digest(path: Path, base: str) -> tuple[str, set[str]]:
             continue
         every.add(chunk.entity_path)
         b = chunk.to_record_batch()
-        keep = chunk.entity_path in old or chunk.entity_path.startswith(f"{base}/candidates/")
-        if chunk.is_static or not keep or "Scalars:scalars" not in b.schema.names:
+        if chunk.is_static or "Scalars:scalars" not in b.schema.names:
             continue
-        s, v = rows.setdefault(chunk.entity_path, ([], []))
+        s, v = rows.setdefault(chunk.entity_path[len(base) + 1 :], ([], []))
         s.extend(b.column("slot").to_pylist())
         v.extend(b.column("Scalars:scalars").to_pylist())
-    h = hashlib.sha256()
-    for e in sorted(rows):
-        s, v = rows[e]
+    for e, (s, v) in rows.items():
         o = np.argsort(s, kind="stable")
-        h.update(json.dumps([e, [s[i] for i in o], [v[i] for i in o]]).encode())
-    return h.hexdigest(), every
+        rows[e] = ([s[i] for i in o], [v[i] for i in o])
+    return rows, every
 
 
-@pytest.mark.parametrize("key", list(BASELINE))
+def old_entities_of(block: SlotBlock) -> dict[str, tuple[list[int], list[Any]]]:
+    """What the entities that existed before the views' work (``ENTITIES``) hold for a run,
+    from its log's columns: one value per slot, or the slots where the arm succeeded,
+    failed, was chosen by the override, or was a candidate (numbered from 1)."""
+    t = [int(v) for v in block.t]
+    arm = [float(a + 1) for a in block.arm]
+
+    def where(mask: np.ndarray, values: list[float]) -> tuple[list[int], list[Any]]:
+        keep = np.flatnonzero(mask)
+        return [t[i] for i in keep], [[values[i]] for i in keep]
+
+    out = {name: (t, [[float(v)] for v in getattr(block, name)])
+           for name in ("aoi", "oracle_aoi", "regret", "estimator")}  # fmt: skip
+    out["x"] = (t, [[float(v + 1)] for v in block.x])
+    out["arm/success"] = where(block.success.astype(bool), arm)
+    out["arm/failure"] = where(~block.success.astype(bool), arm)
+    out["override"] = where(block.override.astype(bool), arm)
+    out["mu_hat"] = (t, [[float(v) for v in row] for row in block.mu_hat])
+    out["pulls"] = (t, [[float(v) for v in row] for row in block.pulls])
+    for k in range(block.mu_hat.shape[1]):
+        out[f"candidates/{k + 1}"] = where(block.candidates[:, k].astype(bool),
+                                           [float(k + 1)] * len(t))  # fmt: skip
+    return {e: v for e, v in out.items() if v[0]}
+
+
+@pytest.mark.parametrize("key", golden_module().LOG_CASES, ids=lambda k: "-".join(map(str, k)))
 def test_logs_and_the_old_entities_are_unchanged_only_presentation_entities_are_new(
     tmp_path, key
 ):
-    from recorder.slotlog.sink import McapSink
+    """The golden logs (tests/golden/logs.json) as the views record them: the log value for
+    value (integers equal, floats within 1e-12 relative: the same on any machine, where a
+    digest of the file's bytes was not), and the old entities hold the log's values."""
+    golden = golden_module()
+    config = golden.write_log(key, tmp_path / "a.mcap")
+    stored = json.loads((GOLDEN / "logs.json").read_text())[golden.case_name(key)]
+    assert golden.differences(stored, golden.log_values(tmp_path / "a.mcap")) == []
+    from recorder.slotlog.reader import open_log
 
-    inst_name, policy, seed, horizon = key
-    config = RunConfig(load_instance(inst_name), make_policy(policy), seed, horizon)
-    blocks = list(simulate_run(config.instance, config.policy, seed, horizon))
-    with McapSink(tmp_path / "a.mcap", config, fsync=False) as sink:
-        for b in blocks:
-            sink.write(b)
+    block = open_log(tmp_path / "a.mcap").read_all()
     with RrdOutput(config, rrd_path=tmp_path / "a.rrd") as out:
         with RerunSink(out.recording, config.label, config) as rsink:
-            for b in blocks:
-                rsink.write(b)
-    want_mcap, want_rrd = BASELINE[key]
-    assert mcap_digest(tmp_path / "a.mcap") == want_mcap  # the log: byte for byte
+            rsink.write(block)
     base = "/" + run_path(config.label)
-    digest, every = old_entities_digest(tmp_path / "a.rrd", base)
-    assert digest == want_rrd  # the old entities' data: value for value
+    got, every = entities_by_value(tmp_path / "a.rrd", base)
+    want = old_entities_of(block)
+    assert golden.differences(want, {e: got[e] for e in want if e in got}) == []
+    slots, values = got["mu_true"]  # the true means, at the ends of the run
+    assert slots[0] == 1 and slots[-1] == config.horizon
+    assert golden.differences([stored["metadata"]["mu"]] * len(values), values) == []
     K = config.instance.K
     old = {f"{base}/{e}" for e in ENTITIES if e != "candidates"} | {
         f"{base}/candidates/{k + 1}" for k in range(K)
     }
-    new = every - old
+    why = {e for e in every - old if e.startswith(f"{base}/why/")}  # the scores' view
+    assert why and all(any(e[len(base) + 1:].startswith(p) for p in WHY) for e in why)
+    new = every - old - why
     assert new == {f"{base}/arm/best"} | {f"{base}/true_means/{k + 1}" for k in range(K)}
     assert all(any(e[len(base) + 1:].startswith(p) for p in PRESENTATION) for e in new)
 

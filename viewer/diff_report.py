@@ -7,10 +7,18 @@ Arms and states are numbered from 1 in everything the report shows.
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from .summary import RunSummary
+
+#: What makes a run's hidden path (and the channel's answers on it): two runs are paired
+#: (common random numbers: ``diff`` compares the policies alone) only when these agree.
+PAIRING = ("instance", "channel", "seed", "streams")
+#: Keys under those that only name things: a renamed copy of an instance is still paired.
+NAMES_ONLY = ("instance.name", "instance.arms", "instance.states", "channel.source")
 
 
 @dataclass(frozen=True)
@@ -85,6 +93,43 @@ class DiffReport:
         return not self.config
 
     @property
+    def unpaired(self) -> tuple[str, ...]:
+        """Why the runs are not paired (e.g. ``seed (0 != 1)``): what of :data:`PAIRING`
+        differs; empty when they are, one hidden path under both."""
+        out = []
+        for part in PAIRING:
+            keys = [d for d in self.config if (d.key == part or d.key.startswith(part + "."))
+                    and d.key not in NAMES_ONLY]  # fmt: skip
+            if not keys:
+                continue
+            if len(keys) == 1 and keys[0].key == part:
+                out.append(f"{part} ({_fmt(keys[0].a)} != {_fmt(keys[0].b)})")
+                continue
+            by = {d.key: d for d in self.config}
+            named = by.get(f"{part}.name") or by.get(f"{part}.kind")
+            if named is not None:  # an i.i.d. run's log has no channel: iid
+                a, b = (("iid" if v is None and part == "channel" else _fmt(v))
+                        for v in (named.a, named.b))  # fmt: skip
+                out.append(f"{part} ({a} != {b})")
+            else:
+                which = ", ".join(d.key.removeprefix(part + ".") for d in keys)
+                out.append(f"{part} ({which} differ)")
+        return tuple(out)
+
+    @property
+    def paired(self) -> bool:
+        """Whether both runs had one hidden path (the same instance, channel and seed), so
+        that every difference is the policies'. False: :meth:`message` says so first."""
+        return not self.unpaired
+
+    def pairing_line(self) -> str | None:
+        """The line that opens the report of runs that are not paired (None when paired)."""
+        if self.paired:
+            return None
+        return (f"not paired: {', '.join(self.unpaired)}: the runs did not see one hidden "
+                "path, so their slots differ by more than the policy")  # fmt: skip
+
+    @property
     def same_slots(self) -> bool:
         return self.a_slots == self.b_slots
 
@@ -101,11 +146,13 @@ class DiffReport:
 
     @property
     def first_divergence(self) -> tuple[int, str] | None:
-        """(slot, field) of the earliest differing slot over all fields, or None."""
+        """(slot, field) of the earliest differing slot over the fields both runs hold
+        comparably (a field only one run logs, or per-arm fields of runs with other numbers
+        of arms, differ everywhere and say nothing of where the runs part), or None."""
         firsts = [
             (f.first_slot, i, name)
             for i, (name, f) in enumerate(self.fields.items())
-            if f.first_slot is not None
+            if f.first_slot is not None and f.comparable
         ]
         if not firsts:
             return None
@@ -137,8 +184,11 @@ class DiffReport:
         return rows
 
     def message(self) -> str:
-        """A readable account (the text ``corraoi diff`` prints; good in an assert)."""
-        lines = [
+        """A readable account (the text ``corraoi diff`` prints; good in an assert). Runs
+        that are not paired are said so on the first line (:meth:`pairing_line`)."""
+        pairing = self.pairing_line()
+        lines = [] if pairing is None else [pairing]
+        lines += [
             f"--- {self.a}  {self.a_label}  ({self.a_slots} slots, {self.a_status})",
             f"+++ {self.b}  {self.b_label}  ({self.b_slots} slots, {self.b_status})",
         ]
@@ -179,7 +229,7 @@ class DiffReport:
     def verdict(self) -> str:
         if self.identical:
             return f"identical: {self.a_slots} slots, every field equal"
-        parts = []
+        parts = [] if self.paired else ["not paired"]
         if self.config:
             parts.append(f"{len(self.config)} configuration key(s) differ")
         if not self.same_slots:
@@ -202,6 +252,8 @@ class DiffReport:
         first = self.first_divergence
         return {
             "identical": self.identical,
+            "paired": self.paired,
+            "unpaired": list(self.unpaired),
             "a": {"path": self.a, "label": self.a_label, "slots": self.a_slots,
                   "status": self.a_status, "summary": self.a_summary.to_dict()},
             "b": {"path": self.b, "label": self.b_label, "slots": self.b_slots,
@@ -219,6 +271,46 @@ class DiffReport:
     def __str__(self) -> str:
         return self.message()
 
+    def __repr__(self) -> str:
+        """One line: the two files and the verdict (:meth:`message` has the whole account)."""
+        return f"DiffReport({Path(self.a).name!r}, {Path(self.b).name!r}: {self.verdict()})"
+
+    def _repr_html_(self) -> str:
+        """In Jupyter: the pairing first, the two runs, then a table of the fields (the first
+        slot where they differ, how many slots, the values there), the final regret and the
+        verdict."""
+
+        def cells(tag: str, values: list[Any]) -> str:
+            return "".join(f"<{tag} style='text-align:left'>{html.escape(str(v))}</{tag}>"
+                           for v in values)  # fmt: skip
+
+        head = ["field", "first slot", "slots differing", "a there", "b there"]
+        runs = "<br>".join(
+            html.escape(f"{name}: {path}  {label}  ({slots:,} slots, {status})")
+            for name, path, label, slots, status in (
+                ("a", self.a, self.a_label, self.a_slots, self.a_status),
+                ("b", self.b, self.b_label, self.b_slots, self.b_status),
+            )
+        )
+        rows = []
+        for name, f in self.fields.items():
+            if not f.comparable:
+                rows.append([name, "-", "not comparable", "", ""])
+                continue
+            first = "-" if f.first_slot is None else f"{f.first_slot:,}"
+            there = ["", ""] if f.first_slot is None else [_fmt(f.a_value), _fmt(f.b_value)]
+            rows.append([name, first, f"{f.slots_differing:,} of {f.compared:,}", *there])
+        regret = next(r for r in self.finals() if r[0] == "regret")
+        rows.append(["final regret", "", f"b - a = {_num(regret[3], sign=True)}",
+                     _num(regret[1]), _num(regret[2])])  # fmt: skip
+        pairing = self.pairing_line()
+        lead = "" if pairing is None else f"<p><b>{html.escape(pairing)}</b></p>"
+        body = "".join(f"<tr>{cells('td', r)}</tr>" for r in rows)
+        return (
+            f"<div>{lead}<p>{runs}</p><table><thead><tr>{cells('th', head)}</tr></thead>"
+            f"<tbody>{body}</tbody></table><p>{html.escape(self.verdict())}</p></div>"
+        )
+
 
 def _minus(x: Any, y: Any) -> Any:
     if x is None or y is None:
@@ -231,8 +323,8 @@ def _fmt(v: Any) -> str:
         return "(none)"
     if isinstance(v, float):
         return f"{v:.6g}"
-    if isinstance(v, list) and v and isinstance(v[0], float):
-        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+    if isinstance(v, list) and any(isinstance(x, float) for x in v):  # None: no value (NaN)
+        return "[" + ", ".join("-" if x is None else f"{x:.4g}" for x in v) + "]"
     return str(v)
 
 
@@ -249,4 +341,4 @@ def _num(v: Any, *, sign: bool = False, pct: bool = False) -> str:
     return str(v)
 
 
-__all__ = ["ConfigDifference", "DiffReport", "FieldDiff"]
+__all__ = ["NAMES_ONLY", "PAIRING", "ConfigDifference", "DiffReport", "FieldDiff"]

@@ -23,19 +23,21 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.engine.block import ARM_FIELDS, FIELDS, SCALAR_FIELDS, SlotBlock
+from corraoi.engine.block import SlotBlock
+from corraoi.engine.slot_record import BY_NAME, NAMES, PER_ARM
+from corraoi.engine.slot_record import FLOAT_FIELDS as _FLOATS
 from corraoi.errors import UsageError
 
 from .diff_report import ConfigDifference, DiffReport, FieldDiff
 from .runs import LogLike, as_log
 from .summary import SummaryAccumulator
 
-#: The fields ``diff`` compares by default: every logged column except the slot number.
-DIFF_FIELDS: tuple[str, ...] = SCALAR_FIELDS + ARM_FIELDS
-#: Float fields: compared within ``atol``; every other field compares exactly.
-FLOAT_FIELDS = ("estimator", "mu_hat")
-#: Fields numbered from 1 for people (0-based in SlotBlock).
-_ONE_BASED = ("x", "arm")
+#: The fields ``diff`` compares by default: every field of the slot record except the slot
+#: number (corraoi.engine.slot_record). A field both runs lack compares equal; one that a
+#: single run lacks differs at every slot.
+DIFF_FIELDS: tuple[str, ...] = tuple(f for f in NAMES if f != "t")
+#: Float fields: compared within ``atol`` (NaN equals NaN); every other field exactly.
+FLOAT_FIELDS = _FLOATS
 #: Configuration keys that are reported but do not make two runs different.
 NOTE_KEYS = ("version",)
 #: Slots read per step from each log.
@@ -95,11 +97,15 @@ def diff(
             f"the runs have different numbers of arms ({Ka} and {Kb}): per-arm fields are "
             "not compared"
         )
-    absent = [n for n in names if n in la.config.absent or n in lb.config.absent]
-    if absent:  # a log written by corraoi.Logger without them: left out
-        warnings.append(f"{', '.join(absent)}: absent from a log, not compared")
-    state = {n: _FieldState(n, comparable=(n not in ARM_FIELDS or Ka == Kb))
-             for n in names if n not in absent}  # fmt: skip
+    missing = [
+        n for n in names if BY_NAME[n].may_be_absent and (n in la.absent) != (n in lb.absent)
+    ]
+    if missing:
+        warnings.append(f"only one of the runs logs {', '.join(missing)}: not compared")
+    state = {
+        n: _FieldState(n, comparable=(n not in PER_ARM or Ka == Kb) and n not in missing)
+        for n in names
+    }
     sa, sb = SummaryAccumulator(la.config), SummaryAccumulator(lb.config)
     for pa, pb in zip_longest(la.blocks(block), lb.blocks(block)):
         if pa is not None:
@@ -150,6 +156,8 @@ class _FieldState:
             if self.first is None and n:
                 self.first = int(a.t[0])
             return
+        if getattr(a, self.name) is None or getattr(b, self.name) is None:
+            return  # a field neither run logs (the blocks of one run agree on it)
         ca, cb = a.column(self.name), b.column(self.name)
         if self.name in FLOAT_FIELDS:
             same = np.isclose(ca, cb, rtol=0.0, atol=atol, equal_nan=True)
@@ -181,17 +189,18 @@ class _FieldState:
 
 def _person(name: str, value: np.ndarray | np.generic) -> Any:
     """A field value as people read it: arms/states and candidate sets numbered from 1."""
-    if name in _ONE_BASED:
+    if BY_NAME[name].one_based:
         return int(value) + 1
     if name == "candidates":
         return [int(k) + 1 for k in np.flatnonzero(value)]
     if isinstance(value, np.ndarray):
-        return value.tolist()
-    return value.item()
+        return [None if v != v else v for v in value.tolist()]  # NaN: no value (null)
+    item = value.item()
+    return None if item != item else item
 
 
 def _head(b: SlotBlock, n: int) -> SlotBlock:
-    return SlotBlock(**{f: b.column(f)[:n] for f in FIELDS})
+    return b.slice(0, n)
 
 
 def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:

@@ -217,9 +217,8 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     last = None
     if last_payload is not None:
         K, n = cfg.instance.K, cfg.instance.n_states
-        last = decode_messages([last_payload], K, n, where=str(src), absent=cfg.absent)
-    end: dict[str, Any] = make_end(slots=n_slots, horizon=cfg.horizon, last=last,
-                                   absent=cfg.absent)  # fmt: skip
+        last = decode_messages([last_payload], K, n, where=str(src))
+    end: dict[str, Any] = make_end(slots=n_slots, horizon=cfg.horizon, last=last)
     end["recovered_from"] = f"{src.name} ({log.status}, {n_slots} slots)"
     writer.add_metadata(END_METADATA, end)
     writer.finish()

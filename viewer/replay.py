@@ -55,6 +55,7 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
+    from recorder.rerun.layout import one_run_blueprint
     from recorder.rerun.output import RrdOutput
     from recorder.rerun.sink import RerunSink
 
@@ -62,9 +63,11 @@ def replay(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"
     )
     config = run.config
+    # the "why this arm" view when the log has scores (a log written before them has none)
+    blueprint = one_run_blueprint(config.label, config, why="score" not in run.absent)
     out = RrdOutput(
         config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite,
-        discard_on_abort=True,
+        discard_on_abort=True, blueprint=blueprint,
     )  # fmt: skip
     try:
         sink = RerunSink(out.recording, out.label, config)

@@ -22,7 +22,7 @@ class RunSummary:
     ``settled_at`` is the first slot from which the run played the best arm in every slot
     up to its last recorded slot (``None`` when its last slot was not on the best arm or
     nothing was recorded). ``best_share`` is the share of recorded slots on the best arm.
-    A figure whose column the log leaves absent (``RunConfig.absent``: a log written by
+    A figure whose field the run lacks (``SlotBlock.absent``: a log written by
     ``corraoi.Logger`` without the hidden state, say) is None.
     """
 
@@ -55,7 +55,8 @@ class SummaryAccumulator:
     def __init__(self, config: RunConfig) -> None:
         self.K = config.instance.K
         self.best_arm = analyse(config.instance).best_arm
-        self.absent = config.absent
+        #: the fields the run lacks, as its blocks say
+        self.absent: tuple[str, ...] = ()
         self.slots = 0
         self.overrides = 0
         self.last_off_best = 0  # last slot whose arm was not the best arm (0: none yet)
@@ -71,6 +72,7 @@ class SummaryAccumulator:
         if off.size:
             self.last_off_best = int(block.t[off[-1]])
         self._last = block
+        self.absent = block.absent
 
     def result(self) -> RunSummary:
         last = self._last

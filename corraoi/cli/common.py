@@ -60,7 +60,8 @@ def warn(message: str) -> None:
 
 
 def errors_exit(code: int | None = None) -> Callable[[F], F]:
-    """Turn corraoi errors, I/O errors and Ctrl-C into one line and an exit status.
+    """Turn corraoi errors, I/O errors, a package that is not installed (the line naming it
+    and the pip command) and Ctrl-C into one line and an exit status.
 
     Errors exit with their own ``exit_code`` (I/O errors with 1), or all with ``code``
     when it is given (``diff`` exits 2 on any trouble, as diff(1)); Ctrl-C exits 130.
@@ -78,6 +79,14 @@ def errors_exit(code: int | None = None) -> Callable[[F], F]:
                     _leave_quietly()
                 where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
                 fail(f"{where}{exc.strerror or exc}", code if code is not None else 1)
+            except ModuleNotFoundError as exc:  # a package corraoi needs is not installed
+                from corraoi.extras import missing_package
+
+                ctx = click.get_current_context(silent=True)
+                missing = missing_package(exc, ctx.command_path if ctx else "corraoi")
+                if missing is None:
+                    raise
+                fail(str(missing), code if code is not None else missing.exit_code)
             except KeyboardInterrupt:
                 click.echo("corraoi: interrupted", err=True)
                 sys.exit(130)

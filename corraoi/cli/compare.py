@@ -127,12 +127,15 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool, *,
                  kept_code: bool = False, allow_changed_code: bool = False) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/``
     (:meth:`corraoi.face.sweeps.Sweep.record_each`)."""
+    from corraoi.experiments.drill import parse_run
+    from corraoi.experiments.folder import CLI_WORDS
     from corraoi.face.sweeps import Sweep
 
+    parse_run(run)  # a bad --run in the command line's words
     runs = Sweep(folder).record_each(run, cells=cells, force=force, kept_code=kept_code,
                                      allow_changed_code=allow_changed_code,
                                      say=lambda line: click.echo(line, err=True),
-                                     warn=warn)  # fmt: skip
+                                     warn=warn, words=CLI_WORDS)  # fmt: skip
     return tuple(r.path for r in runs)
 
 

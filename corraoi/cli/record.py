@@ -11,10 +11,11 @@ from __future__ import annotations
 import json
 import os
 import sys
+from typing import Any
 
 import click
 
-from corraoi.errors import ConfigError, UsageError
+from corraoi.errors import ConfigError, OutputError, UsageError
 from corraoi.text import safe_text
 
 from .common import handle_errors, keep_pandas_out, warn
@@ -73,6 +74,9 @@ from .record_plan import from_sweep, say_where_from
 @foxglove_options
 @backend_option("Per-slot logs are a CPU feature: cpu (and auto) record on the CPU; gpu is "
                 "refused (the GPU backend is for sweeps, docs/gpu.md) [default: cpu].")
+@click.option("--score/--no-score", default=None,
+              help="Log what the policy maximised at every slot (score, forced) [default: "
+                   "up to 64 arms].")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -95,6 +99,7 @@ def record(
     foxglove: str | None,
     pace: float | None,
     backend: str | None,
+    score: bool | None,
     as_json: bool,
     from_: str | None,
     run: str | None,
@@ -150,7 +155,8 @@ def record(
         specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
         chan = resolve_channel(channel, inst)
         chan.check(inst, horizon)
-        configs = [RunConfig(inst, spec, seed, horizon, channel=chan) for spec in specs]
+        configs = [RunConfig(inst, spec, seed, horizon, channel=chan, score=score)
+                   for spec in specs]  # fmt: skip
     from corraoi.face.recording import plan_files
 
     plans = plan_files(configs, output, rrd, no_rrd, drills)
@@ -158,8 +164,12 @@ def record(
         say_where_from(drills)  # once the plan stands: a refusal above stays one line
     live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
 
+    from corraoi.experiments.drill import row_verdict
     from corraoi.face.recording import Outlets, refuse, up_to_date
 
+    live_option = _live_option(viewer, foxglove)
+    if live_option is not None and not force:  # a live view records again: say so, truly
+        _refuse_recorded(plans, live_option, up_to_date)
     fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
     plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
     for p in fresh:
@@ -177,6 +187,11 @@ def record(
     refuse(plans, force=force)  # before simulating anything
 
     worker = None
+    if any(p.rrd for p in plans) or viewer.asked:
+        from corraoi.extras import require_package
+
+        # said here, not as a traceback of the process that would write the .rrd
+        require_package("rerun", "corraoi record's Rerun recording (--no-rrd: none)")
     if any(p.rrd for p in plans):
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
         if not viewer.asked:
@@ -204,6 +219,10 @@ def record(
         click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
     report(results, as_json=as_json)
+    for r in results:  # a run recorded with changed code: does it still give the sweep's row?
+        verdict = row_verdict(r.plan.drill, r.slots, r.regret) if r.plan.drill else None
+        if verdict is not None:
+            click.echo(safe_text(verdict), err=as_json)
     if stopped:
         last = results[-1]
         click.echo(
@@ -216,6 +235,27 @@ def record(
     viewer.serve_until_stopped()
     if viewer_failed:
         sys.exit(1)
+
+
+def _live_option(viewer: ViewerChoice, foxglove: str | None) -> str | None:
+    """The option that shows the runs live as they are recorded, if one was given."""
+    if foxglove is not None:
+        return "--foxglove"
+    if viewer.asked:
+        return "--spawn" if viewer.spawn else "--connect" if viewer.connect else "--serve-web"
+    return None
+
+
+def _refuse_recorded(plans: list[Any], option: str, up_to_date: Any) -> None:
+    """A live view of a run whose complete log is there already would record it again:
+    refused as such (not as "another run"), with --force and ``replay`` as the ways out."""
+    done = next((p for p in plans if up_to_date(p)), None)
+    if done is not None:
+        log = safe_text(done.mcap)
+        raise OutputError(f"{log}: already holds this run (same configuration, complete); "
+                          f"{option} shows a run as it is recorded, which would write it "
+                          f"again: use --force to record it again, or `corraoi replay {log} "
+                          f"{option}` to show this log")  # fmt: skip
 
 
 __all__ = ["record"]

@@ -31,7 +31,7 @@ def from_sweep(
     too."""
     from click.core import ParameterSource
 
-    from corraoi.experiments.drill import choose
+    from corraoi.experiments.drill import choose, split_policy_words
     from corraoi.policies import make_policies, parse_param_assignments
 
     ctx = click.get_current_context()
@@ -45,12 +45,17 @@ def from_sweep(
     if not given and (param or c is not None or beta is not None):
         raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
                          "parameters (with --policy they set those of a policy added)")
-    specs = (make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
-             if given else [])  # fmt: skip
+    # the labels the sweep's table prints select its cells; any other word is a policy
+    labels, words = split_policy_words(folder, policy) if given else ([], [])
+    specs = (make_policies(words, parse_param_assignments(param), c=c, beta=beta, warn=warn)
+             if words else [])  # fmt: skip
+    from corraoi.experiments.drill import kept_code_scope
     from corraoi.face.resolve import TRACE_READERS
 
-    return choose(folder, run, cells=cells, policies=specs, warn=warn, kept_code=kept_code,
-                  allow_changed_code=allow_changed_code,
+    # the kept copies are handed over while this command runs (its runs are recorded later)
+    ctx.with_resource(kept_code_scope(folder, kept_code))
+    return choose(folder, run, cells=cells, policies=specs, swept_labels=labels, warn=warn,
+                  kept_code=kept_code, allow_changed_code=allow_changed_code,
                   trace_readers=TRACE_READERS)  # fmt: skip
 
 

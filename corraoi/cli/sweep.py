@@ -143,7 +143,8 @@ def sweep(
                               "of its plug-ins run)")  # fmt: skip
         from corraoi.experiments.kept_code import use_kept_code
 
-        use_kept_code(out)  # before the grid is built: its plug-ins load from the copies
+        # while this command runs, before the grid is built: its plug-ins load from the copies
+        click.get_current_context().with_resource(use_kept_code(out, pin=True))
     spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
     given_params = parse_param_lists(param)
     for key, value in (("c", c), ("beta", beta)):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+from corraoi.engine.slot_record import FLOAT_FIELDS, NAMES
 from corraoi.text import safe_text
 
 from .common import errors_exit, handle_errors, say, warn
@@ -21,17 +22,24 @@ from .reading import LOG
 
 # ---------------------------------------------------------------------------- diff
 
+#: The fields diff compares (viewer.diffs.DIFF_FIELDS, read from the slot record here so
+#: that the help does not import the viewer).
+_DIFFED = tuple(f for f in NAMES if f != "t")
+
 
 @click.command("diff")
 @click.argument("a", type=LOG, metavar="A.mcap")
 @click.argument("b", type=LOG, metavar="B.mcap")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-@click.option("--fields", multiple=True, metavar="NAME[,NAME...]",
-              help="Compare only these fields (x, arm, success, aoi, oracle_aoi, regret, "
-              "estimator, override, mu_hat, pulls, candidates) [default: all].")  # fmt: skip
+@click.option(
+    "--fields",
+    multiple=True,
+    metavar="NAME[,NAME...]",
+    help=f"Compare only these fields ({', '.join(_DIFFED)}) [default: all].",
+)
 @click.option("--atol", type=float, default=0.0, show_default=True,
-              help="Absolute tolerance of the float fields (estimator, mu_hat); the others "
-              "compare exactly.")  # fmt: skip
+              help=f"Absolute tolerance of the float fields ({', '.join(FLOAT_FIELDS)}); the "
+              "others compare exactly.")  # fmt: skip
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing; only the exit status.")
 @errors_exit(2)  # any trouble exits 2, as diff(1)
 def diff(
@@ -39,10 +47,12 @@ def diff(
 ) -> None:
     """Compare two recorded runs slot by slot.
 
-    Configuration differences come first, then per field the first slot where the runs
-    diverge and how many slots differ, then the final figures of both. Exit status as
-    diff(1): 0 identical, 1 different, 2 trouble (a file that is not a readable log, a
-    bad option).
+    Runs that are not paired (another instance, channel or seed: they did not see one
+    hidden path) are said so on the first line. Configuration differences come next, then
+    per field the first slot where the runs diverge and how many slots differ, then the
+    final figures of both. Exit status as diff(1): 0 identical, 1 different (runs that are
+    not paired always are: their configurations differ), 2 trouble (a file that is not a
+    readable log, a bad option).
 
     \b
     Examples:

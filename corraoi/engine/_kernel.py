@@ -172,7 +172,8 @@ def advance(
     regret,  # (R,) int64 pathwise regret so far
     aoisum,  # (R,) int64 sum of ages so far
     err,  # (R, 3) int64: a hook's fault (slot, what: 1 arm out of range, 2 NaN score, value)
-    record,  # bool: write the per-slot columns below
+    record,  # bool: write the per-slot columns below (the slot record's fields but t and
+    # estimator, in its order: corraoi.engine.simulation.buffered_fields)
     o_x,  # (R, B) int32
     o_arm,  # (R, B) int32
     o_succ,  # (R, B) bool
@@ -180,9 +181,12 @@ def advance(
     o_oaoi,  # (R, B) int64
     o_regret,  # (R, B) int64
     o_override,  # (R, B) bool
-    o_cand,  # (R, B, K) bool
-    o_pulls,  # (R, B, K) int64
     o_muhat,  # (R, B, K) float64
+    o_pulls,  # (R, B, K) int64
+    o_cand,  # (R, B, K) bool
+    o_forced,  # (R, B) bool
+    o_thresh,  # (R, B) float32
+    o_score,  # (R, B, K) float32
     snap_t,  # (S,) int64 ascending slots in (t0, t0 + nslots] at which to snapshot
     s_regret,  # (R, S) int64 regret at each snapshot slot
     s_aoisum,  # (R, S) int64 sum of ages at each snapshot slot
@@ -327,10 +331,16 @@ def advance(
                 o_oaoi[r, j] = oage
                 o_regret[r, j] = reg
                 o_override[r, j] = override
+                # why this arm: forced (the score was not asked), the override's threshold,
+                # the scores of the candidates (NaN for the others, and when not scored)
+                scored = not override and forced < 0
+                o_forced[r, j] = forced >= 0 and not override
+                o_thresh[r, j] = 1.0 / maxmu if maxmu > 0.0 else np.inf
                 for k in range(K):
                     o_cand[r, j, k] = cand[k]
                     o_pulls[r, j, k] = npull[k]
                     o_muhat[r, j, k] = nsucc[k] / npull[k] if npull[k] > 0 else 0.0
+                    o_score[r, j, k] = vals[k] if scored and cand[k] else np.nan
             # RECORD-END
             if si < nsnap and snap_t[si] == t:
                 s_regret[r, si] = reg

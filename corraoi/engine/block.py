@@ -6,7 +6,8 @@ the reader subtracts it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -18,15 +19,12 @@ from corraoi.model.channels import Channel, default_channel
 from corraoi.model.instance import Instance
 from corraoi.policies.spec import PolicySpec
 
-#: Per-slot columns of a block, in log order.
-SCALAR_FIELDS = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "estimator", "override")
-ARM_FIELDS = ("mu_hat", "pulls", "candidates")
-FIELDS = ("t",) + SCALAR_FIELDS + ARM_FIELDS
-#: The columns every log holds; a log written from another simulator or a testbed
-#: (``corraoi.Logger``) may leave any other column of :data:`FIELDS` absent
-#: (:attr:`RunConfig.absent`).
-ALWAYS_FIELDS = ("t", "arm", "success", "aoi")
+from .slot_record import BY_NAME, NAMES, REQUIRED
 
+#: Up to this many arms a run logs its policy's scores (``score``, ``forced``) by default:
+#: a float32 per candidate and slot (benchmarks/bench_record.py's sizes: at 4 arms a log
+#: grows by about a quarter; at 256 arms it is 3 to 7 times as large).
+SCORE_ARMS = 64
 
 #: The values of :attr:`RunConfig.streams`.
 STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
@@ -46,36 +44,36 @@ class RunConfig:
     #: "gpu-emulated" (the GPU kernel's, captured on a CUDA device or on the host compiler:
     #: a run of a GPU sweep recorded again, corraoi.gpu.runner.capture_run)
     streams: str = "cpu"
-    #: the per-slot columns the log does not hold (a run logged by ``corraoi.Logger`` from a
-    #: loop that did not give them), in :data:`FIELDS` order; never one of ALWAYS_FIELDS
-    absent: tuple[str, ...] = ()
+    #: log the policy's scores (``score``, ``forced``): by default up to SCORE_ARMS arms
+    score: bool | None = None
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
         if self.streams not in STREAMS:
             raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
-        absent = set(self.absent)
-        wrong = sorted(absent - set(FIELDS) | absent & set(ALWAYS_FIELDS))
-        if wrong:
-            raise ConfigError(
-                f"absent fields {wrong}: expected fields of the slot record other than "
-                f"{', '.join(ALWAYS_FIELDS)}"
-            )
-        object.__setattr__(self, "absent", tuple(f for f in FIELDS if f in absent))
         if self.channel is None:
             object.__setattr__(self, "channel", default_channel(self.instance))
+        if self.score is None:
+            object.__setattr__(self, "score", self.instance.K <= SCORE_ARMS)
 
     @property
     def format_version(self) -> int:
         """The slot-log format version this run is written in: 1 for a built-in policy on an
         i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
-        non-i.i.d. channel (older readers refuse it instead of misreading it), 3 when it leaves
-        a column absent."""
+        non-i.i.d. channel (older readers refuse it instead of misreading it), 3 for a loop
+        logged by ``corraoi.Logger`` (policy tier ``external``), whose messages may lack any
+        field of the slot record that may be absent."""
         assert self.channel is not None
-        if self.absent:
+        if self.policy.tier == "external":
             return 3
         return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
+
+    @property
+    def scored(self) -> bool:
+        """Its blocks carry ``score`` and ``forced``: a compiled policy's run on the CPU
+        engine (a plain-Python policy's only when its ``select`` returns them)."""
+        return bool(self.score) and self.streams == "cpu" and self.policy.tier == "compiled"
 
     @property
     def label(self) -> str:
@@ -95,8 +93,8 @@ class RunConfig:
             out["channel"] = self.channel.to_dict()
         if self.streams != "cpu":  # logs of the CPU engine read as before
             out["streams"] = self.streams
-        if self.absent:
-            out["absent"] = list(self.absent)
+        if self.score != (self.instance.K <= SCORE_ARMS):  # the default is not written
+            out["score"] = bool(self.score)
         return out
 
     @classmethod
@@ -109,20 +107,24 @@ class RunConfig:
             version=str(data.get("version", "unknown")),
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
-            absent=tuple(str(f) for f in data.get("absent", ())),
+            score=bool(data["score"]) if "score" in data else None,
         )
 
 
 @dataclass
 class Columns:
-    """The per-slot columns (:data:`FIELDS`) of consecutive slots ``t`` (1-based, (B,)).
+    """The per-slot columns (:mod:`corraoi.engine.slot_record`) of consecutive slots ``t``
+    (1-based, (B,)).
 
     ``mu_hat`` and ``pulls`` are after the slot's update; ``candidates`` is the set the arm
     was chosen from (A_t + {k_emp} for the correlated policies, every arm otherwise);
     ``override`` says that the AoI-aware rule chose the arm; ``regret`` is the pathwise
     regret sum(aoi - oracle_aoi) up to the slot; ``estimator`` the paper's
-    sum(aoi) - t / mu*. :class:`SlotBlock` holds one run, ``engine.RunsBlock`` many: the
-    two are distinct types so that a many-run block cannot be handed to a sink.
+    sum(aoi) - t / mu*. The fields a run may lack (``score``, ``forced``,
+    ``override_threshold``) are None when it does; ``extra`` holds the per-slot fields of a
+    log written by a newer corraoi that this one does not know, by name. :class:`SlotBlock`
+    holds one run, ``engine.RunsBlock`` many: the two are distinct types so that a
+    many-run block cannot be handed to a sink.
     """
 
     t: np.ndarray
@@ -137,13 +139,32 @@ class Columns:
     mu_hat: np.ndarray
     pulls: np.ndarray
     candidates: np.ndarray
+    forced: np.ndarray | None = None
+    override_threshold: np.ndarray | None = None
+    score: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the fields of :data:`FIELDS` its run lacks (held as :func:`absent_column`'s fill)
+    absent: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
     def column(self, name: str) -> np.ndarray:
-        value: np.ndarray = getattr(self, name)
+        value: np.ndarray = getattr(self, name) if name in BY_NAME else self.extra[name]
         return value
+
+    def fields(self) -> tuple[str, ...]:
+        """The declared fields this block holds, in log order: not those its run lacks (None,
+        or a column of FIELDS named in ``absent``)."""
+        if self.absent:
+            return tuple(f for f in NAMES if getattr(self, f) is not None and f not in self.absent)
+        return tuple(f for f in NAMES if getattr(self, f) is not None)
+
+    def _parts(self, pick: Any) -> dict[str, Any]:
+        out: dict[str, Any] = {f: pick(f) for f in (*self.fields(), *self.absent)}
+        out["extra"] = {k: pick(k) for k in self.extra}
+        out["absent"] = self.absent
+        return out
 
 
 @dataclass
@@ -152,9 +173,102 @@ class SlotBlock(Columns):
 
     @classmethod
     def concat(cls, blocks: list[SlotBlock]) -> SlotBlock:
+        """The blocks joined; a field some of them lack is filled in them (absent_fill)."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
-        return cls(**{f: np.concatenate([b.column(f) for b in blocks]) for f in FIELDS})
+        names = [f for f in NAMES if any(f in b.fields() for b in blocks) or f in FIELDS]
+        extra = list(dict.fromkeys(k for b in blocks for k in b.extra))
+        out: dict[str, Any] = {f: np.concatenate([absent_fill(b, f) for b in blocks])
+                               for f in names}  # fmt: skip
+        out["extra"] = {k: np.concatenate([absent_fill(b, k) for b in blocks]) for k in extra}
+        out["absent"] = tuple(f for f in FIELDS if all(f in b.absent for b in blocks))
+        return cls(**out)
+
+    def slice(self, start: int | None, stop: int | None) -> SlotBlock:
+        """Slots ``start:stop`` of the block (views), every field it carries."""
+        return SlotBlock(**self._parts(lambda f: self.column(f)[start:stop]))
 
     def equals(self, other: SlotBlock) -> bool:
-        return all(np.array_equal(self.column(f), other.column(f)) for f in FIELDS)
+        """The same slots with the same fields (two empty blocks: the same arms)."""
+        if not len(self) and not len(other):
+            return self.mu_hat.shape == other.mu_hat.shape
+        if self.fields() != other.fields() or set(self.extra) != set(other.extra):
+            return False
+        return all(
+            np.array_equal(self.column(f), other.column(f), equal_nan=self.column(f).dtype.kind
+                           == "f") for f in (*self.fields(), *self.extra)
+        )  # fmt: skip
+
+
+def absent_fill(block: Columns, name: str) -> np.ndarray:
+    """``block``'s column ``name``, or where it lacks the field the column a table needs:
+    NaN for numbers, False for flags (extra fields: None, as objects)."""
+    if name in block.fields() or name in block.extra or name in block.absent:
+        return block.column(name)
+    n = len(block)
+    decl = BY_NAME.get(name)
+    if decl is None:
+        return np.full(n, None, dtype=object)
+    K = block.mu_hat.shape[-1]
+    shape = (*block.mu_hat.shape[:-1], K) if decl.per_arm else block.aoi.shape
+    if decl.dtype == "bool":
+        return np.zeros(shape, dtype=bool)
+    return np.full(shape, np.nan, dtype=decl.dtype)
+
+
+def absent_column(name: str, B: int, K: int) -> np.ndarray:
+    """What a block holds for a column of :data:`FIELDS` its run lacks: NaN for a number, -1
+    for an integer (no state, arm, age or count is -1), False for a flag. Views leave such
+    a column out (``SlotBlock.fields()``); the value only keeps a block whole."""
+    decl = BY_NAME[name]
+    dtype = np.dtype(decl.dtype)
+    fill: float | int | bool = np.nan if dtype.kind == "f" else (-1 if dtype.kind == "i" else False)
+    return np.full((B, K) if decl.per_arm else (B,), fill, dtype=dtype)
+
+
+#: The per-slot columns every block carries as arrays, in log order: the fields of the slot
+#: record (:mod:`corraoi.engine.slot_record`) the :class:`Columns` dataclass requires. A
+#: run may lack one of them too (a field that ``may_be_absent``: a ``corraoi.Logger`` log
+#: without the hidden state); its blocks then hold :func:`absent_column` and name it in
+#: ``absent``. The other fields are None in a block of a run that lacks them.
+_REQUIRED_ARGS = {d.name for d in dataclasses.fields(Columns) if d.default is dataclasses.MISSING
+                  and d.default_factory is dataclasses.MISSING}  # fmt: skip
+FIELDS: tuple[str, ...] = tuple(f for f in NAMES if f in _REQUIRED_ARGS)
+#: The fields a block holds as None when its run lacks them (``score``, ``forced``, ...).
+NONE_FIELDS: tuple[str, ...] = tuple(f for f in NAMES if f not in FIELDS)
+SCALAR_FIELDS = tuple(f for f in FIELDS if f != "t" and not BY_NAME[f].per_arm)
+ARM_FIELDS = tuple(f for f in FIELDS if BY_NAME[f].per_arm)
+assert set(REQUIRED) <= set(FIELDS)
+
+
+#: The kernel's narrower buffers of these fields (the block's columns are int64).
+_BUFFER_DTYPES = {"x": "int32", "arm": "int32"}
+#: Fields the engine derives after a kernel call rather than buffers in it.
+_DERIVED = ("t", "estimator")
+#: The fields the engine buffers per slot, in the order the kernel takes them.
+BUFFERED = tuple(f for f in NAMES if f not in _DERIVED)
+
+
+class Outputs:
+    """The per-slot output buffers of one advance of R runs by B slots (B = 0 when not
+    recording), one per :data:`BUFFERED` field, shaped and typed by the slot record:
+    ``(R, B)`` or ``(R, B, K)``."""
+
+    def __init__(self, R: int, B: int, K: int) -> None:
+        self.columns: dict[str, np.ndarray] = {
+            f: np.empty((R, B, K) if BY_NAME[f].per_arm else (R, B),
+                        dtype=_BUFFER_DTYPES.get(f, BY_NAME[f].dtype))
+            for f in BUFFERED
+        }  # fmt: skip
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def buffers(self) -> tuple[np.ndarray, ...]:
+        """The buffers in the kernel's argument order."""
+        return tuple(self.columns.values())
+
+    def trim(self, done: int) -> None:
+        """Keep the first ``done`` slots (a plug-in failed after them)."""
+        for name, value in self.columns.items():
+            self.columns[name] = value[:, :done]

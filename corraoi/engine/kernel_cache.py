@@ -9,7 +9,9 @@ The folder is ``$CORRAOI_CACHE_DIR``, else ``$XDG_CACHE_HOME/corraoi``, else
 ``~/.cache/corraoi``; a folder that cannot be written falls back to the system's temp folder.
 A lock file per entry makes two processes that share a fresh cache compile it once. numba's
 files of an entry are trusted only when they match the checksums written when it was
-compiled: a truncated, altered or foreign file is rebuilt with one notice, never run.
+compiled: a truncated, altered or foreign file is rebuilt with one notice, never run. A
+compile interrupted at any moment (Ctrl-C, a notebook's stop button), however often, leaves
+nothing that is trusted: the next uninterrupted run compiles the entry whole and says so.
 """
 
 from __future__ import annotations
@@ -128,6 +130,8 @@ def load(folder: Path, modname: str, path: Path, what: str, *,
         compiling = not any(p.suffix == ".nbi" for p in _index_files(folder, modname))
         if compiling and say is not None and not damaged:  # said above if damaged
             say(f"compiling the engine for {what} (first use; cached in {folder})")
+        if compiling:
+            _compiling_file(folder, modname).touch()
         for attempt in (0, 1):
             sys.modules.pop(modname, None)
             spec = importlib.util.spec_from_file_location(modname, path)
@@ -154,12 +158,14 @@ def load(folder: Path, modname: str, path: Path, what: str, *,
                     say(f"the cached engine for {what} is damaged "
                         f"({type(exc).__name__}); rebuilding it")  # fmt: skip
                 _clear_index(folder, modname)
+                _compiling_file(folder, modname).touch()
                 compiling = True
                 continue
             took = 0.0
             if compiling:
                 took = time.perf_counter() - start
                 _write_sums(folder, modname)
+                _compiling_file(folder, modname).unlink(missing_ok=True)
             return module.advance, took
     raise AssertionError("unreachable")
 
@@ -191,18 +197,33 @@ def _write_sums(folder: Path, modname: str) -> None:
     PartialFile.write_bytes(_sums_file(folder, modname), data, what="kernel cache checksums")
 
 
+def _compiling_file(folder: Path, modname: str) -> Path:
+    """Present from the start of a compile until its files and checksums are all written:
+    left behind, it says that a compile was interrupted (Ctrl-C, a notebook's stop button)."""
+    return folder / f".{modname}.compiling"
+
+
 def _damaged(folder: Path, modname: str) -> str:
     """Why a kernel's cached files cannot be trusted, as the end of a sentence ("" when they
     can, or when there are none): integrity is checked before numba loads machine code, so a
-    truncated, altered or foreign file is rebuilt instead of being run."""
+    truncated, altered or foreign file is rebuilt instead of being run. What an interrupted
+    compile left (numba writes its index before its data, and leaves its temporary files
+    when interrupted) is never trusted, whichever moment the interrupt hit: the next run
+    compiles the entry whole."""
     if not _index_files(folder, modname):
         return ""
     try:
         want = json.loads(_sums_file(folder, modname).read_text(encoding="utf-8"))
         have = _sums(folder, modname)
     except (OSError, ValueError, RecursionError):
+        want, have = None, {}
+    if want == have:
+        return ""
+    if _compiling_file(folder, modname).exists():
+        return "was interrupted while it compiled"
+    if want is None:
         return "has no checksums (cached by an older corraoi, or its checksums were lost)"
-    return "" if want == have else "is damaged (its files do not match their checksums)"
+    return "is damaged (its files do not match their checksums)"
 
 
 def _clear_index(folder: Path, modname: str) -> None:

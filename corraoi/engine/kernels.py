@@ -34,6 +34,7 @@ from corraoi.errors import KernelError
 from corraoi.policies.api import CompiledPolicy
 
 from . import kernel_cache
+from .block import Outputs
 
 #: Called with a one-line notice before a kernel is compiled (not when it loads from cache).
 #: The CLI prints it; the library stays quiet.
@@ -170,10 +171,7 @@ def warm_args(K: int = 2) -> tuple[Any, ...]:
         np.zeros((R, 4), np.uint64), np.zeros((R, 4), np.uint64), np.zeros((R, 2), f8),
         np.zeros((R, 1), f8), np.full(R, -1, i8), np.zeros((R, K), i8), np.zeros((R, K), i8),
         np.ones(R, i8), np.ones(R, i8), np.zeros(R, i8), np.zeros(R, i8), np.zeros((R, 3), i8),
-        False, np.empty((R, 0), np.int32), np.empty((R, 0), np.int32),
-        np.empty((R, 0), np.bool_), np.empty((R, 0), i8), np.empty((R, 0), i8),
-        np.empty((R, 0), i8), np.empty((R, 0), np.bool_), np.empty((R, 0, K), np.bool_),
-        np.empty((R, 0, K), i8), np.empty((R, 0, K), f8),
+        False, *Outputs(R, 0, K).buffers(),
         np.empty(0, i8), np.empty((R, 0), i8), np.empty((R, 0), i8), np.empty((R, 0, K), i8),
     )  # fmt: skip
 

@@ -8,7 +8,9 @@ Each slot: the hidden states of every run (drawn in blocks from the runs' latent
 the same compiled function as the built-ins' kernel, so a plug-in run on seed s sees exactly
 the path built-ins see on seed s), then ``policy.select(t, state)`` -> one arm per run,
 checked (shape, integer, in range), then rewards, ages, regret and counts (numpy), then
-``policy.update``.
+``policy.update``. The policy sees the engine's arrays through read-only views
+(:class:`~corraoi.policies.api.RunState`); a write into one is one line naming the field
+(:func:`policy_raised`).
 
 Random numbers for the policy come from :class:`Streams`: each run's own policy stream (the
 one a built-in would use), so a run's decisions do not depend on which runs share the batch.
@@ -16,12 +18,20 @@ one a built-in would use), so a run's decisions do not depend on which runs shar
 
 from __future__ import annotations
 
+import ast
+import dis
+import linecache
+import textwrap
+from inspect import getattr_static
+from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
 from numba import njit
 
 from corraoi.errors import CorraoiError, PolicyRuntimeError
+from corraoi.policies.api import Choice, RunState
 from corraoi.rng import argmax_random, beta, integer, normal, uniform
 
 
@@ -155,15 +165,19 @@ class Streams:
 
 def check_arms(
     out: Any, *, runs: int, arms: int, name: str, t: int, who: Any = None
-) -> tuple[np.ndarray, Any]:
-    """(arms, candidates or None) from ``select``'s return, or PolicyRuntimeError naming the
-    policy, the slot and (``who(r)``, by default "run r") the run."""
-    cand = None
-    if isinstance(out, tuple):
+) -> tuple[np.ndarray, Any, Any]:
+    """(arms, candidates or None, scores or None) from ``select``'s return (arms, a pair
+    (arms, candidates) or a :class:`~corraoi.policies.api.Choice`), or PolicyRuntimeError
+    naming the policy, the slot and (``who(r)``, by default "run r") the run. Scores come
+    back as float32 (runs, K), NaN outside the candidate set."""
+    cand = scores = None
+    if isinstance(out, Choice):
+        out, cand, scores = out.arms, out.candidates, out.scores
+    elif isinstance(out, tuple):
         if len(out) != 2:
             raise PolicyRuntimeError(
                 f"policy {name}, slot {t}: select returned a tuple of {len(out)}; expected "
-                "arms or (arms, candidates)"
+                "arms, (arms, candidates) or Choice(arms, candidates, scores)"
             )
         out, cand = out
     a = np.asarray(out)
@@ -207,7 +221,35 @@ def check_arms(
             raise PolicyRuntimeError(
                 f"policy {name}, slot {t}: a played arm is not among its candidates"
             )
-    return ai, cand
+    if scores is not None:
+        v = np.asarray(scores)
+        if v.shape != (runs, arms) or v.dtype.kind not in "iuf":
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: scores must be an array of numbers of shape "
+                f"({runs}, {arms}), got {v.dtype} {v.shape}"
+            )
+        scores = v.astype(np.float32)
+        if cand is not None:
+            scores[~cand] = np.nan
+        member = np.ones((runs, arms), dtype=bool) if cand is None else cand
+        gap = np.isnan(scores) & member & ~np.isnan(scores).all(axis=1)[:, None]
+        if gap.any():
+            r, k = (int(i) for i in np.argwhere(gap)[0])
+            raise PolicyRuntimeError(
+                f"policy {name}, slot {t}: scores gave NaN to arm {k + 1}, a candidate, for "
+                f"{who(r) if who is not None else f'run {r}'}; a run's scores are a number "
+                "for every candidate (+inf is one), or NaN for all (not chosen by score)"
+            )
+    return ai, cand, scores
+
+
+def not_by_score(scores: np.ndarray, arms: np.ndarray) -> np.ndarray:
+    """Per run, whether the arm played was not chosen by the score: its score is NaN or
+    below the highest (what ``forced`` logs for a plain-Python policy's slot)."""
+    played = scores[np.arange(len(arms)), arms]
+    with np.errstate(invalid="ignore"):
+        top = np.where(np.isnan(scores), -np.inf, scores).max(axis=1)
+    return np.isnan(played) | (played < top)
 
 
 def hook_fault(name: str, t: int, what: int, value: int, K: int, who: str) -> PolicyRuntimeError:
@@ -231,6 +273,46 @@ def hook_raised(name: str, first: int, last: int, exc: BaseException) -> PolicyR
                               f"{type(exc).__name__}" + (f": {detail}" if detail else ""))
 
 
+def counts_written(name: str, t0: int, arm: np.ndarray, success: np.ndarray, pulls: np.ndarray,
+                   mu_hat: np.ndarray, pulls0: np.ndarray, succ0: np.ndarray,
+                   who: Any) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
+    """The record path's check that a compiled plug-in's hooks left the engine's counts
+    alone: the logged ``pulls`` and ``mu_hat`` (R, B, K) of slots ``t0 + 1..`` must follow
+    the arms played and their successes from the counts ``pulls0``/``succ0`` (R, K) before
+    (which this advances). None, or (slots before the first that does not, the
+    PolicyRuntimeError naming it and ``who(r)``)."""
+    first = np.full(arm.shape[0], arm.shape[1], dtype=np.int64)
+    _first_off_count(arm, success, pulls, mu_hat, pulls0, succ0, first)
+    r = int(first.argmin())
+    if first[r] == arm.shape[1]:
+        return None
+    return int(first[r]), hook_wrote(name, f"slot {t0 + int(first[r]) + 1}", "npull or nsucc",
+                                     who(r))  # fmt: skip
+
+
+@njit(cache=True)
+def _first_off_count(arm, success, pulls, muhat, n, s, first):
+    for r in range(arm.shape[0]):
+        for j in range(arm.shape[1]):
+            a = arm[r, j]
+            n[r, a] += 1
+            s[r, a] += success[r, j]
+            off = False
+            for k in range(n.shape[1]):
+                m = s[r, k] / n[r, k] if n[r, k] > 0 else 0.0
+                off = off or pulls[r, j, k] != n[r, k] or muhat[r, j, k] != m
+            if off:
+                first[r] = j
+                break
+
+
+def hook_wrote(name: str, when: str, what: str, who: str = "") -> PolicyRuntimeError:
+    """A compiled hook that wrote into an array it may only read, in one line."""
+    return PolicyRuntimeError(f"policy {name}, {when}: a compiled hook wrote into {what}"
+                              + (f" for {who}" if who else "") + "; hooks may write only "
+                              "vals (score) and ps, and read the rest")  # fmt: skip
+
+
 def construct(cls: Any, spec: Any) -> Any:
     """A plain-Python policy made with its parameters; whatever its ``__init__`` raises is
     one PolicyRuntimeError line naming the policy (before slot 1: no log is left)."""
@@ -243,3 +325,135 @@ def construct(cls: Any, spec: Any) -> Any:
         raise PolicyRuntimeError(f"policy {spec.name}: creating it ({cls.__name__}.__init__) "
                                  f"raised {type(exc).__name__}"
                                  + (f": {detail}" if detail else "")) from None  # fmt: skip
+
+
+def policy_raised(name: str, t: int, func: Any, exc: BaseException,
+                  state: RunState) -> PolicyRuntimeError:  # fmt: skip
+    """What a plain-Python policy's method raised, as one line naming the policy and the
+    slot; a write into its read-only ``state`` names the field written."""
+    what = getattr(func, "__name__", "policy")
+    if isinstance(exc, AttributeError) and getattr(exc, "obj", None) is state:
+        return PolicyRuntimeError(f"policy {name}, slot {t}: {what} set state.{exc.name}, "
+                                  "which is read-only")  # fmt: skip
+    field = written_field(exc, state) if isinstance(exc, ValueError) else None
+    if field is not None:
+        return PolicyRuntimeError(
+            f"policy {name}, slot {t}: {what} wrote into state.{field}, which is read-only "
+            f"(the engine's own; change a copy: state.{field}.copy())"
+        )
+    detail = " ".join(str(exc).split())
+    return PolicyRuntimeError(f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
+                              + (f": {detail}" if detail else ""))  # fmt: skip
+
+
+#: The array fields of :class:`~corraoi.policies.api.RunState`.
+ARRAY_FIELDS = ("pulls", "successes", "mu_hat", "aoi", "seeds")
+_NUMPY_DIR = str(Path(np.__file__).parent)
+
+
+def written_field(exc: BaseException, state: RunState) -> str | None:
+    """The field of ``state`` whose read-only array the write that raised ``exc`` (numpy's
+    "... is read-only") went to, or None. Read from the failing expression in the policy's
+    source (the innermost frame outside numpy): the array it assigns into, its ``out=``,
+    the array whose method it calls, then its arguments; each is looked up (names and
+    attributes, no calls) and matched to a field by memory, so ``m = state.mu_hat;
+    m[0] = 1`` names ``mu_hat`` too."""
+    if "read-only" not in str(exc):
+        return None
+    frame, lasti = _policy_frame(exc)
+    if frame is None:
+        return None
+    try:
+        statement = ast.parse(textwrap.dedent(_segment(frame, lasti))).body[0]
+    except (SyntaxError, IndexError, ValueError):  # no source (exec): the line's bytecode
+        return _loaded_field(frame, lasti, state)
+    for expr in _written(statement):
+        field = _field_of(_lookup(expr, frame), state)
+        if field is not None:
+            return field
+    return None
+
+
+def _field_of(obj: Any, state: RunState) -> str | None:
+    if isinstance(obj, np.ndarray):
+        for field in ARRAY_FIELDS:
+            if np.may_share_memory(obj, getattr(state, field)):
+                return field
+    return None
+
+
+def _loaded_field(frame: FrameType, lasti: int, state: RunState) -> str | None:
+    """The first field of ``state`` the failing line loads (an attribute of that name, or a
+    variable holding a view of it), read from its bytecode."""
+    code = list(dis.get_instructions(frame.f_code))
+    end = max((i for i, ins in enumerate(code) if ins.offset <= lasti), default=0)
+    start = max((i for i in range(end + 1) if code[i].starts_line), default=0)
+    for ins in code[start : end + 1]:
+        if ins.opname in ("LOAD_ATTR", "LOAD_METHOD") and ins.argval in ARRAY_FIELDS:
+            return str(ins.argval)
+        if ins.opname in ("LOAD_FAST", "LOAD_NAME", "LOAD_GLOBAL", "LOAD_DEREF"):
+            field = _field_of(_lookup(ast.Name(id=str(ins.argval)), frame), state)
+            if field is not None:
+                return field
+    return None
+
+
+def _policy_frame(exc: BaseException) -> tuple[FrameType | None, int]:
+    frame, lasti, tb = None, 0, exc.__traceback__
+    while tb is not None:
+        if not tb.tb_frame.f_code.co_filename.startswith(_NUMPY_DIR):
+            frame, lasti = tb.tb_frame, tb.tb_lasti
+        tb = tb.tb_next
+    return frame, lasti
+
+
+def _segment(frame: FrameType, lasti: int) -> str:
+    """The source text of the instruction at ``lasti`` in ``frame`` ('' when unknown)."""
+    code = frame.f_code
+    first, last, col, end = next(
+        (p for i, p in enumerate(code.co_positions()) if 2 * i == lasti), (None,) * 4
+    )
+    if first is None or last is None or col is None or end is None:
+        return ""
+    lines = [linecache.getline(code.co_filename, n, frame.f_globals).encode()
+             for n in range(first, last + 1)]  # fmt: skip
+    lines[-1] = lines[-1][:end]  # columns are UTF-8 byte offsets
+    lines[0] = lines[0][col:]
+    return b"".join(lines).decode(errors="replace")
+
+
+def _written(node: ast.AST) -> list[ast.expr]:
+    """The expressions a failing write may have gone to, the likeliest first."""
+    if isinstance(node, ast.Expr):
+        return _written(node.value)
+    if isinstance(node, (ast.AugAssign, ast.AnnAssign)):
+        return [node.target]
+    if isinstance(node, ast.Assign):
+        return list(node.targets)
+    if isinstance(node, ast.Subscript):
+        return [node.value]
+    if isinstance(node, ast.Call):
+        out = [kw.value for kw in node.keywords if kw.arg == "out"]
+        out = [e for o in out for e in (o.elts if isinstance(o, ast.Tuple) else [o])]
+        receiver = [node.func.value] if isinstance(node.func, ast.Attribute) else []
+        return out + receiver + list(node.args)
+    return []
+
+
+def _lookup(expr: ast.expr, frame: FrameType) -> Any:
+    """The object ``expr`` (a name, attribute or subscript of one) stands for in ``frame``,
+    found without calling the policy's code; None when it is anything else."""
+    if isinstance(expr, (ast.Subscript, ast.Starred)):
+        return _lookup(expr.value, frame)
+    if isinstance(expr, ast.Name):
+        scope = frame.f_locals if expr.id in frame.f_locals else frame.f_globals
+        return scope.get(expr.id)
+    if isinstance(expr, ast.Attribute):
+        base = _lookup(expr.value, frame)
+        try:  # numpy's and RunState's attributes are plain; anything else: no code runs
+            if isinstance(base, (np.ndarray, RunState)):
+                return getattr(base, expr.attr)
+            return getattr_static(base, expr.attr)
+        except AttributeError:
+            return None
+    return None

@@ -26,9 +26,20 @@ from corraoi.policies.spec import PolicySpec
 
 from . import threads
 from ._kernel import draw_states
-from .block import FIELDS, Columns, SlotBlock
+from .block import Columns, Outputs, SlotBlock, absent_fill
 from .problem import Problem
-from .pyengine import Streams, apply_slot, check_arms, construct, hook_fault, hook_raised
+from .pyengine import (
+    Streams,
+    apply_slot,
+    check_arms,
+    construct,
+    counts_written,
+    hook_fault,
+    hook_raised,
+    hook_wrote,
+    not_by_score,
+    policy_raised,
+)
 from .seeds import streams_for_seeds
 
 __all__ = [
@@ -52,16 +63,17 @@ class RunsBlock(Columns):
         """Join consecutive blocks along the slot axis."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
-        return cls(
-            **{
-                f: np.concatenate([b.column(f) for b in blocks], axis=0 if f == "t" else 1)
-                for f in FIELDS
-            }  # fmt: skip
-        )
+        names = [f for f in blocks[0].fields() if all(f in b.fields() for b in blocks)]
+        names += [f for b in blocks for f in b.fields() if f not in names]
+        cols: dict[str, Any] = {
+            f: np.concatenate([absent_fill(b, f) for b in blocks], axis=0 if f == "t" else 1)
+            for f in dict.fromkeys(names)
+        }
+        return cls(**cols)
 
     def run(self, i: int) -> SlotBlock:
         """Run ``i``'s columns (views, no copy)."""
-        per_run = {f: getattr(self, f)[i] for f in FIELDS if f != "t"}
+        per_run = {f: self.column(f)[i] for f in self.fields() if f != "t"}
         return SlotBlock(t=self.t, **per_run)
 
 
@@ -131,6 +143,9 @@ class Simulation:
             self._kernels: dict[bool, Any] = {}
             self._err = np.zeros((R, 3), dtype=np.int64)  # a hook's fault (the kernel's err)
             self._params = pb.params
+            # a plug-in's hooks are checked for writes into params and the counts (the
+            # built-ins are not: no cost)
+            self._given: np.ndarray | None = None if pb.policy.builtin else pb.params.copy()
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
             self._pclass = pb.pclass
             self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
@@ -138,8 +153,15 @@ class Simulation:
             self._rate: float | None = None  # run-slots per second per thread, measured
         else:
             self._py = construct(self.cls, pb.policy)
-            rng = Streams(self.pol, self.ncache)
-            self._state = RunState(runs=R, arms=K, seeds=seed_arr, rng=rng)
+            self._mu = np.zeros((R, K))
+            self._clock = np.zeros(1, dtype=np.int64)  # the slot state.t shows
+            # the policy sees these arrays through read-only views
+            self._state = RunState(runs=R, arms=K, seeds=seed_arr,
+                                   rng=Streams(self.pol, self.ncache), pulls=self.pulls,
+                                   successes=self.succ, mu_hat=self._mu, aoi=self.aoi,
+                                   clock=self._clock)  # fmt: skip
+            #: the policy has given scores (Choice(..., scores=...)) at some slot
+            self._scored = False
 
     def kernel(self, record: bool) -> Any:
         """The compiled kernel this simulation uses: the record kernel (per-slot columns) or
@@ -152,7 +174,7 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
-    def _run_compiled(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+    def _run_compiled(self, nslots: int, record: bool, out: Outputs, snap_t: np.ndarray,
                       s_regret: np.ndarray, s_aoisum: np.ndarray,
                       s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run ``nslots`` slots in kernel calls of at most about
@@ -166,6 +188,7 @@ class Simulation:
         kernel = self.kernel(record)
         R, K = self.pulls.shape
         done = 0
+        check = self._given is not None
         while done < nslots:
             t0 = self.t + done
             n, slices = threads.plan(self._rate, R, nslots - done)
@@ -173,10 +196,11 @@ class Simulation:
             if n == nslots:  # one piece: straight into the caller's arrays
                 piece, st, snaps = out, snap_t, (s_regret, s_aoisum, s_pulls)
             else:  # column slices are not C arrays: separate arrays, copied back
-                piece = _Outputs(R, n if record else 0, K)
+                piece = Outputs(R, n if record else 0, K)
                 st = np.ascontiguousarray(snap_t[i0:i1])
                 snaps = (np.empty((R, i1 - i0), np.int64), np.empty((R, i1 - i0), np.int64),
                          np.empty((R, i1 - i0, K), np.int64))  # fmt: skip
+            counts = (self.pulls.copy(), self.succ.copy()) if check and record else None
             start = time.perf_counter()
             try:
                 self._call_kernel(kernel, t0, n, record, piece, st, snaps, slices)
@@ -188,12 +212,15 @@ class Simulation:
                                       self._rate)  # fmt: skip
             if piece is not out:
                 if record:
-                    for name, value in vars(piece).items():
-                        getattr(out, name)[:, done : done + n] = value
+                    for name, value in piece.columns.items():
+                        out[name][:, done : done + n] = value
                 for full, part in zip((s_regret, s_aoisum, s_pulls), snaps, strict=True):
                     full[:, i0:i1] = part
             if self._err[:, 0].any():
                 return self._fault(K)
+            wrote = self._hooks_wrote(counts, piece, t0, n) if check else None
+            if wrote is not None:
+                return done + wrote[0], wrote[1]
             done += n
         return nslots, None
 
@@ -206,18 +233,36 @@ class Simulation:
         self._err[:] = 0
         return t - 1 - self.t, hook_fault(self.policy.name, t, what, value, K, self.run_name(r))
 
+    def _hooks_wrote(self, counts: tuple[np.ndarray, np.ndarray] | None, piece: Outputs,
+                     t0: int, n: int) -> tuple[int, PolicyRuntimeError] | None:  # fmt: skip
+        """Whether a plug-in's hooks wrote into what they may only read in slots
+        ``t0 + 1..t0 + n``: ``params``, or the counts (``npull``, ``nsucc``) -- the record
+        path finds the first such slot from the columns and the ``counts`` before them, the
+        sweep path checks that each run's pulls add up to its slots. None, or (slots before
+        it, the error)."""
+        name, when = self.policy.name, f"slots {t0 + 1}..{t0 + n}"
+        if self._given is not None and not np.array_equal(self._params, self._given):
+            return 0, hook_wrote(name, when, "params")
+        if counts is not None:
+            return counts_written(name, t0, piece["arm"], piece["success"], piece["pulls"],
+                                  piece["mu_hat"], *counts, self.run_name)  # fmt: skip
+        wrong = (self.succ < 0) | (self.succ > self.pulls)
+        bad = (self.pulls.sum(axis=1) != t0 + n) | wrong.any(axis=1)
+        if bad.any():
+            return 0, hook_wrote(name, when, "npull or nsucc", self.run_name(int(bad.argmax())))
+        return None
+
     def run_name(self, r: int) -> str:
         """How a failure names run ``r`` of this batch: its number and its seed."""
         return f"run {self.first_run + r} (seed {int(self.seeds[r])})"
 
-    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: _Outputs,
+    def _call_kernel(self, kernel: Any, t0: int, nslots: int, record: bool, out: Outputs,
                      snap_t: np.ndarray, snaps: tuple[np.ndarray, np.ndarray, np.ndarray],
                      slices: list[tuple[int, int]]) -> None:  # fmt: skip
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
                    self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
                    self._err)  # fmt: skip
-        outputs = (out.x, out.arm, out.succ, out.aoi, out.oaoi, out.regret, out.override,
-                   out.cand, out.pulls, out.muhat)  # fmt: skip
+        outputs = out.buffers()
         common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
                   self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
                   self._params, t0, nslots)  # fmt: skip
@@ -229,7 +274,7 @@ class Simulation:
 
         threads.run_slices(run, slices)
 
-    def _run_python(self, nslots: int, record: bool, out: _Outputs, snap_t: np.ndarray,
+    def _run_python(self, nslots: int, record: bool, out: Outputs, snap_t: np.ndarray,
                     s_regret: np.ndarray, s_aoisum: np.ndarray,
                     s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
         """Advance every run of a plain-Python policy slot by slot, writing each slot's
@@ -242,45 +287,51 @@ class Simulation:
         draw_states(self._cdf_rows, self._kind, self._trace, self.lat, self.xprev, self.t,
                     nslots, xs)  # fmt: skip
         Y = self._Y
-        mu = state.mu_hat
-        rew = np.empty(R, dtype=np.int8)
-        state.pulls, state.successes, state.aoi = self.pulls, self.succ, self.aoi
+        mu = self._mu
         if self.t == 0:
             try:
-                _call(name, 0, policy.reset, state)
+                _call(name, 0, state, policy.reset, state)
             except PolicyRuntimeError as exc:
                 return 0, exc
         si = 0
         for j in range(nslots):
             t = self.t + j + 1
-            state.t = t
+            self._clock[0] = t
             try:
-                picked = _call(name, t, policy.select, t, state)
-                arms, cand = check_arms(picked, runs=R, arms=K, name=name, t=t,
-                                        who=self.run_name)  # fmt: skip
+                picked = _call(name, t, state, policy.select, t, state)
+                arms, cand, scores = check_arms(picked, runs=R, arms=K, name=name, t=t,
+                                                who=self.run_name)  # fmt: skip
             except PolicyRuntimeError as exc:
                 return j, exc
             x = xs[:, j]
+            rew = np.empty(R, dtype=np.int8)  # new each slot: the policy may keep it
             apply_slot(arms, x, Y, self.best, self.pulls, self.succ, mu, self.aoi,
                        self.oracle_aoi, self.regret, self.aoisum, rew)  # fmt: skip
             if record:
-                out.x[:, j] = x
-                out.arm[:, j] = arms
-                out.succ[:, j] = rew == 1
-                out.aoi[:, j] = self.aoi
-                out.oaoi[:, j] = self.oracle_aoi
-                out.regret[:, j] = self.regret
-                out.override[:, j] = False
-                out.cand[:, j] = True if cand is None else cand
-                out.pulls[:, j] = self.pulls
-                out.muhat[:, j] = mu
+                out["x"][:, j] = x
+                out["arm"][:, j] = arms
+                out["success"][:, j] = rew == 1
+                out["aoi"][:, j] = self.aoi
+                out["oracle_aoi"][:, j] = self.oracle_aoi
+                out["regret"][:, j] = self.regret
+                out["override"][:, j] = False
+                out["candidates"][:, j] = True if cand is None else cand
+                out["pulls"][:, j] = self.pulls
+                out["mu_hat"][:, j] = mu
+                if scores is not None:
+                    self._scored = True
+                out["score"][:, j] = np.nan if scores is None else scores
+                out["forced"][:, j] = True if scores is None else not_by_score(scores, arms)
             if si < snap_t.size and snap_t[si] == t:
                 s_regret[:, si] = self.regret
                 s_aoisum[:, si] = self.aoisum
                 s_pulls[:, si] = self.pulls
                 si += 1
+            rew.flags.writeable = False
+            played = arms.view()
+            played.flags.writeable = False
             try:
-                _call(name, t, policy.update, t, arms, rew, state)
+                _call(name, t, state, policy.update, t, played, rew, state)
             except PolicyRuntimeError as exc:
                 return j + 1, exc  # the slot itself happened
         return nslots, None
@@ -323,7 +374,7 @@ class Simulation:
         s_aoisum = np.empty((R, S), dtype=np.int64)
         s_pulls = np.empty((R, S, K), dtype=np.int64)
         B = nslots if record else 0
-        out = _Outputs(R, B, K)
+        out = Outputs(R, B, K)
         aoisum_before = self.aoisum.copy() if record else None
         if self._py is None:
             done, failure = self._run_compiled(nslots, record, out, snap_t, s_regret, s_aoisum,
@@ -353,46 +404,36 @@ class Simulation:
                 raise failure
             return None, snaps
         assert aoisum_before is not None
-        estimator = aoisum_before[:, None] + np.cumsum(out.aoi, axis=1) - t[None, :] / self.mu_star
+        estimator = (
+            aoisum_before[:, None] + np.cumsum(out["aoi"], axis=1) - t[None, :] / self.mu_star
+        )
+        # what a run lacks: the override's threshold but for an AoI-aware policy; the
+        # score and forced of a plain-Python policy that gave no scores (so far)
+        compiled = self._py is None
+        scored = compiled or self._scored
         block = RunsBlock(
             t=t,
-            x=out.x.astype(np.int64),
-            arm=out.arm.astype(np.int64),
-            success=out.succ,
-            aoi=out.aoi,
-            oracle_aoi=out.oaoi,
-            regret=out.regret,
+            x=out["x"].astype(np.int64),
+            arm=out["arm"].astype(np.int64),
+            success=out["success"],
+            aoi=out["aoi"],
+            oracle_aoi=out["oracle_aoi"],
+            regret=out["regret"],
             estimator=estimator,
-            override=out.override,
-            mu_hat=out.muhat,
-            pulls=out.pulls,
-            candidates=out.cand,
+            override=out["override"],
+            mu_hat=out["mu_hat"],
+            pulls=out["pulls"],
+            candidates=out["candidates"],
+            forced=out["forced"] if scored else None,
+            override_threshold=(
+                out["override_threshold"] if compiled and self.cls.aoi_aware else None
+            ),
+            score=out["score"] if scored else None,
         )
         if failure is not None:
             failure.partial = block if nslots > 0 else None
             raise failure
         return block, snaps
-
-
-class _Outputs:
-    """Per-slot output columns of one advance (empty when not recording)."""
-
-    def __init__(self, R: int, B: int, K: int) -> None:
-        self.x = np.empty((R, B), dtype=np.int32)
-        self.arm = np.empty((R, B), dtype=np.int32)
-        self.succ = np.empty((R, B), dtype=np.bool_)
-        self.aoi = np.empty((R, B), dtype=np.int64)
-        self.oaoi = np.empty((R, B), dtype=np.int64)
-        self.regret = np.empty((R, B), dtype=np.int64)
-        self.override = np.empty((R, B), dtype=np.bool_)
-        self.cand = np.empty((R, B, K), dtype=np.bool_)
-        self.pulls = np.empty((R, B, K), dtype=np.int64)
-        self.muhat = np.empty((R, B, K), dtype=np.float64)
-
-    def trim(self, done: int) -> None:
-        """Keep the first ``done`` slots (a plug-in failed after them)."""
-        for name, value in vars(self).items():
-            setattr(self, name, value[:, :done])
 
 
 def check_seeds(seeds: Sequence[int] | np.ndarray) -> np.ndarray:
@@ -449,16 +490,12 @@ def simulate_run(
         yield b.run(0)
 
 
-def _call(name: str, t: int, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot."""
+def _call(name: str, t: int, state: RunState, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot
+    (and the field of ``state`` for a write into it)."""
     try:
         return func(*args)
     except (CorraoiError, KeyboardInterrupt):
         raise
     except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        what = getattr(func, "__name__", "policy")
-        detail = " ".join(str(exc).split())
-        raise PolicyRuntimeError(
-            f"policy {name}, slot {t}: {what} raised {type(exc).__name__}"
-            + (f": {detail}" if detail else "")
-        ) from exc
+        raise policy_raised(name, t, func, exc, state) from exc

@@ -55,6 +55,21 @@ def chunk_task(
 
 def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = None) -> ChunkResult:
     """Run one chunk from its :func:`chunk_task` data (in this process or on a worker)."""
+    if task.get("version") != __version__:
+        raise ConfigError(
+            f"this worker runs corraoi {__version__}, the client {task.get('version')}: "
+            "install the same version on both"
+        )
+    given = task.get("plugin_source")
+    if given:  # the client's bytes, for this chunk only (the worker may lack the file)
+        from corraoi.policies.loading import handed_over
+
+        with handed_over({given["path"]: given["source"]}):
+            return _run_chunk(task, on_slots)
+    return _run_chunk(task, on_slots)
+
+
+def _run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None) -> ChunkResult:
     from corraoi.engine.block import RunConfig
     from corraoi.engine.threads import set_workers
     from corraoi.model.channels import Channel
@@ -63,15 +78,6 @@ def run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None = Non
 
     from .montecarlo import run_policy
 
-    if task.get("version") != __version__:
-        raise ConfigError(
-            f"this worker runs corraoi {__version__}, the client {task.get('version')}: "
-            "install the same version on both"
-        )
-    if task.get("plugin_source"):
-        from corraoi.policies.loading import install_plugin_source
-
-        install_plugin_source(task["plugin_source"]["path"], task["plugin_source"]["source"])
     if task.get("threads"):
         set_workers(int(task["threads"]))
     cfg = RunConfig.from_dict({**task["cell"], "seed": 0})

@@ -11,6 +11,7 @@ from before they were named, from its parts (the per-run finals, no simulation).
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -22,7 +23,17 @@ from corraoi.errors import ConfigError, DamagedPart
 from corraoi.model.channels import TraceReader
 from corraoi.policies.spec import PolicySpec
 
-from .folder import MANIFEST, PARTS, CellRuns, ChunkResult, group_dirs, read_manifest, read_parts
+from .folder import (
+    CLI_WORDS,
+    MANIFEST,
+    PARTS,
+    CellRuns,
+    ChunkResult,
+    Words,
+    group_dirs,
+    read_manifest,
+    read_parts,
+)
 from .grid import Cell, Grid
 from .kept_code import (
     changed_note,
@@ -50,6 +61,9 @@ class Drill:
     expect: tuple[tuple[int, float], ...] = ()
     #: what the log says beside the run (recorded with code other than the sweep's)
     notes: tuple[str, ...] = ()
+    #: the sweep's row of a run recorded with other code (``--allow-changed-code``): not
+    #: checked as it runs, only compared once it is recorded (:func:`row_verdict`)
+    row: tuple[tuple[int, float], ...] = ()
 
     @property
     def name(self) -> str:
@@ -70,6 +84,22 @@ def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
                 return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
                         f"says {want:g}: the engine or the code changed since the sweep")
     return None
+
+
+def row_verdict(drill: Drill, slots: int, regret: float | None) -> str | None:
+    """Whether a run recorded with changed code (``drill.row``) still gives the sweep's
+    regret at its last slot ``slots`` (``regret``): one line saying it is equal to the sweep's
+    row or differs from it; None when there is nothing to compare (no row, a run cut short
+    of a checkpoint)."""
+    want = dict(drill.row).get(slots)
+    if want is None or regret is None:
+        return None
+    label = drill.cell if drill.cell is not None else drill.config.policy.label
+    what = f"{drill.config.instance.name} {label} run {drill.run}, recorded with changed code"
+    if float(regret) == want:
+        return f"{what}: equal to the sweep's row (regret {want:g} at slot {slots})"
+    return (f"{what}: differs from the sweep's row: regret {float(regret):g} vs {want:g} at "
+            f"slot {slots}")
 
 
 def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, str | None]:
@@ -95,7 +125,7 @@ def sweep_root(path: str | Path, option: str = "--from ") -> tuple[Path, Grid, s
                       "folder `corraoi sweep -o` or `corraoi reproduce -o` wrote)")  # fmt: skip
 
 
-def parse_run(text: str | int) -> str | int:
+def parse_run(text: str | int, words: Words = CLI_WORDS) -> str | int:
     """``--run``: a run index (0-based) or one of :data:`CHOICES`."""
     if isinstance(text, int):
         return text
@@ -105,8 +135,26 @@ def parse_run(text: str | int) -> str | int:
     try:
         return int(t)
     except ValueError:
-        raise ConfigError(f"--run {text!r}: expected a run index (0, 1, ...) or one of "
+        raise ConfigError(f"{words.run}{text!r}: expected a run index (0, 1, ...) or one of "
                           f"{', '.join(CHOICES)}") from None  # fmt: skip
+
+
+def split_policy_words(path: str | Path, values: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``--policy`` words (names or comma lists) for the sweep folder ``path``, split into the
+    labels its own table prints for its cells (``eps-greedy``, ``cucb(c=2)``: what
+    :func:`choose` takes as ``swept_labels``) and the rest (policies to resolve as anywhere). A
+    plug-in's label is no registered name in a new process: it is the sweep's to resolve."""
+    import re
+
+    _, grid, _ = sweep_root(path)
+    known = set(grid.labels().values())
+    labels: list[str] = []
+    rest: list[str] = []
+    for value in values:  # a label's own commas are inside its parentheses
+        for word in (w.strip() for w in re.split(r",(?![^()]*\))", value)):
+            if word:
+                (labels if word in known else rest).append(word)
+    return list(dict.fromkeys(labels)), rest
 
 
 def choose(
@@ -115,48 +163,59 @@ def choose(
     *,
     cells: Sequence[str] = (),
     policies: Sequence[PolicySpec] = (),
+    swept_labels: Sequence[str] = (),
     warn: Any = None,
     kept_code: bool = False,
     allow_changed_code: bool = False,
     trace_readers: Mapping[str, TraceReader] | None = None,
+    words: Words = CLI_WORDS,
 ) -> list[Drill]:
     """The runs to record from the sweep folder ``path`` (module docstring).
 
     ``cells``: labels (``cucb``, ``cucb(c=2)``), instance names or ``INSTANCE/LABEL`` that
     restrict the sweep's cells. ``policies``: those the sweep ran select its cells; any
     other is added on the chosen run (paired: the same seed, so the same hidden path),
-    said through ``warn``. ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel`
-    (a trace channel's file is read again).
+    said through ``warn``. ``swept_labels``: cells named by the labels the sweep's table
+    prints (:func:`split_policy_words`), selected as ``policies`` select theirs.
+    ``trace_readers``: as for :func:`~corraoi.model.channels.parse_channel` (a trace
+    channel's file is read again).
 
     A plug-in whose source is not the one the sweep ran is refused (one line: the file, both
     hashes, the way out; :mod:`corraoi.experiments.kept_code`), unless ``kept_code`` (the
-    sweep's copy runs) or ``allow_changed_code`` (the current code runs, and the log says so). Each
+    sweep's copy runs: record the drills inside :func:`kept_code_scope`) or
+    ``allow_changed_code`` (the current code runs, and the log says so). Each
     :class:`Drill` carries the sweep's regret of its run at the checkpoints (``expect``).
+    The kept code runs under module names of its own: the session's modules, classes and
+    registrations stay the user's. ``words``: how refusals name the options.
     """
     root, grid, group = sweep_root(path)
     manifest = read_manifest_dict(root)
     if kept_code and allow_changed_code:
-        raise ConfigError("--kept-code and --allow-changed-code: choose one")
-    if kept_code:
-        use_kept_code(root, manifest)
-    what = parse_run(run)
+        raise ConfigError(f"{words.kept_code} and {words.allow_changed_code}: choose one")
+    kept = use_kept_code(root, manifest) if kept_code else contextlib.nullcontext()
+    what = parse_run(run, words)
     if isinstance(what, int) and not 0 <= what < grid.runs:
-        raise ConfigError(f"--run {what}: out of range; the sweep in {root} has runs "
+        raise ConfigError(f"{words.run}{what}: out of range; the sweep in {root} has runs "
                           f"0..{grid.runs - 1}")  # fmt: skip
+    named = tuple(swept_labels)
     labels = grid.labels()
+    unknown = [w for w in named if w not in labels.values()]
+    if unknown:
+        raise ConfigError(f"{words.policy}{unknown[0]!r}: no cell of the sweep in {root} has that "
+                          f"label (its labels: {', '.join(dict.fromkeys(labels.values()))})")
     groups = {k: v for k, v in grid.groups().items() if group is None or k[0] == group}
     swept = {c.policy.name for g in groups.values() for c in g}
     extra = [s for s in policies if s.name not in swept]
-    names = [s.name for s in policies if s.name in swept] if policies else None
-    chosen = _select(groups, labels, cells, names, root)
+    names = [s.name for s in policies if s.name in swept] if policies or named else None
+    chosen = _select(groups, labels, cells, names, root, named, words)
     if not any(chosen.values()) and not (extra and isinstance(what, int)):
         raise ConfigError(
-            f"--policy {', '.join(s.name for s in policies)}: not in the sweep in {root} (its "
-            f"policies: {', '.join(sorted(swept))}); a {what} run is chosen among the sweep's "
-            "policies: name one of them too, or give --run N"
+            f"{words.policy}{', '.join([*named, *(s.name for s in policies)])}: not in the "
+            f"sweep in {root} (its policies: {', '.join(sorted(swept))}); a {what} run is "
+            f"chosen among the sweep's policies: name one of them too, or give {words.run}N"
         )
-    picked = {key: _picks(root, grid, key, groups[key], members, labels, what) if members else []
-              for key, members in chosen.items()}  # fmt: skip
+    picked = {key: _picks(root, grid, key, groups[key], members, labels, what, words)
+              if members else [] for key, members in chosen.items()}  # fmt: skip
     if grid.backend == "gpu":  # every run is recorded with the GPU kernel: each needs its form
         from corraoi.gpu.runner import gpu_problem
 
@@ -166,9 +225,12 @@ def choose(
                             if (p := gpu_problem(spec, K)) is not None), None)  # fmt: skip
             if problem is not None:
                 raise ConfigError(f"{problem}: a GPU sweep's runs are recorded with the GPU "
-                                  "kernel; leave it out of --policy")  # fmt: skip
+                                  f"kernel; leave it out of {words.policy.strip()}")  # fmt: skip
     swept_specs = [cell.policy for picks in picked.values() for cell, _ in picks]
-    for note in check_code(swept_specs, root, manifest, allow_changed=allow_changed_code):
+    with kept:
+        notes = check_code(swept_specs, root, manifest, allow_changed=allow_changed_code,
+                           words=words)  # fmt: skip
+    for note in notes:
         if warn is not None:
             warn(note)
     streams = _streams(grid, warn)  # after every check: a refusal stays one line
@@ -192,12 +254,23 @@ def choose(
     return drills
 
 
+def kept_code_scope(path: str | Path, kept_code: bool) -> contextlib.AbstractContextManager[Any]:
+    """The block in which the runs chosen from the sweep folder ``path`` with ``kept_code``
+    are chosen and recorded: its kept copies are handed over to the loader there, and only
+    there (:func:`corraoi.experiments.kept_code.use_kept_code`); nothing without."""
+    if not kept_code:
+        return contextlib.nullcontext()
+    return use_kept_code(sweep_root(path)[0])
+
+
 def _select(
     groups: dict[tuple[str, int], list[Cell]],
     labels: dict[str, str],
     cells: Sequence[str],
     names: Sequence[str] | None,
     root: Path,
+    named: Sequence[str] = (),
+    words: Words = CLI_WORDS,
 ) -> dict[tuple[str, int], list[Cell]]:
     def matches(cell: Cell, text: str) -> bool:
         inst, _, label = text.rpartition("/")
@@ -211,12 +284,14 @@ def _select(
         if not any(matches(c, text) for g in groups.values() for c in g):
             known = ", ".join(dict.fromkeys(f"{k[0]}/{labels[c.key]}"
                                             for k, g in groups.items() for c in g))  # fmt: skip
-            raise ConfigError(f"--cell {text!r}: no such cell in {root} (its cells: {known})")
+            raise ConfigError(f"{words.cell}{text!r}: no such cell in {root} (its cells: "
+                              f"{known})")  # fmt: skip
     for key, members in groups.items():
         keep = [c for c in members if not cells or any(matches(c, t) for t in cells)]
         if cells and not keep:
             continue  # a group --cell leaves out
-        out[key] = keep if names is None else [c for c in keep if c.policy.name in names]
+        out[key] = keep if names is None else [c for c in keep if c.policy.name in names
+                                               or labels[c.key] in named]  # fmt: skip
     return out
 
 
@@ -228,31 +303,36 @@ def _picks(
     members: list[Cell],
     labels: dict[str, str],
     what: str | int,
+    words: Words = CLI_WORDS,
 ) -> list[tuple[Cell, int]]:
     if isinstance(what, int):
         return [(c, what) for c in members]
-    notable = _notable(root, grid, key, group, labels)
+    notable = _notable(root, grid, key, group, labels, words)
     if what == "widest-gap":
         among = [labels[c.key] for c in members] if len(members) < len(group) else None
         gap = pick_pair(notable.get("pairs", []), among)
         if gap is None:
-            raise ConfigError(f"--run widest-gap: no pair of policies on one hidden path among "
-                              f"{', '.join(labels[c.key] for c in members)} in {root}")  # fmt: skip
+            raise ConfigError(f"{words.run}widest-gap: no pair of policies on one hidden path "
+                              f"among {', '.join(labels[c.key] for c in members)} in "
+                              f"{root}")  # fmt: skip
         by_label = {labels[c.key]: c for c in group}
-        return [(by_label[name], _run_of(gap, grid, root)) for name in gap["policies"]]
-    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root)) for c in members]
+        return [(by_label[name], _run_of(gap, grid, root, words)) for name in gap["policies"]]
+    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root, words))
+            for c in members]  # fmt: skip
 
 
-def _run_of(entry: Any, grid: Grid, root: Path) -> int:
+def _run_of(entry: Any, grid: Grid, root: Path, words: Words = CLI_WORDS) -> int:
     run = entry.get("run") if isinstance(entry, dict) else None
     if not isinstance(run, int) or not 0 <= run < grid.runs:
         raise ConfigError(f"{root}: its summary.json names run {run!r}, not one of the sweep's "
-                          f"0..{grid.runs - 1} (a damaged summary: sweep again with --resume)")
+                          f"0..{grid.runs - 1} (a damaged summary: sweep again with "
+                          f"{words.resume})")  # fmt: skip
     return run
 
 
 def _notable(
-    root: Path, grid: Grid, key: tuple[str, int], group: list[Cell], labels: dict[str, str]
+    root: Path, grid: Grid, key: tuple[str, int], group: list[Cell], labels: dict[str, str],
+    words: Words = CLI_WORDS,
 ) -> dict[str, Any]:
     """The group's notable runs: from its summary.json, else from the parts."""
     path = group_dirs(grid, root)[key] / "summary.json"
@@ -262,7 +342,8 @@ def _notable(
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError, RecursionError) as exc:
             why = " ".join(str(exc).split())[:120] or type(exc).__name__
-            raise ConfigError(f"{path}: unreadable ({why}); sweep again with --resume") from None
+            raise ConfigError(f"{path}: unreadable ({why}); sweep again with "
+                              f"{words.resume}") from None  # fmt: skip
         notable = data.get("notable") if isinstance(data, dict) else None
         if well_formed(notable, want):
             return notable  # type: ignore[return-value]
@@ -270,10 +351,10 @@ def _notable(
         parts = read_parts(root, grid)
         runs = [CellRuns.join(c, labels[c.key], parts.get(c.key, []), grid.runs) for c in group]
     except DamagedPart as exc:
-        raise ConfigError(f"{exc}; `corraoi sweep ... --resume` runs it again") from None
+        raise ConfigError(f"{exc}; a sweep with {words.resume} runs it again") from None
     except ConfigError as exc:
-        raise ConfigError(f"{root}: {exc}: finish the sweep with --resume, or give "
-                          "--run N") from None  # fmt: skip
+        raise ConfigError(f"{root}: {exc}: finish the sweep with {words.resume}, or give "
+                          f"{words.run}N") from None  # fmt: skip
     base = [r.label for r in runs if r.cell.policy.name == grid.baseline]
     return notable_runs([r.label for r in runs], [r.regret[:, -1] for r in runs],
                         [r.cell.channel.to_dict() for r in runs], seed=grid.seed,
@@ -314,8 +395,9 @@ def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
            what: str | int, streams: str = "cpu", allow_changed: bool = False,
            trace_readers: Mapping[str, TraceReader] | None = None) -> Drill:  # fmt: skip
     """With ``allow_changed`` (--allow-changed-code) a plug-in whose code changed runs as it
-    is now: the spec names that code, the log says so, and nothing is checked against the
-    sweep's row; otherwise the run must give the sweep's regret again (``expect``)."""
+    is now: the spec names that code, the log says so, and the sweep's row is kept to say
+    afterwards whether the run still equals it (``row``); otherwise the run must give the
+    sweep's regret again (``expect``)."""
     channel = cell.channel
     if channel.kind == "trace" and channel.trace is None:
         channel = _reload_trace(cell, root, trace_readers)
@@ -328,12 +410,16 @@ def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
             where = spec.qualname.removeprefix("file:").rpartition(":")[0] or spec.qualname
             notes = (changed_note(where, spec.digest, now.digest),)
             spec = now
-    if label is not None and not notes:
-        expect = expected_row(root, grid, cell, run)
+    row: tuple[tuple[int, float], ...] = ()
+    if label is not None:  # changed code: compared once recorded, not a check that stops it
+        if notes:
+            row = expected_row(root, grid, cell, run)
+        else:
+            expect = expected_row(root, grid, cell, run)
     config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
                        streams=streams)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
-    return Drill(config, run, choice, label, root, expect, notes)
+    return Drill(config, run, choice, label, root, expect, notes, row)
 
 
 def expected_row(root: Path, grid: Grid, cell: Cell, run: int) -> tuple[tuple[int, float], ...]:

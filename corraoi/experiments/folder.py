@@ -35,6 +35,29 @@ MANIFEST_VERSION = 1
 GROUP_FILES = ("sweep.mcap", "sweep.rrd", "summary.json", "summary.md", "figure.png")
 
 
+@dataclass(frozen=True)
+class Words:
+    """How a message names the caller's options: the command line's (``--resume``) or
+    Python's (``resume=True``). The experiments' refusals take one and say its words."""
+
+    resume: str = "--resume"
+    force: str = "--force"
+    kept_code: str = "--kept-code"
+    allow_changed_code: str = "--allow-changed-code"
+    chunk: str = "--chunk"
+    backend: str = "--backend"
+    #: which run of a sweep to record, whose cells, which policies (each followed by a value)
+    run: str = "--run "
+    cell: str = "--cell "
+    policy: str = "--policy "
+
+
+#: The command line's words, and Python's (``corraoi.sweep``, ``Sweep.record``).
+CLI_WORDS = Words()
+PYTHON_WORDS = Words("resume=True", "force=True", "kept_code=True", "allow_changed_code=True",
+                     "chunk=", "backend=", "which=", "cell=", "policy=")  # fmt: skip
+
+
 @dataclass
 class DeviceAggregates:
     """What a device returns for a chunk instead of every run's checkpoints (the GPU backend):
@@ -228,20 +251,23 @@ def write_text(path: Path, text: str, what: str = "file") -> None:
     PartialFile.write_bytes(path, text.encode(), overwrite=True, what=what, sweep=True)
 
 
-def merge_grids(old: Grid, new: Grid, where: Path) -> Grid:
+def merge_grids(old: Grid, new: Grid, where: Path, words: Words = CLI_WORDS) -> Grid:
     """The grid of an existing folder extended by ``new`` (more runs, cells): an append."""
     if old.seed != new.seed:
-        raise ConfigError(f"{where}: holds a sweep with seed {old.seed}; --resume needs the same "
-                          f"seed (got {new.seed})")  # fmt: skip
+        raise ConfigError(f"{where}: holds a sweep with seed {old.seed}; {words.resume} needs the "
+                          f"same seed (got {new.seed})")  # fmt: skip
     if old.chunk != new.chunk and new.chunk:
         raise ConfigError(f"{where}: holds a sweep in chunks of {old.chunk or old.runs} runs; "
-                          f"--resume keeps them (got --chunk {new.chunk})")  # fmt: skip
+                          f"{words.resume} keeps them (got {words.chunk}"
+                          f"{'' if words.chunk.endswith('=') else ' '}{new.chunk})")  # fmt: skip
     if old.checkpoints != new.checkpoints:
-        raise ConfigError(f"{where}: holds a sweep with {old.checkpoints} checkpoints; --resume "
-                          "keeps them")  # fmt: skip
+        raise ConfigError(f"{where}: holds a sweep with {old.checkpoints} checkpoints; "
+                          f"{words.resume} keeps them")  # fmt: skip
     if old.backend != new.backend:  # other random streams: the runs would not pair
-        raise ConfigError(f"{where}: holds a sweep run with --backend {old.backend}; --resume it "
-                          f"with --backend {old.backend} (got {new.backend})")  # fmt: skip
+        sep = "" if words.backend.endswith("=") else " "
+        raise ConfigError(f"{where}: holds a sweep run with {words.backend}{sep}{old.backend}; "
+                          f"{words.resume} it with {words.backend}{sep}{old.backend} (got "
+                          f"{new.backend})")  # fmt: skip
     cells = list(old.cells)
     keys = {c.key for c in cells}
     cells += [c for c in new.cells if c.key not in keys]

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, CorraoiError
 from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
@@ -210,7 +210,7 @@ class Grid:
                 chunk=int(data.get("chunk", 0)), checkpoints=int(data.get("checkpoints", 200)),
                 baseline=data.get("baseline"), backend=str(data.get("backend", "cpu")),
             )  # fmt: skip
-        except ConfigError:
+        except CorraoiError:  # typed already (a policy, an instance, a setting): as it is
             raise
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(

@@ -12,6 +12,7 @@ line naming the file and both hashes, with the way out -- ``--kept-code`` runs t
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 from collections.abc import Iterable
@@ -20,6 +21,8 @@ from typing import Any
 
 from corraoi.errors import CodeChanged, ConfigError, PolicyError
 from corraoi.files.partial import PartialFile
+
+from .folder import CLI_WORDS, Words
 
 #: Where a sweep folder keeps its plug-ins' sources.
 PLUGINS = "plugins"
@@ -64,25 +67,29 @@ def kept_sources(folder: Path, manifest: dict[str, Any]) -> list[dict[str, Any]]
     return out
 
 
-def use_kept_code(folder: Path, manifest: dict[str, Any] | None = None) -> list[str]:
-    """``--kept-code``: every plug-in file the sweep ran loads from its kept copy in this
-    process (the file on disk, changed or gone, is not read); returns the files so pinned.
+def use_kept_code(folder: Path, manifest: dict[str, Any] | None = None, *,
+                  pin: bool = False) -> contextlib.AbstractContextManager[list[str]]:  # fmt: skip
+    """``kept_code``: while the block runs, the sweep's copy of every plug-in file it ran is
+    handed over to the loader (:func:`corraoi.policies.loading.handed_over`): a spec naming
+    the sweep's code (each of its cells does) runs that copy, under a module name of its own.
+    The user's module, class and registration are left as they are, and after the block a
+    call that names the file runs the file. ``pin`` (``corraoi sweep --resume
+    --kept-code``): a file named without a hash (``-p FILE.py:Class``) runs the copy too.
     A copy that is missing or does not hash to the manifest's sha256 is refused."""
-    from corraoi.policies.loading import pin_plugin_source
+    from corraoi.policies.loading import handed_over
 
-    pinned = []
+    data: dict[str, bytes] = {}
     for p in kept_sources(folder, read_manifest_dict(folder) if manifest is None else manifest):
         if p["data"] is None:
             raise ConfigError(f"{folder / p['copy']}: the sweep's copy of {p['path']} is missing "
-                              f"or does not hash to sha256:{p['sha256'][:16]}; --kept-code "
+                              f"or does not hash to sha256:{p['sha256'][:16]}; the kept code "
                               "cannot run it")  # fmt: skip
-        pin_plugin_source(p["path"], p["data"])
-        pinned.append(p["path"])
-    return pinned
+        data[p["path"]] = p["data"]
+    return handed_over(data, pin=pin)
 
 
 def check_code(specs: Iterable[Any], folder: Path, manifest: dict[str, Any], *,
-               allow_changed: bool = False) -> list[str]:  # fmt: skip
+               allow_changed: bool = False, words: Words = CLI_WORDS) -> list[str]:  # fmt: skip
     """Whether every plug-in of ``specs`` (a sweep's cells) loads the code the sweep ran.
     Raises :class:`CodeChanged` with the way out when one does not; with ``allow_changed``,
     returns instead one note per changed plug-in (for the log: recorded with other code)."""
@@ -96,13 +103,13 @@ def check_code(specs: Iterable[Any], folder: Path, manifest: dict[str, Any], *,
             spec.resolve()
         except CodeChanged as exc:
             if not allow_changed:
-                raise exc.with_way_out(way_out(folder, copy)) from None
+                raise exc.with_way_out(way_out(folder, copy, words)) from None
             notes.append(changed_note(exc.path, exc.expected, exc.found))
         except PolicyError as exc:  # the file is gone (or no longer a plug-in): say so too
             if copy.get("data") is None:
                 raise
             raise PolicyError(f"{exc}; the sweep ran sha256:{spec.digest[:16]}: "
-                              f"{way_out(folder, copy)}") from None  # fmt: skip
+                              f"{way_out(folder, copy, words)}") from None  # fmt: skip
     return notes
 
 
@@ -125,13 +132,16 @@ def current_spec(spec: Any) -> Any:
     return dataclasses.replace(spec, version=res.version, sha256=res.sha256)
 
 
-def way_out(folder: Path, kept: dict[str, Any]) -> str:
-    """The end of a refusal line: where the sweep's copy is, and the two options."""
+def way_out(folder: Path, kept: dict[str, Any], words: Words = CLI_WORDS) -> str:
+    """The end of a refusal line: where the sweep's copy is, and the two options (in the
+    caller's ``words``)."""
     copy = kept.get("copy") if kept.get("data") is not None else None
     where = (f"the sweep's copy is {folder / copy}" if copy else
              "the sweep kept no copy of it")  # fmt: skip
-    return (f"{where}; --kept-code runs that copy, --allow-changed-code (record and compare "
-            "--from) records with the current code and says so in the log")
+    which = ("record and compare --from" if words == CLI_WORDS else
+             "Sweep.record and Sweep.record_each")  # fmt: skip
+    return (f"{where}; {words.kept_code} runs that copy, {words.allow_changed_code} ({which}) "
+            "records with the current code and says so in the log")
 
 
 def read_manifest_dict(folder: Path) -> dict[str, Any]:

@@ -25,7 +25,7 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -34,11 +34,13 @@ from corraoi.errors import ConfigError, DamagedPart
 
 from . import backends
 from .folder import (
+    CLI_WORDS,
     GROUP_FILES,
     MANIFEST,
     PARTS,
     CellRuns,
     ChunkResult,
+    Words,
     covered,
     group_dirs,
     merge_grids,
@@ -132,6 +134,7 @@ def sweep(
     warn: Callable[[str], None] | None = None,
     backend: str | None = None,
     outputs: SweepOutputs | None = None,
+    words: Words = CLI_WORDS,
 ) -> SweepOutcome:
     """Run ``grid``; with ``out``, into a resumable folder (module docstring).
 
@@ -151,11 +154,17 @@ def sweep(
     values are appended). ``on_chunk(done, total)`` after each chunk; ``on_slots(n)`` as the
     in-process engine advances. Returns the summaries, one per (instance, horizon) group.
     A folder is locked while the sweep writes it: a second sweep into it is refused at once.
+    A complete folder that holds ``grid`` already (:func:`saved_outcome`) is read, not run.
+    ``words``: how refusals name the options (the command line's, or Python's).
     """
     from contextlib import ExitStack
 
     grid = backends.settle(grid, backend, client=client, warn=warn)
     folder = Path(out) if out is not None else None
+    if folder is not None and not force:
+        saved = saved_outcome(folder, grid, resume=resume, words=words)
+        if saved is not None:
+            return saved
     with ExitStack() as stack:
         if folder is not None:
             from corraoi.files.locks import folder_lock
@@ -165,7 +174,77 @@ def sweep(
             stack.enter_context(folder_lock(folder, "sweep folder"))
         return _sweep(grid, folder, client=client, resume=resume, force=force, workers=workers,
                       threads_per_worker=threads_per_worker, on_chunk=on_chunk,
-                      on_slots=on_slots, warn=warn, outputs=outputs)  # fmt: skip
+                      on_slots=on_slots, warn=warn, outputs=outputs, words=words)  # fmt: skip
+
+
+def saved_outcome(folder: Path, grid: Grid, *, resume: bool = False,
+                  words: Words = CLI_WORDS) -> SweepOutcome | None:  # fmt: skip
+    """The outcome of the complete sweep folder ``folder`` when it holds ``grid`` already,
+    read from its files (nothing runs): the same cells with the same code (each plug-in's
+    sha256), runs, seed, checkpoints, baseline and backend, made by this corraoi's engine
+    sources. With ``resume``, a folder whose grid takes in ``grid`` (nothing to add) too; a
+    plug-in whose code changed is refused then (:class:`~corraoi.errors.CodeChanged`).
+    None otherwise: the sweep runs (or is refused) as ever."""
+    from corraoi.provenance import versions
+
+    if not (folder / MANIFEST).is_file():
+        return None
+    data = read_manifest_dict(folder)
+    try:
+        old = read_manifest(folder)
+    except ConfigError:
+        return None
+    prov = data.get("provenance")
+    made_by = prov.get("versions", {}) if isinstance(prov, dict) else {}
+    if old is None or data.get("status") != "complete" or not isinstance(made_by, dict) or (
+        made_by.get("kernel_sources") != versions()["kernel_sources"]
+    ):
+        return None
+    asked = Grid(grid.cells, runs=grid.runs, seed=grid.seed, chunk=grid.chunk or old.chunk,
+                 checkpoints=grid.checkpoints, baseline=grid.baseline,
+                 backend=grid.backend)  # fmt: skip
+    if resume:
+        check_code([c.policy for c in old.cells], folder, data, words=words)
+        try:
+            asked = merge_grids(old, asked, folder, words)
+        except ConfigError:
+            return None
+    if asked.to_dict() != old.to_dict():
+        return None
+    dirs = group_dirs(old, folder)
+    if not _intact(folder, old, dirs.values()):
+        return None
+    summaries = []
+    for key in old.groups():
+        try:
+            summary = json.loads((dirs[key] / "summary.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError):
+            return None
+        if not isinstance(summary, dict):
+            return None
+        summaries.append(summary)
+    chunks = sum(len(old.chunks(c)) for c in old.cells)
+    return SweepOutcome(old, summaries, [dirs[k] for k in old.groups()], 0, chunks)
+
+
+def _intact(folder: Path, grid: Grid, groups: Iterable[Path]) -> bool:
+    """Whether a complete folder still holds every file it wrote (by name and kind, none
+    read): each group's files, ``results.parquet``, a part for every run of every cell, and
+    nothing half-written (``.partial``). Otherwise a sweep into it writes what is missing."""
+    if any(folder.rglob("*.partial")) or not (folder / "results.parquet").is_dir():
+        return False
+    for d in groups:
+        for name in GROUP_FILES:
+            path = d / name
+            if path.is_symlink() or not path.is_file():
+                return False
+    made: dict[str, list[tuple[int, int]]] = {}
+    for f in (folder / PARTS).glob("*.npz"):
+        key, _, rest = f.stem.partition("-")
+        start, _, stop = rest.partition("-")
+        if start.isdigit() and stop.isdigit() and f.is_file() and not f.is_symlink():
+            made.setdefault(key, []).append((int(start), int(stop)))
+    return all(not grid.chunks(c, covered=made.get(c.key, [])) for c in grid.cells)
 
 
 def _sweep(
@@ -181,13 +260,14 @@ def _sweep(
     on_slots: Callable[[int], None] | None,
     warn: Callable[[str], None] | None,
     outputs: SweepOutputs | None,
+    words: Words = CLI_WORDS,
 ) -> SweepOutcome:
     start = time.perf_counter()
     runner = backends.choose(grid, client=client, workers=workers,
                              threads_per_worker=threads_per_worker)  # fmt: skip
     parts: dict[str, list[ChunkResult]] = {}
     if folder is not None:
-        grid = _prepare_folder(folder, grid, resume=resume, force=force)
+        grid = _prepare_folder(folder, grid, resume=resume, force=force, words=words)
 
         def damaged(exc: DamagedPart) -> None:
             aside = exc.path.with_name(exc.path.name + ".damaged")
@@ -256,22 +336,26 @@ def _check_parent(folder: Path) -> None:
         raise ConfigError(f"{folder}: cannot create the folder ({probe} is not writable)")
 
 
-def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> Grid:
+def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool,
+                    words: Words = CLI_WORDS) -> Grid:  # fmt: skip
     old = read_manifest(folder) if folder.is_dir() else None
     legacy = folder.is_dir() and old is None and any(
         (folder / f).exists() for f in (*GROUP_FILES, "results.parquet")
     )
     if resume:
         if old is None:
-            raise ConfigError(f"{folder}: no sweep to resume (no {MANIFEST}); drop --resume")
+            raise ConfigError(f"{folder}: no sweep to resume (no {MANIFEST}); drop "
+                              f"{words.resume}")  # fmt: skip
         # the code that will run is the code the sweep ran, or one line says which is not
-        check_code([c.policy for c in old.cells], folder, read_manifest_dict(folder))
-        grid = merge_grids(old, grid, folder)
+        manifest = read_manifest_dict(folder)
+        check_code([c.policy for c in old.cells], folder, manifest, words=words)
+        _check_engine(folder, manifest, words)
+        grid = merge_grids(old, grid, folder, words)
     elif old is not None or legacy:
         if not force:
             raise ConfigError(
-                f"{folder}: already holds a sweep; use --resume to continue or extend it, "
-                "or --force to start over"
+                f"{folder}: already holds a sweep; use {words.resume} to continue or extend it, "
+                f"or {words.force} to start over"
             )
         _clear(folder, old)
     folder.mkdir(parents=True, exist_ok=True)
@@ -287,6 +371,23 @@ def _prepare_folder(folder: Path, grid: Grid, *, resume: bool, force: bool) -> G
         if stale.is_file() and lock_holder(stale) is None:
             stale.unlink(missing_ok=True)
     return grid
+
+
+def _check_engine(folder: Path, manifest: dict[str, Any], words: Words) -> None:
+    """A sweep made by other engine sources (an older corraoi) is not continued: its runs
+    and the new ones would come from different code. A folder from before the hash was
+    recorded is continued as ever."""
+    from corraoi.provenance import short, versions
+
+    prov = manifest.get("provenance")
+    made_by = prov.get("versions") if isinstance(prov, dict) else None
+    then = made_by.get("kernel_sources") if isinstance(made_by, dict) else None
+    now = versions()["kernel_sources"]
+    if isinstance(then, str) and then != now:
+        raise ConfigError(f"{folder}: its runs were made by other engine sources ({short(then)}, "
+                          f"this corraoi's are {short(now)}: another corraoi); new runs would "
+                          f"not be comparable: drop {words.resume} and use {words.force} to "
+                          "start the sweep over")  # fmt: skip
 
 
 def folder_provenance(grid: Grid) -> Any:

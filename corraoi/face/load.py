@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from corraoi import arguments
 from corraoi.errors import UsageError
 
 if TYPE_CHECKING:
@@ -32,9 +33,10 @@ def load(path: str | os.PathLike[str], *, slots: tuple[int, int] | None = None) 
     Raises :class:`~corraoi.errors.LogError` for a file that is not a readable corraoi log,
     :class:`~corraoi.errors.UsageError` for ``slots`` of a sweep.
     """
-    if not isinstance(path, (str, os.PathLike)):
-        raise UsageError(f"load: expected the path of a slot log or a sweep folder, got "
-                         f"{type(path).__name__}")  # fmt: skip
+    arguments.path(
+        path, name="path", kind=UsageError, what="the path of a slot log or a sweep folder"
+    )
+    slots = arguments.optional(arguments.window, slots, name="slots")
     from recorder.sweeplog.results import is_sweep_path
 
     p = Path(path)

@@ -6,8 +6,8 @@ The caller gives what its loop knows: the arm tried and whether it delivered, an
 knows them the hidden state ``x`` and the policy's own per-slot fields. The Logger computes
 what the model defines from those: the age, the pulls and empirical means, the paper's
 estimator (with the instance's ``mu*``), and with ``x`` the oracle's age and the pathwise
-regret. What is neither given nor computable is left absent from the log
-(``RunConfig.absent``); every reader and view leaves it out.
+regret. What is neither given nor computable is left absent from the log (a field the slot
+record says may be absent; ``SlotBlock.absent``); every reader and view leaves it out.
 
 The slots become :class:`~corraoi.engine.block.SlotBlock` s, as the engine's do, and go to
 the sinks ``record_run`` feeds: the MCAP log (:class:`~recorder.slotlog.sink.McapSink`,
@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock, absent_column
+from corraoi.engine.slot_record import BY_NAME, REQUIRED
 from corraoi.errors import CorraoiError, SlotError, UsageError
 from corraoi.provenance import Provenance, versions
 from recorder.sink import RunRecording, Sink
@@ -42,15 +43,16 @@ if TYPE_CHECKING:
 
 #: The qualified name a policy logged by a Logger is given (it is no class corraoi can import).
 EXTERNAL_PREFIX = "external:"
-#: The optional per-slot fields a caller may give (besides arm, success and x), as
-#: ``SlotBlock`` names them, in the order of :meth:`Logger.slot`'s arguments.
-GIVEN_FIELDS = ("override", "mu_hat", "pulls", "candidates")
-#: What the Logger computes from the arms and successes (with the instance's mu*), given or
-#: not; every other field of FIELDS that is not given is absent from the log.
-COMPUTED = ("t", "arm", "success", "aoi", "estimator", "mu_hat", "pulls")
-_DTYPES = {"override": bool, "mu_hat": np.float64, "pulls": np.int64, "candidates": bool}
 #: What the hidden state ``x`` makes computable: without it these are absent.
 NEEDS_X = ("x", "oracle_aoi", "regret")
+#: What the Logger computes from the arms and successes (the estimator with the instance's
+#: mu*), given or not: the slot record's required fields and these.
+COMPUTED = (*REQUIRED, "estimator", "mu_hat", "pulls")
+#: The per-slot fields a caller may give besides arm, success and x, as ``SlotBlock``
+#: names them: those of the block's columns the slot record says may be absent, but the
+#: ones ``x`` gives and the estimator.
+GIVEN_FIELDS = tuple(f for f in FIELDS if BY_NAME[f].may_be_absent and f not in NEEDS_X
+                     and f != "estimator")  # fmt: skip
 
 
 class Logger:
@@ -162,6 +164,8 @@ class Logger:
         #: slots written so far (to the sinks and pending)
         self.t = 0
         self._given: tuple[bool, ...] | None = None  # (x, *GIVEN_FIELDS) given?
+        #: the columns of FIELDS the log lacks (decided by the first slot)
+        self._absent: tuple[str, ...] = ()
         self._pending: dict[str, list[Any]] = {}
         self._written = 0
         # the carried state of the run after the last slot handed to the sinks
@@ -316,6 +320,10 @@ class Logger:
             self._given = given
             self._pending = {f: [] for f in ("arm", "success")}
             self._pending.update({f: [] for f, g in zip(names, given, strict=True) if g})
+            held = {*COMPUTED, *(f for f, g in zip(names, given, strict=True) if g)}
+            if given[0]:
+                held.update(NEEDS_X)
+            self._absent = tuple(f for f in FIELDS if f not in held)
             return
         for name, now, before in zip(names, given, self._given, strict=True):
             if now != before:
@@ -329,15 +337,7 @@ class Logger:
             return
         from recorder.rerun.sink import LocalRecording
 
-        names = ("x", *GIVEN_FIELDS)
-        given = dict(zip(names, self._given or (False,) * len(names), strict=True))
-        held = {*COMPUTED, *(f for f in GIVEN_FIELDS if given[f])}
-        if given["x"]:
-            held.update(NEEDS_X)
-        absent = [f for f in FIELDS if f not in held]
-        base = self._base
-        self.config = RunConfig(base.instance, base.policy, base.seed, base.horizon,
-                                channel=base.channel, absent=tuple(absent))  # fmt: skip
+        self.config = self._base
         wrote = f"slots given to corraoi.Logger by {self.source or 'an unnamed program'}"
         if self.version:
             wrote += f" version {self.version}"
@@ -379,8 +379,6 @@ class Logger:
         """The block of the next slots from the arrays given (0-based arms and states):
         the age, counts, means, estimator, and with ``x`` the oracle's age and regret,
         carried on from the slots before."""
-        from recorder.slotlog.decode import absent_column
-
         arm = given["arm"].astype(np.int64, copy=False)
         success = given["success"].astype(bool, copy=False)
         B, K = arm.size, self.K
@@ -391,7 +389,7 @@ class Logger:
         aoisum = self._aoisum + np.cumsum(aoi)
         self._aoisum = int(aoisum[-1])
         estimator = aoisum - t / self._mu_star
-        cols: dict[str, np.ndarray] = {"t": t, "arm": arm, "success": success, "aoi": aoi,
+        cols: dict[str, Any] = {"t": t, "arm": arm, "success": success, "aoi": aoi,
                                        "estimator": estimator}  # fmt: skip
         onehot = np.zeros((B, K), dtype=np.int64)
         onehot[np.arange(B), arm] = 1
@@ -410,11 +408,10 @@ class Logger:
             cols.update(x=x, oracle_aoi=oracle, regret=regret)
         for f in GIVEN_FIELDS:
             if f in given:
-                cols[f] = given[f].astype(_DTYPES[f], copy=False)
-        for f in FIELDS:
-            if f not in cols:
-                cols[f] = absent_column(f, B, K)
-        return SlotBlock(**cols)
+                cols[f] = given[f].astype(BY_NAME[f].dtype, copy=False)
+        for f in self._absent:
+            cols[f] = absent_column(f, B, K)
+        return SlotBlock(**cols, absent=self._absent)
 
     def _block(self, arm: Any, success: Any, **fields: Any) -> SlotBlock:
         """Check a block's arrays (one SlotError naming the argument and the slot) and

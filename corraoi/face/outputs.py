@@ -110,6 +110,10 @@ class FolderOutputs:
     ``figures``, the figures are drawn by that worker process."""
 
     def __init__(self, figures: FigureWorker | None = None) -> None:
+        from corraoi.extras import require_package
+
+        # written after every run: a machine without Rerun is told before the sweep runs
+        require_package("rerun", "a sweep folder (its sweep.rrd)")
         self._figures = figures
         self._drawn: list[tuple[Path, BaseException | None]] = []
 

@@ -22,8 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi import arguments
 from corraoi.errors import (
     OutputError,
+    PolicyError,
     PolicyRuntimeError,
     SweepMismatch,
     UsageError,
@@ -226,34 +228,89 @@ def plan_files(
 
 
 def up_to_date(plan: Plan) -> bool:
-    """The plan's files exist, and its MCAP log is complete with the same configuration
-    (the version of corraoi included): recording again would write the same bytes."""
+    """The plan's files exist, and its MCAP log is complete and holds the run asked for
+    (:func:`stale`): recording again would write the same bytes."""
+    return stale(plan) is None
+
+
+def stale(plan: Plan) -> str | None:
+    """Why the plan's files do not hold the run asked for, in words (None when they do).
+
+    Read from what the log already holds, no simulation: its status, its configuration
+    (instance, policy and parameters, the sha256 of the policy's code, channel, seed,
+    horizon, backend, corraoi's version) and its provenance (the engine sources' hash, each
+    plug-in source's sha256), each compared with the run asked for, as the code is now: a
+    policy edited and defined again in this session is other code."""
     from corraoi.errors import LogError
+    from corraoi.provenance import short, versions
     from recorder.slotlog.reader import open_log
 
-    if not plan.mcap.is_file() or (plan.rrd is not None and not plan.rrd.is_file()):
-        return False
+    if not plan.mcap.is_file():
+        return "no log"
+    if plan.rrd is not None and not plan.rrd.is_file():
+        return f"no Rerun recording {plan.rrd}"
     try:
         log = open_log(plan.mcap, verify=False)
     except LogError:
-        return False
-    return log.status == "complete" and log.config.to_dict() == plan.config.to_dict()
+        return "not a readable slot log"
+    if log.status != "complete":
+        return f"a run that is not complete (its status is {log.status})"
+    had, want = log.config.to_dict(), plan.config.to_dict()
+    if had != want:
+        return f"another run ({_first_difference(had, want)})"
+    then = log.provenance.get("kernel_sources")
+    now = versions()["kernel_sources"]
+    if then != now:
+        made = (f"engine sources {short(then)}" if then else
+                "no hash of its engine sources")  # fmt: skip
+        return (f"this run as another corraoi made it ({made}, this corraoi's are "
+                f"{short(now)}: its numbers may differ)")  # fmt: skip
+    logged = sorted(p["sha256"] for p in Provenance.read(log.provenance)["plugins"])
+    ran = sorted(s.sha256 for s in Provenance.of([plan.config.policy]).sources)
+    if logged != ran:
+        return "another run (the policy's plug-in sources differ from its log's)"
+    return None
+
+
+def _first_difference(had: dict[str, Any], want: dict[str, Any]) -> str:
+    """The first setting that differs between a log's configuration and the one asked."""
+    from corraoi.provenance import short
+
+    def plugin(d: dict[str, Any]) -> dict[str, Any]:
+        return d.get("policy", {}).get("plugin") or {}
+
+    old, new = plugin(had), plugin(want)
+    if had.get("policy", {}).get("name") == want.get("policy", {}).get("name") and (
+        old.get("sha256", "") != new.get("sha256", "")
+    ):
+        then = short(old["sha256"]) if old.get("sha256") else "no hash"
+        return (f"the policy's code is {short(new.get('sha256', ''))} now, the log's ran "
+                f"{then}")  # fmt: skip
+    names = {"policy": "policy or its parameters", "version": "corraoi version"}
+    for key in ("policy", "instance", "channel", "seed", "horizon", "streams", "version"):
+        if had.get(key) != want.get(key):
+            if key in ("seed", "horizon", "version"):
+                return f"its {key} is {had.get(key)}, here {want.get(key)}"
+            return f"its {names.get(key, key)} differs"
+    return "a different configuration"
 
 
 def refuse(plans: Sequence[Plan], *, force: bool, hint: str = "--force") -> None:
     """Refuse, before anything runs, a plan whose files cannot be written: a log that holds
-    another run (without ``force``), a file another process is writing, a folder, a sweep
-    folder's own file. A ``.partial`` a killed attempt at the same run left is taken over."""
+    another run (without ``force``: the line says why), a file another process is writing,
+    a folder, a sweep folder's own file. A ``.partial`` a killed attempt at the same run
+    left is taken over."""
     from corraoi.files.partial import check_target
     from recorder.sink import made_again
     from recorder.slotlog.sink import same_run_partial
 
     for plan in plans:
         if not force and plan.mcap.is_file():
-            raise OutputError(
-                f"{plan.mcap}: already exists and holds another run (a different "
-                f"configuration, or not complete); use {hint} to overwrite it"
-            )
+            why = stale(plan) or "this run, complete"
+            if why.startswith("no Rerun recording"):
+                why = f"this run, but there is {why}"
+            raise OutputError(f"{plan.mcap}: already exists and holds {why}; use {hint} to "
+                              "overwrite it")  # fmt: skip
         check_target(plan.mcap, overwrite=force, what="MCAP log",
                      replaceable=same_run_partial(plan.config))  # fmt: skip
         if plan.rrd is not None:
@@ -390,6 +447,10 @@ def _record_one(
 # ---------------------------------------------------------------------------- the face
 
 
+#: What every sink has (:class:`recorder.sink.Sink`): written to, closed, and a context manager.
+SINK_METHODS = ("write", "close", "__enter__", "__exit__")
+
+
 def record(
     policy: PolicyLike,
     instance: str | os.PathLike[str] | Instance = "I1",
@@ -405,6 +466,7 @@ def record(
     sinks: Sequence[Sink] = (),
     on_block: Callable[[Any], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    score: bool | None = None,
 ) -> Run:
     """Simulate one run and record every slot, as ``corraoi record`` does with the same
     arguments (the same bytes in the log); returns the recorded :class:`corraoi.Run`.
@@ -427,6 +489,8 @@ def record(
     further :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own);
     ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
     next block, the files finished with the slots so far (Ctrl-C does the same).
+    ``score``: log what the policy maximised at every slot (``score``, ``forced``; by
+    default up to 64 arms).
 
     Raises :class:`~corraoi.errors.PolicyError`, :class:`~corraoi.errors.InstanceError`,
     :class:`~corraoi.errors.ConfigError` (bad input, before anything runs),
@@ -440,13 +504,26 @@ def record(
     from . import resolve
     from .runs import Run
 
+    if isinstance(policy, (list, tuple)):  # the arguments checked before anything is done
+        raise arguments.wrong_type(PolicyError, "policy", policy, f"one policy "
+                                   f"({resolve.POLICY_LIKE}); corraoi.sweep takes several")
+    seed, horizon = check_seed(seed, floats=True), check_horizon(horizon, floats=True)
+    resolve.channel_word(channel)
+    arguments.optional(arguments.path, path, name="path")
+    arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
+    arguments.flag(force, name="force")
+    arguments.optional(arguments.text, viewer, name="viewer",
+                       expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
+    arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
+    arguments.optional(arguments.callback, on_block, name="on_block")
+    arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
     check_seed(seed, name="seed")
     check_horizon(horizon)
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)
-    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan)
+    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score)
     if rrd is True:
         rrd = None
     if rrd is not None and not isinstance(rrd, (str, os.PathLike)) and rrd is not False:
@@ -470,6 +547,7 @@ def record(
 
 __all__ = [
     "DEFAULT_OUT",
+    "SINK_METHODS",
     "FROM_OUT",
     "Outlets",
     "Plan",
@@ -482,5 +560,6 @@ __all__ = [
     "record_plans",
     "record_run",
     "refuse",
+    "stale",
     "up_to_date",
 ]

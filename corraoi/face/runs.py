@@ -12,6 +12,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi import arguments
 from corraoi.errors import UsageError
 from recorder.slotlog.frames import RunData
 from recorder.slotlog.reader import RunLog
@@ -46,6 +47,11 @@ class Run(RunData):
         rrd: str | os.PathLike[str] | None = None,
         summary: RunSummary | None = None,
     ) -> None:
+        if not isinstance(path, RunLog):  # the arguments checked before the log is opened
+            arguments.path(path, name="path", kind=UsageError, what="a slot log's path")
+        slots = arguments.optional(arguments.window, slots, name="slots")
+        arguments.optional(arguments.path, rrd, name="rrd", kind=UsageError,
+                           what="a Rerun recording's path")  # fmt: skip
         super().__init__(path, slots=slots)
         if rrd is not None:
             self.rrd: Path | None = Path(rrd)
@@ -86,7 +92,8 @@ class Run(RunData):
         field (``fields``, default all), as :func:`corraoi.diff`."""
         from viewer.diffs import diff
 
-        return diff(self.log, log_of(other, "other"), fields=fields, atol=atol)
+        chosen, atol = diff_arguments(fields, atol)
+        return diff(self.log, log_of(other, "other"), fields=chosen, atol=atol)
 
     def recording(self) -> Path:
         """The run's Rerun recording: its ``.rrd``, else one replayed from the log to the
@@ -150,9 +157,8 @@ def as_run(value: Run | str | os.PathLike[str], what: str = "run") -> Run:
     if isinstance(value, Run):
         return value
     if isinstance(value, (str, os.PathLike)):
-        return Run(value)
-    raise UsageError(f"{what}: expected a corraoi.Run or a slot log's path, got "
-                     f"{type(value).__name__}")  # fmt: skip
+        return Run(arguments.path(value, name=what, kind=UsageError, what="a slot log's path"))
+    raise arguments.wrong_type(UsageError, what, value, "a corraoi.Run or a slot log's path")
 
 
 def log_of(value: Run | RunLog | str | os.PathLike[str], what: str = "run") -> RunLog:
@@ -161,4 +167,23 @@ def log_of(value: Run | RunLog | str | os.PathLike[str], what: str = "run") -> R
     return value if isinstance(value, RunLog) else as_run(value, what).log
 
 
-__all__ = ["Run", "as_run", "log_of", "rrd_beside"]
+def diff_arguments(fields: object, atol: object) -> tuple[list[str] | None, float]:
+    """``fields`` and ``atol`` of :func:`corraoi.diff` and :meth:`Run.diff`, checked: one
+    field's name (a ``str`` is one name, or a comma list, never its letters) or a list of
+    them, None for all; ``atol`` a finite number >= 0."""
+    from viewer.diffs import DIFF_FIELDS, parse_fields
+
+    chosen = arguments.optional(arguments.names, fields, name="fields", empty=True,
+                                what="fields")  # fmt: skip
+    for i, item in enumerate(chosen or ()):
+        try:
+            parse_fields([item])
+        except UsageError:
+            where = "fields" if isinstance(fields, str) else f"fields[{i}]"
+            raise arguments.wrong_value(UsageError, where, item,
+                                        f"fields of {', '.join(DIFF_FIELDS)}") from None
+    atol = arguments.number(atol, name="atol", lo=0.0)
+    return (None if chosen is None else list(chosen)), atol
+
+
+__all__ = ["Run", "as_run", "diff_arguments", "log_of", "rrd_beside"]

@@ -8,9 +8,10 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from corraoi import arguments
 from corraoi.errors import LogError, UsageError
 
-from .viewing import Shown, checked_rrd, open_viewer
+from .viewing import Shown, check_options, checked_rrd, open_viewer
 
 if TYPE_CHECKING:
     from .runs import Run
@@ -60,13 +61,13 @@ def show(
     from .runs import Run
     from .sweeps import Sweep
 
+    check_options(spawn=spawn, notebook=notebook, web_port=web_port, width=width,
+                  height=height)  # fmt: skip
     options = dict(spawn=spawn, notebook=notebook, web_port=web_port, width=width,
                    height=height)  # fmt: skip
     if isinstance(target, (Run, Sweep)):
         return target.show(**options)
-    if not isinstance(target, (str, os.PathLike)):
-        raise UsageError(f"show: expected {EXPECTED}, got {type(target).__name__}")
-    p = Path(target)
+    p = Path(arguments.path(target, name="target", kind=UsageError, what=EXPECTED))
     if not p.exists():
         raise LogError(f"{p}: no such file or folder (show expected {EXPECTED})")
     if p.suffix == ".rrd" and p.is_file():

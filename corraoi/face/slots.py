@@ -4,6 +4,7 @@ recorded run is fed. A CPU run comes from the engine; a run of a GPU sweep
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from corraoi.engine.simulation import simulate_run
@@ -13,8 +14,11 @@ def slots_of(config: Any) -> Any:
     """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
     (``config.streams``) the GPU kernel's own, captured slot by slot."""
     if config.streams == "cpu":
-        return simulate_run(config.instance, config.policy, config.seed, config.horizon,
-                            channel=config.channel)  # fmt: skip
+        blocks = simulate_run(config.instance, config.policy, config.seed, config.horizon,
+                              channel=config.channel)  # fmt: skip
+        if not config.score:  # the scores left out (RunConfig.score)
+            return (replace(b, score=None, forced=None) for b in blocks)
+        return blocks
     from corraoi.gpu.device import device_of
     from corraoi.gpu.runner import capture_run
 

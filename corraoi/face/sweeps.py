@@ -20,12 +20,14 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from corraoi.errors import ConfigError, CorraoiError, UsageError
+from corraoi import arguments
+from corraoi.errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError
 from recorder.sweeplog.results import SweepData
 
 from .resolve import PolicyLike, python_warn
 
 if TYPE_CHECKING:
+    from corraoi.experiments.folder import Words
     from corraoi.experiments.grid import Grid
     from corraoi.experiments.sweeps import SweepOutcome
     from corraoi.model.instance import Instance
@@ -46,6 +48,10 @@ class Sweep(SweepData):
       that run of every cell (what ``corraoi compare --from`` compares);
     * ``.figure(path)``: the sweep figure.
     """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(arguments.path(path, name="path", kind=UsageError,
+                                        what="a sweep folder's path"))  # fmt: skip
 
     @property
     def notable(self) -> dict[str, Any] | None:
@@ -74,26 +80,57 @@ class Sweep(SweepData):
     ) -> Run:
         """Record one run of this sweep slot by slot, as ``corraoi record --from`` does (the
         same files): ``which`` is a run index or ``worst``, ``median``, ``best``; ``policy``
-        (a name, a class, ...) and ``cell`` (a label such as ``cucb(c=2)``, or
-        ``INSTANCE/LABEL``) say whose. The run's regret must equal the sweep's row
-        (:class:`~corraoi.errors.SweepMismatch` if not: the engine or the code changed).
+        (a label the sweep's table prints, a name, a class, ...) and ``cell`` (a label such
+        as ``cucb(c=2)``, or ``INSTANCE/LABEL``) say whose. The run's regret must equal the
+        sweep's row (:class:`~corraoi.errors.SweepMismatch` if not: the engine or the code
+        changed).
 
         ``path``: the slot log (default ``runs/<folder>-<instance>-<label>-run<N>-<which>.mcap``),
-        ``rrd`` as for :func:`corraoi.record`. A plug-in edited since the sweep is refused
-        unless ``kept_code`` (the folder's copy runs) or ``allow_changed_code``. Where
-        ``which`` names runs of several cells, :class:`~corraoi.errors.CorraoiError` lists
-        them."""
-        from corraoi.experiments.drill import choose
+        ``rrd`` as for :func:`corraoi.record`: a complete log of the same run already there
+        (the same code, settings and engine) is returned as it is, nothing runs, unless
+        ``force``; one that holds another run is refused unless ``force``. A plug-in edited
+        since the sweep is refused unless ``kept_code`` (the folder's copy runs, for this
+        call only, under a module name of its own: your module and class stay as they are)
+        or ``allow_changed_code`` (the code as it is now runs, and a
+        :class:`~corraoi.errors.CorraoiWarning` says whether its regret is still equal to the
+        sweep's row or differs from it). Where ``which`` names runs of several cells,
+        :class:`~corraoi.errors.CorraoiError` lists them."""
+        from corraoi.experiments.drill import kept_code_scope, split_policy_words
 
-        from .recording import Outlets, plan_files, record_plans, refuse
-        from .resolve import TRACE_READERS, policies
+        from .resolve import policies
+
+        which = check_which(which)  # the arguments checked before anything is done
+        arguments.optional(arguments.text, cell, name="cell",
+                           expected="a cell's label (cucb(c=2)) or INSTANCE/LABEL")  # fmt: skip
+        arguments.optional(arguments.path, path, name="path")
+        arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
+        for name, value in (("force", force), ("kept_code", kept_code),
+                            ("allow_changed_code", allow_changed_code)):  # fmt: skip
+            arguments.flag(value, name=name)
+        given = _listed(policy) if policy is not None else []
+        # the labels the sweep's table prints name its cells; anything else is a policy
+        labels = split_policy_words(self.folder, [p for p in given if isinstance(p, str)])[0]
+        rest = [p for p in given if not (isinstance(p, str) and p in labels)]
+        specs = policies(rest) if rest else []
+        with kept_code_scope(self.folder, kept_code):  # the kept copies run here, only here
+            return self._record(which, specs, labels, cell, path, rrd, force, kept_code,
+                                allow_changed_code)  # fmt: skip
+
+    def _record(self, which: int | str, specs: list[Any], labels: list[str], cell: str | None,
+                path: str | os.PathLike[str] | None, rrd: str | os.PathLike[str] | bool | None,
+                force: bool, kept_code: bool, allow_changed_code: bool) -> Run:  # fmt: skip
+        from corraoi.experiments.drill import choose, row_verdict
+        from corraoi.experiments.folder import PYTHON_WORDS
+
+        from .recording import Outlets, plan_files, record_plans, refuse, up_to_date
+        from .resolve import TRACE_READERS
         from .runs import Run
 
-        specs = policies(policy) if policy is not None else []
         cells = (cell,) if cell is not None else ()
-        drills = choose(self.folder, which, cells=cells, policies=specs, warn=python_warn,
-                        kept_code=kept_code, allow_changed_code=allow_changed_code,
-                        trace_readers=TRACE_READERS)  # fmt: skip
+        drills = choose(self.folder, which, cells=cells, policies=specs, swept_labels=labels,
+                        warn=python_warn, kept_code=kept_code,
+                        allow_changed_code=allow_changed_code,
+                        trace_readers=TRACE_READERS, words=PYTHON_WORDS)  # fmt: skip
         if len(drills) != 1:
             listed = "; ".join(f"{d.config.instance.name}/{d.cell or d.config.policy.label} "
                                f"run {d.run}" for d in drills)  # fmt: skip
@@ -101,14 +138,21 @@ class Sweep(SweepData):
                 f"{self.folder}: {which!r} names {len(drills)} runs ({listed}); choose one "
                 "with cell='INSTANCE/LABEL' or policy=..."
             )
-        if rrd is not None and rrd is not False and not isinstance(rrd, (str, os.PathLike)):
-            raise UsageError(f"rrd: expected a path, None or False, got {rrd!r}")
         rrd_path = None if rrd is None or rrd is False or rrd is True else rrd
         plans = plan_files([drills[0].config], path, rrd_path, no_rrd=rrd is False,
                            drills=drills)  # fmt: skip
+        if not force and up_to_date(plans[0]):  # the cell run again: the run it recorded
+            return Run(plans[0].mcap, rrd=plans[0].rrd)
         refuse(plans, force=force, hint="force=True")
         (done,) = record_plans(plans, Outlets(overwrite=force))
         assert done.mcap is not None
+        verdict = row_verdict(drills[0], done.slots, done.regret)  # changed code: still equal?
+        if verdict is not None:
+            import warnings
+
+            from corraoi.errors import CorraoiWarning
+
+            warnings.warn(verdict, CorraoiWarning, stacklevel=2)
         return Run(done.mcap, rrd=done.rrd, summary=done.summary)
 
     def record_each(
@@ -122,6 +166,7 @@ class Sweep(SweepData):
         allow_changed_code: bool = False,
         say: Callable[[str], None] | None = None,
         warn: Callable[[str], None] = python_warn,
+        words: Words | None = None,
     ) -> list[Run]:
         """The chosen run (``which``, as for :meth:`record`) of every cell of this sweep (or
         of ``cells`` only), each recorded slot by slot into ``folder`` (MCAP only, named after
@@ -130,7 +175,23 @@ class Sweep(SweepData):
         is an :class:`~corraoi.errors.OutputError` unless ``force``. Each run's regret must
         equal the sweep's row (:class:`~corraoi.errors.SweepMismatch`). ``say`` is told of
         each run as it starts; ``warn`` of what the choice notices (a
-        :class:`~corraoi.errors.CorraoiWarning` by default)."""
+        :class:`~corraoi.errors.CorraoiWarning` by default); ``words``: how refusals name the
+        options (Python's unless told: ``corraoi compare --from`` gives the command line's)."""
+        from corraoi.experiments.drill import kept_code_scope
+        from corraoi.experiments.folder import PYTHON_WORDS, Words
+
+        if words is not None and not isinstance(words, Words):
+            raise arguments.wrong_type(UsageError, "words", words,
+                                       "None or corraoi.experiments.folder.Words")  # fmt: skip
+        words = words or PYTHON_WORDS
+        with kept_code_scope(self.folder, kept_code):  # the kept copies run here, only here
+            return self._record_each(which, cells, folder, force, kept_code,
+                                     allow_changed_code, say, warn, words)  # fmt: skip
+
+    def _record_each(self, which: int | str, cells: Sequence[str],
+                     folder: str | os.PathLike[str], force: bool, kept_code: bool,
+                     allow_changed_code: bool, say: Callable[[str], None] | None,
+                     warn: Callable[[str], None], words: Words) -> list[Run]:  # fmt: skip
         from corraoi.engine.threads import set_workers
         from corraoi.experiments.drill import choose
         from corraoi.text import safe_name, safe_text
@@ -139,13 +200,21 @@ class Sweep(SweepData):
         from .resolve import TRACE_READERS
         from .runs import Run
 
+        which = check_which(which)  # the arguments checked before anything is done
+        cells = arguments.names(cells, name="cells", empty=True, what="cells' labels")
+        arguments.path(folder, name="folder", what="a folder's path")
+        for name, value in (("force", force), ("kept_code", kept_code),
+                            ("allow_changed_code", allow_changed_code)):  # fmt: skip
+            arguments.flag(value, name=name)
+        arguments.optional(arguments.callback, say, name="say")
+        arguments.callback(warn, name="warn")
         drills = choose(self.folder, which, cells=tuple(cells), warn=warn,
                         kept_code=kept_code, allow_changed_code=allow_changed_code,
-                        trace_readers=TRACE_READERS)  # fmt: skip
+                        trace_readers=TRACE_READERS, words=words)  # fmt: skip
         plans = [Plan(d.config, Path(folder) / f"{safe_name(d.name)}.mcap", None, drill=d)
                  for d in drills]  # fmt: skip
         todo = [p for p in plans if not up_to_date(p)]
-        refuse(todo, force=force, hint="force (--force)")
+        refuse(todo, force=force, hint=words.force)
         set_workers(1)  # one run has nothing to spread over threads
         for p in todo:
             d = p.drill
@@ -163,6 +232,9 @@ class Sweep(SweepData):
         from recorder.sweeplog.read import read_sweep
         from viewer.figure import draw_figure
 
+        arguments.path(path, name="path", what="the figure's path")
+        arguments.flag(log_x, name="log_x")
+        arguments.flag(log_y, name="log_y")
         return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
 
     def recordings(self) -> list[Path]:
@@ -215,6 +287,14 @@ class Sweep(SweepData):
         return f"<p>{html.escape(title)}</p><table><tr>{cells}</tr>{body}</table>"
 
 
+def check_which(which: object) -> int | str:
+    """``which`` of :meth:`Sweep.record` and :meth:`Sweep.record_each`: a run index or
+    ``worst``, ``median``, ``best`` (:func:`corraoi.arguments.index_or_word`)."""
+    from corraoi.experiments.notable import CHOICES
+
+    return arguments.index_or_word(which, name="which", words=CHOICES)
+
+
 def settle_backend(grid: Grid, warn: Callable[[str], None] | None = None) -> Grid:
     """The grid with ``auto`` resolved (a notice through ``warn`` when it falls back to the
     CPU) and ``gpu`` checked (:class:`~corraoi.errors.GpuUnavailable` says why not)."""
@@ -254,19 +334,29 @@ def run_grid(
     on_chunk: Callable[[int, int], None] | None = None,
     warn: Callable[[str], None] | None = None,
     figure_worker: bool = True,
+    words: Words | None = None,
 ) -> SweepOutcome:
     """Run ``grid`` (:func:`corraoi.experiments.sweeps.sweep`) with every output a sweep folder
     has: the sweep logs, recordings, ``results.parquet`` and figures
     (:class:`~corraoi.face.outputs.FolderOutputs`). ``scheduler``: ``local:N``,
     ``tcp://HOST:PORT`` or a ``dask.distributed.Client`` (the ``cluster`` extra). Into a
     folder in this process, the figures are drawn by a forked process that imports matplotlib
-    while the sweep runs (``figure_worker``)."""
+    while the sweep runs (``figure_worker``). A complete folder of the same sweep is read at
+    once (:func:`corraoi.experiments.sweeps.saved_outcome`). ``words``: how refusals name
+    the options (the command line's unless told)."""
     from corraoi.experiments.backends import GPU_NOT_ON_CLUSTER
+    from corraoi.experiments.folder import CLI_WORDS
+    from corraoi.experiments.sweeps import saved_outcome
     from corraoi.experiments.sweeps import sweep as run_sweep
 
+    words = words or CLI_WORDS
     folder = Path(out) if out is not None else None
     if scheduler is not None and grid.backend == "gpu":  # before a cluster is started
         raise ConfigError(GPU_NOT_ON_CLUSTER)
+    if folder is not None and not force:  # nothing to run: no worker, no cluster started
+        saved = saved_outcome(folder, grid, resume=resume, words=words)
+        if saved is not None:
+            return saved
     with ExitStack() as stack:
         outputs = None
         if folder is not None:
@@ -292,7 +382,7 @@ def run_grid(
             client = scheduler  # a dask.distributed.Client of the caller's
         return run_sweep(grid, out=folder, client=client, resume=resume, force=force,
                          workers=workers, on_chunk=on_chunk, on_slots=on_slots, warn=warn,
-                         outputs=outputs)  # fmt: skip
+                         outputs=outputs, words=words)  # fmt: skip
 
 
 def _listed(value: Any) -> list[Any]:
@@ -347,12 +437,45 @@ def sweep(
     Ctrl-C (KeyboardInterrupt) keeps the finished chunks: ``resume=True`` continues.
     """
     from corraoi import limits
-    from corraoi.experiments.grid import build_grid
+    from corraoi.experiments.folder import PYTHON_WORDS
+    from corraoi.experiments.grid import BACKENDS, build_grid
 
     from . import resolve
 
+    # the arguments checked before anything is done (corraoi.arguments)
+    if isinstance(instances, (list, tuple)) and not instances:
+        raise arguments.wrong_value(InstanceError, "instances", instances,
+                                    "at least one instance", "empty")  # fmt: skip
+    if isinstance(horizon, (list, tuple)) and not horizon:
+        raise arguments.wrong_value(ConfigError, "horizon", horizon, "at least one horizon",
+                                    "empty")  # fmt: skip
+    runs = limits.check_int(runs, name="runs", lo=1, hi=limits.MAX_RUNS, floats=True)
+    horizon = [limits.check_horizon(h, name="horizon" if not isinstance(horizon, (list, tuple))
+                                    else f"horizon[{i}]", floats=True)
+               for i, h in enumerate(_listed(horizon))]  # fmt: skip
+    seed = limits.check_seed(seed, runs=runs, floats=True)
+    arguments.optional(arguments.path, out, name="out", what="the sweep folder's path")
+    arguments.text(backend, name="backend", kind=ConfigError, choices=BACKENDS)
+    if scheduler is not None and not (isinstance(scheduler, str) or hasattr(scheduler, "submit")):
+        raise arguments.wrong_type(ConfigError, "scheduler", scheduler, "'local:N', "
+                                   "'tcp://HOST:PORT', a dask.distributed.Client or None")
+    arguments.optional(arguments.text, scheduler if isinstance(scheduler, str) else None,
+                       name="scheduler", kind=ConfigError,
+                       expected="'local:N', 'tcp://HOST:PORT', a dask.distributed.Client or None")
+    resolve.channel_word(channel)
+    arguments.optional(arguments.text, baseline, name="baseline", kind=PolicyError,
+                       expected="the name of one of the swept policies")  # fmt: skip
+    chunk = limits.check_int(chunk, name="chunk", lo=0, hi=limits.MAX_RUNS, floats=True,
+                             why="runs per chunk; 0 chooses")  # fmt: skip
+    checkpoints = limits.check_int(checkpoints, name="checkpoints", lo=2,
+                                   hi=limits.MAX_CHECKPOINTS, floats=True)  # fmt: skip
+    for name, value in (("resume", resume), ("force", force), ("allow_huge", allow_huge)):
+        arguments.flag(value, name=name)
+    workers = arguments.optional(limits.check_int, workers, name="workers", lo=1,
+                                 hi=limits.MAX_WORKERS, floats=True)  # fmt: skip
+    arguments.optional(arguments.callback, on_slots, name="on_slots")
     insts = [resolve.instance(i) for i in _listed(instances)]
-    words, scoped = resolve.policy_words(policies, params)
+    words, scoped = resolve.policy_words(policies, params, "policies")
     horizons = [int(h) for h in _listed(horizon)]
     given = {k: v if isinstance(v, list) else [v]
              for k, v in {**scoped, **resolve.flat_params(params, several=True)}.items()}
@@ -367,7 +490,8 @@ def sweep(
     check_grid(grid, folder, allow_huge=allow_huge)
     try:
         run_grid(grid, out=folder, scheduler=scheduler, resume=resume, force=force,
-                 workers=workers, on_slots=on_slots, warn=python_warn)  # fmt: skip
+                 workers=workers, on_slots=on_slots, warn=python_warn,
+                 words=PYTHON_WORDS)  # fmt: skip
     except BaseException:
         if temporary:
             shutil.rmtree(folder, ignore_errors=True)

@@ -22,6 +22,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from corraoi import arguments
 from corraoi.errors import LogError, UsageError, ViewerError
 
 #: The first bytes of every Rerun recording file (0.41: ``RRF2``).
@@ -103,6 +104,8 @@ def open_viewer(
     """Open the viewer :func:`corraoi.show` describes on the recordings ``find()`` returns,
     called once the viewer is known to be possible (so that nothing is replayed for a
     viewer that cannot open)."""
+    web_port = check_options(spawn=spawn, notebook=notebook, web_port=web_port, width=width,
+                             height=height)  # fmt: skip
     if spawn and notebook:
         raise UsageError("show: spawn=True opens a native window, notebook=True a widget; "
                          "choose one")  # fmt: skip
@@ -124,6 +127,25 @@ def open_viewer(
     if in_notebook:
         return _widget(recordings, width=width, height=height)
     return _web(recordings, web_port=web_port)
+
+
+def check_options(*, spawn: object, notebook: object, web_port: object, width: object,
+                  height: object) -> int:  # fmt: skip
+    """The viewer's options of :func:`corraoi.show`, ``Run.show`` and ``Sweep.show``, checked
+    (:mod:`corraoi.arguments`); returns ``web_port`` as an int (0: any free port)."""
+    from corraoi.limits import MAX_PORT
+
+    arguments.flag(spawn, name="spawn")
+    arguments.optional(arguments.flag, notebook, name="notebook")
+    port = arguments.integer(web_port, name="web_port", lo=0, hi=MAX_PORT,
+                             why="a TCP port; 0 for any free one")  # fmt: skip
+    if width != "auto":
+        if isinstance(width, str):
+            raise arguments.wrong_value(UsageError, "width", width,
+                                        "a width in pixels (an integer >= 1) or 'auto'")
+        arguments.integer(width, name="width", lo=1, why="pixels, or 'auto'")
+    arguments.integer(height, name="height", lo=1, why="pixels")
+    return port
 
 
 def checked_rrd(p: Path) -> Path:
@@ -158,10 +180,11 @@ def _execution_count() -> int | None:
 
 def _web(recordings: list[Path], *, web_port: int) -> Shown:
     """``rerun --serve-web`` on 127.0.0.1 (the ``--serve-web`` server), fed the recordings."""
-    from recorder.live.viewers import WebViewer
+    from recorder.live.viewers import WebViewer, free_port
 
     os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
-    web = WebViewer(web_port=web_port).start()
+    # 0: any free port, as in socket: one is bound and read back, so that the URL names it
+    web = WebViewer(web_port=web_port or free_port(0)).start()
     try:
         _send(recordings, web.grpc_url)
     except BaseException:
@@ -171,21 +194,42 @@ def _web(recordings: list[Path], *, web_port: int) -> Shown:
 
 
 def _send(recordings: list[Path], url: str) -> None:
-    """Load each recording, unchanged (its own application and recording id), into the
-    server at ``url``, which keeps it for every viewer that connects."""
+    """Load each recording, unchanged, into the server at ``url``, which keeps it for every
+    viewer that connects. Each goes through a stream of the file's own application and
+    recording id (:func:`store_of`), so the viewer lists the run and nothing beside it (a
+    stream of its own would be an empty source of that name)."""
     import rerun as rr
 
-    stream = rr.RecordingStream("corraoi-show", send_properties=False)
-    try:
-        stream.connect_grpc(url)
-        for p in recordings:
+    for p in recordings:
+        app, rec = store_of(p)
+        stream = rr.RecordingStream(app, recording_id=rec, send_properties=False)
+        try:
+            stream.connect_grpc(url)
             stream.log_file_from_path(p)
-        stream.flush()
+            stream.flush()
+        except Exception as exc:  # noqa: BLE001 - rerun raises several kinds here
+            raise ViewerError(f"show: cannot send {p} to the viewer at {url}: "
+                              f"{exc}") from None  # fmt: skip
+        finally:
+            stream.disconnect()
+
+
+def store_of(rrd: Path) -> tuple[str, str | None]:
+    """(application id, recording id) of the recording the ``.rrd`` file holds (its first,
+    if several); a file without one (a blueprint alone) gives ``corraoi`` and None."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():  # a file from before footers: read whole, not said
+            warnings.simplefilter("ignore")
+            entries = RrdReader(rrd).recordings()
     except Exception as exc:  # noqa: BLE001 - rerun raises several kinds here
-        raise ViewerError(f"show: cannot send {recordings[0]} to the viewer at {url}: "
-                          f"{exc}") from None  # fmt: skip
-    finally:
-        stream.disconnect()
+        raise LogError(f"{rrd}: cannot read the Rerun recording ({exc})") from None
+    if not entries:
+        return "corraoi", None
+    return entries[0].application_id, entries[0].recording_id
 
 
 def _native(recordings: list[Path]) -> Shown:
@@ -268,4 +312,5 @@ def serve_widget_assets() -> str | None:
         return _assets_url
 
 
-__all__ = ["Shown", "checked_rrd", "in_kernel", "open_viewer", "serve_widget_assets"]
+__all__ = ["Shown", "check_options", "checked_rrd", "in_kernel", "open_viewer",
+           "serve_widget_assets"]  # fmt: skip

@@ -8,9 +8,11 @@ import os
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from corraoi import arguments
 from corraoi.errors import UsageError
+from recorder.slotlog.reader import RunLog
 
-from .runs import Run, log_of
+from .runs import Run, diff_arguments, log_of
 
 if TYPE_CHECKING:
     from viewer.compare import Comparison
@@ -34,8 +36,19 @@ def compare(
     :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
     from viewer.compare import compare as compare_logs
 
-    if isinstance(runs, (str, os.PathLike)) or not isinstance(runs, Sequence) or not runs:
-        raise UsageError("runs: expected a list of runs or slot logs to compare")
+    if isinstance(runs, (str, os.PathLike)) or not isinstance(runs, Sequence):
+        raise arguments.wrong_type(UsageError, "runs", runs, "a list of corraoi.Run or slot "
+                                   "logs' paths")  # fmt: skip
+    if not runs:
+        raise arguments.wrong_value(UsageError, "runs", runs, "at least one run", "empty")
+    arguments.optional(arguments.path, rrd, name="rrd", what="the Rerun recording's path")
+    arguments.optional(arguments.text, viewer, name="viewer",
+                       expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
+    arguments.flag(force, name="force")
+    for i, r in enumerate(runs):
+        if not isinstance(r, (Run, RunLog)):
+            arguments.path(r, name=f"runs[{i}]", kind=UsageError,
+                           what="a corraoi.Run or a slot log's path")  # fmt: skip
     logs = [log_of(r, f"runs[{i}]") for i, r in enumerate(runs)]
     return compare_logs(logs, rrd_path=rrd, viewer_url=viewer, overwrite=force)
 
@@ -55,7 +68,8 @@ def diff(
     cannot be read."""
     from viewer.diffs import diff as diff_logs
 
-    return diff_logs(log_of(a, "a"), log_of(b, "b"), fields=fields, atol=atol)
+    chosen, atol = diff_arguments(fields, atol)  # before any log is opened
+    return diff_logs(log_of(a, "a"), log_of(b, "b"), fields=chosen, atol=atol)
 
 
 __all__ = ["compare", "diff"]

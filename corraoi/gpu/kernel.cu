@@ -814,7 +814,9 @@ struct DTsForm {
 // The per-slot capture of run `cap_run` (-1: none), CAI_CAPW values a slot of this launch into
 // `cap`: the hidden state, the arm, the reward, the ages (own, oracle's), the regret and the
 // AoI sum after the slot, the override flag and the candidate set as a bit mask (K <= 64).
-// What `corraoi record --from` of a GPU sweep turns into the slots of one run.
+// What `corraoi record --from` of a GPU sweep turns into the slots of one run. The row's
+// layout is corraoi.engine.slot_record.GPU_CAPTURE_ROW (each `row[i] =` below names its
+// field in a comment; tests/test_slot_record.py checks the two agree).
 #define CAI_CAPW 9
 
 // The hidden state of slot t from its word w (w / 2^32 a uniform), through the CDF of row 0
@@ -1003,15 +1005,15 @@ CAI_FN void cai_run(int r, const u64* comb_tab, CAI_PARAMS) {
         osum += (i64)oage;
         if (r == cap_run) {
             i64* row = cap + (i64)j * CAI_CAPW;
-            row[0] = x;
-            row[1] = arm;
-            row[2] = rew;
-            row[3] = age;
-            row[4] = oage;
-            row[5] = asum - osum;
-            row[6] = asum;
-            row[7] = override_ ? 1 : 0;
-            row[8] = (i64)cand;
+            row[0] = x;                   // x
+            row[1] = arm;                 // arm
+            row[2] = rew;                 // success
+            row[3] = age;                 // aoi
+            row[4] = oage;                // oracle_aoi
+            row[5] = asum - osum;         // regret
+            row[6] = asum;                // aoisum
+            row[7] = override_ ? 1 : 0;   // override
+            row[8] = (i64)cand;           // candidates
         }
         if (t == next_ck) {
             ck_reg[(i64)ci * R + r] = asum - osum;

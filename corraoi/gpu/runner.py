@@ -26,6 +26,7 @@ import numpy as np
 
 from corraoi.engine.block import SlotBlock
 from corraoi.engine.problem import Problem
+from corraoi.engine.slot_record import GPU_CAPTURE_ROW
 from corraoi.errors import ConfigError, GpuUnavailable
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
@@ -243,8 +244,9 @@ def simulate(
     )  # fmt: skip
 
 
-#: Values the kernel captures per slot (kernel.cu, CAI_CAPW).
-CAPTURE_WIDTH = 9
+#: Values the kernel captures per slot (kernel.cu, CAI_CAPW): the slot record's capture row.
+CAPTURE_WIDTH = len(GPU_CAPTURE_ROW)
+_COL = {name: i for i, name in enumerate(GPU_CAPTURE_ROW)}
 
 
 def capture_run(
@@ -273,8 +275,8 @@ def capture_run(
         n = min(block, horizon - t)
         prob.launch(seed, t, n, cap_run=0, cap=cap)
         rows = dev.asnumpy(cap)[: n * CAPTURE_WIDTH].reshape(n, CAPTURE_WIDTH)
-        arm = rows[:, 1]
-        success = rows[:, 2] == 1
+        arm = rows[:, _COL["arm"]]
+        success = rows[:, _COL["success"]] == 1
         hit = np.zeros((n, K), dtype=np.int64)
         hit[np.arange(n), arm] = 1
         p = pulls + np.cumsum(hit, axis=0)
@@ -282,12 +284,13 @@ def capture_run(
         with np.errstate(invalid="ignore", divide="ignore"):
             mu_hat = np.where(p > 0, s / np.maximum(p, 1), 0.0)
         ts = np.arange(t + 1, t + n + 1, dtype=np.int64)
-        yield SlotBlock(
-            t=ts, x=rows[:, 0].copy(), arm=arm.copy(), success=success, aoi=rows[:, 3].copy(),
-            oracle_aoi=rows[:, 4].copy(), regret=rows[:, 5].copy(),
-            estimator=rows[:, 6] - ts / mu_star, override=rows[:, 7] == 1,
+        col = {name: rows[:, i] for name, i in _COL.items()}
+        yield SlotBlock(  # no score, forced or override_threshold: the GPU captures none
+            t=ts, x=col["x"].copy(), arm=arm.copy(), success=success, aoi=col["aoi"].copy(),
+            oracle_aoi=col["oracle_aoi"].copy(), regret=col["regret"].copy(),
+            estimator=col["aoisum"] - ts / mu_star, override=col["override"] == 1,
             mu_hat=mu_hat, pulls=p,
-            candidates=(rows[:, 8:9].astype(np.uint64) & bits[None, :]) != 0,
+            candidates=(col["candidates"][:, None].astype(np.uint64) & bits[None, :]) != 0,
         )  # fmt: skip
         pulls, succ = p[-1].copy(), s[-1].copy()
         t += n

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, ConfigValueError
 
 from .instance import Instance
 
@@ -149,7 +149,7 @@ def parse_channel(
         return ch
     if text.startswith("trace:"):
         return load_trace(text[len("trace:") :], instance, readers=readers)
-    raise ConfigError(
+    raise ConfigValueError(
         f"--channel {spec!r}: expected iid, markov or trace:PATH (a .mcap slot log or a text "
         "file of 1-based states)"
     )

@@ -21,13 +21,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from corraoi.errors import InstanceError
+from corraoi.errors import InstanceError, InstanceValueError
 
 P_TOLERANCE = 1e-9
 
@@ -54,10 +55,11 @@ class Instance:
             raise InstanceError(f"{where}: Y must be a K x n table, got shape {Y.shape}")
         if not np.all(np.isfinite(p)) or np.any(p < 0):
             raise InstanceError(f"{where}: probabilities must be finite and >= 0, got {p.tolist()}")
-        if abs(float(p.sum()) - 1.0) > P_TOLERANCE:
+        total = math.fsum(p)
+        if abs(total - 1.0) > P_TOLERANCE:
             raise InstanceError(
                 f"{where}: probabilities must sum to 1 (within {P_TOLERANCE:g}), "
-                f"they sum to {float(p.sum())!r}"
+                f"they sum to {total!r}"
             )
         if Y.shape[0] < 2:
             raise InstanceError(f"{where}: an instance needs at least 2 arms, got {Y.shape[0]}")
@@ -99,6 +101,8 @@ class Instance:
         object.__setattr__(self, "Y", Yi)
         object.__setattr__(self, "arm_names", arms)
         object.__setattr__(self, "state_names", states)
+        if isinstance(self.name, str):  # one name, however its letters were composed
+            object.__setattr__(self, "name", unicodedata.normalize("NFC", self.name))
 
     @property
     def K(self) -> int:  # noqa: N802 - the paper's notation
@@ -110,8 +114,8 @@ class Instance:
 
     @property
     def mu(self) -> np.ndarray:
-        """Mean reward of each arm, ``mu_k = sum_x p_x Y[k, x]``."""
-        return self.Y.astype(np.float64) @ self.p
+        """Mean reward of each arm, ``mu_k = sum_x p_x Y[k, x]`` (:func:`weighted_sums`)."""
+        return weighted_sums(self.Y, self.p)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Instance):
@@ -157,7 +161,7 @@ class Instance:
         if missing:
             raise InstanceError(f"{where}: missing key(s) {', '.join(missing)} (expected p and Y)")
         if transition is not None:
-            from .markov import check_transition, stationary
+            from .markov import check_chain, check_transition, stationary
 
             if not isinstance(transition, list) or not all(isinstance(r, list) for r in transition):
                 raise InstanceError(f"{where}: transition must be a list of rows (n x n)")
@@ -170,6 +174,11 @@ class Instance:
             n_given = len(data["p"]) if isinstance(data.get("p"), list) else None
             P = check_transition(transition, n_given, where)
             if "p" not in data:
+                states = data.get("states")
+                names = None
+                if isinstance(states, list) and len(states) == P.shape[0]:
+                    names = [str(v) for v in states]
+                check_chain(P, where, names)
                 data = {**data, "p": [float(v) for v in stationary(P)]}
         p, Y = data["p"], data["Y"]
         if not isinstance(p, list) or not all(_is_number(v) for v in p):
@@ -193,6 +202,15 @@ class Instance:
             state_names=tuple(str(s) for s in data.get("states", ()) or ()),
             transition=None if transition is None else np.array(transition, dtype=np.float64),
         )
+
+
+def weighted_sums(M: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``sum_x p_x M[k, x]`` for every row k of a 0/1 table ``M``, correctly rounded: each
+    sum by ``math.fsum``, so the result is the same bits on every machine (a matrix product
+    goes through BLAS, whose order of additions, and so whose last bits, depend on the CPU).
+    mu, mu* and phi are made by it; they are logged and decide the estimator."""
+    rows = np.asarray(M) != 0
+    return np.array([math.fsum(p[row]) for row in rows], dtype=np.float64).reshape(rows.shape[0])
 
 
 def _same_matrix(a: np.ndarray | None, b: np.ndarray | None) -> bool:
@@ -244,7 +262,7 @@ def load_instance(spec: str | os.PathLike[str] | Instance) -> Instance:
     path = Path(text)
     if not path.exists():
         known = ", ".join(BUILTINS)
-        raise InstanceError(f"{text}: no such instance file (built-in instances: {known})")
+        raise InstanceValueError(f"{text}: no such instance file (built-in instances: {known})")
     if path.is_dir():
         raise InstanceError(f"{text}: is a directory, expected an instance file")
     raw = _read_regular(path, text)

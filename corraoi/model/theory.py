@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .instance import Instance
+from .instance import Instance, weighted_sums
 
 #: Two means closer than this are a tie (for the best arm and for competitiveness).
 TIE_TOL = 1e-12
@@ -125,8 +125,8 @@ def _analyse(inst: Instance) -> InstanceTheory:
     ybest = inst.Y[best].astype(int)
     # phi_{l,k*} = sum_x p_x s_{l,k*}(Y_{k*}(x)); states with p_x = 0 contribute nothing
     vals = s[:, best, :][:, ybest]  # (K, n): s_{l,k*}(Y_{k*}(x))
-    vals = np.where(inst.p[None, :] > 0, vals, 0.0)
-    phi = vals @ inst.p
+    vals = np.where(inst.p[None, :] > 0, vals, 0.0)  # 0 or 1: s is a maximum of rewards
+    phi = weighted_sums(vals, inst.p)
     mu_star = float(mu[best])
     pseudo_gap = mu_star - phi
     pseudo_gap[best] = 0.0

@@ -21,7 +21,7 @@ user's do) and their numba hooks load only when a kernel is built.
 
 from __future__ import annotations
 
-from .api import RGB, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, gpu_form
+from .api import RGB, Choice, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, gpu_form
 from .registry import (
     ENTRY_POINT_GROUP,
     available,
@@ -49,6 +49,7 @@ __all__ = [
     "AOI_PREFIX",
     "ENTRY_POINT_GROUP",
     "RGB",
+    "Choice",
     "CompiledPolicy",
     "GpuForm",
     "Param",

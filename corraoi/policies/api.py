@@ -21,7 +21,8 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from corraoi.errors import PolicyError
+from corraoi.arguments import flag, number, optional, text, wrong_type, wrong_value
+from corraoi.errors import PolicyError, PolicyTypeError
 
 RGB = tuple[int, int, int]
 BUILTIN_PREFIX = "corraoi:"
@@ -44,23 +45,23 @@ class Param:
     integer: bool = False
 
     def __post_init__(self) -> None:
-        for field in ("default", "low", "high"):
-            value = getattr(self, field)
-            if field != "default" and value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
-                                                                  np.floating)):  # fmt: skip
-                raise PolicyError(f"Param {field}: expected a number, got {value!r} "
-                                  "(Param(default, help, low, high, ...))")  # fmt: skip
-        if not isinstance(self.help, str):
-            raise PolicyError(f"Param help: expected text, got {self.help!r} "
-                              "(Param(default, help, low, high, ...))")  # fmt: skip
+        hint = " (Param(default, help, low, high, ...))"
+        number(self.default, name="Param default", kind=PolicyError, finite=False,
+               expected="a number" + hint)  # fmt: skip
+        for bound in ("low", "high"):
+            optional(number, getattr(self, bound), name=f"Param {bound}", kind=PolicyError,
+                     finite=False, expected="a number or None" + hint)  # fmt: skip
+        text(self.help, name="Param help", kind=PolicyError, empty=True,
+             expected="a line of text" + hint)  # fmt: skip
         for field in ("open_low", "open_high", "integer"):
-            if not isinstance(getattr(self, field), (bool, np.bool_)):
-                raise PolicyError(f"Param {field}: expected True or False, got "
-                                  f"{getattr(self, field)!r}")  # fmt: skip
-        if self.check(float(self.default)) is not None:
-            raise PolicyError(f"parameter default {self.default!r} is outside {self.range_text()}")
+            flag(getattr(self, field), name=f"Param {field}", kind=PolicyError)
+        if self.low is not None and self.high is not None and self.low > self.high:
+            raise wrong_value(PolicyError, "Param low", self.low,
+                              f"a low bound <= high ({self.high!r})")  # fmt: skip
+        problem = self.check(float(self.default))
+        if problem is not None:
+            why = "out of range" if problem.startswith("must be in") else problem
+            raise wrong_value(PolicyError, "Param default", self.default, self.range_text(), why)
 
     def range_text(self) -> str:
         lo = "-inf" if self.low is None else f"{self.low:g}"
@@ -129,12 +130,48 @@ class PolicyBase:
     paper: ClassVar[bool] = False
     tier: ClassVar[str] = ""
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        check_declaration(cls)
+
     @classmethod
     def describe(cls) -> str:
         if cls.summary:
             return cls.summary
         doc = (cls.__doc__ or "").strip().splitlines()
         return doc[0].strip() if doc else ""
+
+
+def check_declaration(cls: type[PolicyBase]) -> type[PolicyBase]:
+    """A policy class's declarations checked as it is declared (and again where it is
+    registered): ``params`` a table of parameter names to :class:`Param`, ``name``,
+    ``label``, ``summary`` and ``reference`` text, ``color`` an RGB triple or None.
+    :class:`~corraoi.errors.PolicyTypeError` / ``PolicyValueError`` name what is wrong."""
+    where = cls.__qualname__
+    for attr in ("name", "label", "summary", "reference"):
+        text(getattr(cls, attr), name=f"{where}.{attr}", kind=PolicyError, empty=True)
+    table = cls.params
+    if not isinstance(table, Mapping):
+        raise wrong_type(PolicyError, f"{where}.params", table,
+                         'a dict of parameter names to corraoi.Param (e.g. {"epsilon": '
+                         'Param(0.1, "exploration", low=0, high=1)})')  # fmt: skip
+    for key, decl in table.items():
+        if not isinstance(key, str) or not key.isidentifier():
+            raise wrong_value(PolicyError, f"{where}.params key", key,
+                              "a parameter name (a Python identifier)")  # fmt: skip
+        if not isinstance(decl, Param):
+            raise wrong_type(PolicyError, f"{where}.params[{key!r}]", decl,
+                             f'a corraoi.Param (e.g. Param({decl!r}, "help", low=..., '
+                             "high=...))" if isinstance(decl, (int, float)) else
+                             "a corraoi.Param")  # fmt: skip
+    color = cls.color
+    if color is not None and not (
+        isinstance(color, (tuple, list)) and len(color) == 3
+        and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255 for c in color)
+    ):  # fmt: skip
+        raise wrong_type(PolicyError, f"{where}.color", color,
+                         "None or an (r, g, b) tuple of integers 0..255")  # fmt: skip
+    return cls
 
 
 class CompiledPolicy(PolicyBase):
@@ -205,23 +242,81 @@ class RunStreams(Protocol):
 
 
 class RunState:
-    """What a plain-Python policy sees (read-only arrays; arms are 0-based).
+    """What a plain-Python policy sees: read-only, arms 0-based.
 
-    ``t`` the current slot (1-based); ``runs``, ``arms`` (K); ``pulls`` and ``successes``
-    (runs, K) int64 before this slot; ``mu_hat`` (runs, K) their ratio (0 for unpulled arms);
-    ``aoi`` (runs,) the current age; ``seeds`` (runs,); ``rng`` the runs' streams.
+    ``t`` the current slot (1-based; 0 in ``reset``); ``runs``, ``arms`` (K); ``seeds``
+    (runs,); ``pulls`` and ``successes`` (runs, K) int64 before this slot; ``mu_hat``
+    (runs, K) their ratio (0 for unpulled arms); ``aoi`` (runs,) the current age; ``rng`` the
+    runs' streams.
+
+    The arrays are read-only views of the engine's own: they follow the run as it advances
+    (keep ``state.pulls.copy()`` for a snapshot), and a write into one (``state.mu_hat[0] =
+    1``, ``state.aoi += 1``, ``np.copyto(state.pulls, 0)``) raises at once, as does setting
+    any attribute (``state.t = 0``); the engine then ends the run with one
+    :class:`~corraoi.errors.PolicyRuntimeError` naming the policy, the field and the slot.
     """
 
-    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams) -> None:
-        self.t = 0
-        self.runs = runs
-        self.arms = arms
-        self.seeds = seeds
-        self.rng = rng
-        self.pulls = np.zeros((runs, arms), dtype=np.int64)
-        self.successes = np.zeros((runs, arms), dtype=np.int64)
-        self.mu_hat = np.zeros((runs, arms))
-        self.aoi = np.ones(runs, dtype=np.int64)
+    #: The fields a policy reads (each read-only).
+    FIELDS: ClassVar[tuple[str, ...]] = ("t", "runs", "arms", "seeds", "pulls", "successes",
+                                         "mu_hat", "aoi", "rng")  # fmt: skip
+    __slots__ = ("_clock", "runs", "arms", "seeds", "rng", "pulls", "successes", "mu_hat",
+                 "aoi")  # fmt: skip
+    _clock: np.ndarray
+    runs: int
+    arms: int
+    seeds: np.ndarray
+    rng: RunStreams
+    pulls: np.ndarray
+    successes: np.ndarray
+    mu_hat: np.ndarray
+    aoi: np.ndarray
+
+    def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams,
+                 pulls: np.ndarray, successes: np.ndarray, mu_hat: np.ndarray,
+                 aoi: np.ndarray, clock: np.ndarray) -> None:  # fmt: skip
+        """The engine's arrays, each shown through a read-only view (``clock``: a (1,) array
+        whose entry is the current slot)."""
+        put = object.__setattr__
+        put(self, "_clock", read_only(clock))
+        put(self, "runs", int(runs))
+        put(self, "arms", int(arms))
+        put(self, "seeds", read_only(seeds))
+        put(self, "rng", rng)
+        put(self, "pulls", read_only(pulls))
+        put(self, "successes", read_only(successes))
+        put(self, "mu_hat", read_only(mu_hat))
+        put(self, "aoi", read_only(aoi))
+
+    @property
+    def t(self) -> int:
+        return int(self._clock[0])
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"state.{name} is read-only", name=name, obj=self)
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"state.{name} is read-only", name=name, obj=self)
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A view of the C-contiguous array ``a`` that nothing can write through: its memory is a
+    read-only buffer, so even ``view.flags.writeable = True`` is refused. It sees every
+    later write into ``a``."""
+    ro = np.frombuffer(a.data.toreadonly(), dtype=a.dtype)
+    return ro.reshape(a.shape)
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What a plain-Python policy's ``select`` may return instead of bare arms: the arm of
+    every run (runs,), and optionally the candidate set it chose from (runs, K) bool and the
+    score of every arm (runs, K) numbers, what it maximised (logged as ``score``; NaN for an
+    arm it did not score). A slot whose played arm does not have the highest score (or has
+    none) is logged ``forced``."""
+
+    arms: Any
+    candidates: Any = None
+    scores: Any = None
 
 
 class Policy(PolicyBase):
@@ -231,13 +326,26 @@ class Policy(PolicyBase):
     before slot 1, :meth:`select` every slot and :meth:`update` after it; ``state`` (a
     :class:`RunState`) holds the history as arrays of shape (runs, K) and
     the runs' own random streams (``state.rng``). Plain-Python policies log every arm as a
-    candidate and no AoI-aware override unless ``select`` returns ``(arms, candidates)``.
+    candidate, no AoI-aware override and no score unless ``select`` returns
+    ``(arms, candidates)`` or a :class:`Choice` with candidates and scores.
     """
 
     tier: ClassVar[str] = "python"
 
     def __init__(self, **params: float) -> None:
+        cls = type(self)
         for key, value in params.items():
+            decl = cls.params.get(key)
+            if decl is None:
+                declared = ", ".join(cls.params) or "none"
+                raise PolicyTypeError(f"{cls.__qualname__}({key}=...): not a parameter it "
+                                      f"declares (it declares: {declared})")  # fmt: skip
+            x = number(value, name=f"{cls.__qualname__}({key}=...)", kind=PolicyError,
+                       finite=False)  # fmt: skip
+            problem = decl.check(x)
+            if problem is not None:
+                raise wrong_value(PolicyError, f"{cls.__qualname__}({key}=...)", value,
+                                  decl.range_text(), problem)  # fmt: skip
             setattr(self, key, value)
 
     def reset(self, state: RunState) -> None:

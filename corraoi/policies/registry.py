@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from corraoi._version import __version__
-from corraoi.errors import PolicyError
+from corraoi.errors import PolicyError, PolicyValueError
 
 from .api import BUILTIN_PREFIX, PolicyBase
 from .loading import (
@@ -35,8 +35,8 @@ from .loading import (
     file_module,
     guarded_load,
     has_source,
+    is_copy,
     is_file_ref,
-    module_digest,
     module_version,
     one_line,
 )
@@ -78,9 +78,13 @@ def register(cls: P) -> P:
 
     The class is checked as a plug-in is (PolicyError if it is not a policy). Registering the
     same class again (a module imported twice) is allowed; another class under a name that is
-    taken is refused, and so is a built-in's name.
+    taken is refused, and so is a built-in's name. A class defined again where it was (a
+    notebook cell run again, a module reloaded) takes its name over. A copy of a plug-in's
+    source loaded to run a sweep's kept code registers nothing: the name stays the user's.
     """
     checked = check_class(cls, f"register({getattr(cls, '__name__', cls)!r})")
+    if is_copy(checked.__module__):
+        return cls
     key = policy_name(checked)
     if not _NAME.fullmatch(key) or key == "all":
         raise PolicyError(
@@ -167,9 +171,13 @@ def _registered(cls: type[PolicyBase]) -> Resolved:
         file_version = getattr(sys.modules.get(module), "__corraoi_digest__", "")
         return Resolved(cls, qual, f"sha256:{file_version[:16]}" if file_version else "",
                         file_version)  # fmt: skip
-    source = class_source(cls)
-    digest = hashlib.sha256(source[1]).hexdigest() if source is not None else ""
-    return Resolved(cls, qual, module_version(module), digest)
+    return Resolved(cls, qual, module_version(module), class_digest(cls))
+
+
+def class_digest(cls: type[PolicyBase]) -> str:
+    """The sha256 (hex) of the code a class runs (:func:`~.loading.class_source`), asked
+    anew every time: a class edited and defined again is other code."""
+    return hashlib.sha256(class_source(cls)[1]).hexdigest()
 
 
 def resolve(token: str, *, expect: str = "") -> Resolved:
@@ -189,7 +197,7 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
             raise PolicyError(f"policy {raw!r}: expected FILE.py:Class or package.module:Class")
         if is_file_ref(left):
             path = Path(left).expanduser()
-            if not path.is_file() and not has_source(path):
+            if not path.is_file() and not has_source(path, expect):
                 raise PolicyError(f"policy {raw!r}: no such file {left}")
             module, version = file_module(path, f"policy {raw!r}", expect)
             qual = f"file:{path.resolve()}:{attr}"
@@ -199,11 +207,11 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
                 module = importlib.import_module(left)
             version = module_version(left)
             qual = f"{left}:{attr}"
-            digest = module_digest(left)
+            digest = ""
         if not hasattr(module, attr):
             raise PolicyError(f"policy {raw!r}: {left} has no class {attr}")
-        return Resolved(check_class(getattr(module, attr), f"policy {raw!r}"), qual, version,
-                        digest)  # fmt: skip
+        cls = check_class(getattr(module, attr), f"policy {raw!r}")
+        return Resolved(cls, qual, version, digest or class_digest(cls))
     if ":" not in raw and raw.endswith(".py"):  # FILE.py without its class: say which it holds
         raise PolicyError(_file_without_class(raw))
     for ep in _entry_points():
@@ -214,14 +222,14 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
             cls = check_class(loaded, f"policy {raw!r} (entry point {ep.value})")
             modname = ep.value.split(":")[0]
             return Resolved(cls, f"{modname}:{cls.__name__}", module_version(modname),
-                            module_digest(modname))  # fmt: skip
-    raise PolicyError(unknown_policy_message(raw))
+                            class_digest(cls))  # fmt: skip
+    raise PolicyValueError(unknown_policy_message(raw))
 
 
 def _file_without_class(raw: str) -> str:
     """The one line for ``--policy FILE.py``: the policy classes the file holds."""
     path = Path(raw).expanduser()
-    if not path.is_file() and not has_source(path):
+    if not path.is_file():
         return f"policy {raw!r}: no such file {raw} (a plug-in is FILE.py:Class)"
     module, _ = file_module(path, f"policy {raw!r}")
     found = [attr for attr, obj in vars(module).items()
@@ -262,8 +270,17 @@ def source_path(cls: type[PolicyBase]) -> str:
     return str(getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__)
 
 
-def held(name: str, qualname: str) -> type[PolicyBase] | None:
+def held(name: str, qualname: str, expect: str = "") -> type[PolicyBase] | None:
     """The class registered in this process under ``name``, if it is the one ``qualname``
-    names (perhaps defined in a script, so not importable again); otherwise None."""
+    names (perhaps defined in a script, so not importable again); otherwise None. With
+    ``expect`` (the sha256 a run recorded), a plug-in file's class whose code is other than
+    that is passed over when a copy of that code was handed over (a sweep's kept code): the
+    copy runs, the user's class stays registered."""
     cls = _TABLE.get(name)
-    return cls if cls is not None and _qualname(cls) == qualname else None
+    if cls is None or _qualname(cls) != qualname:
+        return None
+    if expect and qualname.startswith("file:") and not class_digest(cls).startswith(expect):
+        path = Path(qualname[len("file:"):].rpartition(":")[0])
+        if has_source(path, expect):
+            return None
+    return cls

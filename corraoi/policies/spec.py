@@ -136,7 +136,7 @@ class PolicySpec:
                 raise PolicyError(f"policy {self.name}: not a built-in of corraoi {__version__}")
             return cls
         expect = self.digest
-        here = held(self.name, self.qualname)
+        here = held(self.name, self.qualname, expect)
         if here is not None:
             found = registered_digest(here)
             if expect and found and not found.startswith(expect):

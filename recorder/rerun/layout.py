@@ -142,11 +142,14 @@ class RunViews:
     Each view takes the width of its panel in a 1600-pixel viewer (``px``), which sets its
     legend room and how much of its title is kept. ``compare`` builds the same views for
     each of its columns: ``prefix`` (the run's label before each title), ``aoi_y`` and
-    ``arms`` (y ranges shared by the columns).
+    ``arms`` (y ranges shared by the columns). ``why``: the run logs scores, so its views
+    show why the policy chose its arm (:meth:`why`; the forced slots on the arm played,
+    the override's threshold on the AoI).
     """
 
     def __init__(self, label: str, config: RunConfig, tw: TimeWindows, *, prefix: str = "",
-                 aoi_y: tuple[float, float] | None = None, arms: int | None = None) -> None:
+                 aoi_y: tuple[float, float] | None = None, arms: int | None = None,
+                 why: bool = False) -> None:
         self.base = run_path(label)
         self.config = config
         self.K = config.instance.K
@@ -158,6 +161,8 @@ class RunViews:
         inst = config.instance
         self.arm_legends = [style.arm_legend(k, n) for k, n in enumerate(inst.arm_names)]
         self.best = int(analyse(inst).best_arm)
+        self.why_shown = why
+        self.aware = style.is_aoi_aware(config.policy.name)
 
     def _title(self, px: float, *titles: str) -> str:
         """The first of ``titles`` that fits the panel, after the run's prefix."""
@@ -180,13 +185,23 @@ class RunViews:
 
     def aoi(self, px: float) -> rrb.TimeSeriesView:
         w = self.tw.window
-        title = self._title(
-            px, f"AoI {style.AOI_UNIT}: policy (line), oracle k* (black dots), last {w} slots",
-            f"AoI {style.AOI_UNIT}: line, oracle k*: dots, last {w}",
-            f"AoI {style.AOI_UNIT}, oracle: dots",
-        )  # fmt: skip
-        return self._series(title, ["$origin/aoi", "$origin/oracle_aoi"], px, windowed=True,
-                            y=self.aoi_y, lock=False)  # fmt: skip
+        contents = ["$origin/aoi", "$origin/oracle_aoi"]
+        if self.why_shown and self.aware:  # the override acts where the AoI crosses it
+            contents.append("$origin/why/threshold")
+            title = self._title(
+                px, f"AoI {style.AOI_UNIT}: policy (line), oracle k* (black dots), override "
+                f"threshold (gold), last {w} slots",
+                f"AoI {style.AOI_UNIT}: line, oracle: dots, threshold: gold",
+                f"AoI {style.AOI_UNIT}, threshold: gold",
+            )  # fmt: skip
+        else:
+            title = self._title(
+                px, f"AoI {style.AOI_UNIT}: policy (line), oracle k* (black dots), last {w} "
+                "slots",
+                f"AoI {style.AOI_UNIT}: line, oracle k*: dots, last {w}",
+                f"AoI {style.AOI_UNIT}, oracle: dots",
+            )  # fmt: skip
+        return self._series(title, contents, px, windowed=True, y=self.aoi_y, lock=False)
 
     def regret(self, px: float) -> rrb.TimeSeriesView:
         title = self._title(
@@ -201,11 +216,47 @@ class RunViews:
         title = names_in_title(f"{self.prefix}arm played", names, px,
                                self._title(px, f"arm played (1..{self.K})"))  # fmt: skip
         legend = [style.SUCCESS_NAME, style.FAILURE_NAME, style.best_arm_name(self.best)]
-        if style.is_aoi_aware(self.config.policy.name):
+        if self.aware:
             legend.append(style.OVERRIDE_NAME)
-        view = self._series(title, ["$origin/arm/**", "$origin/override"], px, windowed=True,
+        contents = ["$origin/arm/**", "$origin/override"]
+        if self.why_shown:
+            contents.append("$origin/why/forced")
+            legend.append(style.FORCED_NAME)
+        view = self._series(title, contents, px, windowed=True,
                             y=(0.5, self.arms + 0.5), legend=legend)  # fmt: skip
         return view
+
+    def why(self, px: float) -> rrb.TimeSeriesView:
+        """Why the policy chose its arm: the score of every arm (what it maximised; up to
+        LINES_UP_TO arms, else of the arms that matter) and of the arm played, over the
+        last slots before the cursor."""
+        w = self.tw.window
+        if self.lines:
+            contents, legend = ["$origin/why/score/**", "$origin/why/chosen"], self.arm_legends
+        else:
+            contents = ["$origin/why/focus/**", "$origin/why/chosen"]
+            legend = [self.arm_legends[k] for k in range(min(self.K, style.FOCUS_MAX))]
+        title = self._title(
+            px, f"why this arm: score {style.SCORE_UNIT} per arm (lines), the chosen one's "
+            f"(dots), last {w} slots",
+            f"why this arm: scores, the chosen one's: dots, last {w}",
+            "why this arm: scores",
+        )  # fmt: skip
+        return self._series(title, contents, px, windowed=True,
+                            legend=[*legend, style.CHOSEN_NAME])  # fmt: skip
+
+    def why_bars(self, px: float) -> rrb.BarChartView:
+        """The scores at the cursor, the arm played's in the policy's colour (beyond
+        LINES_UP_TO arms)."""
+        return rrb.BarChartView(
+            origin=self.base,
+            contents=["$origin/why/bars/**"],
+            name=self._title(
+                px, f"why this arm: scores {style.SCORE_UNIT} at the cursor, the chosen arm "
+                "in colour", "why this arm: scores now",
+            ),
+            plot_legend=NO_LEGEND,
+        )  # fmt: skip
 
     def candidates(self, px: float, *, name: str | None = None) -> rrb.TimeSeriesView:
         what = "a dot per slot in the set" if self.lines else "a dot per arm and slot in it"
@@ -266,7 +317,8 @@ class RunViews:
         return rrb.TextDocumentView(origin=f"{self.base}/about", name="run")
 
 
-def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
+def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW,
+                      why: bool | None = None) -> rrb.Blueprint:  # fmt: skip
     """The default layout of one run.
 
     Top: AoI against the oracle's (the last ``window`` slots before the cursor) and the
@@ -276,16 +328,26 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
     means and the pulls per arm (whole run) and the hidden state; beyond, the means at the
     cursor as bars, the means of the arms that matter, and the pulls at the cursor (the
     hidden state goes to a tab beside the run card).
+
+    ``why`` (by default when the run is one that logs scores, ``RunConfig.scored``): the
+    "why this arm" view beside the means (beyond LINES_UP_TO arms, the scores at the cursor
+    as bars, with the scores of the arms that matter in a tab).
     """
-    v = RunViews(label, config, time_windows(window, config.horizon))
+    why = config.scored if why is None else why
+    v = RunViews(label, config, time_windows(window, config.horizon), why=why)
     W = VIEWER_PX
     top = rrb.Horizontal(v.aoi(W * 3 / 5), v.regret(W * 2 / 5), column_shares=[3, 2])
     if v.lines:
         inner = W * 4 / 5  # left of the run card
         middle = rrb.Horizontal(v.arm_played(inner * 3 / 5), v.candidates(inner * 2 / 5),
                                 column_shares=[3, 2])  # fmt: skip
-        bottom = rrb.Horizontal(v.means(inner * 0.4), v.pulls(inner * 0.3),
-                                v.state(inner * 0.3), column_shares=[4, 3, 3])  # fmt: skip
+        if why:  # beside the means it explains
+            bottom = rrb.Horizontal(v.means(inner * 0.3), v.why(inner * 0.3),
+                                    v.pulls(inner * 0.2), v.state(inner * 0.2),
+                                    column_shares=[3, 3, 2, 2])  # fmt: skip
+        else:
+            bottom = rrb.Horizontal(v.means(inner * 0.4), v.pulls(inner * 0.3),
+                                    v.state(inner * 0.3), column_shares=[4, 3, 3])  # fmt: skip
         root = rrb.Vertical(
             top,
             rrb.Horizontal(rrb.Vertical(middle, bottom, row_shares=[2.6, 3.4]), v.card(),
@@ -301,8 +363,14 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
             rrb.Tabs(v.card(), v.state(W * 1.4 / 6.4), active_tab=0),
             column_shares=[3, 2, 1.4],
         )  # fmt: skip
-        bottom = rrb.Horizontal(v.mean_bars(W * 0.37), v.means(W * 0.37), v.pulls(W * 0.26),
-                                column_shares=[37, 37, 26])  # fmt: skip
+        if why:
+            bottom = rrb.Horizontal(
+                v.mean_bars(W * 0.27), rrb.Tabs(v.why_bars(W * 0.27), v.why(W * 0.27)),
+                v.means(W * 0.27), v.pulls(W * 0.19), column_shares=[27, 27, 27, 19],
+            )  # fmt: skip
+        else:
+            bottom = rrb.Horizontal(v.mean_bars(W * 0.37), v.means(W * 0.37),
+                                    v.pulls(W * 0.26), column_shares=[37, 37, 26])  # fmt: skip
         root = rrb.Vertical(top, middle, bottom, row_shares=[2.0, 4.0, 3.0])
     return rrb.Blueprint(
         root,

@@ -18,7 +18,16 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``pulls``           pulls of every arm after the slot, K series
 ``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
 ``about``           the run card: configuration, arms and what the views show (markdown)
+``why/score/<k>``   up to LINES_UP_TO arms: arm k's score (what the policy maximised) at
+                    the slots it had a finite one (in the candidate set, a slot scored)
+``why/chosen``      the score of the arm played, at the slots the score chose it (points)
+``why/forced``      the arm played, at the slots it was not chosen by the score (points)
+``why/threshold``   the AoI-aware rule's threshold 1 / max mu_hat (line, in the AoI view)
 ==================  =====================================================================
+
+The ``why/`` entities come from the fields a run may lack (``score``, ``forced``,
+``override_threshold``): a run without them (a log written before them, a plain-Python
+plug-in that gives no scores) has none of them, and its recording is what it was before.
 
 Presentation entities (:data:`PRESENTATION`), drawn from the same slots to make the views
 read at any K (:data:`recorder.style.LINES_UP_TO`):
@@ -41,6 +50,11 @@ read at any K (:data:`recorder.style.LINES_UP_TO`):
 ``bars/mean_arm/<k>`` arm k's empirical mean, one bar in its colour, from the slot it came
                       to matter
 ``bars/pulls_arm/<k>`` arm k's pulls, the same way
+``why/bars/score``    beyond LINES_UP_TO arms, at the bars' slots: the candidates' scores
+                      (0 for the others and for the arm played)
+``why/bars/chosen``   the arm played's score alone, in the policy's colour
+``why/focus/<k>``     beyond LINES_UP_TO arms: arm k's score, from the slot it came to
+                      matter (as ``focus/<k>``)
 ====================  ===================================================================
 
 :mod:`recorder.rerun.static` logs what they look like, :mod:`recorder.rerun.sink` their data
@@ -75,6 +89,17 @@ ENTITIES = (
     "pulls",
     "candidates",
     "about",
+)
+#: The "why this arm" entities, relative to :func:`run_path`: a run that logs scores has
+#: them (``why/score``, ``why/focus`` and ``why/bars`` hold children), the others none.
+WHY = (
+    "why/score",
+    "why/chosen",
+    "why/forced",
+    "why/threshold",
+    "why/bars/score",
+    "why/bars/chosen",
+    "why/focus",
 )
 #: Entities drawn for the views only, relative to :func:`run_path` (``true_means`` and
 #: ``focus`` have one child per arm shown).
@@ -146,6 +171,7 @@ __all__ = [
     "TRUE_DOTS",
     "ROOT",
     "TIMELINE",
+    "WHY",
     "new_recording",
     "run_path",
     "run_recording_id",

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -33,7 +34,7 @@ from .names import (
     snapshot_every,
 )
 from .output import RrdOutput, first_line
-from .static import log_focus, log_static, tensor_batch
+from .static import log_focus, log_static, log_why_focus, log_why_static, tensor_batch
 
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
@@ -91,6 +92,10 @@ class RerunSink(Sink):
         #: beyond LINES_UP_TO arms: the arms drawn as lines, each with its first slot
         self.focus: dict[int, int] = {}
         self._last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: the "why this arm" entities are styled (at the first block with scores), and
+        #: the score and arm at the last slot sent (for the bars at the end)
+        self._why = False
+        self._why_last: tuple[int, np.ndarray, int] | None = None
         self._snapped = 0
         log_static(recording, self.base, config, self.color)
         # the references are known before any slot: the best arm's line and the true
@@ -142,7 +147,7 @@ class RerunSink(Sink):
         n = len(block)
         send, base = self.recording.send_columns, self.base
         t = np.ascontiguousarray(block.t, dtype=np.int64)
-        absent = self.config.absent  # columns the run's log does not hold: not drawn
+        absent = block.absent  # columns the run does not give: not drawn
 
         def column(path: str, times: np.ndarray, values: np.ndarray) -> None:
             if times.size and path.partition("/")[0] not in absent:
@@ -172,6 +177,13 @@ class RerunSink(Sink):
         for k in range(self.K):
             member = cand[:, k]
             column(f"candidates/{k + 1}", t[member], np.full(int(member.sum()), k + 1.0))
+        if block.score is not None and not self._why:
+            self._why = True
+            log_why_static(self.recording, self.base, self.config, self.color,
+                           threshold=block.override_threshold is not None)  # fmt: skip
+            for k in self.focus:
+                log_why_focus(self.recording, self.base, self.config, k,
+                              style.focus_color(list(self.focus).index(k)))  # fmt: skip
         # the presentation entities (names.PRESENTATION) beyond LINES_UP_TO arms
         if not self._lines:
             self._snapshots(block, t, cand)
@@ -179,11 +191,45 @@ class RerunSink(Sink):
             keep = t >= first
             mean = np.ascontiguousarray(block.mu_hat[keep, k], dtype=f64)
             column(f"focus/{k + 1}", t[keep], mean)
+        if block.score is not None:
+            self._send_why(block, t, column)
         self.slots += n
+
+    def _send_why(self, block: SlotBlock, t: np.ndarray, column: Any) -> None:
+        """The "why this arm" entities of a block that has scores: every arm's score (up to
+        LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
+        where the score chose it, the forced slots, the override's threshold."""
+        assert block.score is not None
+        f64 = np.float64
+        # only finite scores are sent: an arm's line skips the slots it has none (NaN is
+        # not sent at all: `rerun rrd compare` tells NaN from NaN)
+        score = np.asarray(block.score, dtype=f64)
+        fin = np.isfinite(score)
+        if self._lines:
+            for k in range(self.K):
+                column(
+                    f"why/score/{k + 1}", t[fin[:, k]], np.ascontiguousarray(score[fin[:, k], k])
+                )
+        for k, first in self.focus.items():
+            keep = (t >= first) & fin[:, k]
+            column(f"why/focus/{k + 1}", t[keep], np.ascontiguousarray(score[keep, k]))
+        chosen = score[np.arange(len(t)), block.arm]
+        ok = np.isfinite(chosen)
+        column("why/chosen", t[ok], np.ascontiguousarray(chosen[ok]))
+        if block.forced is not None:
+            forced = np.asarray(block.forced, dtype=bool)
+            column("why/forced", t[forced], (block.arm[forced] + 1).astype(f64))
+        if block.override_threshold is not None:
+            thr = np.asarray(block.override_threshold, dtype=f64)
+            fin = np.isfinite(thr)
+            column("why/threshold", t[fin], np.ascontiguousarray(thr[fin]))
 
     def _join(self, k: int, slot: int) -> None:
         """Arm k matters from ``slot`` on: its line and true-mean dots are drawn."""
-        log_focus(self.recording, self.base, self.config, k, style.focus_color(len(self.focus)))
+        color = style.focus_color(len(self.focus))
+        log_focus(self.recording, self.base, self.config, k, color)
+        if self._why:
+            log_why_focus(self.recording, self.base, self.config, k, color)
         self.focus[k] = slot
         self._true_dots(k, slot)
 
@@ -207,6 +253,25 @@ class RerunSink(Sink):
         self._last = (int(t[last]), block.mu_hat[last], pulls[last], cand[last])
         if len(at):
             self._bars(t[at], block.mu_hat[at], pulls[at], cand[at])
+        if block.score is not None:
+            self._why_last = (int(t[last]), block.score[last], int(block.arm[last]))
+            if len(at):
+                self._why_bars(t[at], block.score[at], block.arm[at])
+
+    def _why_bars(self, t: np.ndarray, score: np.ndarray, arm: np.ndarray) -> None:
+        """The scores at the bars' slots ``t``: the candidates' in grey, the arm played's in
+        the policy's colour (0 where an arm has none)."""
+        send, base = self.recording.send_columns, self.base
+        descriptor = rr.BarChart.descriptor_values()
+        values = np.where(np.isfinite(score), np.asarray(score, dtype=np.float64), 0.0)
+        mine = np.zeros_like(values)
+        rows = np.arange(len(t))
+        mine[rows, arm] = values[rows, arm]
+        values[rows, arm] = 0.0
+        times = [rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(t, dtype=np.int64))]
+        for path, v in (("why/bars/score", values), ("why/bars/chosen", mine)):
+            send(f"{base}/{path}", indexes=times,
+                 columns=[rr.ComponentColumn(descriptor, tensor_batch(v))])  # fmt: skip
 
     def _bars(self, t: np.ndarray, mu_hat: np.ndarray, pulls: np.ndarray, cand: np.ndarray) -> None:
         """The bars at the snapshot slots ``t``: an arm that matters (at that slot) in its
@@ -243,6 +308,9 @@ class RerunSink(Sink):
         if self._last is not None and self._last[0] != self._snapped:
             t, mu_hat, pulls, cand = self._last
             self._bars(np.array([t]), mu_hat[None, :], pulls[None, :], cand[None, :])
+            if self._why_last is not None:
+                t, score, arm = self._why_last
+                self._why_bars(np.array([t]), score[None, :], np.array([arm]))
 
     def close(self) -> str | None:
         """Flush the recording (blocking up to ``flush_timeout`` s). Safe to call twice.

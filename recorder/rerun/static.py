@@ -150,6 +150,48 @@ def log_static(rec: rr.RecordingStream, base: str, config: RunConfig, color: sty
                                             media_type=[rr.MediaType.MARKDOWN]))  # fmt: skip
 
 
+def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color: style.RGB,
+                   *, threshold: bool) -> None:  # fmt: skip
+    """The styling of the "why this arm" entities (``why/``), logged when the first block
+    that has scores arrives (a run without them has none of these entities):
+    ``threshold`` when the run logs the AoI-aware rule's threshold."""
+    st = style
+    K = config.instance.K
+    names = [f"{n} {st.SCORE_UNIT}" if i == 0 else n for i, n in enumerate(_legend_names(config))]
+    shape = rr.components.MarkerShape
+
+    def static(path: str, columns: Any, count: int = 1) -> None:
+        rec.send_columns(f"{base}/{path}", indexes=[], columns=columns.partition([count]))
+
+    def points(path: str, rgb: Any, name: str, marker: Any, size: float) -> None:
+        static(path, rr.SeriesPoints.columns(colors=[rgb], names=[name], markers=[marker],
+                                             marker_sizes=[size]))  # fmt: skip
+
+    if st.lines_for(K):
+        for k in range(K):
+            static(f"why/score/{k + 1}", rr.SeriesLines.columns(
+                colors=[st.arm_color(k)], names=[names[k]], widths=[st.WIDTH_ARM]))  # fmt: skip
+    else:
+        arm = np.arange(1, K + 1, dtype=np.float64)
+        bars(rec, f"{base}/why/bars/score", st.BAR_IN_SET_COLOR, arm,
+             width=2 * BAR_WIDTH)  # fmt: skip
+        bars(rec, f"{base}/why/bars/chosen", color, arm, width=max(2 * BAR_WIDTH, K / 64))
+    points("why/chosen", color, st.CHOSEN_NAME, shape.Circle, st.MARKER_CHOSEN)
+    points("why/forced", st.FORCED_COLOR, st.FORCED_NAME, shape.Asterisk, st.MARKER_FORCED)
+    if threshold:
+        static("why/threshold", rr.SeriesLines.columns(
+            colors=[st.OVERRIDE_COLOR], names=[st.THRESHOLD_NAME],
+            widths=[st.WIDTH_SECONDARY]))  # fmt: skip
+
+
+def log_why_focus(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
+                  color: style.RGB) -> None:  # fmt: skip
+    """The styling of ``why/focus/<k>``: arm k's score, a line in its colour."""
+    name = style.arm_legend(k, config.instance.arm_names[k])
+    rec.send_columns(f"{base}/why/focus/{k + 1}", indexes=[], columns=rr.SeriesLines.columns(
+        colors=[color], names=[name], widths=[style.WIDTH_ARM]).partition([1]))  # fmt: skip
+
+
 def log_true_mean(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
                   color: style.RGB) -> None:  # fmt: skip
     """The styling of ``true_means/<k>``: dots in arm k's colour, named like its line."""
@@ -252,4 +294,13 @@ def tensor_batch(values: np.ndarray) -> rr.components.TensorDataBatch:
     return rr.components.TensorDataBatch(array)
 
 
-__all__ = ["about_markdown", "bars", "log_focus", "log_static", "log_true_mean", "tensor_batch"]
+__all__ = [
+    "about_markdown",
+    "bars",
+    "log_focus",
+    "log_static",
+    "log_true_mean",
+    "log_why_focus",
+    "log_why_static",
+    "tensor_batch",
+]

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 import orjson
 
-from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import FIELDS, NONE_FIELDS, RunConfig, SlotBlock, absent_column
+from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, NAMES, REQUIRED
 from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
@@ -28,8 +29,9 @@ from recorder.vocab import (
     SLOT_FORMAT_VERSION,
 )
 
-#: Message keys in the order the encoder writes them.
-MESSAGE_KEYS = FIELDS
+#: Message keys in the order the encoder writes them: the required fields, then those of
+#: the optional ones a run gives (corraoi.engine.slot_record).
+MESSAGE_KEYS = NAMES
 
 
 def empty_block(K: int) -> SlotBlock:
@@ -53,16 +55,6 @@ def empty_block(K: int) -> SlotBlock:
 #: Slot values are int64 in every array: a value beyond is refused by the reader.
 _I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
 _INT_FIELDS = ("t", "x", "arm", "aoi", "oracle_aoi", "regret")
-
-
-def absent_column(name: str, B: int, K: int) -> np.ndarray:
-    """What a block holds for a column its log leaves absent (``RunConfig.absent``): NaN
-    for a number, -1 for an integer (no state, arm, age or count is -1), false for a bool.
-    Views leave such a column out; the value only keeps a ``SlotBlock`` whole."""
-    dtype = empty_block(K).column(name).dtype
-    shape = (B, K) if name in ARM_FIELDS else (B,)
-    fill: float | int | bool = np.nan if dtype.kind == "f" else (-1 if dtype.kind == "i" else False)
-    return np.full(shape, fill, dtype=dtype)
 
 
 def _shown(value: Any) -> str:
@@ -157,71 +149,158 @@ def _table(values: list[Any], field: str, K: int, ok: Any, expected: str) -> np.
 
 
 def decode_messages(
-    payloads: Sequence[bytes | memoryview],
-    K: int,
-    n_states: int,
-    *,
-    where: str,
-    absent: tuple[str, ...] = (),
+    payloads: Sequence[bytes | memoryview], K: int, n_states: int, *, where: str
 ) -> SlotBlock:
     """The SlotBlock of consecutive slot messages (JSON bytes), validated strictly.
 
     Every field must have its JSON type (an integer is never a bool or a float, a bool is
     never a number or a string), integers must fit int64, x in 1..n_states, arm in 1..K,
     aoi and oracle_aoi >= 1, pulls >= 0, mu_hat in [0, 1], candidates distinct arms in
-    1..K, exactly the fields of the schema (those of the log: every field but the
-    ``absent`` ones, which the block holds as :func:`absent_column`). The first violation
-    is one :class:`LogError` naming ``where``, the slot, the field, the value and what was
+    1..K, exactly the fields of the schema. The first violation is one
+    :class:`LogError` naming ``where``, the slot, the field, the value and what was
     expected.
     """
     if not payloads:
         return empty_block(K)
-    fields = [f for f in FIELDS if f not in absent] if absent else FIELDS
     joined = b"[" + b",".join(payloads) + b"]"
     try:
         rows = orjson.loads(joined)
     except orjson.JSONDecodeError:
         raise _json_error(payloads, where) from None
     B = len(rows)
-    # C-level checks first (map/set); the Python loop below runs only to name a bad row
-    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {len(fields)}
-    for i, r in enumerate(() if fine else rows):
-        if type(r) is not dict or len(r) != len(fields):
+    first = rows[0] if type(rows[0]) is dict else {}
+    names = list(first)
+    missing = [f for f in REQUIRED if f not in first]
+    if type(rows[0]) is dict and missing:  # a required field lacking in the log
+        raise LogError(
+            f"{where}: {_slot_of(first, 0)} lacks {', '.join(missing)}, a required "
+            f"field of the slot log (expected at least the fields {', '.join(REQUIRED)})"
+        )
+    # C-level checks first (map/set); the Python loop below runs only to name a bad row.
+    # Every message of a chunk has the keys of its first; a field a block holds as None
+    # when absent may come and go (a plug-in that gave scores from some slot on), a column
+    # of FIELDS may not (a log holds it from its first slot or never).
+    fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {len(names)}
+    cols: dict[str, list[Any]] = {}
+    if fine:
+        try:
+            cols = {f: [r[f] for r in rows] for f in names}
+        except KeyError:
+            fine = False
+    if not fine:
+        expect = set(names)
+        for i, r in enumerate(rows):
             if type(r) is not dict:
                 raise LogError(f"{where}: message {i + 1} is {_shown(r)}, expected a JSON object")
-            missing = [f for f in fields if f not in r]
-            extra = sorted(k for k in r if k not in fields)[:3]
-            what = f"lacks {', '.join(missing)}" if missing else f"has extra keys {extra}"
-            raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
-                           f"{', '.join(fields)}")  # fmt: skip
+            lacking = [f for f in names if f not in r and f not in NONE_FIELDS]
+            extra = sorted(k for k in r if k not in expect and k not in NONE_FIELDS)[:3]
+            if lacking or extra:
+                what = f"lacks {', '.join(lacking)}" if lacking else f"has extra keys {extra}"
+                raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
+                               f"{', '.join(names)}")  # fmt: skip
+        names += [f for f in NONE_FIELDS if f not in expect and any(f in r for r in rows)]
+        cols = {f: [r.get(f) for r in rows] for f in names}
+    unknown = [f for f in names if f not in BY_NAME]
     try:
-        cols: dict[str, list[Any]] = {f: [r[f] for r in rows] for f in fields}
-    except KeyError as exc:
-        raise LogError(f"{where}: a slot message lacks the field {exc}") from None
-    try:
-        out = _columns(cols, B, K, n_states, absent)
-        # a bool hidden in an integer column: numpy reads [1, true] as int64, so count them
-        # (every column now holds numbers or bools only; keys are fixed)
-        bools = joined.count(b"true") + joined.count(b"false")
-        if bools != 2 * B:
+        out = _columns(cols, B, K, n_states)
+        # a bool hidden in a number column: numpy reads [1, true] as int64, so count them
+        # (every known column now holds numbers, nulls or bools only; keys are fixed)
+        bools = B * sum(f in cols for f in ("success", "override"))
+        bools += sum(v is not None for v in cols.get("forced", ()))
+        bools += sum(_count_bools(v) for f in unknown for v in cols[f])
+        if joined.count(b"true") + joined.count(b"false") != bools:
             for f in (*_INT_FIELDS, "estimator", "mu_hat", "pulls", "candidates"):
                 for i, v in enumerate(cols.get(f, ())):
                     items = v if type(v) is list else [v]
                     if any(type(a) is bool for a in items):
                         raise _Bad(i, f, _shown(next(a for a in items if type(a) is bool)),
                                    "a number, not a bool")  # fmt: skip
+        optional = {f: _optional(f, cols[f], out["candidates"]) for f in names
+                    if f in NONE_FIELDS}  # fmt: skip
     except _Bad as bad:
         raise LogError(
             f"{where}: {_slot_of(rows[bad.row], bad.row)}: {bad.field} is {bad.shown}, "
             f"expected {bad.expected}"
         ) from None
-    return SlotBlock(**{f: out[f] for f in FIELDS})
+    kept = {f: _unknown(cols[f]) for f in unknown}
+    absent = tuple(f for f in FIELDS if f not in cols)
+    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=kept, absent=absent)
 
 
-def _columns(
-    cols: dict[str, list[Any]], B: int, K: int, n_states: int, absent: tuple[str, ...] = ()
-) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {}
+def _count_bools(v: Any) -> int:
+    if type(v) is bool:
+        return 1
+    if type(v) is list:
+        return sum(_count_bools(a) for a in v)
+    if type(v) is dict:
+        return sum(_count_bools(a) for a in v.values())
+    return 0
+
+
+def _unknown(values: list[Any]) -> np.ndarray:
+    """A field this corraoi does not know (a newer one wrote it), kept as it reads."""
+    try:
+        arr = np.asarray(values)
+    except ValueError:  # ragged lists
+        arr = np.empty(len(values), dtype=object)
+        arr[:] = values
+    return arr
+
+
+_NUMBER = {float, int}
+
+
+def _optional(f: str, values: list[Any], cand: np.ndarray) -> np.ndarray:
+    """An optional field's column (``cand``: the slots' candidate sets); a slot that lacks
+    it (None: a chunk where it came or went) gets NaN, or False."""
+    decl = BY_NAME[f]
+    B, K = cand.shape
+    if decl.json == "boolean":
+        arr = np.asarray([False if v is None else v for v in values])
+        if arr.dtype != np.bool_ or arr.ndim != 1:
+            i = _first(values, lambda v: v is None or type(v) is bool)
+            raise _Bad(max(i, 0), f, _shown(values[max(i, 0)]), "a JSON bool (true or false)")
+        return arr
+    if decl.json == "float32":
+        vals = [np.nan if v is None else v for v in values]
+        if not set(map(type, vals)) <= _NUMBER:
+            i = _first(vals, lambda v: type(v) in _NUMBER)
+            raise _Bad(i, f, _shown(vals[i]), "a number")
+        return _infinite(np.asarray(vals, dtype=np.float64).astype(np.float32))
+    # "candidate scores": per slot [] or one number per candidate, in the candidates' order
+    rows = [[] if v is None else v for v in values]
+    counts = cand.sum(axis=1)
+    lengths = np.fromiter(map(len, rows), dtype=np.int64, count=B) if set(
+        map(type, rows)) == {list} else None  # fmt: skip
+    if lengths is None or ((lengths != 0) & (lengths != counts)).any():
+        for i, row in enumerate(rows):
+            if type(row) is not list or len(row) not in (0, counts[i]):
+                raise _Bad(i, f, _shown(row), f"a list of {counts[i]} numbers (one per "
+                           "candidate) or []")  # fmt: skip
+    flat = list(chain.from_iterable(rows))
+    if not set(map(type, flat)) <= _NUMBER:
+        for i, row in enumerate(rows):
+            j = _first(row, lambda a: type(a) in _NUMBER)
+            if j >= 0:
+                raise _Bad(i, f"{f}[{j + 1}]", _shown(row[j]), "a number")
+    out = np.full((B, K), np.nan, dtype=np.float32)
+    assert lengths is not None
+    scored = lengths > 0
+    out[cand & scored[:, None]] = _infinite(np.asarray(flat, dtype=np.float64).astype(np.float32))
+    return out
+
+
+def _infinite(arr: np.ndarray) -> np.ndarray:
+    """+-FLOAT32_MAX, how the log writes +-infinity, back to +-infinity."""
+    arr[arr >= FLOAT32_MAX] = np.inf
+    arr[arr <= -FLOAT32_MAX] = -np.inf
+    return arr
+
+
+def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[str, np.ndarray]:
+    """The columns of FIELDS, checked; one the log lacks (not in ``cols``) is
+    :func:`~corraoi.engine.block.absent_column`'s fill."""
+    out: dict[str, np.ndarray] = {f: absent_column(f, B, K) for f in FIELDS if f not in cols}
     for f in _INT_FIELDS:
         if f in cols:
             out[f] = _int_column(cols[f], f)
@@ -241,7 +320,7 @@ def _columns(
         out["pulls"] = _table(cols["pulls"], "pulls", K, _is_int, "integers >= 0")
     for f, lo, hi in (("x", 1, n_states), ("arm", 1, K), ("aoi", 1, None),
                       ("oracle_aoi", 1, None), ("t", 1, None)):  # fmt: skip
-        if f not in out:
+        if f not in cols:
             continue
         col = out[f]
         bad = (col < lo) | (col > hi) if hi is not None else col < lo
@@ -249,12 +328,13 @@ def _columns(
             i = int(np.argmax(bad))
             want = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
             raise _Bad(i, f, str(int(col[i])), f"an integer {want}")
-    bounds: tuple[tuple[str, np.ndarray, float, float | None], ...] = tuple(
-        (f, out[f], low, high)
-        for f, low, high in (("mu_hat", 0.0, 1.0), ("pulls", 0, None))
-        if f in out
+    bounds: tuple[tuple[str, np.ndarray, float, float | None], ...] = (
+        ("mu_hat", out["mu_hat"], 0.0, 1.0),
+        ("pulls", out["pulls"], 0, None),
     )
     for f, arr, low, high in bounds:
+        if f not in cols:
+            continue
         bad = (arr < low) | (arr > high) if high is not None else arr < low
         if bad.any():
             i, j = divmod(int(np.argmax(bad)), K)
@@ -262,11 +342,9 @@ def _columns(
             raise _Bad(i, f"{f}[{j + 1}]", repr(arr[i, j].item()), f"a value {want}")
     if "candidates" in cols:
         out["candidates"] = _candidates(cols["candidates"], B, K)
-    if "x" in out:
+    if "x" in cols:
         out["x"] = out["x"] - 1
     out["arm"] = out["arm"] - 1
-    for f in absent:
-        out[f] = absent_column(f, B, K)
     return out
 
 
@@ -376,7 +454,6 @@ def check_run_metadata(p: Path, md: dict[str, str], library: str) -> None:
 
 __all__ = [
     "MESSAGE_KEYS",
-    "absent_column",
     "check_agrees",
     "check_run_metadata",
     "decode_messages",

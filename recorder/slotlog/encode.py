@@ -8,13 +8,14 @@ these names; ``docs/log-format.md`` is the human description.
 
 from __future__ import annotations
 
+import functools
 import json
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import orjson
 
+from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, REQUIRED, SLOT_RECORD, SlotField
 from corraoi.model.theory import analyse
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
@@ -27,62 +28,50 @@ if TYPE_CHECKING:  # types only: corraoi.engine.block's import circle stays out 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 
-def slot_schema(config: RunConfig) -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of one slot message of this run."""
-    K, n = config.instance.K, config.instance.n_states
+def field_schema(f: SlotField, K: int, n: int) -> dict[str, Any]:
+    """The JSON Schema of one field of the slot record (a run with K arms and n states)."""
+    bound = {"K": K, "n": n}
 
-    def integer(desc: str, minimum: int | None = None, maximum: int | None = None) -> dict:
-        out: dict[str, Any] = {"type": "integer", "description": desc}
-        if minimum is not None:
-            out["minimum"] = minimum
-        if maximum is not None:
-            out["maximum"] = maximum
-        return out
+    def number(v: str) -> int | float:
+        return bound[v] if v in bound else (float(v) if "." in v else int(v))
 
-    def per_arm(item: dict[str, Any], desc: str) -> dict[str, Any]:
+    desc = f.meaning
+    if not f.per_arm:  # "numbered 1..K": the run's own numbers
+        desc = desc.replace("1..K", f"1..{K}").replace("1..n", f"1..{n}")
+    if f.json == "candidate scores":
+        return {
+            "type": "array",
+            "description": desc + ": the scores of the arms of candidates, in its order (the "
+            "others have none); [] at a slot not scored; +-3.4028235e38 is +-infinity",
+            "items": {"type": "number"},
+            "minItems": 0,
+            "maxItems": K,
+        }
+    if f.json == "arm set":
         return {
             "type": "array",
             "description": desc,
-            "items": item,
-            "minItems": K,
-            "maxItems": K,
-        }
-
-    properties: dict[str, Any] = {
-        "t": integer("slot number, 1..horizon", 1),
-        "x": integer(f"hidden state X_t, numbered 1..{n}", 1, n),
-        "arm": integer(f"channel (arm) played at slot t, numbered 1..{K}", 1, K),
-        "success": {"type": "boolean", "description": "r_t = Y[arm, x] = 1"},
-        "aoi": integer("age of information after slot t, in slots (aoi_0 = 1)", 1),
-        "oracle_aoi": integer("age of the oracle that plays the best arm on the same X path", 1),
-        "regret": integer("pathwise AoI regret sum_{s<=t} (aoi_s - oracle_aoi_s), in slots"),
-        "estimator": {
-            "type": "number",
-            "description": "the paper's estimator sum_{s<=t} aoi_s - t / mu*, in slots",
-        },
-        "override": {
-            "type": "boolean",
-            "description": "the AoI-aware rule chose the arm (argmax mu_hat); false otherwise",
-        },
-        "mu_hat": per_arm(
-            {"type": "number", "minimum": 0, "maximum": 1},
-            "empirical mean reward of arms 1..K after the slot's update (0 if never pulled)",
-        ),
-        "pulls": per_arm(
-            {"type": "integer", "minimum": 0}, "pulls of arms 1..K after the slot's update"
-        ),
-        "candidates": {
-            "type": "array",
-            "description": "arms (1..K, ascending) the arm was chosen from: A_t + {k_emp} for "
-            "the correlated policies, every arm otherwise",
             "items": {"type": "integer", "minimum": 1, "maximum": K},
             "minItems": 1,
             "maxItems": K,
             "uniqueItems": True,
-        },
-    }
-    for name in config.absent:  # a column the log leaves out is not in its messages
-        del properties[name]
+        }
+    kind = {"integer": "integer", "boolean": "boolean"}.get(f.json, "number")
+    item: dict[str, Any] = {"type": kind}
+    if f.minimum:
+        item["minimum"] = number(f.minimum)
+    if f.maximum:
+        item["maximum"] = number(f.maximum)
+    if not f.per_arm:
+        return {"type": kind, "description": desc, **{k: v for k, v in item.items() if k != "type"}}
+    return {"type": "array", "description": desc, "items": item, "minItems": K, "maxItems": K}
+
+
+def slot_schema(config: RunConfig) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of one slot message of this run: a property per field
+    of the slot record (corraoi.engine.slot_record), its required fields required."""
+    K, n = config.instance.K, config.instance.n_states
+    properties = {f.name: field_schema(f, K, n) for f in SLOT_RECORD}
     version = config.format_version  # the run's own: the schema says what its metadata says
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -92,8 +81,8 @@ def slot_schema(config: RunConfig) -> dict[str, Any]:
         "arms and states are numbered from 1.",
         "type": "object",
         "properties": properties,
-        # the message keys in the order the encoder writes them: corraoi.engine.block.FIELDS
-        "required": list(properties),
+        # the message keys in the order the encoder writes them (the optional ones last)
+        "required": list(REQUIRED),
         "additionalProperties": False,
     }
 
@@ -128,31 +117,25 @@ def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[s
         "log_time": f"t * {NS_PER_SLOT} ns",
         "flush_every": str(flush_every),
         "config": json.dumps(config.to_dict(), sort_keys=True),
-        **({"absent": json.dumps(list(config.absent))} if config.absent else {}),
     }
 
 
 def end_metadata(
-    *,
-    slots: int,
-    horizon: int,
-    last: SlotBlock | None,
-    error: str | None = None,
-    absent: tuple[str, ...] = (),
+    *, slots: int, horizon: int, last: SlotBlock | None, error: str | None = None
 ) -> dict[str, str]:
     """The ``corraoi.end`` metadata record written by a writer that finished its file
-    (``error``: the run stopped on that error, status ``failed``; ``absent``: the run's
-    columns the log does not hold, left out here too)."""
+    (``error``: the run stopped on that error, status ``failed``)."""
     status = "complete" if slots >= horizon else "interrupted"
     out = {"status": "failed" if error is not None else status, "slots": str(slots)}
     if error is not None:
         out["error"] = error
-    if last is not None and len(last):
-        if "regret" not in absent:
+    if last is not None and len(last):  # what the run holds (a Logger's may lack them)
+        held = last.fields()
+        if "regret" in held:
             out["regret"] = str(int(last.regret[-1]))
-        if "estimator" not in absent:
+        if "estimator" in held:
             out["estimator"] = repr(float(last.estimator[-1]))
-        if "pulls" not in absent:
+        if "pulls" in held:
             out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
     return out
 
@@ -167,11 +150,8 @@ class BlockEncoder:
     as formatting each slot with ``bytes %`` (benchmarks/bench_record.py).
     """
 
-    def __init__(self, K: int, absent: tuple[str, ...] = ()) -> None:
+    def __init__(self, K: int) -> None:
         self.K = int(K)
-        #: the message's fields, in log order: all but the absent ones
-        self._fields = [f for f in _COLUMNS if f not in absent]
-        self._keys = _keys(self._fields)
         self._weights = (1 << np.arange(self.K, dtype=np.int64)) if self.K <= 62 else None
         self._sets: dict[int, bytes] = {}
 
@@ -189,55 +169,66 @@ class BlockEncoder:
             texts[i] = text
         return texts[inverse].tolist()
 
+    def _column(self, f: SlotField, values: np.ndarray, n: int) -> list[bytes]:
+        """JSON text of each slot's value of field ``f`` (a list's without its brackets)."""
+        if f.json == "arm set":
+            return self._candidates(values)
+        if f.json == "candidate scores":
+            return _candidate_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX))
+        if f.json == "boolean":
+            return _BOOLS[np.asarray(values, dtype=np.intp)].tolist()
+        if f.json == "float32":  # JSON has no infinity: +-FLOAT32_MAX stand for it
+            values = np.clip(np.asarray(values, dtype=np.float32), -FLOAT32_MAX, FLOAT32_MAX)
+        elif f.one_based:
+            values = values + 1
+        return _rows(values, n) if f.per_arm else _items(values)
+
     def encode(self, b: SlotBlock) -> list[bytes]:
         n = len(b)
         if n == 0:
             return []
-        columns = [_COLUMNS[f](self, b, n) for f in self._fields]
-        keys, last = self._keys[:-1], self._keys[-1]
+        names = b.fields()
+        keys = _keys(names)
+        columns = [self._column(BY_NAME[f], b.column(f), n) for f in names]
         step = 2 * len(keys) + 1
-        parts: list[bytes] = [last] * (step * n)  # every message ends with "}\n"
+        end = b"]}\n" if _bracketed(BY_NAME[names[-1]]) else b"}\n"
+        parts: list[bytes] = [end] * (step * n)
         for i, (key, column) in enumerate(zip(keys, columns, strict=True)):
             parts[2 * i :: step] = [key] * n
             parts[2 * i + 1 :: step] = column
         return b"".join(parts)[:-1].split(b"\n")
 
 
-_BOOLS = np.array([b"false", b"true"], dtype=object)
-
-#: Each field's JSON texts for a block, in the order ``encode`` writes them
-#: (corraoi.engine.block.FIELDS's; tests/test_logger.py checks that the two agree).
-_COLUMNS: dict[str, Callable[[BlockEncoder, SlotBlock, int], list[bytes]]] = {
-    "t": lambda e, b, n: _items(b.t),
-    "x": lambda e, b, n: _items(b.x + 1),
-    "arm": lambda e, b, n: _items(b.arm + 1),
-    "success": lambda e, b, n: _BOOLS[np.asarray(b.success, dtype=np.intp)].tolist(),
-    "aoi": lambda e, b, n: _items(b.aoi),
-    "oracle_aoi": lambda e, b, n: _items(b.oracle_aoi),
-    "regret": lambda e, b, n: _items(b.regret),
-    "estimator": lambda e, b, n: _items(b.estimator),
-    "override": lambda e, b, n: _BOOLS[np.asarray(b.override, dtype=np.intp)].tolist(),
-    "mu_hat": lambda e, b, n: _rows(b.mu_hat, n),
-    "pulls": lambda e, b, n: _rows(b.pulls, n),
-    "candidates": lambda e, b, n: e._candidates(b.candidates),
-}
-_ROWS = ("mu_hat", "pulls")  # written without their brackets (_rows)
+def _candidate_rows(table: np.ndarray) -> list[bytes]:
+    """JSON text of each row of a (B, K) float32 table without its NaN items (the arms
+    outside the candidate set, a slot not scored) nor the brackets: the table written at
+    once (NaN as null), its nulls dropped by three replaces over the whole text (after the
+    first two a row keeps a null only where it was all nulls: ``[null]``), then split."""
+    text = orjson.dumps(np.ascontiguousarray(table), option=_NUMPY)
+    if b"null" in text:
+        text = text.replace(b"null,", b"").replace(b",null", b"").replace(b"[null]", b"[]")
+    return text[2:-2].split(b"],[")
 
 
-def _keys(fields: list[str]) -> list[bytes]:
-    """The text before each value of a message of ``fields``; ``encode`` ends each message
-    with "}\n" and splits at the newlines (orjson escapes any newline inside a JSON
-    string). A table's brackets are part of the texts around its rows."""
+def _bracketed(f: SlotField) -> bool:
+    """The encoder writes the field's brackets around its rows (a per-arm list of numbers)."""
+    return f.per_arm and f.json != "arm set" or f.json == "candidate scores"
+
+
+@functools.cache
+def _keys(names: tuple[str, ...]) -> tuple[bytes, ...]:
+    """The text before each value of a message of these fields (``{"t":``, ``,"x":``, ...,
+    ``],"pulls":[``); ``encode`` ends each message with "}\n" (or "]}\n") and splits at the
+    newlines (orjson escapes any newline inside a JSON string)."""
     out = []
-    before = b"{"
-    for f in fields:
-        text = before + b'"' + f.encode() + b'":'
-        if f in _ROWS:
-            text += b"["
-        out.append(text)
-        before = b"]," if f in _ROWS else b","
-    out.append(b"]}\n" if fields[-1] in _ROWS else b"}\n")
-    return out
+    for i, name in enumerate(names):
+        before = b"]" if i and _bracketed(BY_NAME[names[i - 1]]) else b""
+        after = b"[" if _bracketed(BY_NAME[name]) else b""
+        out.append(before + (b"," if i else b"{") + orjson.dumps(name) + b":" + after)
+    return tuple(out)
+
+
+_BOOLS = np.array([b"false", b"true"], dtype=object)
 
 
 def _items(column: np.ndarray) -> list[bytes]:
@@ -252,4 +243,11 @@ def _rows(table: np.ndarray, n: int) -> list[bytes]:
     return orjson.dumps(np.ascontiguousarray(table), option=_NUMPY)[2:-2].split(b"],[")
 
 
-__all__ = ["BlockEncoder", "end_metadata", "run_metadata", "schema_bytes", "slot_schema"]
+__all__ = [
+    "BlockEncoder",
+    "end_metadata",
+    "field_schema",
+    "run_metadata",
+    "schema_bytes",
+    "slot_schema",
+]

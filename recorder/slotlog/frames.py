@@ -6,16 +6,17 @@ record batch whose columns are the log's fields exactly as the file holds them: 
 states numbered from 1, per-arm arrays spread into wide columns. pandas and pyarrow are
 the optional extra ``analysis``; they are imported when a table is built.
 
-Columns (``docs/analysis.md`` documents them): ``t, x, arm`` (int64), ``success`` (bool),
-``aoi, oracle_aoi, regret`` (int64), ``estimator`` (float64), ``mu_hat_1..K`` (float64),
-``pulls_1..K`` (int64), ``cand_1..K`` (bool), ``override`` (bool).
+Columns (``docs/analysis.md`` documents them): one per field of the slot record
+(:mod:`corraoi.engine.slot_record`) that the log holds, in its order, a per-arm field
+spread over one column per arm (``mu_hat_1..K``, ``pulls_1..K``, ``cand_1..K``,
+``score_1..K``); then any field a newer corraoi wrote, as read.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
@@ -23,7 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from corraoi.engine.block import SlotBlock
+from corraoi.engine.block import FIELDS, SlotBlock, absent_column, absent_fill
+from corraoi.engine.slot_record import BY_NAME, NAMES, SLOT_RECORD
 from corraoi.errors import UsageError
 
 from .reader import RunLog, open_log
@@ -36,71 +38,69 @@ if TYPE_CHECKING:
 BATCH_SLOTS = 65_536
 
 
-def slot_columns(K: int, absent: tuple[str, ...] = ()) -> list[tuple[str, str]]:
-    """(name, dtype) of every column of the slots table of a run with K arms, in order;
-    those of its log's ``absent`` fields (``RunConfig.absent``) left out."""
-    cols = [
-        ("t", "int64"),
-        ("x", "int64"),
-        ("arm", "int64"),
-        ("success", "bool"),
-        ("aoi", "int64"),
-        ("oracle_aoi", "int64"),
-        ("regret", "int64"),
-        ("estimator", "float64"),
-    ]
-    cols += [(f"mu_hat_{k}", "float64") for k in range(1, K + 1)]
-    cols += [(f"pulls_{k}", "int64") for k in range(1, K + 1)]
-    cols += [(f"cand_{k}", "bool") for k in range(1, K + 1)]
-    cols.append(("override", "bool"))
-    return [c for c in cols if _field_of(c[0]) not in absent] if absent else cols
+def slot_columns(
+    K: int, fields: Sequence[str] = NAMES, extra: Mapping[str, np.ndarray] | None = None
+) -> list[tuple[str, str]]:
+    """(name, dtype) of every column of the slots table of a run with K arms that logs
+    ``fields`` (by default every field of the slot record), in order: one per field, or
+    one per arm numbered from 1 (``mu_hat_1 .. mu_hat_K``); then the columns of the fields
+    a newer corraoi wrote (``extra``: a block's, as read)."""
+    cols = [c for f in SLOT_RECORD if f.name in fields for c in f.table_columns(K)]
+    for name, value in (extra or {}).items():
+        if value.ndim == 2:
+            cols += [(f"{name}_{k}", str(value.dtype)) for k in range(1, value.shape[1] + 1)]
+        else:
+            cols.append((name, str(value.dtype)))
+    return cols
 
 
-def _field_of(column: str) -> str:
-    """The slot record's field a column of the table shows (``mu_hat_2``: ``mu_hat``)."""
-    head, _, tail = column.rpartition("_")
-    if not tail.isdigit():
-        return column
-    return "candidates" if head == "cand" else head
-
-
-def arrow_schema(K: int, absent: tuple[str, ...] = ()) -> pa.Schema:
+def arrow_schema(
+    K: int, fields: Sequence[str] = NAMES, extra: Mapping[str, np.ndarray] | None = None
+) -> pa.Schema:
     pa = _pyarrow()
-    types = {"int64": pa.int64(), "float64": pa.float64(), "bool": pa.bool_()}
-    return pa.schema([(name, types[dtype]) for name, dtype in slot_columns(K, absent)])
+    columns = slot_columns(K, fields, extra)
+    return pa.schema([(name, _arrow_type(pa, dtype)) for name, dtype in columns])
+
+
+def _arrow_type(pa: Any, dtype: str) -> Any:
+    if dtype == "object":  # an unknown field of mixed values: kept as text
+        return pa.string()
+    return pa.from_numpy_dtype(np.dtype(dtype))
 
 
 def block_columns(block: SlotBlock) -> dict[str, np.ndarray]:
     """The columns of a SlotBlock as the file numbers them (arms and states from 1)."""
-    K = block.mu_hat.shape[1]
-    out: dict[str, np.ndarray] = {
-        "t": block.t.astype(np.int64, copy=False),
-        "x": block.x.astype(np.int64) + 1,
-        "arm": block.arm.astype(np.int64) + 1,
-        "success": block.success.astype(bool, copy=False),
-        "aoi": block.aoi.astype(np.int64, copy=False),
-        "oracle_aoi": block.oracle_aoi.astype(np.int64, copy=False),
-        "regret": block.regret.astype(np.int64, copy=False),
-        "estimator": block.estimator.astype(np.float64, copy=False),
-    }
-    for k in range(K):
-        out[f"mu_hat_{k + 1}"] = np.ascontiguousarray(block.mu_hat[:, k], dtype=np.float64)
-    for k in range(K):
-        out[f"pulls_{k + 1}"] = np.ascontiguousarray(block.pulls[:, k], dtype=np.int64)
-    for k in range(K):
-        out[f"cand_{k + 1}"] = np.ascontiguousarray(block.candidates[:, k], dtype=bool)
-    out["override"] = block.override.astype(bool, copy=False)
+    out: dict[str, np.ndarray] = {}
+    for name in block.fields():
+        f = BY_NAME[name]
+        value = block.column(name)
+        if f.one_based:
+            value = value.astype(np.int64) + 1
+        if f.per_arm:
+            for (col, dtype), k in zip(f.table_columns(value.shape[1]), range(value.shape[1]),
+                                       strict=True):  # fmt: skip
+                out[col] = np.ascontiguousarray(value[:, k], dtype=dtype)
+        else:
+            out[name] = np.ascontiguousarray(value, dtype=f.dtype)
+    for name, value in block.extra.items():
+        if value.dtype == object:
+            value = np.array([None if v is None else str(v) for v in value], dtype=object)
+        if value.ndim == 2:
+            for k in range(value.shape[1]):
+                out[f"{name}_{k + 1}"] = value[:, k]
+        else:
+            out[name] = value
     return out
 
 
-def block_batch(block: SlotBlock, absent: tuple[str, ...] = ()) -> pa.RecordBatch:
-    """One Arrow record batch of the block's slots (columns of :func:`slot_columns`, those
-    of the ``absent`` fields left out)."""
+def block_batch(block: SlotBlock) -> pa.RecordBatch:
+    """One Arrow record batch of the block's slots (columns of :func:`slot_columns`)."""
     pa = _pyarrow()
     K = block.mu_hat.shape[1]
+    schema = arrow_schema(K, block.fields(), block.extra)
     cols = block_columns(block)
-    arrays = [pa.array(cols[name]) for name, _ in slot_columns(K, absent)]
-    return pa.RecordBatch.from_arrays(arrays, schema=arrow_schema(K, absent))
+    arrays = [pa.array(cols[name], type=schema.field(name).type) for name in schema.names]
+    return pa.RecordBatch.from_arrays(arrays, schema=schema)
 
 
 class RunData:
@@ -130,6 +130,8 @@ class RunData:
                 )
             slots = (first, last)
         self.window = slots
+        #: the fields of the tables (the declared ones, the unknown ones), from the first block
+        self._fields: tuple[tuple[str, ...], Mapping[str, np.ndarray]] | None = None
 
     def __repr__(self) -> str:
         where = f", slots {self.window[0]}..{self.window[1]}" if self.window else ""
@@ -172,23 +174,45 @@ class RunData:
             yield from self.log.window(*self.window)
 
     def to_arrow(self, *, batch: int = BATCH_SLOTS) -> Iterator[pa.RecordBatch]:
-        """Arrow record batches of the slots, streamed: memory bounded by one batch."""
+        """Arrow record batches of the slots, streamed: memory bounded by one batch. Every
+        batch has the columns of the first (:meth:`arrow_schema`): a field a later block
+        lacks is filled (NaN, or False)."""
         _pyarrow()
-        absent = self.log.config.absent
         for b in self.blocks(batch):
-            yield block_batch(b, absent)
+            if self._fields is None:
+                self._fields = (b.fields(), b.extra)
+            fields, extra = self._fields
+            if b.fields() != fields or list(b.extra) != list(extra):
+                b = _conform(b, fields, extra)
+            yield block_batch(b)
 
     def arrow_schema(self) -> pa.Schema:
-        return arrow_schema(self.K, self.log.config.absent)
+        """The columns of the tables: those of the fields the log holds (its first block's;
+        the required ones of an empty log)."""
+        if self._fields is None:
+            first = next(iter(self.blocks(1)), None)
+            self._fields = (first.fields(), first.extra) if first is not None else (FIELDS, {})
+        return arrow_schema(self.K, *self._fields)
 
     @cached_property
     def slots(self) -> pd.DataFrame:
         """One row per slot; dtypes as documented (``docs/analysis.md``)."""
         _pandas()
         pyarrow = _pyarrow()
-        table = pyarrow.Table.from_batches(list(self.to_arrow()), schema=self.arrow_schema())
+        batches = list(self.to_arrow())
+        table = pyarrow.Table.from_batches(batches, schema=self.arrow_schema())
         frame: pd.DataFrame = table.to_pandas()
         return frame
+
+
+def _conform(b: SlotBlock, fields: Sequence[str], extra: Mapping[str, np.ndarray]) -> SlotBlock:
+    """``b`` with exactly the fields of the table (absent ones filled)."""
+    parts: dict[str, Any] = {f: absent_fill(b, f) for f in fields}
+    parts["extra"] = {k: absent_fill(b, k) for k in extra}
+    parts["absent"] = tuple(f for f in FIELDS if f not in fields)
+    for f in parts["absent"]:
+        parts[f] = absent_column(f, len(b), b.mu_hat.shape[1])
+    return SlotBlock(**parts)
 
 
 def _pyarrow() -> Any:

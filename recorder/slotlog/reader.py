@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,10 +21,13 @@ from pathlib import Path
 import numpy as np
 from mcap.records import Attachment, Header, Metadata
 
-from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
-from corraoi.errors import CorraoiError, LogError
+from corraoi._version import __version__
+from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.slot_record import OPTIONAL
+from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
 from recorder.vocab import (
+    LACKING_FORMAT_VERSION,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     PROVENANCE_METADATA,
@@ -76,6 +80,9 @@ class RunLog:
     _channel_id: int = field(default=0, repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
+    #: the unknown slot fields already named in a warning
+    _unknown: list[str] = field(default_factory=list, repr=False)
+    _absent: tuple[str, ...] | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         return (f"RunLog({str(self.path)!r}, {self.config.label}, "
@@ -84,6 +91,16 @@ class RunLog:
     @property
     def label(self) -> str:
         return self.config.label
+
+    @property
+    def absent(self) -> tuple[str, ...]:
+        """The fields a run may lack (corraoi.engine.slot_record.OPTIONAL) that this log
+        lacks, as its first chunk shows (a log written before a field existed lacks it)."""
+        if self._absent is None:
+            first = next(iter(self._chunk_blocks()), None)
+            have = first.fields() if first is not None else ()
+            self._absent = tuple(f for f in OPTIONAL if f not in have)
+        return self._absent
 
     @property
     def horizon(self) -> int:
@@ -149,14 +166,14 @@ class RunLog:
         first, last = max(int(first), 1), min(int(last), self.n_slots)
         if first > last:
             return
-        K, n, absent = self.config.instance.K, self.config.instance.n_states, self.config.absent
+        K, n = self.config.instance.K, self.config.instance.n_states
         lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
         expected = first
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
             for offset in chunk_offsets(f, walker, lo, hi):
                 chunk = walker.chunk_at(offset)
-                part = _decode(chunk, self._channel_id, self.path, K, n, absent)
+                part = self._noted(_decode(chunk, self._channel_id, self.path, K, n))
                 keep = (part.t >= first) & (part.t <= last)
                 if not keep.any():
                     continue
@@ -167,8 +184,31 @@ class RunLog:
         if expected != last + 1:
             raise LogError(f"{self.path}: slots {expected}..{last} are missing from the log")
 
+    def _noted(self, part: SlotBlock) -> SlotBlock:
+        """``part``, after one warning per log naming the fields a newer corraoi wrote that
+        this one does not know (they are kept: ``SlotBlock.extra``, ``Run.slots``). Only a
+        log of format version 3 (``corraoi.Logger``'s) may lack a column every block carries
+        (``SlotBlock.absent``): in an older one that is damage."""
+        if part.absent and self.format_version < LACKING_FORMAT_VERSION and len(part):
+            raise LogError(
+                f"{self.path}: slot {int(part.t[0])} lacks {', '.join(part.absent)}, a required "
+                f"field of a log of format version {self.format_version} (only a log of "
+                f"version {LACKING_FORMAT_VERSION}, corraoi.Logger's, may lack it)"
+            )
+        new = [f for f in part.extra if f not in self._unknown]
+        if new:
+            self._unknown.extend(new)
+            warnings.warn(
+                f"{self.path}: slot field{'s' if len(new) > 1 else ''} {', '.join(new)} "
+                f"unknown to corraoi {__version__} (written by corraoi "
+                f"{self.config.version}?): kept as read, not shown or compared",
+                CorraoiWarning,
+                stacklevel=3,
+            )
+        return part
+
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
-        K, n, absent = self.config.instance.K, self.config.instance.n_states, self.config.absent
+        K, n = self.config.instance.K, self.config.instance.n_states
         expected = 1
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
@@ -176,7 +216,7 @@ class RunLog:
                 if kind != "chunk":
                     continue
                 assert isinstance(item, ChunkData)
-                part = _decode(item, self._channel_id, self.path, K, n, absent)
+                part = self._noted(_decode(item, self._channel_id, self.path, K, n))
                 if not len(part):
                     continue
                 _follows(part, expected, self.path, item.offset)
@@ -372,17 +412,15 @@ def _validate_chunk(
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     config = _config(p, run_md)
-    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states, config.absent)
+    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 
 
-def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int,
-            absent: tuple[str, ...] = ()) -> SlotBlock:  # fmt: skip
+def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int) -> SlotBlock:
     """The slots of one chunk, decoded and validated (an empty block when it holds none)."""
     assert chunk.records is not None
     found = channel_payloads(chunk.records, channel_id, p, chunk.offset)
-    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}",
-                           absent=absent)  # fmt: skip
+    return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}")
 
 
 def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
@@ -397,4 +435,4 @@ def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
 
 
 def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
-    return SlotBlock(**{f: b.column(f)[start:stop] for f in FIELDS})
+    return b.slice(start, stop)

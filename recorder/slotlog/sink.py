@@ -107,7 +107,7 @@ class McapSink(Sink):
         self._fsync = fsync
         self._torn = False
         self._last: SlotBlock | None = None
-        self._encoder = BlockEncoder(config.instance.K, config.absent)
+        self._encoder = BlockEncoder(config.instance.K)
         self._file: BinaryIO = self._out.create().file
         try:
             self._writer = ChunkWriter(
@@ -217,7 +217,7 @@ class McapSink(Sink):
             self._writer.add_metadata(
                 END_METADATA,
                 end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last,
-                             error=error, absent=self.config.absent),
+                             error=error),
             )  # fmt: skip
             self._writer.finish()
             self._file.flush()

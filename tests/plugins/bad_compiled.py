@@ -129,3 +129,33 @@ class RaisingState(CompiledPolicy):
     @classmethod
     def state_size(cls, K, params):
         raise RuntimeError("state size unknown")
+
+
+@njit(cache=True)
+def writing_update(t, arm, reward, K, npull, nsucc, params, ps):
+    if t != params[1]:
+        return
+    what = params[0]
+    if what == 1.0:  # one pull too many
+        npull[0] += 1
+    elif what == 2.0:  # the played arm's successes
+        nsucc[arm] = 0 if nsucc[arm] > 0 else npull[arm]
+    elif what == 3.0:  # a pull moved: the pulls still add up to the slots
+        other = 1 if arm == 0 else 0
+        npull[arm] -= 1
+        npull[other] += 1
+    elif what == 4.0:  # its own parameter
+        params[2] = 1.0
+
+
+class WritesCounts(CompiledPolicy):
+    """Writes into what its hooks may only read (params: what, at which slot)."""
+
+    name = "writes-counts"
+    params = {"what": Param(0.0, "0 nothing, 1 npull, 2 nsucc, 3 a pull moved, 4 params",
+                            low=0.0, high=4.0, integer=True),
+              "at": Param(5.0, "the slot", low=1.0),
+              "spare": Param(0.0, "a parameter it overwrites")}  # fmt: skip
+    forced = "corraoi.policies.hooks:first_unpulled"
+    score = "corraoi.policies.hooks:score_none"
+    update = writing_update
