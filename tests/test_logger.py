@@ -224,12 +224,16 @@ def test_a_process_killed_mid_run_loses_at_most_one_block(tmp_path):
 
 
 def test_bad_arguments_are_refused_before_any_file(tmp_path):
-    with pytest.raises(corraoi.UsageError, match="arms 3: instance I1 has 4 arms"):
+    with pytest.raises(corraoi.ConfigError, match="arms 3: .*expected 4, the arms of instance I1"):
         corraoi.Logger(tmp_path / "a.mcap", instance="I1", horizon=10, arms=3)
     with pytest.raises(corraoi.InstanceError):
         corraoi.Logger(tmp_path / "a.mcap", instance="nope", horizon=10)
-    with pytest.raises(corraoi.UsageError, match="needs the instance the slots were played on"):
+    with pytest.raises(corraoi.ConfigError, match="arms None: .*needs its number of arms"):
         corraoi.Logger(tmp_path / "a.mcap", instance=None, horizon=10)
+    with pytest.raises(corraoi.ConfigError, match="channel 'markov': .*no hidden states"):
+        corraoi.Logger(tmp_path / "a.mcap", instance=None, arms=4, channel="markov")
+    with pytest.raises(corraoi.UsageError, match="horizon"):
+        corraoi.Logger(tmp_path / "a.mcap", instance="I1", horizon=2.5)
     (tmp_path / "taken.mcap").write_bytes(b"x")
     with pytest.raises(corraoi.OutputError, match="already exists"):
         corraoi.Logger(tmp_path / "taken.mcap", instance="I1", horizon=10)
@@ -286,3 +290,70 @@ def test_the_testbed_example_replays_its_csv_into_a_recording(tmp_path):
     assert run.slots["arm"].tolist() == rows[:, 1].tolist()
     assert run.slots["aoi"].tolist() == ages
     assert list(run.summary.pulls) == np.bincount(rows[:, 1] - 1, minlength=4).tolist()
+
+
+def test_the_issues_example_without_an_instance_reads_in_every_view(cucb, tmp_path):
+    """``Logger(path, arms=4, policy=..., instance=None)``: no horizon, no p or Y. The log
+    holds the age and the counts; x, the oracle, the regret and the estimator are absent,
+    the configuration records 4 arms and no instance, and every reader leaves out what the
+    log lacks."""
+    run, b = cucb
+    path = tmp_path / "testbed.mcap"
+    with corraoi.Logger(path, arms=4, policy="my-scheduler", instance=None) as log:
+        log.slot(arm=2, success=True)
+        log.slots(b.arm[1:1500] + 1, b.success[1:1500])
+    got = open_log(path)
+    assert got.status == "complete" and got.n_slots == 1500 and got.format_version == 3
+    assert got.config.instance is None and got.config.K == 4 and got.config.n_states is None
+    assert got.config.to_dict()["arms"] == 4 and "instance" not in got.config.to_dict()
+    assert got.label == "my-scheduler-none-s0"
+    lacks = ("x", "oracle_aoi", "regret", "estimator", "override", "candidates")
+    assert _lacks(got) == lacks
+    assert "p" not in got.metadata and "Y" not in got.metadata and got.metadata["arms"] == "4"
+    blocks = got.read_all()
+    want_aoi = np.asarray(b.aoi[:1500])  # the ages follow from the successes alone
+    want_aoi[0] = 1
+    assert blocks.aoi[0] == 1 and np.array_equal(blocks.pulls[-1], np.bincount(
+        np.r_[1, b.arm[1:1500]], minlength=4))  # fmt: skip
+    # load / Run.slots / summary
+    loaded = corraoi.load(path)
+    cols = list(loaded.slots.columns)
+    assert cols[:4] == ["t", "arm", "success", "aoi"]
+    assert not {"x", "oracle_aoi", "regret", "estimator", "override", "cand_1"} & set(cols)
+    s = loaded.summary
+    assert s.regret is None and s.estimator is None and s.best_arm is None
+    assert s.best_share is None and s.pulls == tuple(int(v) for v in blocks.pulls[-1])
+    # info names what is absent
+    info = cli("info", path)
+    assert info.exit_code == 0, info.output
+    assert "none: K=4 arms (p and Y unknown)" in info.output
+    assert "fields absent          x, oracle_aoi, regret, estimator, override" in info.output
+    assert "pathwise regret        -" in info.output
+    # replay draws it
+    replay = cli("replay", path, "-o", tmp_path / "replayed.rrd")
+    assert replay.exit_code == 0, replay.output
+    assert (tmp_path / "replayed.rrd").stat().st_size > 0
+    # compare and diff beside a built-in run with an instance
+    compare = cli("compare", path, run.path, "--no-rrd")
+    assert compare.exit_code == 0, compare.output
+    assert "my-scheduler" in compare.output
+    report = corraoi.diff(path, run.path)
+    assert any("only one of the runs logs x, oracle_aoi, regret, estimator" in w
+               for w in report.warnings)  # fmt: skip
+    assert report["arm"].comparable and not report["regret"].comparable
+    diff = cli("diff", path, run.path)
+    assert diff.exit_code in (0, 1), diff.output
+    assert "only one of the runs logs x" in diff.output
+
+
+def test_x_without_an_instance_is_one_error(tmp_path):
+    path = tmp_path / "x.mcap"
+    log = corraoi.Logger(path, arms=4, instance=None, horizon=10)
+    log.slot(arm=1, success=False)
+    with pytest.raises(SlotError, match="slot 2: x given, but the log has no instance") as info:
+        log.slot(arm=1, success=True, x=2)
+    assert "\n" not in str(info.value)
+    assert log.closed and open_log(f"{path}.partial").status == "failed"
+    with pytest.raises(SlotError, match="slot 1: x given, but the log has no instance"):
+        with corraoi.Logger(tmp_path / "y.mcap", arms=4, instance=None) as other:
+            other.slots([1, 2], [True, False], x=[1, 2])

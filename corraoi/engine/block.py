@@ -17,6 +17,7 @@ from corraoi.errors import ConfigError
 from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, default_channel
 from corraoi.model.instance import Instance
+from corraoi.model.theory import InstanceTheory, analyse
 from corraoi.policies.spec import PolicySpec
 
 from .slot_record import BY_NAME, NAMES, REQUIRED
@@ -26,15 +27,25 @@ from .slot_record import BY_NAME, NAMES, REQUIRED
 #: grows by about a quarter; at 256 arms it is 3 to 7 times as large).
 SCORE_ARMS = 64
 
+#: :attr:`RunConfig.instance_name` of a run without an instance.
+NO_INSTANCE = "none"
+
 #: The values of :attr:`RunConfig.streams`.
 STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
 
 
 @dataclass(frozen=True)
 class RunConfig:
-    """Everything that determines a run: with it, a log replays with nothing else."""
+    """Everything that determines a run: with it, a log replays with nothing else.
 
-    instance: Instance
+    ``instance`` is None for a loop logged by ``corraoi.Logger`` without one (a testbed
+    whose ``p`` and ``Y`` nobody knows): such a run has ``arms`` arms and no states, best
+    arm or theory, and its log lacks what needs them (``x``, the oracle, the regret, the
+    estimator). Everything that reads a run asks :attr:`K`, :attr:`n_states`,
+    :attr:`instance_name` and :attr:`theory`, which answer for both kinds.
+    """
+
+    instance: Instance | None
     policy: PolicySpec
     seed: int
     horizon: int
@@ -46,16 +57,76 @@ class RunConfig:
     streams: str = "cpu"
     #: log the policy's scores (``score``, ``forced``): by default up to SCORE_ARMS arms
     score: bool | None = None
+    #: the number of arms of a run without an instance (None with one: the instance's)
+    arms: int | None = None
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
         if self.streams not in STREAMS:
             raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
+        if self.instance is None:
+            if self.policy.tier != "external":
+                raise ConfigError(
+                    f"policy {self.policy.name!r}: a run without an instance is a loop logged "
+                    "by corraoi.Logger (policy tier external); expected an instance"
+                )
+            if type(self.arms) is not int or self.arms < 1:
+                raise ConfigError(
+                    f"arms {self.arms!r}: a run without an instance needs its number of arms, "
+                    "an integer >= 1"
+                )
+        elif self.arms is not None and self.arms != self.instance.K:
+            raise ConfigError(
+                f"arms {self.arms!r}: instance {self.instance.name} has {self.instance.K} arms"
+            )
+        else:
+            object.__setattr__(self, "arms", None)
         if self.channel is None:
-            object.__setattr__(self, "channel", default_channel(self.instance))
+            chan = Channel() if self.instance is None else default_channel(self.instance)
+            object.__setattr__(self, "channel", chan)
         if self.score is None:
-            object.__setattr__(self, "score", self.instance.K <= SCORE_ARMS)
+            object.__setattr__(self, "score", self.K <= SCORE_ARMS)
+
+    @property
+    def K(self) -> int:
+        """The number of arms."""
+        if self.instance is None:
+            assert self.arms is not None
+            return self.arms
+        return self.instance.K
+
+    @property
+    def n_states(self) -> int | None:
+        """The number of hidden states (None without an instance)."""
+        return None if self.instance is None else self.instance.n_states
+
+    @property
+    def instance_name(self) -> str:
+        """The instance's name, or ``none`` for a run without one."""
+        return NO_INSTANCE if self.instance is None else self.instance.name
+
+    @property
+    def arm_names(self) -> tuple[str, ...]:
+        """The arms' names ("1".."K" without an instance)."""
+        if self.instance is None:
+            return tuple(str(k + 1) for k in range(self.K))
+        return tuple(self.instance.arm_names)
+
+    @property
+    def theory(self) -> InstanceTheory | None:
+        """The instance's theory (mu, best arm, mu*, competitive arms); None without one."""
+        return None if self.instance is None else analyse(self.instance)
+
+    @property
+    def model(self) -> Instance:
+        """The instance, for what cannot run without one (simulating, recording again)."""
+        if self.instance is None:
+            raise ConfigError(
+                f"run {self.label} has no instance (a loop logged by corraoi.Logger without "
+                "one): expected a run with an instance"
+            )
+        return self.instance
 
     @property
     def format_version(self) -> int:
@@ -78,11 +149,13 @@ class RunConfig:
     @property
     def label(self) -> str:
         gpu = "" if self.streams == "cpu" else "-gpu"
-        return f"{self.policy.name}-{self.instance.name}-s{self.seed}{gpu}"
+        return f"{self.policy.name}-{self.instance_name}-s{self.seed}{gpu}"
 
     def to_dict(self) -> dict[str, Any]:
-        out = {
-            "instance": self.instance.to_dict(),
+        out: dict[str, Any] = (
+            {"arms": self.K} if self.instance is None else {"instance": self.instance.to_dict()}
+        )
+        out |= {
             "policy": self.policy.to_dict(),
             "seed": int(self.seed),
             "horizon": int(self.horizon),
@@ -93,14 +166,16 @@ class RunConfig:
             out["channel"] = self.channel.to_dict()
         if self.streams != "cpu":  # logs of the CPU engine read as before
             out["streams"] = self.streams
-        if self.score != (self.instance.K <= SCORE_ARMS):  # the default is not written
+        if self.score != (self.K <= SCORE_ARMS):  # the default is not written
             out["score"] = bool(self.score)
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
         return cls(
-            instance=Instance.from_dict(data["instance"], where="run configuration"),
+            instance=Instance.from_dict(data["instance"], where="run configuration")
+            if "instance" in data or "arms" not in data
+            else None,
             policy=PolicySpec.from_dict(data["policy"]),
             seed=int(data["seed"]),
             horizon=int(data["horizon"]),
@@ -108,6 +183,7 @@ class RunConfig:
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
             score=bool(data["score"]) if "score" in data else None,
+            arms=data["arms"] if "instance" not in data and "arms" in data else None,
         )
 
 

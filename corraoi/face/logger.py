@@ -23,14 +23,14 @@ from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
 from corraoi._version import __version__
 from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock, absent_column
 from corraoi.engine.slot_record import BY_NAME, REQUIRED
-from corraoi.errors import CorraoiError, SlotError, UsageError
+from corraoi.errors import ConfigError, CorraoiError, SlotError, UsageError
 from corraoi.provenance import Provenance, versions
 from recorder.sink import RunRecording, Sink
 from recorder.slotlog.sink import McapSink
@@ -66,14 +66,23 @@ class Logger:
                 log.slot(arm=2, success=True)          # arms and states numbered from 1
             log.slots(arm=[...], success=[...], x=[...])   # or many at once
 
+        with corraoi.Logger("testbed.mcap", arms=4, policy="my-scheduler",
+                            instance=None) as log:     # no p, Y known: no x, oracle, regret
+            log.slot(arm=2, success=True)
+
     ``path``: the slot log (written as ``<path>.partial``, renamed when closed); ``rrd``: a
     Rerun recording beside it (a path, or True for the log's name with ``.rrd``).
     ``instance``: what :func:`corraoi.record` takes (a built-in name, a file or an
-    :class:`~corraoi.Instance`); ``arms``, if given, must be its number of arms.
+    :class:`~corraoi.Instance`); ``arms``, if given, must be its number of arms. With
+    ``instance=None`` (a testbed whose ``p`` and ``Y`` nobody knows) ``arms`` is required:
+    the log then has no hidden state, oracle, regret or estimator (they need the instance;
+    ``x`` is refused) and its run configuration records the arms only.
     ``horizon``: the slots the run is meant to have (closing earlier marks the log
-    interrupted). ``policy``: the name the run is logged under (with ``params``); ``seed``:
-    the seed of its hidden path, when it is corraoi's (:mod:`corraoi.gym`), so that it is
-    paired with corraoi's own runs of that seed. ``channel``: as ``corraoi.record``'s.
+    interrupted); None (the default) for a stream of unknown length: the log's horizon is
+    the longest a log holds, and closing it marks it complete (Ctrl-C: interrupted).
+    ``policy``: the name the run is logged under (with ``params``); ``seed``: the seed of
+    its hidden path, when it is corraoi's (:mod:`corraoi.gym`), so that it is paired with
+    corraoi's own runs of that seed. ``channel``: as ``corraoi.record``'s.
     ``source`` and ``version``: what wrote the slots (your program and its version), kept
     in the log's provenance with corraoi's own versions.
 
@@ -95,8 +104,8 @@ class Logger:
         self,
         path: str | os.PathLike[str],
         *,
-        instance: str | os.PathLike[str] | Instance,
-        horizon: int,
+        instance: str | os.PathLike[str] | Instance | None,
+        horizon: int | None = None,
         policy: str = "external",
         arms: int | None = None,
         params: Mapping[str, float] | None = None,
@@ -108,54 +117,76 @@ class Logger:
         overwrite: bool = False,
         sinks: Sequence[Sink] = (),
     ) -> None:
+        from corraoi import arguments
         from corraoi.files.partial import check_target
-        from corraoi.limits import check_horizon, check_seed
-        from corraoi.model.theory import analyse
+        from corraoi.limits import MAX_HORIZON, check_horizon, check_seed
         from corraoi.policies.spec import PolicySpec
 
         from . import resolve
         from .runs import rrd_beside
 
+        arguments.path(path, name="path", what="the slot log's path (a str or a pathlib.Path)")
         if instance is None:
-            raise UsageError(
-                "instance: corraoi.Logger needs the instance the slots were played on (a "
-                "built-in name, an instance file or a corraoi.Instance): its arms, best arm "
-                "and mu* define the log; a log without one is not supported"
+            K = arguments.integer(
+                arms,
+                name="arms",
+                lo=1,
+                kind=ConfigError,
+                why="a log without an instance needs its number of arms",
             )
-        inst = resolve.instance(instance)
-        if arms is not None and arms != inst.K:
-            raise UsageError(f"arms {arms!r}: instance {inst.name} has {inst.K} arms")
-        check_horizon(horizon)
-        check_seed(seed, name="seed")
-        if not isinstance(policy, str) or not policy.strip():
-            raise UsageError(f"policy {policy!r}: expected the name the run is logged under")
-        for name, text in (("source", source), ("version", version)):
-            if not isinstance(text, str):
-                raise UsageError(f"{name} {text!r}: expected a string")
-        chan = resolve.channel(channel, inst)
-        chan.check(inst, int(horizon))
-        self.spec = PolicySpec(name=policy, params=dict(params or {}),
+            if channel is not None:
+                raise arguments.wrong_value(
+                    ConfigError,
+                    "channel",
+                    channel,
+                    "None (a log without an instance has no hidden states)",
+                )
+            inst = None
+        else:
+            inst = resolve.instance(instance)
+            given = arguments.optional(arguments.integer, arms, name="arms", kind=ConfigError)
+            if given is not None and given != inst.K:
+                raise arguments.wrong_value(
+                    ConfigError, "arms", arms, f"{inst.K}, the arms of instance {inst.name}"
+                )
+            K = inst.K
+        self.open_ended = horizon is None
+        horizon = MAX_HORIZON if horizon is None else check_horizon(horizon, floats=True)
+        seed = check_seed(seed, name="seed", floats=True)
+        arguments.text(policy, name="policy", expected="the name the run is logged under")
+        arguments.text(source, name="source", empty=True)
+        arguments.text(version, name="version", empty=True)
+        arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
+        arguments.flag(overwrite, name="overwrite")
+        if params is not None and not isinstance(params, Mapping):
+            raise arguments.wrong_type(ConfigError, "params", params, "a mapping of numbers")
+        params = {k: arguments.number(v, name=f"params[{k!r}]", kind=ConfigError)
+                  for k, v in (params or {}).items()}  # fmt: skip
+        if inst is not None:
+            chan = resolve.channel(resolve.channel_word(channel), inst)
+            chan.check(inst, int(horizon))
+        self.spec = PolicySpec(name=policy, params=dict(params),
                                qualname=EXTERNAL_PREFIX + policy, version=version,
                                tier="external")  # fmt: skip
-        self._base = RunConfig(inst, self.spec, int(seed), int(horizon), channel=chan)
+        self._base = RunConfig(inst, self.spec, int(seed), int(horizon),
+                               channel=None if inst is None else chan,
+                               arms=K if inst is None else None)  # fmt: skip
         self.path = check_target(path, overwrite=overwrite, what="MCAP log")
         if rrd is True:
             rrd = rrd_beside(self.path)
-        if rrd is not None and rrd is not False and not isinstance(rrd, (str, os.PathLike)):
-            raise UsageError(f"rrd: expected a path, True, None or False, got {rrd!r}")
         self.rrd: Path | None = None if rrd is None or rrd is False else Path(rrd)
         if self.rrd is not None:
             check_target(self.rrd, overwrite=overwrite, what="Rerun recording")
         self.overwrite = overwrite
         self.source, self.version = source, version
         self._sinks = tuple(sinks)
-        self.K, self.n_states = inst.K, inst.n_states
+        self.K, self.n_states = K, self._base.n_states
         self.horizon = int(horizon)
-        theory = analyse(inst)
-        self._best = theory.best_arm
-        self._mu_star = theory.mu_star
-        self._Y = np.asarray(inst.Y, dtype=bool)
-        self._Y_rows = self._Y.tolist()
+        theory = self._base.theory  # None without an instance: no oracle, regret, estimator
+        self._best = None if theory is None else theory.best_arm
+        self._mu_star = None if theory is None else theory.mu_star
+        self._Y = None if inst is None else np.asarray(inst.Y, dtype=bool)
+        self._Y_rows = None if self._Y is None else self._Y.tolist()
         #: the run's configuration once the first slot said which fields are given
         self.config: RunConfig | None = None
         self._stack: ExitStack | None = None
@@ -209,11 +240,15 @@ class Logger:
                 raise SlotError(f"slot {n}: arm {arm}: expected an arm in 1..{self.K}")
             if success is not True and success is not False:
                 success = self._boolean(success, "success", n)
+            if x is not None and self._Y_rows is None:
+                self._no_instance_x(n)
             given = (x is not None, override is not None, mu_hat is not None,
                      pulls is not None, candidates is not None)  # fmt: skip
             if given != self._given:
                 self._fields_given(given, n)
             if x is not None:
+                if self._Y_rows is None or self.n_states is None:
+                    self._no_instance_x(n)
                 if x.__class__ is not int:
                     x = self._integer(x, "x", n)
                 if not 1 <= x <= self.n_states:
@@ -278,6 +313,9 @@ class Logger:
 
     def close(self) -> Path:
         """Write the slots still pending and finish every file; returns the log's path."""
+        return self._close(interrupted=False)
+
+    def _close(self, *, interrupted: bool) -> Path:
         if self.closed:
             assert self.result is not None
             return self.result
@@ -285,6 +323,12 @@ class Logger:
         self._open()
         assert self._stack is not None and self._log is not None
         self.closed = True
+        if self.open_ended:  # no horizon: complete when closed, interrupted on Ctrl-C
+            try:
+                self._log.close(complete=not interrupted)
+            except BaseException:
+                self._stack.close()
+                raise
         self._stack.close()
         self.result = self._log.path if self._log.finished else self._log.partial_path
         return self.result
@@ -301,7 +345,7 @@ class Logger:
         if self.closed:
             return
         if exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
-            self.close()  # Ctrl-C: the slots so far, interrupted
+            self._close(interrupted=exc_type is not None)  # Ctrl-C: the slots so far
         elif exc is not None:
             text = " ".join(str(exc).split()) or type(exc).__name__
             self._fail(exc if isinstance(exc, CorraoiError) else
@@ -309,7 +353,8 @@ class Logger:
 
     def __repr__(self) -> str:
         state = "closed" if self.closed else "open"
-        return f"Logger({str(self.path)!r}, {self.t}/{self.horizon} slots, {state})"
+        of = "" if self.open_ended else f"/{self.horizon}"
+        return f"Logger({str(self.path)!r}, {self.t}{of} slots, {state})"
 
     # ------------------------------------------------------------------ internals
 
@@ -323,6 +368,8 @@ class Logger:
             held = {*COMPUTED, *(f for f, g in zip(names, given, strict=True) if g)}
             if given[0]:
                 held.update(NEEDS_X)
+            if self._mu_star is None:  # the estimator needs the instance's mu*
+                held.discard("estimator")
             self._absent = tuple(f for f in FIELDS if f not in held)
             return
         for name, now, before in zip(names, given, self._given, strict=True):
@@ -388,9 +435,9 @@ class Logger:
         self._aoi = int(aoi[-1])
         aoisum = self._aoisum + np.cumsum(aoi)
         self._aoisum = int(aoisum[-1])
-        estimator = aoisum - t / self._mu_star
-        cols: dict[str, Any] = {"t": t, "arm": arm, "success": success, "aoi": aoi,
-                                       "estimator": estimator}  # fmt: skip
+        cols: dict[str, Any] = {"t": t, "arm": arm, "success": success, "aoi": aoi}
+        if self._mu_star is not None:
+            cols["estimator"] = aoisum - t / self._mu_star
         onehot = np.zeros((B, K), dtype=np.int64)
         onehot[np.arange(B), arm] = 1
         pulls = self._pulls + np.cumsum(onehot, axis=0)
@@ -399,7 +446,7 @@ class Logger:
         with np.errstate(invalid="ignore", divide="ignore"):
             mu = np.where(pulls > 0, succ / np.maximum(pulls, 1), 0.0)
         cols["mu_hat"], cols["pulls"] = mu, pulls
-        if "x" in given:
+        if "x" in given and self._Y is not None and self._best is not None:
             x = given["x"].astype(np.int64, copy=False)
             oracle = _ages(self._Y[self._best, x], self._oracle_aoi)
             self._oracle_aoi = int(oracle[-1])
@@ -445,6 +492,8 @@ class Logger:
             raise SlotError(f"slot {self.horizon + 1}: past the horizon {self.horizon} of the log")
         self._check_ints(arrays["arm"], "arm", first, 1, self.K)
         self._check_bools(arrays, first)
+        if "x" in arrays and self._Y is None:
+            self._no_instance_x(first)
         given = (*(f in arrays for f in ("x", *GIVEN_FIELDS)),)
         if given != self._given:
             self._fields_given(given, first)
@@ -452,7 +501,7 @@ class Logger:
             self._check_ints(arrays["x"], "x", first, 1, self.n_states)
             arrays["x"] = arrays["x"].astype(np.int64) - 1
         arrays["arm"] = arrays["arm"].astype(np.int64) - 1
-        if "x" in arrays:
+        if "x" in arrays and self._Y is not None:
             want = self._Y[arrays["arm"], arrays["x"]]
             wrong = want != arrays["success"]
             if wrong.any():
@@ -493,6 +542,13 @@ class Logger:
             if name in arrays and arrays[name].dtype != bool:
                 raise SlotError(f"slots {first}..: {name}: expected bools, got "
                                 f"{arrays[name].dtype}")  # fmt: skip
+
+    def _no_instance_x(self, n: int) -> NoReturn:
+        raise SlotError(
+            f"slot {n}: x given, but the log has no instance (instance=None): a hidden state "
+            "is one of an instance's states; give instance= the slots were played on, or "
+            "leave x out"
+        )
 
     @staticmethod
     def _bad_t(t: Any, n: int) -> None:

@@ -149,7 +149,7 @@ def _table(values: list[Any], field: str, K: int, ok: Any, expected: str) -> np.
 
 
 def decode_messages(
-    payloads: Sequence[bytes | memoryview], K: int, n_states: int, *, where: str
+    payloads: Sequence[bytes | memoryview], K: int, n_states: int | None, *, where: str
 ) -> SlotBlock:
     """The SlotBlock of consecutive slot messages (JSON bytes), validated strictly.
 
@@ -297,10 +297,14 @@ def _infinite(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[str, np.ndarray]:
+def _columns(
+    cols: dict[str, list[Any]], B: int, K: int, n_states: int | None
+) -> dict[str, np.ndarray]:
     """The columns of FIELDS, checked; one the log lacks (not in ``cols``) is
     :func:`~corraoi.engine.block.absent_column`'s fill."""
     out: dict[str, np.ndarray] = {f: absent_column(f, B, K) for f in FIELDS if f not in cols}
+    if n_states is None and "x" in cols:
+        raise _Bad(0, "x", _shown(cols["x"][0]), "no hidden state (the run has no instance)")
     for f in _INT_FIELDS:
         if f in cols:
             out[f] = _int_column(cols[f], f)
@@ -409,10 +413,10 @@ def check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
     facts = {
         "seed": str(config.seed),
         "horizon": str(config.horizon),
-        "arms": str(config.instance.K),
-        "states": str(config.instance.n_states),
+        "arms": str(config.K),
+        "states": str(config.n_states),
         "policy": config.policy.name,
-        "instance": config.instance.name,
+        "instance": config.instance_name,
     }
     for key, value in facts.items():
         if key in md and md[key] != value:

@@ -139,7 +139,7 @@ class RunData:
 
     @property
     def K(self) -> int:
-        return self.log.config.instance.K
+        return self.log.config.K
 
     @cached_property
     def config(self) -> Mapping[str, Any]:
@@ -153,9 +153,9 @@ class RunData:
                 "params": dict(cfg.policy.params),
                 "seed": cfg.seed,
                 "horizon": cfg.horizon,
-                "instance": cfg.instance.name,
-                "arms": cfg.instance.K,
-                "states": cfg.instance.n_states,
+                "instance": cfg.instance_name,
+                "arms": cfg.K,
+                "states": cfg.n_states,
                 "best_arm": int(md["best_arm"]) if "best_arm" in md else None,
                 "mu": json.loads(md["mu"]) if "mu" in md else None,
                 "corraoi_version": cfg.version,
