@@ -30,7 +30,7 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock, absent_column
 from corraoi.engine.slot_record import BY_NAME, REQUIRED
-from corraoi.errors import ConfigError, CorraoiError, SlotError, UsageError
+from corraoi.errors import ConfigError, CorraoiError, PolicyError, SlotError, UsageError
 from corraoi.provenance import Provenance, versions
 from recorder.sink import RunRecording, Sink
 from recorder.slotlog.sink import McapSink
@@ -123,9 +123,11 @@ class Logger:
         from corraoi.policies.spec import PolicySpec
 
         from . import resolve
+        from .recording import SINK_METHODS
         from .runs import rrd_beside
 
         arguments.path(path, name="path", what="the slot log's path (a str or a pathlib.Path)")
+        channel = resolve.channel_word(channel)
         if instance is None:
             K = arguments.integer(
                 arms,
@@ -153,17 +155,19 @@ class Logger:
         self.open_ended = horizon is None
         horizon = MAX_HORIZON if horizon is None else check_horizon(horizon, floats=True)
         seed = check_seed(seed, name="seed", floats=True)
-        arguments.text(policy, name="policy", expected="the name the run is logged under")
+        arguments.text(policy, name="policy", kind=PolicyError,
+                       expected="the name the run is logged under")  # fmt: skip
         arguments.text(source, name="source", empty=True)
         arguments.text(version, name="version", empty=True)
         arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
         arguments.flag(overwrite, name="overwrite")
+        arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
         if params is not None and not isinstance(params, Mapping):
-            raise arguments.wrong_type(ConfigError, "params", params, "a mapping of numbers")
-        params = {k: arguments.number(v, name=f"params[{k!r}]", kind=ConfigError)
+            raise arguments.wrong_type(PolicyError, "params", params, "a dict of numbers")
+        params = {k: arguments.number(v, name=f"params[{k!r}]", kind=PolicyError)
                   for k, v in (params or {}).items()}  # fmt: skip
         if inst is not None:
-            chan = resolve.channel(resolve.channel_word(channel), inst)
+            chan = resolve.channel(channel, inst)
             chan.check(inst, int(horizon))
         self.spec = PolicySpec(name=policy, params=dict(params),
                                qualname=EXTERNAL_PREFIX + policy, version=version,
