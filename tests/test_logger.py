@@ -328,7 +328,7 @@ def test_the_issues_example_without_an_instance_reads_in_every_view(cucb, tmp_pa
     assert info.exit_code == 0, info.output
     assert "none: K=4 arms (p and Y unknown)" in info.output
     assert "fields absent          x, oracle_aoi, regret, estimator, override" in info.output
-    assert "pathwise regret        -" in info.output
+    assert "pathwise regret        -" in info.output and "none (no instance)" in info.output
     # replay draws it
     replay = cli("replay", path, "-o", tmp_path / "replayed.rrd")
     assert replay.exit_code == 0, replay.output

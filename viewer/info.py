@@ -91,6 +91,8 @@ def info_text(info: dict[str, Any]) -> str:
         chan += f" of {channel.get('length', '?')} slots from {channel.get('source', '?')}"
     elif chan == "markov":
         chan += " (the instance's transition matrix)"
+    if inst is None:
+        chan = "none (no instance)"
     lines += [
         f"  {'hidden states':<22} {chan}",
         f"  {'seed':<22} {cfg['seed']}",
