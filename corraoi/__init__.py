@@ -37,6 +37,7 @@ from .errors import (  # noqa: E402
 
 if TYPE_CHECKING:
     from .face.load import load
+    from .face.logger import Logger
     from .face.recording import record
     from .face.runs import Run
     from .face.show import show
@@ -50,6 +51,7 @@ _LAZY = {
     "record": "corraoi.face.recording",
     "sweep": "corraoi.face.sweeps",
     "load": "corraoi.face.load",
+    "Logger": "corraoi.face.logger",
     "compare": "corraoi.face.views",
     "diff": "corraoi.face.views",
     "Run": "corraoi.face.runs",
@@ -88,6 +90,7 @@ __all__ = [
     "Instance",
     "InstanceError",
     "LogError",
+    "Logger",
     "OutputError",
     "Param",
     "Policy",

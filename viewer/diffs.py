@@ -90,7 +90,7 @@ def diff(
         va, vb = flat_a.get(key), flat_b.get(key)
         if va != vb:
             (notes if key in NOTE_KEYS else config).append(ConfigDifference(key, va, vb))
-    Ka, Kb = la.config.instance.K, lb.config.instance.K
+    Ka, Kb = la.config.K, lb.config.K
     warnings = []
     if Ka != Kb:
         warnings.append(

@@ -168,7 +168,7 @@ def _expand(template: str, config: Any, drill: Any = None) -> Path:
     values = {
         "{label}": config.label,
         "{policy}": config.policy.name,
-        "{instance}": config.instance.name,
+        "{instance}": config.instance_name,
         "{seed}": str(config.seed),
         "{run}": str(drill.run) if drill is not None else str(config.seed),
         "{from}": drill.name if drill is not None else config.label,

@@ -125,13 +125,13 @@ class Run(RunData):
     def _repr_html_(self) -> str:
         cfg = self.log.config
         s = self.summary
-        arms = cfg.instance.arm_names
+        arms = cfg.arm_names
         pulls = ", ".join(f"{a}: {n}" for a, n in zip(arms, s.pulls, strict=True))
         params = ", ".join(f"{k}={v:g}" for k, v in cfg.policy.params.items())
         rows = [
             ("run", cfg.label),
             ("policy", cfg.policy.name + (f" ({params})" if params else "")),
-            ("instance", f"{cfg.instance.name} (K = {cfg.instance.K})"),
+            ("instance", f"{cfg.instance_name} (K = {cfg.K})"),
             ("seed, horizon", f"{cfg.seed}, {cfg.horizon:,}"),
             ("slots", f"{s.slots:,} ({self.log.status})"),
             ("AoI regret (pathwise)", "" if s.regret is None else f"{s.regret:,}"),

@@ -270,7 +270,7 @@ class FoxgloveSlotSink(Sink):
         )
         self._run = server.channel(self.run_topic, _run_schema(meta))
         self._run_message = json.dumps(meta).encode()
-        self._encoder = BlockEncoder(config.instance.K)
+        self._encoder = BlockEncoder(config.K)
         self._pacer = Pacer(pace, stop=stop)
         self._waited = False
         self.sent = 0
