@@ -329,6 +329,10 @@ def test_the_issues_example_without_an_instance_reads_in_every_view(cucb, tmp_pa
     assert "none: K=4 arms (p and Y unknown)" in info.output
     assert "fields absent          x, oracle_aoi, regret, estimator, override" in info.output
     assert "pathwise regret        -" in info.output and "none (no instance)" in info.output
+    # a stream given no horizon says so, not "1500 of 4294967294 slots"
+    assert "complete: 1500 slots (no horizon given)" in info.output
+    assert "horizon                none given (an open-ended stream)" in info.output
+    assert "4294967294" not in info.output
     # replay draws it
     replay = cli("replay", path, "-o", tmp_path / "replayed.rrd")
     assert replay.exit_code == 0, replay.output

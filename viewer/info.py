@@ -12,6 +12,7 @@ from typing import Any
 
 from corraoi.engine.summary import RunSummary, summarize_blocks
 from corraoi.experiments.notable import well_formed
+from corraoi.limits import MAX_HORIZON
 from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
 
@@ -96,7 +97,7 @@ def info_text(info: dict[str, Any]) -> str:
     lines += [
         f"  {'hidden states':<22} {chan}",
         f"  {'seed':<22} {cfg['seed']}",
-        f"  {'horizon':<22} {cfg['horizon']}",
+        f"  {'horizon':<22} {horizon_text(cfg['horizon'])}",
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
         *([f"  {'fields absent':<22} {', '.join(info['absent'])}"] if info.get("absent") else []),
         f"  {'corraoi version':<22} {cfg['version']}",
@@ -273,3 +274,9 @@ def sweep_info_text(info: dict[str, Any]) -> str:
             lines.append(f"    {a} - {b}: {gap['difference']:+g} at run {gap['run']}  "
                          f"{safe_text(gap['command'])}")  # fmt: skip
     return "\n".join(lines)
+
+
+def horizon_text(horizon: int) -> str:
+    """A run's horizon as info prints it: a log of a stream given none (corraoi.Logger)
+    carries the largest horizon a log can hold, and says it has none."""
+    return str(horizon) if horizon < MAX_HORIZON else "none given (an open-ended stream)"

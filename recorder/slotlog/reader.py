@@ -26,6 +26,7 @@ from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.engine.slot_record import OPTIONAL
 from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
+from corraoi.limits import MAX_HORIZON
 from recorder.vocab import (
     LACKING_FORMAT_VERSION,
     MESSAGE_ENCODING,
@@ -109,26 +110,29 @@ class RunLog:
     @property
     def summary(self) -> str:
         """One line on how complete the log is."""
-        T = self.config.horizon
+        n = self.n_slots
+        # a log of a stream given no horizon (corraoi.Logger) has no "of T" to say
+        bounded = self.config.horizon < MAX_HORIZON
+        of = f" of {self.config.horizon}" if bounded else ""
         if self.status == "complete":
-            return f"complete: {self.n_slots} of {T} slots"
+            return f"complete: {n}{of} slots" + ("" if bounded else " (no horizon given)")
         if self.status == "failed":
-            return (f"failed: the run stopped on an error after slot {self.n_slots} of {T}: "
+            return (f"failed: the run stopped on an error after slot {n}{of}: "
                     f"{self.end.get('error', '(no message)')}")  # fmt: skip
         if self.status == "damaged":
-            return f"damaged: {self.damage}; read {self.n_slots} of {T} slots before the damage"
+            return f"damaged: {self.damage}; read {n}{of} slots before the damage"
         if self.status == "interrupted":
-            return (f"cut short: the run was stopped after slot {self.n_slots} of {T} "
+            return (f"cut short: the run was stopped after slot {n}{of} "
                     "(the file was finished properly)")  # fmt: skip
         if self.writer is not None:
             who = f"process {self.writer}" if self.writer else "another process"
             return (
-                f"being written right now by {who}: {self.n_slots} of {T} slots so far, up "
+                f"being written right now by {who}: {n}{of} slots so far, up "
                 "to the last complete chunk"
             )
         return (
             f"cut short: the writer did not finish the file (killed?); recovered "
-            f"{self.n_slots} of {T} slots, up to the last complete chunk"
+            f"{n}{of} slots, up to the last complete chunk"
         )
 
     def blocks(self, block: int = 1000) -> Iterator[SlotBlock]:
