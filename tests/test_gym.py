@@ -186,3 +186,22 @@ def test_a_file_there_before_is_refused_unless_forced(tmp_path):
     for _ in range(5):
         env.step(1)
     assert open_log(tmp_path / "old.mcap").status == "complete"
+
+
+def test_mabwisers_ucb1_in_the_environment_matches_corraois_ucb_seed_by_seed():
+    """docs/examples/mabwiser_ucb1.py: an agent of another library (MABWiser's UCB1) acting in
+    the environment, its final regret paired seed by seed with corraoi's ``ucb`` on the same
+    hidden paths: the same algorithm, so the mean paired difference is within 1.96 standard
+    errors of zero (20 seeds x 1,000 slots here; the docs show a larger run)."""
+    pytest.importorskip("mabwiser")
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "docs" / "examples" / "mabwiser_ucb1.py"
+    spec = importlib.util.spec_from_file_location("mabwiser_ucb1", path)
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    got = example.compare("I1", 20, 1000)
+    assert 100 < got["mabwiser"] < 1000 and 100 < got["corraoi"] < 1000  # UCB's regret on I1
+    assert 0 < got["se"] < 100
+    assert abs(got["difference"]) <= 1.96 * got["se"], got
