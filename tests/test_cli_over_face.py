@@ -32,7 +32,6 @@ OWED: set[str] = {
     "reproduce.py",
     "sweep.py",
     "sweep_run.py",
-    "viewer.py",
 }
 
 

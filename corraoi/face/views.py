@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import UsageError
@@ -17,6 +18,7 @@ from .runs import Run, diff_arguments, log_of
 if TYPE_CHECKING:
     from viewer.compare import Comparison
     from viewer.diff_report import DiffReport
+    from viewer.recover import Recovered
 
 
 
@@ -72,4 +74,69 @@ def diff(
     return diff_logs(log_of(a, "a"), log_of(b, "b"), fields=chosen, atol=atol)
 
 
-__all__ = ["compare", "diff"]
+def diff_files(a: str | os.PathLike[str], b: str | os.PathLike[str], *,
+               fields: Sequence[str] | None = None, atol: float = 0.0) -> DiffReport:  # fmt: skip
+    """``corraoi diff``: :func:`diff` of two logs' paths as the command line gives them,
+    ``fields`` in its words (names or comma lists, ``--fields x,arm``). Raises
+    :class:`~corraoi.errors.UsageError` for an unknown field, :class:`~corraoi.errors.LogError`
+    for a log that cannot be read."""
+    from viewer.diffs import diff as diff_logs
+
+    return diff_logs(a, b, fields=fields or None, atol=atol)
+
+
+class Info:
+    """What :func:`info` finds: ``.to_dict()`` (``corraoi info --json``) and ``.text()``
+    (the table ``corraoi info`` prints)."""
+
+    def __init__(self, data: dict[str, Any], *, sweep: bool) -> None:
+        self.data, self.sweep = data, sweep
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.data
+
+    def text(self) -> str:
+        from viewer.info import info_text, sweep_info_text
+
+        return sweep_info_text(self.data) if self.sweep else info_text(self.data)
+
+
+def info(path: str | os.PathLike[str]) -> Info:
+    """What a slot log or a sweep folder holds, as ``corraoi info`` shows it: a log's
+    configuration, slots, how it ended and its summary figures (a log cut short too); a sweep
+    folder's (or one group's folder's) grid, status and runs worth watching. Returns an
+    :class:`Info`; raises :class:`~corraoi.errors.LogError` for what is not a readable log
+    or sweep folder."""
+    p = Path(arguments.path(path, name="path", kind=UsageError,
+                            what="the path of a slot log or a sweep folder"))  # fmt: skip
+    if p.is_dir() and any((d / "manifest.json").is_file() for d in (p, p.parent)):
+        from viewer.info import sweep_info
+
+        return Info(sweep_info(p), sweep=True)
+    from viewer.info import log_info
+
+    return Info(log_info(p), sweep=False)
+
+
+def recover(
+    log: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    force: bool = False,
+) -> Recovered:
+    """Rewrite the log ``log`` whose writer died into a finished, indexed log at ``out``
+    (default ``RUN.recovered.mcap`` beside it), as ``corraoi recover`` does; ``log`` itself is
+    not modified. Returns a :class:`viewer.recover.Recovered` (``.slots``, ``.status``,
+    ``.damage``, ``.to_dict()``); raises :class:`~corraoi.errors.LogError` for a log that
+    cannot be read, :class:`~corraoi.errors.OutputError` for an ``out`` that exists (unless
+    ``force``) or is ``log`` itself."""
+    from viewer.recover import default_output
+    from viewer.recover import recover as recover_log
+
+    arguments.path(log, name="log", kind=UsageError, what="a slot log's path")
+    arguments.optional(arguments.path, out, name="out", what="the recovered log's path")
+    arguments.flag(force, name="force")
+    return recover_log(log, out if out is not None else default_output(log), overwrite=force)
+
+
+__all__ = ["Info", "compare", "diff", "diff_files", "info", "recover"]
