@@ -22,8 +22,6 @@ GROUND = ("errors", "_version", "_signals", "text", "progress", "limits", "extra
 OWED: set[str] = {
     "__init__.py",
     "compare.py",
-    "export.py",
-    "figure.py",
     "live.py",
     "record.py",
     "record_loop.py",

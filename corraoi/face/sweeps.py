@@ -229,13 +229,11 @@ class Sweep(SweepData):
                log_y: bool = False) -> Path:  # fmt: skip
         """Draw the sweep figure (regret against t, a line and 95% band per policy) from the
         sweep log to ``path`` (its extension picks the format); the ``plot`` extra."""
-        from recorder.sweeplog.read import read_sweep
-        from viewer.figure import draw_figure
-
         arguments.path(path, name="path", what="the figure's path")
         arguments.flag(log_x, name="log_x")
         arguments.flag(log_y, name="log_y")
-        return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
+        draw_sweep_figure(self.log_path, path, log_x=log_x, log_y=log_y, force=True)
+        return Path(path)
 
     def recordings(self) -> list[Path]:
         """The sweep's Rerun recording (``sweep.rrd``); for a grid's folder, each group's.
@@ -285,6 +283,45 @@ class Sweep(SweepData):
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
                        for r in rows)  # fmt: skip
         return f"<p>{html.escape(title)}</p><table><tr>{cells}</tr>{body}</table>"
+
+
+def draw_sweep_figure(
+    sweep_log: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    log_x: bool = False,
+    log_y: bool = False,
+    dpi: int = 150,
+    split: bool = False,
+    policies: Sequence[str] | None = None,
+    force: bool = False,
+    warn: Callable[[str], None] | None = None,
+) -> tuple[Any, list[str]]:
+    """``corraoi figure``: the sweep figure of the sweep log ``sweep_log`` to ``output`` (its
+    extension picks the format), ``policies`` (names or comma lists; None: every one) in that
+    order. The output's name, ``dpi`` and an existing ``output`` (without ``force``) are
+    refused before the log is read; a sweep that did not finish is drawn up to its last
+    checkpoint, said through ``warn``. Returns the sweep log read and the policies drawn.
+    Raises :class:`~corraoi.errors.UsageError` for a bad output or policy,
+    :class:`~corraoi.errors.LogError` for a log that cannot be read."""
+    from recorder.sweeplog.read import read_sweep
+    from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
+
+    out = Path(output)
+    if out.is_dir():
+        raise UsageError(f"{out}: is a directory; give a file name for the figure")
+    figure_format(out)  # before reading the log: a wrong name is the first thing said
+    check_dpi(dpi)
+    if out.exists() and not force:
+        raise UsageError(f"{out}: already exists (use --force to overwrite it)")
+    sweep = read_sweep(sweep_log)
+    wanted = [n.strip() for v in policies or () for n in v.split(",") if n.strip()]
+    names = check_policies(sweep, wanted or None)
+    if not sweep.complete and warn is not None:
+        warn(f"{sweep_log}: the sweep did not finish ({sweep.status}); drawing the "
+             f"{sweep.messages} checkpoint(s) it holds")  # fmt: skip
+    draw_figure(sweep, out, log_x=log_x, log_y=log_y, dpi=dpi, split=split, policies=names)
+    return sweep, names
 
 
 def check_which(which: object) -> int | str:
@@ -502,4 +539,4 @@ def sweep(
     return result
 
 
-__all__ = ["Sweep", "check_grid", "run_grid", "settle_backend", "sweep"]
+__all__ = ["Sweep", "check_grid", "draw_sweep_figure", "run_grid", "settle_backend", "sweep"]
