@@ -21,12 +21,9 @@ GROUND = ("errors", "_version", "_signals", "text", "progress", "limits", "extra
 #: fails on a debt that is paid but still listed).
 OWED: set[str] = {
     "__init__.py",
-    "compare.py",
-    "live.py",
     "record.py",
     "record_loop.py",
     "record_plan.py",
-    "replay.py",
     "reproduce.py",
     "sweep.py",
     "sweep_run.py",

@@ -1,8 +1,9 @@
 """``corraoi diff | info | recover``: commands that read logs only, and nothing else.
 
 Nothing here simulates: the logs hold every slot. Each command calls the face
-(:mod:`corraoi.face.views`), imported inside the command so that ``corraoi --help`` stays fast. ``replay`` and ``compare`` are
-:mod:`corraoi.cli.replay`'s and :mod:`corraoi.cli.compare`'s (importable from here too).
+(:mod:`corraoi.face.views`), imported inside the command so that ``corraoi --help`` stays
+fast. ``replay`` and ``compare`` are :mod:`corraoi.cli.replay`'s and
+:mod:`corraoi.cli.compare`'s.
 """
 
 from __future__ import annotations

@@ -324,6 +324,22 @@ def draw_sweep_figure(
     return sweep, names
 
 
+def record_each_from(folder: str | os.PathLike[str], run: str, *, cells: Sequence[str] = (),
+                     force: bool = False, kept_code: bool = False,
+                     allow_changed_code: bool = False, say: Callable[[str], None] | None = None,
+                     warn: Callable[[str], None] | None = None) -> list[Run]:  # fmt: skip
+    """``corraoi compare --from``: :meth:`Sweep.record_each` of the sweep folder ``folder``
+    with ``run`` and the refusals in the command line's words (``--run``, ``--cell``). Raises
+    :class:`~corraoi.errors.UsageError` for a bad ``run`` before the folder is read."""
+    from corraoi.experiments.drill import parse_run
+    from corraoi.experiments.folder import CLI_WORDS
+
+    parse_run(run)  # a bad --run in the command line's words
+    return Sweep(folder).record_each(run, cells=cells, force=force, kept_code=kept_code,
+                                     allow_changed_code=allow_changed_code, say=say,
+                                     warn=warn, words=CLI_WORDS)  # fmt: skip
+
+
 def check_which(which: object) -> int | str:
     """``which`` of :meth:`Sweep.record` and :meth:`Sweep.record_each`: a run index or
     ``worst``, ``median``, ``best`` (:func:`corraoi.arguments.index_or_word`)."""
@@ -539,4 +555,7 @@ def sweep(
     return result
 
 
-__all__ = ["Sweep", "check_grid", "draw_sweep_figure", "run_grid", "settle_backend", "sweep"]
+__all__ = [
+    "Sweep", "check_grid", "draw_sweep_figure", "record_each_from", "run_grid", "settle_backend",
+    "sweep",
+]  # fmt: skip
