@@ -24,9 +24,6 @@ OWED: set[str] = {
     "record.py",
     "record_loop.py",
     "record_plan.py",
-    "reproduce.py",
-    "sweep.py",
-    "sweep_run.py",
 }
 
 
