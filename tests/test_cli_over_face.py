@@ -17,14 +17,6 @@ CLI = ROOT / "corraoi" / "cli"
 #: the ground floor a command may name
 GROUND = ("errors", "_version", "_signals", "text", "progress", "limits", "extras")
 
-#: The modules whose move onto the face is still owed (taken off as each is paid; the test
-#: fails on a debt that is paid but still listed).
-OWED: set[str] = {
-    "record.py",
-    "record_loop.py",
-    "record_plan.py",
-}
-
 
 def _imports(path: Path) -> list[tuple[int, str]]:
     """Every module ``path`` imports, with its line: ``import a.b`` -> ``a.b``; ``from a
@@ -69,9 +61,7 @@ def _climbs() -> dict[str, list[str]]:
 
 
 def test_the_command_line_imports_only_the_face_and_the_ground_floor():
-    wrong = _climbs()
-    assert set(wrong) - OWED == set(), wrong
-    assert OWED <= set(wrong), "paid: take it off OWED"
+    assert _climbs() == {}
 
 
 def test_the_check_sees_every_way_in(tmp_path):
