@@ -194,7 +194,7 @@ def policies_cmd(as_json: bool) -> None:
     )
 
 
-# Commands defined in their own modules (they import recorder/viewer inside their bodies).
+# Commands defined in their own modules (they import the face inside their bodies).
 # --- command registrations (keep this block at the end) ---
 from .compare import compare  # noqa: E402
 from .figure import figure  # noqa: E402

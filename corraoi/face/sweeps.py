@@ -327,7 +327,7 @@ def draw_sweep_figure(
 def record_each_from(folder: str | os.PathLike[str], run: str, *, cells: Sequence[str] = (),
                      force: bool = False, kept_code: bool = False,
                      allow_changed_code: bool = False, say: Callable[[str], None] | None = None,
-                     warn: Callable[[str], None] | None = None) -> list[Run]:  # fmt: skip
+                     warn: Callable[[str], None] = python_warn) -> list[Run]:  # fmt: skip
     """``corraoi compare --from``: :meth:`Sweep.record_each` of the sweep folder ``folder``
     with ``run`` and the refusals in the command line's words (``--run``, ``--cell``). Raises
     :class:`~corraoi.errors.UsageError` for a bad ``run`` before the folder is read."""
@@ -353,7 +353,7 @@ def kept_code(folder: str | os.PathLike[str]) -> Any:
     (``--resume --kept-code``), entered before the grid is built."""
     from corraoi.experiments.kept_code import use_kept_code
 
-    return use_kept_code(folder, pin=True)
+    return use_kept_code(Path(folder), pin=True)
 
 
 def grid_from_options(
