@@ -80,3 +80,29 @@ def test_the_check_sees_every_way_in(tmp_path):
     bad = [m for _, m in _imports(path) if not _allowed(m)]
     assert bad == ["recorder.export.export", "viewer.info", "corraoi.engine.kernels",
                    "corraoi.gpu", "corraoi.model.theory"]  # fmt: skip
+
+
+def test_what_the_log_commands_do_is_the_faces(tmp_path):
+    """``info``, ``recover``, ``replay`` and ``export`` are face functions first: from Python
+    they give what the commands print."""
+    import json
+
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+
+    run = corraoi.record("cucb", "I1", seed=2, horizon=300, path=tmp_path / "r.mcap", rrd=False)
+    found = corraoi.info(run)
+    assert found.to_dict()["slots"] == 300 and found.to_dict()["status"] == "complete"
+    printed = CliRunner().invoke(main, ["info", str(run.path), "--json"])
+    assert printed.exit_code == 0 and json.loads(printed.output) == found.to_dict()
+    table = CliRunner().invoke(main, ["info", str(run.path)])
+    assert table.exit_code == 0 and table.output.rstrip("\n") == found.text().rstrip("\n")
+    done = corraoi.replay(run, tmp_path / "r.rrd")
+    assert (done.slots, done.horizon, done.path) == (300, 300, tmp_path / "r.rrd")
+    assert done.path.stat().st_size > 0
+    fixed = corraoi.recover(run, tmp_path / "fixed.mcap")
+    assert (fixed.slots, fixed.source_status, fixed.status) == (300, "complete", "complete")
+    assert corraoi.load(fixed.path).summary.regret == run.summary.regret
+    table = corraoi.export(run, tmp_path / "t.csv")
+    assert table.rows == 300 and (tmp_path / "t.csv").read_text().count("\n") == 301

@@ -65,6 +65,10 @@ def export(
     the ``analysis`` extra when pyarrow is missing."""
     from recorder.export import export as export_table
 
+    arguments.path(path, name="path", kind=UsageError,
+                   what="the path of a slot log or a sweep folder")  # fmt: skip
+    arguments.path(out, name="out", what="the table's path (.csv or .parquet)")
+    arguments.flag(force, name="force")
     return export_table(path, out, overwrite=force)
 
 

@@ -110,7 +110,7 @@ class Info:
 
 
 def info(path: str | os.PathLike[str]) -> Info:
-    """What a slot log or a sweep folder holds, as ``corraoi info`` shows it: a log's
+    """What the slot log or sweep folder at ``path`` holds, as ``corraoi info`` shows it: a log's
     configuration, slots, how it ended and its summary figures (a log cut short too); a sweep
     folder's (or one group's folder's) grid, status and runs worth watching. Returns an
     :class:`Info`; raises :class:`~corraoi.errors.LogError` for what is not a readable log
@@ -245,6 +245,26 @@ def replay_foxglove(log: Path, live: FoxgloveChoice, *, start: int = 1,
     return run, last, server.url
 
 
+def replay(
+    run: Run | str | os.PathLike[str],
+    rrd: str | os.PathLike[str] | None = None,
+    *,
+    force: bool = False,
+) -> Replayed:
+    """Re-render the recorded ``run`` (a :class:`corraoi.Run` or a slot log's path) into the
+    Rerun recording ``rrd`` (default ``RUN.rrd`` beside the log), as ``corraoi replay`` does:
+    through the sink ``record`` uses, nothing recomputed; a log cut short replays up to its
+    last slot. ``force`` replaces an existing ``rrd``. Returns what was replayed (``.path``,
+    ``.slots``, ``.horizon``, ``.status``); raises :class:`~corraoi.errors.LogError` for a log
+    that cannot be read, :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be
+    written."""
+    arguments.path(run, name="run", kind=UsageError, what="a corraoi.Run or a slot log's path")
+    arguments.optional(arguments.path, rrd, name="rrd", what="the Rerun recording's path")
+    arguments.flag(force, name="force")
+    done, _ = replay_log(Path(run), None if rrd is None else Path(rrd), force=force)
+    return done
+
+
 def compare_logs(
     logs: Sequence[Path],
     rrd: Path | None,
@@ -292,5 +312,5 @@ def compare_logs(
 
 __all__ = [
     "Info", "ProgressBar", "compare", "compare_logs", "default_rrd", "diff", "diff_files", "info",
-    "not_an_input", "recover", "replay_foxglove", "replay_log",
+    "not_an_input", "recover", "replay", "replay_foxglove", "replay_log",
 ]  # fmt: skip
