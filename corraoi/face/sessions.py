@@ -71,8 +71,10 @@ def runs_from_sweep(
     from .resolve import TRACE_READERS
 
     if policies is None and (params or c is not None or beta is not None):
-        raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
-                         "parameters (with --policy they set those of a policy added)")
+        raise UsageError(
+            "--c/--beta/--param and --from: the sweep fixes its policies' "
+            "parameters (with --policy they set those of a policy added)"
+        )
     # the labels the sweep's table prints select its cells; any other word is a policy
     labels, words = split_policy_words(folder, policies) if policies is not None else ([], [])
     specs = (make_policies(words, parse_param_assignments(params), c=c, beta=beta, warn=warn)
@@ -224,8 +226,10 @@ def record_runs(
     )
     outlets = Outlets(viewer_url=viewer_url, overwrite=force, live=live, rerun=worker)
     try:
-        if worker is None and before_rerun is not None and (
-            viewer_url is not None or any(p.rrd is not None for p in plans)
+        if (
+            worker is None
+            and before_rerun is not None
+            and (viewer_url is not None or any(p.rrd is not None for p in plans))
         ):
             before_rerun()  # Rerun's logging goes through pyarrow, in this process
         total = sum(p.config.horizon for p in plans)
