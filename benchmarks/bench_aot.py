@@ -66,7 +66,7 @@ for workers in (1, 2):
     threads.set_workers(workers)
     sim = Simulation(load_instance("I1"), make_policy(name), range(200), 10_000)
     if mode == "aot":
-        sim._kernels[False] = advance
+        sim.use_kernel(advance, record=False)
     sim.advance_to(100)
     t = time.perf_counter()
     sim.advance_to(10_000)

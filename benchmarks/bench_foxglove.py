@@ -78,7 +78,7 @@ def run(kind: str, blocks: list[SlotBlock], config: RunConfig) -> tuple[float, f
         got = [0]
         if kind != "no client":
             ws, _, got = _client(server.url, read=kind == "reading client")
-            while not sink._slots.has_sinks():
+            while not sink.subscribed():
                 time.sleep(0.01)
         before = _rss_mib()
         start = time.perf_counter()

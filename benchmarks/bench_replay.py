@@ -13,7 +13,7 @@ interleaved rounds:
   with its ratio to the floor (target: at most 1.5);
 * ``viewer.compare`` of the short logs into one .rrd (target: under 2 s), and the same
   two commands end to end as ``corraoi`` processes (interpreter and imports included);
-* ``viewer.diff`` and ``viewer.log_info`` of the long log, for reference.
+* ``viewer.diff`` and ``viewer.info.log_info`` of the long log, for reference.
 
 ``--arms K``: the logs are of an instance of K arms (benchmarks/alternate.py).
 ``--baseline DIR``: this checkout and another one, alternately, side by side (issue 35:

@@ -6,8 +6,17 @@ unless the row says "empty cache". With ``--baseline DIR`` (another checkout, fo
 PYTHONPATH, alternating the two so that both see the same machine; the table then has a
 column for each.
 
-    python benchmarks/bench_start.py [--repeat 5] [--baseline /tmp/base] [--skip-cold]
-                                     [--no-workers] [--only ROW,ROW]
+    python benchmarks/bench_start.py [--repeat 5] [--baseline /tmp/base | --against REV]
+                                     [--skip-cold] [--no-workers] [--only ROW,ROW] [--keep DIR]
+
+``--against REV`` times the code of a git revision (its ``corraoi``, ``recorder`` and
+``viewer``, extracted with ``git archive``) as the baseline; that copy is no git checkout, so
+its logs record no commit and it never asks git (``--baseline`` with ``git worktree add``
+times that too). The order of the checkouts flips
+every repeat. Each row is also timed in CPU seconds (user + system of the command and the
+processes it waited for), a second table: on a machine that others load, CPU time moves far
+less than wall time. ``--keep DIR`` keeps the kernel caches and logs in DIR and reuses them
+next time (nothing compiles again; the empty-cache rows still start empty).
 
 ``--no-workers`` times every command a second time with ``CORRAOI_WORKERS=0`` (no forked
 worker: the Rerun writer of ``record``, the figure drawer of ``sweep -o`` and the log
@@ -25,6 +34,7 @@ from __future__ import annotations
 import argparse
 import compileall
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -49,16 +59,29 @@ def corraoi(
     cwd: Path,
     ok: tuple[int, ...] = (0,),
     env_extra: dict[str, str] | None = None,
-) -> float:
+) -> tuple[float, float]:
     env = {**os.environ, "PYTHONPATH": str(root), "CORRAOI_CACHE_DIR": str(cache),
            **(env_extra or {})}  # fmt: skip
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "corraoi.cli", *args], cwd=cwd, env=env,
                           capture_output=True, text=True)  # fmt: skip
     took = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode not in ok:
         raise SystemExit(f"{root}: corraoi {' '.join(args)} failed:\n{proc.stderr}")
-    return took
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return took, cpu
+
+
+def checkout_of(rev: str, into: Path) -> Path:
+    """The packages of the git revision ``rev`` extracted into ``into`` (made once)."""
+    if not (into / "corraoi").is_dir():
+        into.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi", "recorder",
+                                  "viewer"], capture_output=True, check=True)  # fmt: skip
+        subprocess.run(["tar", "-x", "-C", str(into)], input=archive.stdout, check=True)
+    return into
 
 
 def main() -> None:
@@ -69,7 +92,16 @@ def main() -> None:
     ap.add_argument("--no-workers", action="store_true",
                     help="also time every command with CORRAOI_WORKERS=0 (no forked worker)")
     ap.add_argument("--only", default="", help="rows whose name starts with these words")
+    ap.add_argument("--against", metavar="REV", help="a git revision to time beside this one")
+    ap.add_argument("--keep", type=Path, help="keep the caches and logs here, reused next time")
     args = ap.parse_args()
+    if args.keep is not None:
+        work = args.keep.resolve()
+        work.mkdir(parents=True, exist_ok=True)
+    else:
+        work = Path(tempfile.mkdtemp(prefix="corraoi-bench-start-"))
+    if args.against is not None:
+        args.baseline = checkout_of(args.against, work / f"rev-{args.against}")
     roots = {"now": ROOT}
     if args.baseline is not None:
         roots = {"before": args.baseline.resolve(), "now": ROOT}
@@ -80,18 +112,24 @@ def main() -> None:
     for root in roots.values():
         for pkg in ("corraoi", "recorder", "viewer"):
             compileall.compile_dir(str(root / pkg), quiet=1)
-    work = Path(tempfile.mkdtemp(prefix="corraoi-bench-start-"))
     checkouts = list(dict.fromkeys(roots.values()))  # "now" and "no workers" share one
     caches = {k: work / f"cache-{checkouts.index(root)}" for k, root in roots.items()}
     rows: dict[str, dict[str, list[float]]] = {}
+    cpus: dict[str, dict[str, list[float]]] = {}
 
-    def add(row: str, key: str, seconds: float) -> None:
-        rows.setdefault(row, {}).setdefault(key, []).append(seconds)
+    def add(row: str, key: str, seconds: tuple[float, float]) -> None:
+        rows.setdefault(row, {}).setdefault(key, []).append(seconds[0])
+        cpus.setdefault(row, {}).setdefault(key, []).append(seconds[1])
+
+    def order(i: int) -> list[tuple[str, Path]]:
+        """The checkouts in the order of repeat ``i``: flipped every repeat."""
+        pairs = list(roots.items())
+        return pairs if i % 2 == 0 else pairs[::-1]
 
     try:
         if not args.skip_cold and not only:
-            for _ in range(max(1, args.repeat // 2)):
-                for key, root in roots.items():
+            for i in range(max(1, args.repeat // 2)):
+                for key, root in order(i):
                     cold = work / f"cold-{key}"
                     shutil.rmtree(cold, ignore_errors=True)
                     add("first record --policy cucb (empty cache)", key,
@@ -134,26 +172,29 @@ def main() -> None:
         }  # fmt: skip
         if only:
             commands = {r: m for r, m in commands.items() if r.startswith(only)}
-        for _ in range(args.repeat):
+        for i in range(args.repeat):
             for row, make in commands.items():
-                for key, root in roots.items():
+                for key, root in order(i):
                     ok = (0, 1) if row.startswith("diff") else (0,)  # diff: 1 = they differ
                     name = key.replace(" ", "-")
                     add(row, key, corraoi(root, make(name), caches[key], work, ok=ok,
                                           env_extra=envs[key]))  # fmt: skip
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        if args.keep is None:
+            shutil.rmtree(work, ignore_errors=True)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     print(f"\nwhole processes, {cores} cores, best of {args.repeat} (median in brackets); "
           "empty-cache rows best of " + str(max(1, args.repeat // 2)))  # fmt: skip
-    head = f"{'what the user does':50s}" + "".join(f" {k:>17s}" for k in roots)
-    print(head)
-    print("-" * len(head))
-    for row, per in rows.items():
-        cells = "".join(
-            f" {min(per[k]):7.2f} s ({statistics.median(per[k]):5.2f})" for k in roots
-        )
-        print(f"{row:50s}{cells}")
+    for title, table in (("wall seconds", rows), ("CPU seconds", cpus)):
+        head = f"{'what the user does (' + title + ')':50s}" + "".join(f" {k:>17s}" for k in roots)
+        print(head)
+        print("-" * len(head))
+        for row, per in table.items():
+            cells = "".join(
+                f" {min(per[k]):7.2f} s ({statistics.median(per[k]):5.2f})" for k in roots
+            )
+            print(f"{row:50s}{cells}")
+        print()
 
 
 if __name__ == "__main__":

@@ -37,6 +37,7 @@ from .errors import (  # noqa: E402
 
 if TYPE_CHECKING:
     from .face.load import export, load
+    from .face.logger import Logger
     from .face.recording import record
     from .face.runs import Run
     from .face.show import show
@@ -54,6 +55,7 @@ _LAZY = {
     "info": "corraoi.face.views",
     "recover": "corraoi.face.views",
     "replay": "corraoi.face.views",
+    "Logger": "corraoi.face.logger",
     "compare": "corraoi.face.views",
     "diff": "corraoi.face.views",
     "Run": "corraoi.face.runs",
@@ -92,6 +94,7 @@ __all__ = [
     "Instance",
     "InstanceError",
     "LogError",
+    "Logger",
     "OutputError",
     "Param",
     "Policy",

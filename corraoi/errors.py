@@ -189,3 +189,11 @@ class FigureUnavailable(CorraoiError):
     """matplotlib is not installed: the figure cannot be drawn (the logs are fine)."""
 
     exit_code = 1
+
+
+class SlotError(UsageError):
+    """A slot handed to :class:`corraoi.Logger` (or an environment's ``step``) that cannot be
+    logged: an arm or state out of range, a success that is not a bool or contradicts the
+    instance, a slot number out of order, a field of the wrong shape. The message names the
+    argument and the slot; the log is left readable up to the last good slot, marked
+    failed."""

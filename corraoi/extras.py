@@ -17,6 +17,7 @@ EXTRAS = {
     "foxglove": ("foxglove",),
     "gpu": ("cupy",),
     "notebook": ("rerun_notebook",),
+    "gym": ("gymnasium",),
 }
 
 

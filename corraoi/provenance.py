@@ -15,8 +15,10 @@ import functools
 import hashlib
 import importlib.metadata
 import json
+import os
 import platform
 import subprocess
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +27,7 @@ from typing import Any
 from corraoi.policies.loading import class_source, loaded_source
 
 from ._version import __version__
+from .errors import CorraoiError
 
 _HERE = Path(__file__).resolve().parent
 #: The sources that decide what the engines compute, slot for slot (their hash is logged).
@@ -131,24 +134,187 @@ def versions() -> dict[str, str]:
     return out
 
 
-def git_commit() -> str | None:
-    """The commit of the checkout corraoi runs from, with "+dirty" when its packages have
-    uncommitted changes; None when it is installed (no checkout) or git is not there."""
-    root = _HERE.parent
-    if not (root / ".git").exists():
+#: The checkout's folders whose changes make a commit "+dirty" (what is imported from it).
+GIT_PACKAGES = ("corraoi", "recorder", "viewer")
+#: A file changed this recently (seconds) may change again within one tick of its
+#: file system's clock: a dirty mark is not cached while one is (git's "racy clean").
+_RACY_S = 2.0
+
+
+def git_commit(root: Path | None = None) -> str | None:
+    """The commit of the checkout corraoi runs from (or of ``root``), with "+dirty" when its
+    packages (:data:`GIT_PACKAGES`) differ from that commit; None when it is installed (no
+    checkout) or the commit cannot be read.
+
+    The commit is read from ``.git`` (``HEAD``, the branch it names, ``packed-refs``; a
+    worktree's or submodule's ``.git`` file is followed), with no process started. "Dirty"
+    means what ``git status --porcelain -- corraoi recorder viewer`` says, less Python's
+    bytecode (``__pycache__``, ``*.pyc``): a source file of the packages modified, staged,
+    deleted, or new and not ignored (and dirty too when git cannot say). Asking git costs a
+    process (tens of ms), so its answer is kept in the kernel cache folder under a
+    fingerprint of everything that can change it: the commit, the index file, the ignore
+    files, and the size, times and inode of every file under the packages (a walk of about a
+    millisecond). git is asked again only when the fingerprint changes, and its answer is not
+    kept while a file there is younger than two seconds.
+    """
+    root = (root if root is not None else _HERE.parent).resolve()
+    gitdir = _git_dir(root)
+    if gitdir is None:
         return None
+    commit = _head_commit(gitdir) or _git_rev_parse(root)
+    if commit is None:
+        return None
+    clean = _dirty(root, gitdir, commit) is False  # git cannot say: not claimed clean
+    return commit + ("" if clean else "+dirty")
+
+
+def _git_dir(root: Path) -> Path | None:
+    """The git directory of the checkout ``root`` (its ``.git`` folder, or the folder a
+    ``.git`` file names), None when there is none."""
+    dot = root / ".git"
+    if dot.is_dir():
+        return dot
     try:
-        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=10)  # fmt: skip
-        if head.returncode != 0:
-            return None
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--",
-                                "corraoi", "recorder", "viewer"], capture_output=True,
-                               text=True, timeout=10)  # fmt: skip
+        text = dot.read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    if not text.startswith("gitdir:"):
+        return None
+    path = Path(text.removeprefix("gitdir:").strip())
+    path = path if path.is_absolute() else root / path
+    return path if path.is_dir() else None
+
+
+def _common_dir(gitdir: Path) -> Path:
+    """Where a worktree's shared refs live (its ``commondir``), else ``gitdir`` itself."""
+    try:
+        rel = (gitdir / "commondir").read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError):
+        return gitdir
+    common = Path(rel) if Path(rel).is_absolute() else gitdir / rel
+    return common if common.is_dir() else gitdir
+
+
+def _is_object_id(text: str) -> bool:
+    return len(text) in (40, 64) and all(c in "0123456789abcdef" for c in text)
+
+
+def _head_commit(gitdir: Path) -> str | None:
+    """The commit ``HEAD`` names, read from the files (a detached HEAD, a loose ref, a ref in
+    ``packed-refs``); None for what only git can answer (a reftable, an unborn branch)."""
+    common = _common_dir(gitdir)
+    try:
+        value = (gitdir / "HEAD").read_text(encoding="utf-8").strip()
+        for _ in range(5):  # a symbolic ref may name another
+            if not value.startswith("ref:"):
+                return value if _is_object_id(value) else None
+            ref = value.removeprefix("ref:").strip()
+            if not ref.startswith("refs/") or ".." in ref.split("/"):
+                return None
+            for base in (gitdir, common):
+                loose = base / ref
+                if loose.is_file():
+                    value = loose.read_text(encoding="utf-8").strip()
+                    break
+            else:
+                packed = common / "packed-refs"
+                if not packed.is_file():
+                    return None
+                for line in packed.read_text(encoding="utf-8").splitlines():
+                    oid, _, name = line.partition(" ")
+                    if name == ref and _is_object_id(oid):
+                        return oid
+                return None
+    except (OSError, UnicodeDecodeError):
+        return None
+    return None
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess[str] | None:
+    try:
+        done = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
+                              timeout=10)  # fmt: skip
     except (OSError, subprocess.SubprocessError):
         return None
-    commit = head.stdout.strip()
-    return commit + ("+dirty" if dirty.returncode != 0 or dirty.stdout.strip() else "")
+    return done if done.returncode == 0 else None
+
+
+def _git_rev_parse(root: Path) -> str | None:
+    done = _git(root, "rev-parse", "HEAD")
+    commit = done.stdout.strip() if done is not None else ""
+    return commit if _is_object_id(commit) else None
+
+
+def _dirty(root: Path, gitdir: Path, commit: str) -> bool | None:
+    """Whether the packages differ from ``commit`` (None when git cannot say): the kept
+    answer when the checkout's fingerprint is the one it was kept under, else git's."""
+    from corraoi.engine import kernel_cache
+    from corraoi.files.partial import PartialFile
+
+    name = f"git-{hashlib.sha256(str(root).encode()).hexdigest()[:16]}.json"
+    mark, newest = _fingerprint(root, gitdir, commit)
+    try:
+        kept = json.loads((kernel_cache.cache_dir() / name).read_text(encoding="utf-8"))
+        if kept["fingerprint"] == mark and isinstance(kept["dirty"], bool):
+            return kept["dirty"]
+    except (OSError, ValueError, TypeError, KeyError, RecursionError):
+        pass
+    asked = time.time()
+    done = _git(root, "status", "--porcelain", "--", *GIT_PACKAGES)
+    if done is None:
+        return None
+    dirty = any(
+        line[3:] and "__pycache__/" not in line and not line.rstrip('"').endswith(".pyc")
+        for line in done.stdout.splitlines()
+    )
+    mark, newest = _fingerprint(root, gitdir, commit)  # git may have refreshed its index
+    if newest < asked - _RACY_S:
+        data = json.dumps({"fingerprint": mark, "dirty": dirty}).encode()
+        try:
+            PartialFile.write_bytes(kernel_cache.folder() / name, data, what="git state",
+                                    sync=False)  # fmt: skip
+        except (OSError, CorraoiError):
+            pass  # not kept: git is asked again next time
+    return dirty
+
+
+def _fingerprint(root: Path, gitdir: Path, commit: str) -> tuple[str, float]:
+    """A hash of what decides ``git status`` of the packages, and the newest time a file
+    under them was changed (seconds since the epoch)."""
+    digest = hashlib.sha256(f"{root}\0{commit}\0".encode())
+    newest = 0.0
+    common = _common_dir(gitdir)
+    for path in (gitdir / "index", root / ".gitignore", common / "info" / "exclude"):
+        try:
+            st = path.stat()
+            digest.update(f"{path}\0{st.st_size}\0{st.st_mtime_ns}\0{st.st_ctime_ns}\0"
+                          f"{st.st_ino}\0".encode())  # fmt: skip
+        except OSError:
+            digest.update(f"{path}\0-\0".encode())
+    stack = [root / pkg for pkg in reversed(GIT_PACKAGES)]
+    while stack:
+        folder = stack.pop()
+        try:
+            with os.scandir(folder) as it:
+                entries = sorted(it, key=lambda e: e.name)
+        except OSError:
+            digest.update(f"{folder}\0-\0".encode())
+            continue
+        subfolders = []
+        for entry in entries:
+            try:
+                if entry.is_dir(follow_symlinks=False):
+                    if entry.name != "__pycache__":
+                        subfolders.append(Path(entry.path))
+                    continue
+                st = entry.stat(follow_symlinks=False)
+            except OSError:
+                continue
+            digest.update(f"{entry.path}\0{st.st_size}\0{st.st_mtime_ns}\0{st.st_ctime_ns}"
+                          f"\0{st.st_ino}\0".encode())  # fmt: skip
+            newest = max(newest, st.st_mtime)
+        stack.extend(reversed(subfolders))
+    return digest.hexdigest(), newest
 
 
 def kernel_sources_hash() -> str:
@@ -199,5 +365,5 @@ def short(sha256: str) -> str:
     return f"sha256:{hexa[:16]}"
 
 
-__all__ = ["BACKENDS", "KERNEL_SOURCES", "Provenance", "Source", "git_commit",
+__all__ = ["BACKENDS", "GIT_PACKAGES", "KERNEL_SOURCES", "Provenance", "Source", "git_commit",
            "kernel_sources_hash", "short", "sources_of", "versions"]  # fmt: skip

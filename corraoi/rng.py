@@ -160,7 +160,7 @@ ZIGGURAT_LAYERS = (
 )
 
 
-def _ziggurat() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The normal sampler's tables from :data:`ZIGGURAT_LAYERS` (k, w, f, R): a 52-bit
     magnitude m of layer i gives x = m w_i, accepted at once when m < k_i (x < x_{i+1});
     f_i = f(x_i)."""
@@ -171,7 +171,7 @@ def _ziggurat() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     return k, w, f.copy(), float(x[1])
 
 
-_ZK, _ZW, _ZF, _ZR = _ziggurat()
+_ZK, _ZW, _ZF, _ZR = ziggurat_tables()
 _ZINV_R = 1.0 / _ZR
 _M8 = np.uint64(0xFF)
 _M52 = np.uint64((1 << 52) - 1)
@@ -181,7 +181,7 @@ _S9 = np.uint64(9)
 
 @njit(inline="always", cache=True)
 def normal(st, cache):
-    """Standard normal by a 256-layer ziggurat (:func:`_ziggurat`): one 64-bit draw for 99%
+    """Standard normal by a 256-layer ziggurat (:func:`ziggurat_tables`): one 64-bit draw for 99%
     of values (8 bits pick the layer, 1 the sign, 52 the magnitude), a wedge test or
     Marsaglia's tail algorithm for the rest: about 3x faster than the polar method it
     replaced (docs/changelog.md). ``cache`` is unused; hooks written against the polar

@@ -44,9 +44,12 @@ def library_name(version: str) -> str:
 #: Name of the slot-log format, stored under ``format`` in the run metadata.
 SLOT_FORMAT_NAME = "corraoi.slot-log"
 #: The newest version of the slot-log format this code reads and writes: a run is written
-#: as version 1 (built-in policy, i.i.d. channel) or 2 (a plug-in policy or a Markov/trace
-#: channel), ``RunConfig.format_version``.
-SLOT_FORMAT_VERSION = 2
+#: as version 1 (built-in policy, i.i.d. channel), 2 (a plug-in policy or a Markov/trace
+#: channel) or 3 (a loop logged by ``corraoi.Logger``: its messages may lack any field the
+#: slot record says may be absent, its run may have no instance), ``RunConfig.format_version``.
+SLOT_FORMAT_VERSION = 3
+#: The first version whose logs may lack a column every block carries (``SlotBlock.absent``).
+LACKING_FORMAT_VERSION = 3
 SLOT_TOPIC = "/corraoi/slot"
 SLOT_SCHEMA_NAME = "corraoi.SlotEvent"
 #: Metadata record written when a slot log is opened: the run configuration.
@@ -103,6 +106,7 @@ __all__ = [
     "SLOT_FLUSH_EVERY",
     "SLOT_FORMAT_NAME",
     "SLOT_FORMAT_VERSION",
+    "LACKING_FORMAT_VERSION",
     "SLOT_SCHEMA_NAME",
     "SLOT_TOPIC",
     "SWEEP_END_METADATA",

@@ -337,8 +337,8 @@ class _FullDisk:
 
 @pytest.mark.parametrize("room", [30_000, 120_000])
 def test_a_full_disk_is_one_line_and_keeps_the_partial_readable(tmp_path, monkeypatch, room):
-    real = partial_file._fdopen  # the seam where PartialFile opens its file
-    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), room))
+    real = partial_file.fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "fdopen", lambda fd: _FullDisk(real(fd), room))
     out = tmp_path / "run.mcap"
     err = one_line_error(cli("record", "-T", 6000, "--no-rrd", "-o", out), code=1)
     part = tmp_path / "run.mcap.partial"

@@ -16,13 +16,13 @@ from corraoi.policies import make_policies
 @pytest.fixture
 def calls(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     seen: list[str] = []
-    real = theory._analyse
+    real = theory.compute_theory
 
     def counted(inst: Instance) -> theory.InstanceTheory:
         seen.append(inst.name)
         return real(inst)
 
-    monkeypatch.setattr(theory, "_analyse", counted)
+    monkeypatch.setattr(theory, "compute_theory", counted)
     return seen
 
 
@@ -37,7 +37,7 @@ def test_the_kept_theory_is_the_computed_one_and_cannot_be_changed(calls):
     inst = load_instance("I1")
     kept = theory.analyse(inst)
     assert theory.analyse(inst) is kept and calls == ["I1"]
-    fresh = theory._analyse(load_instance("I1"))
+    fresh = theory.compute_theory(load_instance("I1"))
     for name in ("mu", "gaps", "phi", "pseudo_gap", "pseudo_rewards"):
         assert np.array_equal(getattr(kept, name), getattr(fresh, name))
     assert (kept.best_arm, kept.competitive) == (fresh.best_arm, fresh.competitive)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from corraoi.model.bounds import _first_tau, cts_bound, cucb_bound
+from corraoi.model.bounds import cts_bound, cucb_bound, first_tau
 from corraoi.model.instance import Instance, load_instance
 
 
@@ -23,7 +23,7 @@ def test_t0_is_the_first_slot_meeting_the_condition():
 
 
 def test_first_tau_small_case():
-    assert _first_tau(2.0, 1e-9, 2, 1.0) == 2.0
+    assert first_tau(2.0, 1e-9, 2, 1.0) == 2.0
 
 
 def test_i1_linear_below_t0_and_log_above():

@@ -27,7 +27,7 @@ from click.testing import CliRunner
 from corraoi.cli import main
 from corraoi.engine.block import SlotBlock
 from corraoi.files.partial import partial_path
-from recorder.slotlog.reader import _slice, open_log
+from recorder.slotlog.reader import open_log
 
 PYTHON = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
@@ -86,7 +86,7 @@ def test_record_cucb_with_no_other_option(tmp_path, monkeypatch):
     c = log.config
     assert (c.instance.name, c.policy.name, c.seed, c.horizon) == ("I1", "cucb", 0, 10_000)
     assert log.n_slots == 10_000 and log.status == "complete"
-    last = _slice(log.read_all(), 9_999, 10_000)
+    last = log.read_all().slice(9_999, 10_000)
     out = res.stdout
     assert f"AoI regret at slot 10000: {int(last.regret[0])} (pathwise)" in out
     assert f"{float(last.estimator[0]):.1f} (paper's estimator" in out

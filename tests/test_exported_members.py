@@ -10,7 +10,7 @@ import corraoi
 
 EXPECTED = [
     "Choice", "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
-    "InstanceError", "LogError", "OutputError", "Param", "Policy", "PolicyError", "Run",
+    "InstanceError", "LogError", "Logger", "OutputError", "Param", "Policy", "PolicyError", "Run",
     "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "export", "info", "load",
     "record", "recover", "register", "replay", "show", "sweep",
 ]  # fmt: skip

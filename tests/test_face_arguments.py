@@ -99,10 +99,34 @@ CALLS: dict[str, Callable[..., Any]] = {
         **{"policy": "ucb", "arms": (2,), "horizon": 20, "runs": 2, **kw}
     ),  # fmt: skip
     "corraoi_run": lambda c, **kw: c.fixture(**{"horizon": 50, **kw}),
+    "Logger": lambda c, **kw: corraoi.Logger(**{"path": "log.mcap", "instance": "I1", **kw}),
 }
 
 #: (function, kwargs, error class, words of the message): a wrong type for every argument.
 TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
+    # corraoi.Logger
+    ("Logger", {"path": 3}, OutputTypeError, "path 3: expected the slot log's path"),
+    ("Logger", {"instance": 3}, InstanceTypeError, "instance 3: expected a built-in name"),
+    ("Logger", {"instance": None}, ConfigTypeError, "arms None: not an integer"),
+    ("Logger", {"instance": None, "arms": 0}, ConfigValueError, "arms 0: out of range"),
+    ("Logger", {"arms": 2.5}, ConfigTypeError, "arms 2.5: not an integer"),
+    ("Logger", {"arms": 3}, ConfigValueError, "expected 4, the arms of instance I1"),
+    ("Logger", {"horizon": "10"}, ConfigTypeError, "horizon '10': not an integer"),
+    ("Logger", {"policy": 3}, PolicyTypeError, "policy 3: expected the name the run is"),
+    ("Logger", {"params": [1]}, PolicyTypeError, "params [1]: expected a dict of numbers"),
+    ("Logger", {"seed": 1.5}, ConfigTypeError, "seed 1.5: not an integer"),
+    ("Logger", {"channel": 3}, ConfigTypeError, "channel 3: expected iid, markov or trace:"),
+    (
+        "Logger",
+        {"instance": None, "arms": 4, "channel": "markov"},
+        ConfigValueError,
+        "channel 'markov': expected None (a log without an instance has no hidden states)",
+    ),
+    ("Logger", {"rrd": 3}, OutputTypeError, "rrd 3: expected the Rerun recording's path"),
+    ("Logger", {"source": 3}, ArgumentTypeError, "source 3: expected text"),
+    ("Logger", {"version": 3}, ArgumentTypeError, "version 3: expected text"),
+    ("Logger", {"overwrite": "yes"}, ArgumentTypeError, "overwrite 'yes': expected True or"),
+    ("Logger", {"sinks": "x"}, ArgumentTypeError, "sinks 'x': expected a list or tuple"),
     # corraoi.record
     ("record", {"policy": 3}, PolicyTypeError, "policy 3: expected a policy name"),
     ("record", {"policy": ["ucb", "cucb"]}, PolicyTypeError, "expected one policy"),
@@ -127,6 +151,7 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
         "rrd 3: expected the Rerun recording's path, None, True or False",
     ),  # fmt: skip
     ("record", {"force": "yes"}, ArgumentTypeError, "force 'yes': expected True or False"),
+    ("record", {"score": "on"}, ArgumentTypeError, "score 'on': expected True or False"),
     ("record", {"viewer": 9876}, ArgumentTypeError, "viewer 9876: expected a running Rerun"),
     ("record", {"sinks": "x"}, ArgumentTypeError, "sinks 'x': expected a list or tuple"),
     ("record", {"sinks": [3]}, ArgumentTypeError, "sinks[0] 3: expected a recorder.sink.Sink"),
@@ -381,7 +406,7 @@ def _arguments(function: str) -> set[str]:
         "Sweep": Sweep.__init__, "Sweep.record": Sweep.record,
         "Sweep.record_each": Sweep.record_each, "Sweep.figure": Sweep.figure,
         "Sweep.show": open_viewer, "Param": Param, "register": corraoi.register,
-        "check_policy": check_policy,
+        "check_policy": check_policy, "Logger": corraoi.Logger.__init__,
     }  # fmt: skip
     if function == "Policy class":
         return {"params", "name", "label", "color"}

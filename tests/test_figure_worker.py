@@ -30,13 +30,13 @@ from corraoi.face.outputs import FolderOutputs
 grid = build_grid(instances=["I1", "I2"], policies=["ucb", "cts"], horizons=[300], runs=8)
 notes = []
 worker = FigureWorker.start()
-started = worker is not None and worker._worker.proc.pid
+started = worker is not None and worker.process.pid
 if how == "killed":
-    os.kill(worker._worker.proc.pid, signal.SIGKILL)  # dead before it draws anything
-    worker._worker.proc.join()
+    os.kill(worker.process.pid, signal.SIGKILL)  # dead before it draws anything
+    worker.process.join()
 with worker:
     sweep(grid, out=out, outputs=FolderOutputs(worker), workers=1, warn=notes.append)
-started = started and not worker._worker.proc.is_alive()
+started = started and not worker.process.is_alive()
 print(json.dumps({"notes": notes, "started_and_stopped": bool(started)}))
 """
 
@@ -107,7 +107,7 @@ fw.draw_from_log = lambda log, out: time.sleep(60)  # a figure that takes a minu
 figures = fw.FigureWorker.start()
 figures.draw("sweep.mcap", "figure.png")  # busy: it does not read the pipe meanwhile
 rerun = RerunWorker.start(lambda: time.sleep(60))  # busy before it imports Rerun
-print(figures._worker.proc.pid, rerun._worker.proc.pid, flush=True)
+print(figures.process.pid, rerun.process.pid, flush=True)
 time.sleep(60)  # killed long before
 """
 

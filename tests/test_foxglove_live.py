@@ -160,7 +160,7 @@ def test_a_client_gets_the_mcap_logs_messages_schema_and_run_record(tmp_path, ma
         sink = server.slot_sink(config)
         client = Client(server.url, (TOPIC, RUN_TOPIC))
         client.pump(until=client.subscribed.is_set)
-        _wait(sink._slots.has_sinks)
+        _wait(sink.subscribed)
         reader = client.pump_in_background(lambda: len(client.slots()) >= 3000)
         with McapSink(tmp_path / "run.mcap", config, fsync=False) as mcap:
             for block in engine(config):
@@ -215,7 +215,7 @@ def test_a_late_client_gets_the_advertisement_and_the_messages_from_then_on(make
             sink.write(block)
         client = Client(server.url, (TOPIC, RUN_TOPIC))
         client.pump(until=client.subscribed.is_set)
-        _wait(sink._slots.has_sinks)
+        _wait(sink.subscribed)
         reader = client.pump_in_background(lambda: len(client.slots()) >= 3000)
         for block in blocks[2:]:
             _write_kept_up(sink, block, client, before=2000)
@@ -235,7 +235,7 @@ def test_a_stalled_client_neither_stalls_the_run_nor_grows_memory(make_config, e
         sink = server.slot_sink(config)
         client = Client(server.url, read=False)
         client.pump(until=client.subscribed.is_set)
-        _wait(sink._slots.has_sinks)
+        _wait(sink.subscribed)
         before = _rss_kib()
         total_bytes = 0
         for i in range(n_blocks):  # the client reads nothing meanwhile
@@ -268,7 +268,7 @@ def test_several_runs_get_one_topic_each(make_config, engine):
         topics = (f"{TOPIC}/ucb-I1-s0", f"{TOPIC}/cucb-I1-s0")
         client = Client(server.url, topics)
         client.pump(until=client.subscribed.is_set)
-        _wait(lambda: all(s._slots.has_sinks() for s in sinks))
+        _wait(lambda: all(s.subscribed() for s in sinks))
         for c, s in zip(configs, sinks, strict=True):
             s.write(engine(c)[0])
             client.pump(until=lambda s=s: len(client.slots(s.topic)) >= 1000)
@@ -290,7 +290,7 @@ def test_the_sweep_sink_sends_each_point_on_corraoi_sweep():
         sink = FoxgloveSweepSink(server)
         client = Client(server.url, (SWEEP_TOPIC,))
         client.pump(until=client.subscribed.is_set)
-        _wait(sink._channel.has_sinks)
+        _wait(sink.subscribed)
         for p in points:
             sink.write(p)
         client.pump(until=lambda: len(client.slots(SWEEP_TOPIC)) >= 2)

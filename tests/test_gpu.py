@@ -85,7 +85,7 @@ def no_cupy(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(DEVICE_ENV, raising=False)
     import corraoi.gpu.device as device
 
-    monkeypatch.setattr(device, "_DEVICES", {})
+    monkeypatch.setattr(device, "DEVICES", {})
 
 
 def run(*args: object):  # type: ignore[no-untyped-def]
@@ -954,9 +954,9 @@ def test_two_builders_on_a_fresh_cache_compile_the_emulation_once(
         Path(f"{lib}.sha256").write_text(hashlib.sha256(b"library").hexdigest())  # as compiled
         return lib
 
-    monkeypatch.setattr(EmulatedDevice, "_compile_to", fake_compile)
+    monkeypatch.setattr(EmulatedDevice, "compile_to", fake_compile)
     got: list[Path] = []
-    builders = [threading.Thread(target=lambda: got.append(EmulatedDevice()._build(3)))
+    builders = [threading.Thread(target=lambda: got.append(EmulatedDevice().build(3)))
                 for _ in range(2)]  # fmt: skip
     for b in builders:
         b.start()

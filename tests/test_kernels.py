@@ -205,7 +205,7 @@ def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path,
     from corraoi.engine import kernel_cache, kernel_pool
 
     monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(kernel_cache, "_LOADED", {})  # as in a fresh process (whatever ran)
+    monkeypatch.setattr(kernel_cache, "LOADED", {})  # as in a fresh process (whatever ran)
     started: list[str] = []
 
     class Done:  # a worker that has finished at once

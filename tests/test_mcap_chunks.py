@@ -143,14 +143,34 @@ def _slow_encode(b: SlotBlock) -> list[bytes]:
     def num(v: float) -> bytes:
         return orjson.dumps(v)
 
+    def f32(v: float) -> bytes:  # float32's shortest text, +-infinity as +-FLOAT32_MAX
+        top = float(np.finfo(np.float32).max)
+        return orjson.dumps(np.float32(min(max(v, -top), top)), option=orjson.OPT_SERIALIZE_NUMPY)
+
+    def later(i: int) -> bytes:
+        """The fields added with the score (issue 40), each where the block has it: forced,
+        the override's threshold, the candidates' scores in the candidates' order ([] where
+        the slot was not scored)."""
+        text = b""
+        if b.forced is not None:
+            text += b',"forced":' + (b"true" if b.forced[i] else b"false")
+        if b.override_threshold is not None:
+            text += b',"override_threshold":' + f32(float(b.override_threshold[i]))
+        if b.score is not None:
+            row = b.score[i]
+            arms = [] if np.isnan(row).all() else np.flatnonzero(b.candidates[i])
+            text += b',"score":[' + b",".join(f32(float(row[k])) for k in arms) + b"]"
+        return text
+
     return [
-        _TEMPLATE % (int(b.t[i]), int(b.x[i]) + 1, int(b.arm[i]) + 1,
+        (_TEMPLATE % (int(b.t[i]), int(b.x[i]) + 1, int(b.arm[i]) + 1,
                      b"true" if b.success[i] else b"false", int(b.aoi[i]),
                      int(b.oracle_aoi[i]), int(b.regret[i]), num(float(b.estimator[i])),
                      b"true" if b.override[i] else b"false",
                      b",".join(num(float(v)) for v in b.mu_hat[i]),
                      b",".join(b"%d" % v for v in b.pulls[i]),
-                     orjson.dumps([int(k) + 1 for k in np.flatnonzero(b.candidates[i])]))
+                     orjson.dumps([int(k) + 1 for k in np.flatnonzero(b.candidates[i])])))
+        [:-1] + later(i) + b"}"
         for i in range(len(b))
     ]  # fmt: skip
 

@@ -161,8 +161,8 @@ def test_a_full_disk_is_one_write_error_and_nothing_is_left(tmp_path: Path, monk
         def __getattr__(self, name):
             return getattr(self.f, name)
 
-    real = partial_file._fdopen
-    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: Full(real(fd)))
+    real = partial_file.fdopen
+    monkeypatch.setattr(partial_file, "fdopen", lambda fd: Full(real(fd)))
     target = tmp_path / "h.json"
     target.write_bytes(b"old")
     with pytest.raises(WriteError) as info:

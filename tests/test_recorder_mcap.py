@@ -222,8 +222,8 @@ class _FullDisk:
 def test_a_full_disk_is_one_clear_error_and_no_finished_file(
     tmp_path, make_config, engine, monkeypatch
 ):
-    real = partial_file._fdopen  # the seam where PartialFile opens its file
-    monkeypatch.setattr(partial_file, "_fdopen", lambda fd: _FullDisk(real(fd), 150_000))
+    real = partial_file.fdopen  # the seam where PartialFile opens its file
+    monkeypatch.setattr(partial_file, "fdopen", lambda fd: _FullDisk(real(fd), 150_000))
     config = make_config(horizon=20_000)
     path = tmp_path / "full.mcap"
     with pytest.raises(WriteError) as info:

@@ -12,7 +12,7 @@ from mcap.writer import Writer
 from corraoi.errors import LogError, UsageError
 from recorder.slotlog.encode import run_metadata
 from recorder.slotlog.reader import open_log
-from recorder.vocab import RUN_METADATA
+from recorder.vocab import RUN_METADATA, SLOT_FORMAT_VERSION
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000, 4096])
@@ -62,9 +62,7 @@ def test_a_log_cut_anywhere_is_read_up_to_its_last_complete_chunk(record_mcap, t
 
 
 def _prefix(block, n):
-    from recorder.slotlog.reader import _slice
-
-    return _slice(block, 0, n)
+    return block.slice(0, n)
 
 
 def _bad(path) -> str:
@@ -97,7 +95,7 @@ def test_files_that_are_not_usable_logs_are_refused_in_one_line(tmp_path):
 def test_a_newer_format_version_is_refused(tmp_path, make_config):
     config = make_config(horizon=10)
     meta = run_metadata(config)
-    meta["format_version"] = "3"
+    meta["format_version"] = str(SLOT_FORMAT_VERSION + 1)
     newer = tmp_path / "newer.mcap"
     with open(newer, "wb") as f:
         w = Writer(f)
@@ -105,7 +103,7 @@ def test_a_newer_format_version_is_refused(tmp_path, make_config):
         w.add_metadata(RUN_METADATA, meta)
         w.finish()
     message = _bad(newer)
-    assert "version 3" in message and "upgrade corraoi" in message
+    assert f"version {SLOT_FORMAT_VERSION + 1}" in message and "upgrade corraoi" in message
 
 
 def test_a_chunk_with_a_bad_crc_is_refused(record_mcap, tmp_path):

@@ -48,7 +48,7 @@ MODULE = textwrap.dedent(
 @pytest.fixture
 def table(monkeypatch):
     """A private copy of the registry table: what a test registers is gone after it."""
-    monkeypatch.setattr(registry, "_TABLE", dict(registry._TABLE))
+    monkeypatch.setattr(registry, "TABLE", dict(registry.TABLE))
 
 
 @pytest.fixture

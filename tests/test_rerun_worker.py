@@ -80,8 +80,8 @@ def test_a_bad_rrd_path_is_refused_before_the_run(tmp_path):
 def test_a_worker_that_dies_is_one_line_and_the_mcap_log_is_complete(tmp_path):
     worker = _worker()
     try:
-        worker._worker.proc.kill()
-        worker._worker.proc.join(5)
+        worker.process.kill()
+        worker.process.join(5)
         with pytest.raises(WriteError) as err:
             record_run(_config(), tmp_path / "d.mcap", rrd=tmp_path / "d.rrd", rerun=worker)
     finally:
@@ -154,7 +154,7 @@ def test_a_killed_record_leaves_no_worker_behind(tmp_path):
 _PROBE = """
 import json, os, sys
 import recorder.rerun.worker as w
-serve = w._serve
+serve = w.serve
 def spy(*args):
     try:
         serve(*args)
@@ -162,7 +162,7 @@ def spy(*args):
         heavy = sorted(m for m in ("numba", "rerun", "pandas", "pyarrow") if m in sys.modules)
         with open("child.json", "w") as f:
             json.dump(heavy, f)
-w._serve = spy
+w.serve = spy
 from corraoi.cli import main
 try:
     main(sys.argv[1:])

@@ -176,7 +176,7 @@ def test_spawn_with_a_display_opens_the_files_in_the_native_viewer(tmp_path, mon
         while not (tmp_path / "args").exists() and time.monotonic() < deadline:
             time.sleep(0.1)
         assert (tmp_path / "args").read_text() == str(recorded.rrd)
-        process = shown._process
+        process = shown.process
         assert process is not None and process.poll() is None
     finally:
         shown.close()

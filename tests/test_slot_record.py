@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
+from corraoi.engine.block import FIELDS, NONE_FIELDS, RunConfig, SlotBlock
 from corraoi.engine.simulation import simulate, simulate_run
 from corraoi.engine.slot_record import (
     GPU_CAPTURE_ROW,
     NAMES,
-    OPTIONAL,
     SLOT_RECORD,
     markdown_table,
 )
@@ -157,7 +156,7 @@ def _payloads(path: Path) -> list[bytes]:
 def test_a_log_written_before_the_score_reads_and_its_slots_equal_todays(tmp_path):
     old = open_log(BEFORE)
     assert old.status == "complete" and old.n_slots == 1200
-    assert old.absent == OPTIONAL
+    assert old.absent == NONE_FIELDS
     blocks = list(old.blocks())
     assert all(b.fields() == FIELDS for b in blocks)
     # today's engine and encoder: the same messages, field by field, but the new fields
@@ -307,7 +306,7 @@ def test_the_score_is_an_option_on_by_default_up_to_64_arms(tmp_path):
     wide = Instance("wide-65", np.full(65, 1 / 65), (rng.random((65, 65)) < 0.3).astype(int))
     assert not RunConfig(wide, make_policy("ucb"), 0, 10).score
     run = record("ucb", inst, horizon=300, path=tmp_path / "off.mcap", rrd=False, score=False)
-    assert open_log(run.path).absent == OPTIONAL  # ucb: no threshold either
+    assert open_log(run.path).absent == NONE_FIELDS  # ucb: no threshold either
 
 
 def test_every_declared_rerun_entity_is_one_the_recording_has():
@@ -316,4 +315,4 @@ def test_every_declared_rerun_entity_is_one_the_recording_has():
     for f in SLOT_RECORD:
         for part in filter(None, (p.strip() for p in f.entity.split(","))):
             assert part.removesuffix("/<k>") in ENTITIES + WHY, (f.name, part)
-    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(OPTIONAL)
+    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(NONE_FIELDS)

@@ -20,9 +20,10 @@ from mcap.writer import Writer
 
 from corraoi._version import __version__
 from corraoi.errors import LogError, SweepLogError, UsageError
-from corraoi.experiments.montecarlo import SweepPoint, checkpoint_point, run_sweep, sweep_config
+from corraoi.experiments.montecarlo import checkpoint_point, run_sweep, sweep_config
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
+from corraoi.stats import SweepPoint
 from recorder.style import POLICY_COLORS, lighter, policy_color
 from recorder.sweeplog.log import SweepMcapSink
 from recorder.sweeplog.read import read_sweep

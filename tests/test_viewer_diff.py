@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.summary import summarize_blocks
 from corraoi.errors import UsageError
 from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
 from viewer import diff
 from viewer.diffs import DIFF_FIELDS, parse_fields
-from viewer.summary import summarize_blocks
 
 
 def _write(path, config: RunConfig, block: SlotBlock):

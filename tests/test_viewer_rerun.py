@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 
 from corraoi.cli import main  # noqa: E402
 from corraoi.engine.block import RunConfig, SlotBlock  # noqa: E402
+from corraoi.engine.summary import summarize_blocks  # noqa: E402
 from corraoi.model.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
 from recorder.rerun.names import run_path  # noqa: E402
@@ -25,7 +26,6 @@ from viewer.compare import (  # noqa: E402
     summary_table,
 )
 from viewer.runs import safe_label, unique_labels  # noqa: E402
-from viewer.summary import summarize_blocks  # noqa: E402
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 

@@ -144,7 +144,7 @@ def bars(path: Path) -> dict[str, tuple[list[int], list[list[float]]]]:
 @pytest.mark.parametrize("K", [2, 4, 6, 16, 64, 256])
 def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
     inst = instance_of(K)
-    config = RunConfig(inst, make_policy("cucb"), 0, 5000)
+    config = RunConfig(inst, make_policy("cucb"), 0, 5000, score=True)  # the why view too
     all_views = views(one_run_blueprint(config.label, config))
     kinds = [v.class_identifier for v in all_views]
     contents = {c for v in all_views for c in v.contents}
@@ -282,7 +282,8 @@ def test_1024_arms_record_and_draw(tmp_path):
     assert slots[-1] == 1200 and len(values[-1]) == 1024
     shown = np.isin(np.arange(1024), list(sink.focus))
     assert np.array_equal(np.array(values[-1])[~shown], ref.pulls[-1][~shown])
-    assert len(views(one_run_blueprint(config.label, config))) == 11  # with why this arm
+    assert not config.scored  # beyond 64 arms the score is off by default: no why-this-arm views
+    assert len(views(one_run_blueprint(config.label, config))) == 9
 
 
 # ------------------------------------------------------------------ what is drawn
@@ -492,7 +493,7 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
 
 
 def test_a_sweep_of_many_arms_draws_bars_and_the_arms_that_matter(tmp_path):
-    from corraoi.experiments.montecarlo import SweepPoint
+    from corraoi.stats import SweepPoint
     from recorder.sweeplog.layout import shown_arms, sweep_blueprint
     from recorder.sweeplog.recording import SweepRerunSink
 

@@ -2,32 +2,17 @@
 
 ``viewer.diff(a, b)`` compares two logs slot by slot (a :class:`DiffReport` with
 ``.identical``, per-field first divergence and ``.message()``); :func:`compare`,
-:func:`replay`, :func:`recover` and :func:`log_info` are what the ``corraoi compare``,
-``replay``, ``recover`` and ``info`` commands call. Rerun is imported only by
+:func:`replay` and :func:`recover` are what the ``corraoi compare``, ``replay`` and
+``recover`` commands call (``info`` is :mod:`viewer.info`'s). Rerun is imported only by
 ``compare`` and ``replay``, when they run.
 """
 
 from __future__ import annotations
 
-from .compare import Comparison, compare
-from .diff_report import DiffReport, FieldDiff
+from .compare import compare
+from .diff_report import DiffReport
 from .diffs import diff
-from .info import log_info
-from .recover import Recovered, recover
-from .replay import Replayed, replay
-from .summary import RunSummary, summarize_blocks
+from .recover import recover
+from .replay import replay
 
-__all__ = [
-    "Comparison",
-    "DiffReport",
-    "FieldDiff",
-    "Recovered",
-    "Replayed",
-    "RunSummary",
-    "compare",
-    "diff",
-    "log_info",
-    "recover",
-    "replay",
-    "summarize_blocks",
-]
+__all__ = ["DiffReport", "compare", "diff", "recover", "replay"]

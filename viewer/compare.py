@@ -19,13 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi.engine.summary import RunSummary, SummaryAccumulator
 from corraoi.policies import RGB
 from recorder.style import REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
 from .runs import LogLike, as_log, require_slots, unique_labels
-from .summary import RunSummary, SummaryAccumulator
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
@@ -76,7 +76,7 @@ class Comparison:
                     "label": r.label,
                     "path": str(r.log.path),
                     "policy": r.config.policy.name,
-                    "instance": r.config.instance.name,
+                    "instance": r.config.instance_name,
                     "seed": r.config.seed,
                     "horizon": r.config.horizon,
                     "status": r.log.status,
@@ -90,7 +90,7 @@ class Comparison:
 def comparability_warnings(logs: Sequence[RunLog]) -> list[str]:
     """Warnings for runs whose regret curves cannot be compared (or only partly)."""
     out = []
-    instances = {log.config.instance.name for log in logs}
+    instances = {log.config.instance_name for log in logs}
     same_instance = all(log.config.instance == logs[0].config.instance for log in logs)
     if not same_instance:
         names = ", ".join(sorted(instances))
@@ -153,7 +153,7 @@ def compare_blueprint(
 
     horizon = max(r.config.horizon for r in runs)
     tw = time_windows(window, horizon)
-    arms = max(r.config.instance.K for r in runs)
+    arms = max(r.config.K for r in runs)
     aoi_y = None if aoi_max is None else (0.5, float(aoi_max) + 0.5)
     px = VIEWER_PX / len(runs)
     columns = []
@@ -294,7 +294,7 @@ def _rows(runs: Sequence[ComparedRun]) -> tuple[list[str], list[list[str]]]:
         s = r.summary
         assert s is not None
         status = "" if not r.log.cut_short else f" of {r.config.horizon} (cut short)"
-        col = [r.config.policy.name, r.config.instance.name, str(r.config.seed),
+        col = [r.config.policy.name, r.config.instance_name, str(r.config.seed),
                f"{s.slots}{status}"]  # fmt: skip
         rows = summary_rows(s)
         col += [v for _, v in rows]

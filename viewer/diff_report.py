@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .summary import RunSummary
+from corraoi.engine.summary import RunSummary
 
 #: What makes a run's hidden path (and the channel's answers on it): two runs are paired
 #: (common random numbers: ``diff`` compares the policies alone) only when these agree.
@@ -146,11 +146,13 @@ class DiffReport:
 
     @property
     def first_divergence(self) -> tuple[int, str] | None:
-        """(slot, field) of the earliest differing slot over all fields, or None."""
+        """(slot, field) of the earliest differing slot over the fields both runs hold
+        comparably (a field only one run logs, or per-arm fields of runs with other numbers
+        of arms, differ everywhere and say nothing of where the runs part), or None."""
         firsts = [
             (f.first_slot, i, name)
             for i, (name, f) in enumerate(self.fields.items())
-            if f.first_slot is not None
+            if f.first_slot is not None and f.comparable
         ]
         if not firsts:
             return None
@@ -175,7 +177,7 @@ class DiffReport:
             rows.append((f"pulls arm {k + 1}", pa, pb, _minus(pb, pa)))
         rows += [
             ("best-arm share", a.best_share, b.best_share, _minus(b.best_share, a.best_share)),
-            ("overrides", a.overrides, b.overrides, b.overrides - a.overrides),
+            ("overrides", a.overrides, b.overrides, _minus(b.overrides, a.overrides)),
             ("on best arm from slot", a.settled_at, b.settled_at,
              _minus(b.settled_at, a.settled_at)),
         ]  # fmt: skip

@@ -26,11 +26,11 @@ import numpy as np
 from corraoi.engine.block import SlotBlock
 from corraoi.engine.slot_record import BY_NAME, NAMES, PER_ARM
 from corraoi.engine.slot_record import FLOAT_FIELDS as _FLOATS
+from corraoi.engine.summary import SummaryAccumulator
 from corraoi.errors import UsageError
 
 from .diff_report import ConfigDifference, DiffReport, FieldDiff
 from .runs import LogLike, as_log
-from .summary import SummaryAccumulator
 
 #: The fields ``diff`` compares by default: every field of the slot record except the slot
 #: number (corraoi.engine.slot_record). A field both runs lack compares equal; one that a
@@ -90,7 +90,7 @@ def diff(
         va, vb = flat_a.get(key), flat_b.get(key)
         if va != vb:
             (notes if key in NOTE_KEYS else config).append(ConfigDifference(key, va, vb))
-    Ka, Kb = la.config.instance.K, lb.config.instance.K
+    Ka, Kb = la.config.K, lb.config.K
     warnings = []
     if Ka != Kb:
         warnings.append(

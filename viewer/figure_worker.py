@@ -39,6 +39,11 @@ class FigureWorker:
         self._pending: list[tuple[Path, Path]] = []
         self._alive = True
 
+    @property
+    def process(self) -> Any:
+        """The worker's process (``pid``, ``is_alive()``, ``join()``)."""
+        return self._worker.proc
+
     @classmethod
     def start(cls) -> FigureWorker | None:
         """A worker, or None where one cannot be forked safely."""

@@ -10,13 +10,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from corraoi.engine.summary import RunSummary, summarize_blocks
 from corraoi.experiments.notable import well_formed
-from corraoi.model.theory import analyse
 from corraoi.provenance import Provenance, short
 from corraoi.text import safe_text
 
 from .runs import LogLike, as_log
-from .summary import RunSummary, summarize_blocks
 
 
 def log_info(log: LogLike) -> dict[str, Any]:
@@ -24,7 +23,7 @@ def log_info(log: LogLike) -> dict[str, Any]:
     run = as_log(log)
     cfg = run.config
     summary = summarize_blocks(cfg, run.blocks(4096))
-    theory = analyse(cfg.instance)
+    theory = cfg.theory  # None for a run without an instance
     return {
         "path": str(run.path),
         "label": cfg.label,
@@ -40,12 +39,13 @@ def log_info(log: LogLike) -> dict[str, Any]:
         "description": run.summary,
         "config": cfg.to_dict(),
         "provenance": provenance_info(run.provenance, run.attachments),
-        "theory": {
+        "theory": None if theory is None else {
             "mu": [float(v) for v in theory.mu],
             "best_arm": theory.best_arm + 1,
             "competitive": [a + 1 for a in theory.competitive],
             "C": theory.C,
         },
+        "absent": list(run.absent),
         "summary": summary.to_dict(),
     }
 
@@ -53,12 +53,22 @@ def log_info(log: LogLike) -> dict[str, Any]:
 def info_text(info: dict[str, Any]) -> str:
     """The table ``corraoi info`` prints from :func:`log_info`'s dict."""
     cfg = info["config"]
-    inst, pol, th = cfg["instance"], cfg["policy"], info["theory"]
+    inst, pol, th = cfg.get("instance"), cfg["policy"], info["theory"]
     s = info["summary"]
     params = ", ".join(f"{k}={v:g}" for k, v in sorted(pol["params"].items()))
-    p = " ".join(f"{v:g}" for v in inst["p"])
-    mu = " ".join(f"{v:g}" for v in th["mu"])
-    comp = ", ".join(str(a) for a in th["competitive"]) or "none"
+    if inst is None or th is None:  # a loop logged without an instance
+        model = [f"  {'instance':<22} none: K={cfg['arms']} arms (p and Y unknown)",
+                 f"  {'theory':<22} - (no instance)"]  # fmt: skip
+    else:
+        p = " ".join(f"{v:g}" for v in inst["p"])
+        mu = " ".join(f"{v:g}" for v in th["mu"])
+        comp = ", ".join(str(a) for a in th["competitive"]) or "none"
+        model = [
+            f"  {'instance':<22} {inst['name']}: K={len(inst['Y'])} arms, {len(inst['p'])} "
+            f"states, p = [{p}]",
+            f"  {'theory':<22} mu = [{mu}], best arm {th['best_arm']}, competitive arms: "
+            f"{comp} (C = {th['C']})",
+        ]
     lines = [
         f"{info['path']}: corraoi slot log, format version {info['format_version']}"
         + (f" (written by {info['library']})" if info["library"] else ""),
@@ -66,10 +76,7 @@ def info_text(info: dict[str, Any]) -> str:
         f"  {'run':<22} {info['label']}",
         *([f"  {'streams':<22} {cfg['streams']}: a GPU sweep's run, its slots captured from the "
            "GPU kernel"] if cfg.get("streams", "cpu") != "cpu" else []),
-        f"  {'instance':<22} {inst['name']}: K={len(inst['Y'])} arms, {len(inst['p'])} states,"
-        f" p = [{p}]",
-        f"  {'theory':<22} mu = [{mu}], best arm {th['best_arm']}, competitive arms: {comp}"
-        f" (C = {th['C']})",
+        *model,
         f"  {'policy':<22} {pol['name']}" + (f" ({params})" if params else ""),
     ]
     plugin = pol.get("plugin")
@@ -84,11 +91,14 @@ def info_text(info: dict[str, Any]) -> str:
         chan += f" of {channel.get('length', '?')} slots from {channel.get('source', '?')}"
     elif chan == "markov":
         chan += " (the instance's transition matrix)"
+    if inst is None:
+        chan = "none (no instance)"
     lines += [
         f"  {'hidden states':<22} {chan}",
         f"  {'seed':<22} {cfg['seed']}",
         f"  {'horizon':<22} {cfg['horizon']}",
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
+        *([f"  {'fields absent':<22} {', '.join(info['absent'])}"] if info.get("absent") else []),
         f"  {'corraoi version':<22} {cfg['version']}",
     ]
     lines += provenance_rows(info.get("provenance"))
@@ -148,9 +158,9 @@ def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:
         ("pathwise regret", opt(d["regret"])),
         ("paper's estimator", opt(d["estimator"], "{:.6g}")),
         ("pulls per arm", " ".join(str(v) for v in d["pulls"])),
-        ("best arm", str(d["best_arm"])),
+        ("best arm", opt(d["best_arm"])),
         ("share on best arm", opt(d["best_share"], "{:.2%}")),
-        ("AoI override slots", str(d["overrides"])),
+        ("AoI override slots", opt(d["overrides"])),
         ("on best arm from slot", opt(d["settled_at"])),
     ]
 

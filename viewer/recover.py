@@ -216,7 +216,7 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
         raise LogError(f"{src}: found {written} slot messages where the reader found {n_slots}")
     last = None
     if last_payload is not None:
-        K, n = cfg.instance.K, cfg.instance.n_states
+        K, n = cfg.K, cfg.n_states
         last = decode_messages([last_payload], K, n, where=str(src))
     end: dict[str, Any] = make_end(slots=n_slots, horizon=cfg.horizon, last=last)
     end["recovered_from"] = f"{src.name} ({log.status}, {n_slots} slots)"

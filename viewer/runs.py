@@ -54,7 +54,7 @@ def config_key(log: RunLog) -> dict[str, Any]:
     """What tells runs apart for labelling: instance, seed, horizon, parameters."""
     cfg = log.config
     return {
-        "instance": cfg.instance.name,
+        "instance": cfg.instance_name,
         "seed": cfg.seed,
         "horizon": cfg.horizon,
         "params": tuple(sorted(cfg.policy.params.items())),
@@ -84,7 +84,7 @@ def unique_labels(logs: Sequence[RunLog]) -> list[str]:
             cfg = logs[i].config
             for k in varying:
                 if k == "instance":
-                    parts.append(cfg.instance.name)
+                    parts.append(cfg.instance_name)
                 elif k == "seed":
                     parts.append(f"s{cfg.seed}")
                 elif k == "horizon":

@@ -6,6 +6,7 @@ the reader subtracts it).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,21 +17,18 @@ from corraoi.errors import ConfigError
 from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, default_channel
 from corraoi.model.instance import Instance
+from corraoi.model.theory import InstanceTheory, analyse
 from corraoi.policies.spec import PolicySpec
 
-from .slot_record import BY_NAME, NAMES, OPTIONAL, REQUIRED
-
-#: The per-slot columns every block carries, in log order (the slot record's required
-#: fields, :mod:`corraoi.engine.slot_record`); a block may carry the optional ones too.
-FIELDS = REQUIRED
-SCALAR_FIELDS = tuple(f for f in FIELDS if f != "t" and not BY_NAME[f].per_arm)
-ARM_FIELDS = tuple(f for f in FIELDS if BY_NAME[f].per_arm)
-
+from .slot_record import BY_NAME, NAMES, REQUIRED
 
 #: Up to this many arms a run logs its policy's scores (``score``, ``forced``) by default:
 #: a float32 per candidate and slot (benchmarks/bench_record.py's sizes: at 4 arms a log
 #: grows by about a quarter; at 256 arms it is 3 to 7 times as large).
 SCORE_ARMS = 64
+
+#: :attr:`RunConfig.instance_name` of a run without an instance.
+NO_INSTANCE = "none"
 
 #: The values of :attr:`RunConfig.streams`.
 STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
@@ -38,9 +36,16 @@ STREAMS = ("cpu", "gpu-cuda", "gpu-emulated")
 
 @dataclass(frozen=True)
 class RunConfig:
-    """Everything that determines a run: with it, a log replays with nothing else."""
+    """Everything that determines a run: with it, a log replays with nothing else.
 
-    instance: Instance
+    ``instance`` is None for a loop logged by ``corraoi.Logger`` without one (a testbed
+    whose ``p`` and ``Y`` nobody knows): such a run has ``arms`` arms and no states, best
+    arm or theory, and its log lacks what needs them (``x``, the oracle, the regret, the
+    estimator). Everything that reads a run asks :attr:`K`, :attr:`n_states`,
+    :attr:`instance_name` and :attr:`theory`, which answer for both kinds.
+    """
+
+    instance: Instance | None
     policy: PolicySpec
     seed: int
     horizon: int
@@ -52,23 +57,87 @@ class RunConfig:
     streams: str = "cpu"
     #: log the policy's scores (``score``, ``forced``): by default up to SCORE_ARMS arms
     score: bool | None = None
+    #: the number of arms of a run without an instance (None with one: the instance's)
+    arms: int | None = None
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
         check_seed(self.seed)
         if self.streams not in STREAMS:
             raise ConfigError(f"streams {self.streams!r}: expected one of {', '.join(STREAMS)}")
+        if self.instance is None:
+            if self.policy.tier != "external":
+                raise ConfigError(
+                    f"policy {self.policy.name!r}: a run without an instance is a loop logged "
+                    "by corraoi.Logger (policy tier external); expected an instance"
+                )
+            if type(self.arms) is not int or self.arms < 1:
+                raise ConfigError(
+                    f"arms {self.arms!r}: a run without an instance needs its number of arms, "
+                    "an integer >= 1"
+                )
+        elif self.arms is not None and self.arms != self.instance.K:
+            raise ConfigError(
+                f"arms {self.arms!r}: instance {self.instance.name} has {self.instance.K} arms"
+            )
+        else:
+            object.__setattr__(self, "arms", None)
         if self.channel is None:
-            object.__setattr__(self, "channel", default_channel(self.instance))
+            chan = Channel() if self.instance is None else default_channel(self.instance)
+            object.__setattr__(self, "channel", chan)
         if self.score is None:
-            object.__setattr__(self, "score", self.instance.K <= SCORE_ARMS)
+            object.__setattr__(self, "score", self.K <= SCORE_ARMS)
+
+    @property
+    def K(self) -> int:
+        """The number of arms."""
+        if self.instance is None:
+            assert self.arms is not None
+            return self.arms
+        return self.instance.K
+
+    @property
+    def n_states(self) -> int | None:
+        """The number of hidden states (None without an instance)."""
+        return None if self.instance is None else self.instance.n_states
+
+    @property
+    def instance_name(self) -> str:
+        """The instance's name, or ``none`` for a run without one."""
+        return NO_INSTANCE if self.instance is None else self.instance.name
+
+    @property
+    def arm_names(self) -> tuple[str, ...]:
+        """The arms' names ("1".."K" without an instance)."""
+        if self.instance is None:
+            return tuple(str(k + 1) for k in range(self.K))
+        return tuple(self.instance.arm_names)
+
+    @property
+    def theory(self) -> InstanceTheory | None:
+        """The instance's theory (mu, best arm, mu*, competitive arms); None without one."""
+        return None if self.instance is None else analyse(self.instance)
+
+    @property
+    def model(self) -> Instance:
+        """The instance, for what cannot run without one (simulating, recording again)."""
+        if self.instance is None:
+            raise ConfigError(
+                f"run {self.label} has no instance (a loop logged by corraoi.Logger without "
+                "one): expected a run with an instance"
+            )
+        return self.instance
 
     @property
     def format_version(self) -> int:
         """The slot-log format version this run is written in: 1 for a built-in policy on an
         i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
-        non-i.i.d. channel (older readers refuse it instead of misreading it)."""
+        non-i.i.d. channel (older readers refuse it instead of misreading it), 3 for a loop
+        logged by ``corraoi.Logger`` (policy tier ``external``), whose messages may lack any
+        field of the slot record that may be absent."""
         assert self.channel is not None
+        if self.policy.tier == "external":
+            return 3
         return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
 
     @property
@@ -80,11 +149,13 @@ class RunConfig:
     @property
     def label(self) -> str:
         gpu = "" if self.streams == "cpu" else "-gpu"
-        return f"{self.policy.name}-{self.instance.name}-s{self.seed}{gpu}"
+        return f"{self.policy.name}-{self.instance_name}-s{self.seed}{gpu}"
 
     def to_dict(self) -> dict[str, Any]:
-        out = {
-            "instance": self.instance.to_dict(),
+        out: dict[str, Any] = (
+            {"arms": self.K} if self.instance is None else {"instance": self.instance.to_dict()}
+        )
+        out |= {
             "policy": self.policy.to_dict(),
             "seed": int(self.seed),
             "horizon": int(self.horizon),
@@ -95,14 +166,16 @@ class RunConfig:
             out["channel"] = self.channel.to_dict()
         if self.streams != "cpu":  # logs of the CPU engine read as before
             out["streams"] = self.streams
-        if self.score != (self.instance.K <= SCORE_ARMS):  # the default is not written
+        if self.score != (self.K <= SCORE_ARMS):  # the default is not written
             out["score"] = bool(self.score)
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
         return cls(
-            instance=Instance.from_dict(data["instance"], where="run configuration"),
+            instance=Instance.from_dict(data["instance"], where="run configuration")
+            if "instance" in data or "arms" not in data
+            else None,
             policy=PolicySpec.from_dict(data["policy"]),
             seed=int(data["seed"]),
             horizon=int(data["horizon"]),
@@ -110,6 +183,7 @@ class RunConfig:
             channel=Channel.from_dict(data["channel"]) if "channel" in data else Channel(),
             streams=str(data.get("streams", "cpu")),
             score=bool(data["score"]) if "score" in data else None,
+            arms=data["arms"] if "instance" not in data and "arms" in data else None,
         )
 
 
@@ -145,6 +219,8 @@ class Columns:
     override_threshold: np.ndarray | None = None
     score: np.ndarray | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the fields of :data:`FIELDS` its run lacks (held as :func:`absent_column`'s fill)
+    absent: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -154,12 +230,16 @@ class Columns:
         return value
 
     def fields(self) -> tuple[str, ...]:
-        """The declared fields this block carries, in log order (the optional ones given)."""
-        return tuple(f for f in NAMES if f not in OPTIONAL or getattr(self, f) is not None)
+        """The declared fields this block holds, in log order: not those its run lacks (None,
+        or a column of FIELDS named in ``absent``)."""
+        if self.absent:
+            return tuple(f for f in NAMES if getattr(self, f) is not None and f not in self.absent)
+        return tuple(f for f in NAMES if getattr(self, f) is not None)
 
     def _parts(self, pick: Any) -> dict[str, Any]:
-        out: dict[str, Any] = {f: pick(f) for f in self.fields()}
+        out: dict[str, Any] = {f: pick(f) for f in (*self.fields(), *self.absent)}
         out["extra"] = {k: pick(k) for k in self.extra}
+        out["absent"] = self.absent
         return out
 
 
@@ -172,11 +252,12 @@ class SlotBlock(Columns):
         """The blocks joined; a field some of them lack is filled in them (absent_fill)."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
-        names = [f for f in NAMES if any(f in b.fields() for b in blocks)]
+        names = [f for f in NAMES if any(f in b.fields() for b in blocks) or f in FIELDS]
         extra = list(dict.fromkeys(k for b in blocks for k in b.extra))
         out: dict[str, Any] = {f: np.concatenate([absent_fill(b, f) for b in blocks])
                                for f in names}  # fmt: skip
         out["extra"] = {k: np.concatenate([absent_fill(b, k) for b in blocks]) for k in extra}
+        out["absent"] = tuple(f for f in FIELDS if all(f in b.absent for b in blocks))
         return cls(**out)
 
     def slice(self, start: int | None, stop: int | None) -> SlotBlock:
@@ -198,7 +279,7 @@ class SlotBlock(Columns):
 def absent_fill(block: Columns, name: str) -> np.ndarray:
     """``block``'s column ``name``, or where it lacks the field the column a table needs:
     NaN for numbers, False for flags (extra fields: None, as objects)."""
-    if name in block.fields() or name in block.extra:
+    if name in block.fields() or name in block.extra or name in block.absent:
         return block.column(name)
     n = len(block)
     decl = BY_NAME.get(name)
@@ -209,6 +290,31 @@ def absent_fill(block: Columns, name: str) -> np.ndarray:
     if decl.dtype == "bool":
         return np.zeros(shape, dtype=bool)
     return np.full(shape, np.nan, dtype=decl.dtype)
+
+
+def absent_column(name: str, B: int, K: int) -> np.ndarray:
+    """What a block holds for a column of :data:`FIELDS` its run lacks: NaN for a number, -1
+    for an integer (no state, arm, age or count is -1), False for a flag. Views leave such
+    a column out (``SlotBlock.fields()``); the value only keeps a block whole."""
+    decl = BY_NAME[name]
+    dtype = np.dtype(decl.dtype)
+    fill: float | int | bool = np.nan if dtype.kind == "f" else (-1 if dtype.kind == "i" else False)
+    return np.full((B, K) if decl.per_arm else (B,), fill, dtype=dtype)
+
+
+#: The per-slot columns every block carries as arrays, in log order: the fields of the slot
+#: record (:mod:`corraoi.engine.slot_record`) the :class:`Columns` dataclass requires. A
+#: run may lack one of them too (a field that ``may_be_absent``: a ``corraoi.Logger`` log
+#: without the hidden state); its blocks then hold :func:`absent_column` and name it in
+#: ``absent``. The other fields are None in a block of a run that lacks them.
+_REQUIRED_ARGS = {d.name for d in dataclasses.fields(Columns) if d.default is dataclasses.MISSING
+                  and d.default_factory is dataclasses.MISSING}  # fmt: skip
+FIELDS: tuple[str, ...] = tuple(f for f in NAMES if f in _REQUIRED_ARGS)
+#: The fields a block holds as None when its run lacks them (``score``, ``forced``, ...).
+NONE_FIELDS: tuple[str, ...] = tuple(f for f in NAMES if f not in FIELDS)
+SCALAR_FIELDS = tuple(f for f in FIELDS if f != "t" and not BY_NAME[f].per_arm)
+ARM_FIELDS = tuple(f for f in FIELDS if BY_NAME[f].per_arm)
+assert set(REQUIRED) <= set(FIELDS)
 
 
 #: The kernel's narrower buffers of these fields (the block's columns are int64).

@@ -35,7 +35,9 @@ from corraoi._version import __version__
 from corraoi.errors import KernelError
 
 Say = Callable[[str], None] | None
-_LOADED: dict[str, Any] = {}
+#: the kernels loaded in this process, by module name (a test swaps in an empty one to be
+#: as a fresh process)
+LOADED: dict[str, Any] = {}
 _LOCK = threading.Lock()
 
 
@@ -92,7 +94,7 @@ def write_source(folder: Path, modname: str, source: str) -> Path:
 
 def ready(folder: Path, modname: str) -> bool:
     """Whether the kernel ``modname`` is loaded in this process or compiled in ``folder``."""
-    return modname in _LOADED or any(p.suffix == ".nbi" for p in _index_files(folder, modname))
+    return modname in LOADED or any(p.suffix == ".nbi" for p in _index_files(folder, modname))
 
 
 def kernel(modname: str, source: str, what: str, *, warm: Callable[[], tuple[Any, ...]],
@@ -100,12 +102,12 @@ def kernel(modname: str, source: str, what: str, *, warm: Callable[[], tuple[Any
     """The compiled ``advance`` of the generated module ``modname`` (``source``), loaded once
     per process, and the seconds spent compiling it now (0 when it was loaded)."""
     with _LOCK:
-        if modname in _LOADED:
-            return _LOADED[modname], 0.0
+        if modname in LOADED:
+            return LOADED[modname], 0.0
         where = folder()
         path = write_source(where, modname, source)
         advance, took = load(where, modname, path, what, warm=warm, say=say)
-        _LOADED[modname] = advance
+        LOADED[modname] = advance
         return advance, took
 
 

@@ -174,6 +174,11 @@ class Simulation:
             kernel = self._kernels[record] = kernel_for(self.cls, record=record)
         return kernel
 
+    def use_kernel(self, kernel: Any, *, record: bool = False) -> None:
+        """Run the compiled calls with ``kernel`` instead of the kernel cache's: one of the
+        same signature compiled elsewhere (ahead of time: ``benchmarks/bench_aot.py``)."""
+        self._kernels[record] = kernel
+
     def _run_compiled(self, nslots: int, record: bool, out: Outputs, snap_t: np.ndarray,
                       s_regret: np.ndarray, s_aoisum: np.ndarray,
                       s_pulls: np.ndarray) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip

@@ -11,9 +11,12 @@ the tables' columns, the Rerun sink, the diff, ``corraoi.testing``, ``corraoi di
 (:func:`markdown_table`, checked by a test).
 
 Arms and states are 0-based in a block and numbered from 1 in files and for people
-(``one_based``). A field that ``may_be_absent`` is ``None`` in a block of a run that does
-not give it (a plain-Python plug-in that returns no scores; a log written before the field
-existed); readers and views accept that.
+(``one_based``). A field that ``may_be_absent`` is left out of the messages of a run that
+does not give it (a plain-Python plug-in that returns no scores; a log written before the
+field existed; a loop logged by ``corraoi.Logger`` without the hidden state): in a block it
+is ``None``, or, for a column every block carries (``corraoi.engine.block.FIELDS``), a fill
+named in ``SlotBlock.absent``; ``SlotBlock.fields()`` names what a block holds, and every
+writer, reader and view follows it. A run always holds the :data:`REQUIRED` fields.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ class SlotField:
     #: "candidate scores", a list of such numbers, one per arm of ``candidates`` in its
     #: order (NaN, the value of every other arm, needs no text), [] for a slot not scored
     json: str
-    #: a run may lack it (None in its blocks, no key in its messages)
+    #: a run may lack it (no key in its messages; not in its blocks' ``fields()``)
     may_be_absent: bool = False
     #: arms or states: 0-based in a block, numbered from 1 in files and for people
     one_based: bool = False
@@ -102,6 +105,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "",
         "hidden state X_t, numbered 1..n",
         "integer",
+        may_be_absent=True,
         one_based=True,
         minimum="1",
         maximum="n",
@@ -153,6 +157,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "slots",
         "age of the oracle that plays the best arm on the same X path",
         "integer",
+        may_be_absent=True,
         minimum="1",
         entity="oracle_aoi",
         view="AoI",
@@ -165,6 +170,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "slots",
         "pathwise AoI regret sum_{s<=t} (aoi_s - oracle_aoi_s), in slots",
         "integer",
+        may_be_absent=True,
         entity="regret",
         view="regret",
         foxglove="/corraoi/slot.regret",
@@ -176,6 +182,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "slots",
         "the paper's estimator sum_{s<=t} aoi_s - t / mu*, in slots",
         "number",
+        may_be_absent=True,
         diff="float",
         entity="estimator",
         view="regret",
@@ -188,6 +195,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "",
         "the AoI-aware rule chose the arm (argmax mu_hat); false otherwise",
         "boolean",
+        may_be_absent=True,
         entity="override",
         view="arm played",
         foxglove="/corraoi/slot.override",
@@ -199,6 +207,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "",
         "empirical mean reward of arms 1..K after the slot's update (0 if never pulled)",
         "number",
+        may_be_absent=True,
         minimum="0",
         maximum="1",
         diff="float",
@@ -213,6 +222,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "pulls",
         "pulls of arms 1..K after the slot's update",
         "integer",
+        may_be_absent=True,
         minimum="0",
         entity="pulls",
         view="pulls",
@@ -226,6 +236,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "arms (1..K, ascending) the arm was chosen from: A_t + {k_emp} for the correlated "
         "policies, every arm otherwise",
         "arm set",
+        may_be_absent=True,
         entity="candidates/<k>",
         view="candidate set",
         foxglove="/corraoi/slot.candidates",

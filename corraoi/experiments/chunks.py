@@ -85,7 +85,7 @@ def _run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None) -> 
     if "trace" in task and channel is not None:
         states = np.asarray(task["trace"], dtype=np.int64)
         channel = Channel("trace", source=channel.source, trace=states, digest=channel.digest)
-    inst: Instance = cfg.instance
+    inst: Instance = cfg.model
     best = analyse(inst).best_arm
     stops = [int(c) for c in task["checkpoints"]]
     S, K = len(stops), inst.K

@@ -70,7 +70,7 @@ class Drill:
         """A file name stem that says where the run came from."""
         label = self.cell if self.cell is not None else self.config.policy.label
         what = "" if self.choice == "run" else f"-{self.choice}"
-        return f"{self.folder.name}-{self.config.instance.name}-{label}-run{self.run}{what}"
+        return f"{self.folder.name}-{self.config.instance_name}-{label}-run{self.run}{what}"
 
 
 def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
@@ -95,7 +95,7 @@ def row_verdict(drill: Drill, slots: int, regret: float | None) -> str | None:
     if want is None or regret is None:
         return None
     label = drill.cell if drill.cell is not None else drill.config.policy.label
-    what = f"{drill.config.instance.name} {label} run {drill.run}, recorded with changed code"
+    what = f"{drill.config.instance_name} {label} run {drill.run}, recorded with changed code"
     if float(regret) == want:
         return f"{what}: equal to the sweep's row (regret {want:g} at slot {slots})"
     return (f"{what}: differs from the sweep's row: regret {float(regret):g} vs {want:g} at "

@@ -379,7 +379,7 @@ class CellRuns:
 
     def points(self) -> list[Any]:
         """The sweep log's points: mean and 95% CI over runs at each checkpoint."""
-        from .montecarlo import sweep_points
+        from corraoi.stats import sweep_points
 
         if self.agg is not None:
             a = self.agg

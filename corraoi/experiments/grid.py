@@ -204,7 +204,7 @@ class Grid:
             for d in data["cells"]:
                 cfg = RunConfig.from_dict({**d, "seed": 0})
                 assert cfg.channel is not None
-                cells.append(Cell(cfg.instance, cfg.policy, cfg.horizon, cfg.channel))
+                cells.append(Cell(cfg.model, cfg.policy, cfg.horizon, cfg.channel))
             return cls(
                 cells=tuple(cells), runs=int(data["runs"]), seed=int(data["seed"]),
                 chunk=int(data.get("chunk", 0)), checkpoints=int(data.get("checkpoints", 200)),

@@ -14,7 +14,7 @@ from corraoi.errors import ConfigError
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
 from corraoi.policies import PolicySpec
-from corraoi.stats import Moments, finite, mean_ci95
+from corraoi.stats import Moments, SweepPoint, finite, mean_ci95, sweep_points
 
 
 @dataclass
@@ -68,46 +68,6 @@ CheckpointHook = Callable[[PolicySpec, Snapshot], None]
 #: A policy's horizon is simulated in about this many compiled calls, so that checkpoints
 #: stream out (and the progress bar moves) while a long sweep runs.
 SEGMENTS = 10
-
-
-@dataclass(frozen=True)
-class SweepPoint:
-    """Aggregates over the runs of one policy at checkpoint slot ``t`` (one row of a curve)."""
-
-    policy: str
-    t: int
-    regret_mean: float
-    regret_ci95: float | None  # half-width; None with a single run
-    estimator_mean: float
-    estimator_ci95: float | None
-    pull_share: np.ndarray  # (K,) mean over runs of pulls_k / t
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "policy": self.policy,
-            "t": self.t,
-            "regret_mean": self.regret_mean,
-            "regret_ci95": self.regret_ci95,
-            "estimator_mean": self.estimator_mean,
-            "estimator_ci95": self.estimator_ci95,
-            "pull_share": [float(v) for v in self.pull_share],
-        }
-
-
-def sweep_points(
-    name: str, t: np.ndarray, regret: Moments, estimator: Moments, pull_share: np.ndarray
-) -> list[SweepPoint]:
-    """The :class:`SweepPoint` of each checkpoint ``t[i]`` from the moments of the runs' values
-    there (:meth:`Moments.of` of runs x checkpoints) and the mean shares ((checkpoints, K))."""
-    h, eh = regret.ci95(), estimator.ci95()
-    return [
-        SweepPoint(
-            policy=name, t=int(ts), regret_mean=float(regret.mean[i]),
-            regret_ci95=finite(float(h[i])), estimator_mean=float(estimator.mean[i]),
-            estimator_ci95=finite(float(eh[i])), pull_share=pull_share[i],
-        )  # fmt: skip
-        for i, ts in enumerate(t)
-    ]
 
 
 def checkpoint_point(policy: PolicySpec, snap: Snapshot) -> SweepPoint:

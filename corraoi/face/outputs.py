@@ -19,6 +19,7 @@ from corraoi.experiments.backends import sweep_backend
 from corraoi.experiments.folder import CellRuns, ChunkResult
 from corraoi.experiments.grid import Grid
 from corraoi.experiments.montecarlo import sweep_config
+from corraoi.experiments.sweeps import folder_provenance
 from corraoi.provenance import Provenance
 from recorder.style import spec_color, variant_colors
 from recorder.sweeplog.log import SweepMcapSink
@@ -67,7 +68,7 @@ def write_results(
             warn('results.parquet not written: install the analysis extra, '
                  'pip install "corraoi[analysis]"')  # fmt: skip
         return
-    write_dataset(folder / "results.parquet", grid, parts)
+    write_dataset(folder / "results.parquet", grid, parts, folder_provenance(grid))
 
 
 def write_group_log(

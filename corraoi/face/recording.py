@@ -168,7 +168,7 @@ def _expand(template: str, config: Any, drill: Any = None) -> Path:
     values = {
         "{label}": config.label,
         "{policy}": config.policy.name,
-        "{instance}": config.instance.name,
+        "{instance}": config.instance_name,
         "{seed}": str(config.seed),
         "{run}": str(drill.run) if drill is not None else str(config.seed),
         "{from}": drill.name if drill is not None else config.label,
@@ -350,7 +350,7 @@ class Recorded:
     rrd: Path | None = None
     compile_s: float = 0.0
     viewer_problem: str | None = None
-    summary: Any = None  # viewer.summary.RunSummary, measured as the blocks went by
+    summary: Any = None  # corraoi.engine.summary.RunSummary, measured as the blocks went by
 
 
 def prepare_kernels(plans: Sequence[Plan]) -> None:
@@ -403,8 +403,8 @@ def _record_one(
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
+    from corraoi.engine.summary import SummaryAccumulator
     from corraoi.files.partial import partial_path
-    from viewer.summary import SummaryAccumulator
 
     config = plan.config
     summary = SummaryAccumulator(config)
@@ -512,14 +512,13 @@ def record(
     arguments.optional(arguments.path, path, name="path")
     arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
     arguments.flag(force, name="force")
+    arguments.optional(arguments.flag, score, name="score")
     arguments.optional(arguments.text, viewer, name="viewer",
                        expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
     arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
     arguments.optional(arguments.callback, on_block, name="on_block")
     arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
-    check_seed(seed, name="seed")
-    check_horizon(horizon)
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)

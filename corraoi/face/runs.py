@@ -18,8 +18,8 @@ from recorder.slotlog.frames import RunData
 from recorder.slotlog.reader import RunLog
 
 if TYPE_CHECKING:
+    from corraoi.engine.summary import RunSummary
     from viewer.diff_report import DiffReport
-    from viewer.summary import RunSummary
 
     from .viewing import Shown
 
@@ -33,7 +33,8 @@ class Run(RunData):
       extra); ``.blocks()``, ``.to_arrow()``;
     * ``.summary``: final pathwise regret, the paper's estimator, pulls per arm, the share of
       slots on the best arm, AoI-aware overrides and the slot from which it stayed on the best
-      arm (:class:`viewer.summary.RunSummary`; arms 0-based, ``.to_dict()`` numbers them from 1);
+      arm (:class:`corraoi.engine.summary.RunSummary`; arms 0-based, ``.to_dict()`` numbers
+      them from 1);
     * ``.diff(other)``: a :class:`viewer.DiffReport`.
 
     ``slots=(first, last)`` restricts the tables to those slots (1-based, inclusive).
@@ -82,7 +83,7 @@ class Run(RunData):
     @cached_property
     def summary(self) -> RunSummary:
         """The run's figures from its logged slots (the window's, with ``slots=``)."""
-        from viewer.summary import summarize_blocks
+        from corraoi.engine.summary import summarize_blocks
 
         return summarize_blocks(self.log.config, self.blocks())
 
@@ -124,13 +125,13 @@ class Run(RunData):
     def _repr_html_(self) -> str:
         cfg = self.log.config
         s = self.summary
-        arms = cfg.instance.arm_names
+        arms = cfg.arm_names
         pulls = ", ".join(f"{a}: {n}" for a, n in zip(arms, s.pulls, strict=True))
         params = ", ".join(f"{k}={v:g}" for k, v in cfg.policy.params.items())
         rows = [
             ("run", cfg.label),
             ("policy", cfg.policy.name + (f" ({params})" if params else "")),
-            ("instance", f"{cfg.instance.name} (K = {cfg.instance.K})"),
+            ("instance", f"{cfg.instance_name} (K = {cfg.K})"),
             ("seed, horizon", f"{cfg.seed}, {cfg.horizon:,}"),
             ("slots", f"{s.slots:,} ({self.log.status})"),
             ("AoI regret (pathwise)", "" if s.regret is None else f"{s.regret:,}"),

@@ -14,7 +14,7 @@ def slots_of(config: Any) -> Any:
     """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
     (``config.streams``) the GPU kernel's own, captured slot by slot."""
     if config.streams == "cpu":
-        blocks = simulate_run(config.instance, config.policy, config.seed, config.horizon,
+        blocks = simulate_run(config.model, config.policy, config.seed, config.horizon,
                               channel=config.channel)  # fmt: skip
         if not config.score:  # the scores left out (RunConfig.score)
             return (replace(b, score=None, forced=None) for b in blocks)
@@ -23,5 +23,5 @@ def slots_of(config: Any) -> Any:
     from corraoi.gpu.runner import capture_run
 
     device = device_of("emulate" if config.streams == "gpu-emulated" else "cuda")
-    return capture_run(config.instance, config.policy, seed=config.seed,
+    return capture_run(config.model, config.policy, seed=config.seed,
                        horizon=config.horizon, channel=config.channel, device=device)  # fmt: skip

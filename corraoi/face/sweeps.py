@@ -132,7 +132,7 @@ class Sweep(SweepData):
                         allow_changed_code=allow_changed_code,
                         trace_readers=TRACE_READERS, words=PYTHON_WORDS)  # fmt: skip
         if len(drills) != 1:
-            listed = "; ".join(f"{d.config.instance.name}/{d.cell or d.config.policy.label} "
+            listed = "; ".join(f"{d.config.instance_name}/{d.cell or d.config.policy.label} "
                                f"run {d.run}" for d in drills)  # fmt: skip
             raise CorraoiError(
                 f"{self.folder}: {which!r} names {len(drills)} runs ({listed}); choose one "
@@ -219,7 +219,7 @@ class Sweep(SweepData):
         for p in todo:
             d = p.drill
             if say is not None:
-                say(f"recording {safe_text(p.mcap)} ({safe_text(d.config.instance.name)} "
+                say(f"recording {safe_text(p.mcap)} ({safe_text(d.config.instance_name)} "
                     f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
                     f"{d.config.seed}, {d.choice})")  # fmt: skip
             record_drill(d, p.mcap, overwrite=True)

@@ -48,6 +48,11 @@ class Shown:
         atexit.register(self.close)
 
     @property
+    def process(self) -> subprocess.Popen[bytes] | None:
+        """The native viewer's process (None for the other kinds, or once closed)."""
+        return self._process
+
+    @property
     def closed(self) -> bool:
         return self._server is None and self._process is None and self.widget is None
 

@@ -41,7 +41,7 @@ def compare(
     column per run and every run's regret overlaid, into ``rrd`` (a file) and/or ``viewer``
     (a running viewer's URL); with neither, only the summary figures are gathered; ``force``
     replaces an existing ``rrd``. ``runs``: :class:`corraoi.Run` objects or slot logs' paths.
-    Returns a :class:`viewer.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
+    Returns a :class:`viewer.compare.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
     :class:`~corraoi.errors.LogError` for a log that cannot be read,
     :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
     from viewer.compare import compare as compare_logs

@@ -120,7 +120,7 @@ def _busy(part: Path, holder: int) -> str:
             "or give another output path)")  # fmt: skip
 
 
-def _fdopen(fd: int) -> BinaryIO:
+def fdopen(fd: int) -> BinaryIO:
     """The file object of a locked ``.partial`` (a seam: tests inject faults here)."""
     return os.fdopen(fd, "wb")  # noqa: SIM115 - PartialFile closes it
 
@@ -179,7 +179,7 @@ class PartialFile:
                 self._fd = self._create_folder(take_over)
             else:
                 self._fd = self._create_file(take_over)
-                self._file = _fdopen(self._fd)
+                self._file = fdopen(self._fd)
         except FileExistsError:
             holder = lock_holder(self.partial)
             if holder is not None:
@@ -395,4 +395,4 @@ class PartialFile:
         return out.path
 
 
-__all__ = ["PARTIAL_SUFFIX", "PartialFile", "check_target", "partial_path", "reason"]
+__all__ = ["PARTIAL_SUFFIX", "PartialFile", "check_target", "fdopen", "partial_path", "reason"]

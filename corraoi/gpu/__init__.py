@@ -11,6 +11,6 @@ from __future__ import annotations
 
 from corraoi.errors import GpuUnavailable
 
-from .device import DEVICE_ENV, MAX_ARMS, get_device
+from .device import get_device
 
-__all__ = ["DEVICE_ENV", "MAX_ARMS", "GpuUnavailable", "get_device"]
+__all__ = ["GpuUnavailable", "get_device"]

@@ -288,9 +288,11 @@ class EmulatedDevice(Device):
         return K  # one library per K holds every family
 
     def _compile(self, K: int, family: str) -> Any:
-        return ctypes.CDLL(str(self._build(K)))
+        return ctypes.CDLL(str(self.build(K)))
 
-    def _build(self, K: int) -> Path:
+    def build(self, K: int) -> Path:
+        """The emulation library for ``K`` arms: from the kernel cache when intact, else
+        compiled once (one process compiles, the others wait for it)."""
         from corraoi.engine import kernel_cache, kernels
 
         text = source()
@@ -307,9 +309,10 @@ class EmulatedDevice(Device):
                 if kernels.on_compile is not None:
                     kernels.on_compile(f"the cached GPU-emulation library {lib.name} is damaged "
                                        "or unverified; rebuilding it")  # fmt: skip
-            return self._compile_to(lib, flags)
+            return self.compile_to(lib, flags)
 
-    def _compile_to(self, lib: Path, flags: tuple[str, ...]) -> Path:
+    def compile_to(self, lib: Path, flags: tuple[str, ...]) -> Path:
+        """Compile the library into ``lib`` with ``flags`` (written aside, then moved in)."""
         folder = lib.parent
         fd, tmp = tempfile.mkstemp(prefix=lib.name, suffix=".partial", dir=folder)
         os.close(fd)
@@ -386,7 +389,8 @@ def _intact(lib: Path) -> bool:
 # ---------------------------------------------------------------------------- choosing
 
 
-_DEVICES: dict[str, Device] = {}
+#: the devices made in this process, by kind (a test swaps in an empty one)
+DEVICES: dict[str, Device] = {}
 _DEVICE_LOCK = threading.Lock()
 
 
@@ -399,7 +403,7 @@ def get_device() -> Device:
 def device_of(kind: str) -> Device:
     """The device ``kind`` ("cuda" or "emulate") of this process, made once."""
     with _DEVICE_LOCK:
-        device = _DEVICES.get(kind)
+        device = DEVICES.get(kind)
         if device is None:
             if kind == "emulate":
                 device = EmulatedDevice()
@@ -407,5 +411,5 @@ def device_of(kind: str) -> Device:
                 device = CudaDevice()
             else:
                 raise GpuUnavailable(f"{DEVICE_ENV}={kind!r}: expected 'cuda' or 'emulate'")
-            _DEVICES[kind] = device
+            DEVICES[kind] = device
         return device

@@ -80,7 +80,7 @@ def _threshold(th: InstanceTheory) -> float:
     return float(min([gap_min, *nc]))
 
 
-def _first_tau(start: float, coef: float, K: int, level: float) -> float:
+def first_tau(start: float, coef: float, K: int, level: float) -> float:
     """inf{tau >= start : level >= coef sqrt(2K log tau / tau)} (tau/log tau increases)."""
     tau = max(start, 2.0)
 
@@ -186,7 +186,7 @@ def cucb_bound(inst: Instance, horizon: int) -> Bound:
     K = inst.K
     T = int(horizon)
     level = _threshold(th)
-    t0 = _first_tau(2.0, 4.0, K, level) if level > TIE_TOL else math.inf
+    t0 = first_tau(2.0, 4.0, K, level) if level > TIE_TOL else math.inf
     linear = (1.0 / mu_min - 1.0 / th.mu_star) * T
     if not T > t0:
         return Bound("Theorem 2 (CUCB)", T, linear, "linear", t0, _below("t0", t0))
@@ -221,7 +221,7 @@ def cts_bound(inst: Instance, horizon: int, beta: float = DEFAULT_BOUND_BETA) ->
     K = inst.K
     T = int(horizon)
     level = _threshold(th)
-    tb = _first_tau(math.exp(11.0 * beta), 6.0 * math.sqrt(beta), K, level)
+    tb = first_tau(math.exp(11.0 * beta), 6.0 * math.sqrt(beta), K, level)
     linear = (1.0 / mu_min - 1.0 / th.mu_star) * T
     if not T > tb:
         return Bound(name, T, linear, "linear", tb, _below("t_b", tb))

@@ -108,7 +108,7 @@ def analyse(inst: Instance) -> InstanceTheory:
     """
     kept = inst.__dict__.get("_theory")
     if kept is None:
-        kept = _analyse(inst)
+        kept = compute_theory(inst)
         for value in vars(kept).values():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
@@ -116,7 +116,8 @@ def analyse(inst: Instance) -> InstanceTheory:
     return kept
 
 
-def _analyse(inst: Instance) -> InstanceTheory:
+def compute_theory(inst: Instance) -> InstanceTheory:
+    """The theory of ``inst`` computed afresh, every time (:func:`analyse` keeps it)."""
     mu = inst.mu
     top = float(mu.max())
     tied = tuple(int(k) for k in np.flatnonzero(mu >= top - TIE_TOL))

@@ -21,16 +21,14 @@ user's do) and their numba hooks load only when a kernel is built.
 
 from __future__ import annotations
 
-from .api import RGB, Choice, CompiledPolicy, GpuForm, Param, Policy, PolicyBase, gpu_form
+from .api import RGB, Choice, CompiledPolicy, Param, Policy, PolicyBase, gpu_form
 from .registry import (
-    ENTRY_POINT_GROUP,
     available,
     builtins,
     paper_names,
     register,
     registered,
     resolve,
-    unknown_policy_message,
 )
 from .spec import (
     PolicySpec,
@@ -47,11 +45,9 @@ from corraoi.policies import paper, forced_exploration, drifting  # noqa: E402, 
 
 __all__ = [
     "AOI_PREFIX",
-    "ENTRY_POINT_GROUP",
     "RGB",
     "Choice",
     "CompiledPolicy",
-    "GpuForm",
     "Param",
     "Policy",
     "PolicyBase",
@@ -67,5 +63,4 @@ __all__ = [
     "register",
     "registered",
     "resolve",
-    "unknown_policy_message",
 ]

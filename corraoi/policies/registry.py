@@ -47,7 +47,7 @@ _NAME = re.compile(r"[a-z0-9][a-z0-9_.+-]*")
 _BUILTIN_MODULE = "corraoi.policies."
 
 #: every registered policy by name, in the order of registration (the paper's twelve first)
-_TABLE: dict[str, type[PolicyBase]] = {}
+TABLE: dict[str, type[PolicyBase]] = {}
 
 P = TypeVar("P", bound=type[PolicyBase])
 
@@ -91,25 +91,25 @@ def register(cls: P) -> P:
             f"register: policy name {key!r} is not usable on the command line (expected "
             "lower-case letters, digits and - _ . +, not 'all')"
         )
-    held = _TABLE.get(key)
+    held = TABLE.get(key)
     if held is not None and held is not checked:
         if _qualname(held) != _qualname(checked) or held.__module__.startswith(_BUILTIN_MODULE):
             raise PolicyError(
                 f"register: policy name {key!r} is taken by {_qualname(held)} "
                 f"(registering {_qualname(checked)})"
             )
-    _TABLE[key] = checked
+    TABLE[key] = checked
     return cls
 
 
 def builtins() -> dict[str, type[PolicyBase]]:
     """Every built-in policy by name: the paper's twelve first, in their table order."""
-    return {n: c for n, c in _TABLE.items() if c.__module__.startswith(_BUILTIN_MODULE)}
+    return {n: c for n, c in TABLE.items() if c.__module__.startswith(_BUILTIN_MODULE)}
 
 
 def registered() -> dict[str, type[PolicyBase]]:
     """Every registered policy by name: the built-ins, then users' in registration order."""
-    return dict(_TABLE)
+    return dict(TABLE)
 
 
 def paper_names() -> list[str]:
@@ -136,10 +136,10 @@ def available() -> list[Available]:
     with its error)."""
     out = [
         Available(n, "built-in" if n in builtins() else f"registered by {cls.__module__}", cls)
-        for n, cls in _TABLE.items()
+        for n, cls in TABLE.items()
     ]
     for ep in _entry_points():
-        if ep.name.lower() in _TABLE:
+        if ep.name.lower() in TABLE:
             continue  # a registered name wins (as resolve does)
         dist = ep.dist.name if ep.dist is not None else "?"
         try:
@@ -189,8 +189,8 @@ def resolve(token: str, *, expect: str = "") -> Resolved:
     if not raw:
         raise PolicyError("empty policy name (expected a name, FILE.py:Class or module:Class)")
     name = raw.lower()
-    if name in _TABLE:
-        return _registered(_TABLE[name])
+    if name in TABLE:
+        return _registered(TABLE[name])
     if ":" in raw:
         left, _, attr = raw.rpartition(":")
         if not left or not attr.isidentifier():
@@ -251,7 +251,7 @@ def _is_policy(obj: type[PolicyBase], where: str) -> bool:
 
 
 def unknown_policy_message(name: str) -> str:
-    known = list(_TABLE) + [ep.name for ep in _entry_points()]
+    known = list(TABLE) + [ep.name for ep in _entry_points()]
     close = difflib.get_close_matches(name.lower(), known, n=1, cutoff=0.6)
     hint = f"; did you mean {close[0]}?" if close else ""
     return (
@@ -276,7 +276,7 @@ def held(name: str, qualname: str, expect: str = "") -> type[PolicyBase] | None:
     ``expect`` (the sha256 a run recorded), a plug-in file's class whose code is other than
     that is passed over when a copy of that code was handed over (a sweep's kept code): the
     copy runs, the user's class stays registered."""
-    cls = _TABLE.get(name)
+    cls = TABLE.get(name)
     if cls is None or _qualname(cls) != qualname:
         return None
     if expect and qualname.startswith("file:") and not class_digest(cls).startswith(expect):

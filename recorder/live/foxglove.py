@@ -270,7 +270,7 @@ class FoxgloveSlotSink(Sink):
         )
         self._run = server.channel(self.run_topic, _run_schema(meta))
         self._run_message = json.dumps(meta).encode()
-        self._encoder = BlockEncoder(config.instance.K)
+        self._encoder = BlockEncoder(config.K)
         self._pacer = Pacer(pace, stop=stop)
         self._waited = False
         self.sent = 0
@@ -279,6 +279,10 @@ class FoxgloveSlotSink(Sink):
 
     def _send_run(self, t: int) -> None:
         self._run.log(self._run_message, log_time=t * NS_PER_SLOT)
+
+    def subscribed(self) -> bool:
+        """Whether a client subscribes to the slots' topic now."""
+        return bool(self._slots.has_sinks())
 
     def write(self, block: SlotBlock) -> int:
         """Publish the block's slots; returns how many went out (fewer if stopped)."""
@@ -330,6 +334,10 @@ class FoxgloveSweepSink(Sink):
         self._channel = server.channel(topic, None)
         self.sent = 0
         server.published.setdefault(topic, 0)
+
+    def subscribed(self) -> bool:
+        """Whether a client subscribes to the sweep's topic now."""
+        return bool(self._channel.has_sinks())
 
     def write(self, point: dict[str, Any]) -> None:
         t = point.get("t")

@@ -20,7 +20,6 @@ from typing import Any
 import rerun.blueprint as rrb
 
 from corraoi.engine.block import RunConfig
-from corraoi.model.theory import analyse
 from recorder import style
 
 from .names import TIMELINE, run_path
@@ -152,15 +151,15 @@ class RunViews:
                  why: bool = False) -> None:
         self.base = run_path(label)
         self.config = config
-        self.K = config.instance.K
+        self.K = config.K
         self.arms = arms or self.K
         self.lines = style.lines_for(self.K)
         self.tw = tw
         self.prefix = f"{prefix}: " if prefix else ""
         self.aoi_y = aoi_y
-        inst = config.instance
-        self.arm_legends = [style.arm_legend(k, n) for k, n in enumerate(inst.arm_names)]
-        self.best = int(analyse(inst).best_arm)
+        self.arm_legends = [style.arm_legend(k, n) for k, n in enumerate(config.arm_names)]
+        theory = config.theory  # None for a run without an instance: no best arm
+        self.best = None if theory is None else int(theory.best_arm)
         self.why_shown = why
         self.aware = style.is_aoi_aware(config.policy.name)
 
@@ -211,11 +210,13 @@ class RunViews:
         return self._series(title, ["$origin/regret", "$origin/estimator"], px, windowed=False)
 
     def arm_played(self, px: float) -> rrb.TimeSeriesView:
-        inst = self.config.instance
-        names = _names(inst.arm_names, [str(k + 1) for k in range(self.K)]) if self.lines else []
+        arm_names = self.config.arm_names
+        names = _names(arm_names, [str(k + 1) for k in range(self.K)]) if self.lines else []
         title = names_in_title(f"{self.prefix}arm played", names, px,
                                self._title(px, f"arm played (1..{self.K})"))  # fmt: skip
-        legend = [style.SUCCESS_NAME, style.FAILURE_NAME, style.best_arm_name(self.best)]
+        legend = [style.SUCCESS_NAME, style.FAILURE_NAME]
+        if self.best is not None:
+            legend.append(style.best_arm_name(self.best))
         if self.aware:
             legend.append(style.OVERRIDE_NAME)
         contents = ["$origin/arm/**", "$origin/override"]
@@ -307,6 +308,9 @@ class RunViews:
 
     def state(self, px: float) -> rrb.TimeSeriesView:
         inst = self.config.instance
+        if inst is None:  # a run without an instance logs no hidden state
+            return self._series(self._title(px, "hidden state x: none (no instance)"),
+                                ["$origin/x"], px, windowed=True)  # fmt: skip
         n = inst.n_states
         names = _names(inst.state_names, [f"x{x + 1}" for x in range(n)])
         title = names_in_title("hidden state x", names, px,

@@ -23,7 +23,6 @@ import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from corraoi.model.theory import analyse
 from recorder import style
 from recorder.sink import RunRecording, Sink
 
@@ -71,7 +70,7 @@ class RerunSink(Sink):
         self.label = label
         self.config = config
         self.base = run_path(label)
-        self.K = config.instance.K
+        self.K = config.K
         self.slots = 0
         self.closed = False
         self.flush_timeout = flush_timeout
@@ -80,9 +79,9 @@ class RerunSink(Sink):
         #: the run's colour: ``color`` (compare gives runs of one policy distinct shades),
         #: else the policy's own (``spec.color``) or its base policy's
         self.color = color if color is not None else style.spec_color(config.policy)
-        theory = analyse(config.instance)
-        self._mu = np.asarray(theory.mu, dtype=np.float64)
-        self._best = int(theory.best_arm)
+        theory = config.theory  # None for a run without an instance: no means, no best arm
+        self._mu = None if theory is None else np.asarray(theory.mu, dtype=np.float64)
+        self._best = None if theory is None else int(theory.best_arm)
         self._lines = style.lines_for(self.K)
         #: true-mean dots: every ``_dot`` slots, arm k's shifted by ``_phase[k]``
         shown = self.K if self._lines else style.FOCUS_MAX
@@ -101,12 +100,18 @@ class RerunSink(Sink):
         # the references are known before any slot: the best arm's line and the true
         # means' dots over the whole horizon, sent once (not a batch at a time)
         horizon = max(int(config.horizon), 1)
-        self._reference("arm/best", np.array([1, horizon]), self._best + 1.0)
+        if self._best is not None:
+            self._reference("arm/best", np.array([1, horizon]), self._best + 1.0)
         if self._lines:
             for k in range(self.K):
                 self._true_dots(k, 1)
         else:
-            for k in style.arms_that_matter(theory.mu, self._best, theory.competitive):
+            first = (
+                range(min(self.K, style.FOCUS_START))
+                if theory is None
+                else style.arms_that_matter(theory.mu, int(theory.best_arm), theory.competitive)
+            )
+            for k in first:  # fmt: skip
                 self._join(k, 1)
 
     def _reference(self, path: str, t: np.ndarray, value: float) -> None:
@@ -117,7 +122,10 @@ class RerunSink(Sink):
         )
 
     def _true_dots(self, k: int, first: int) -> None:
-        """Arm k's true mean as dots from slot ``first`` to the horizon."""
+        """Arm k's true mean as dots from slot ``first`` to the horizon (none without an
+        instance)."""
+        if self._mu is None:
+            return
         t = np.arange(1 + self._phase[k], int(self.config.horizon) + 1, self._dot)
         t = t[t >= first]
         if len(t):
@@ -147,9 +155,10 @@ class RerunSink(Sink):
         n = len(block)
         send, base = self.recording.send_columns, self.base
         t = np.ascontiguousarray(block.t, dtype=np.int64)
+        absent = block.absent  # columns the run does not give: not drawn
 
         def column(path: str, times: np.ndarray, values: np.ndarray) -> None:
-            if times.size:
+            if times.size and path.partition("/")[0] not in absent:
                 send(
                     f"{base}/{path}",
                     indexes=[rr.TimeColumn(TIMELINE, sequence=times)],
@@ -170,7 +179,8 @@ class RerunSink(Sink):
         column("x", t, (block.x + 1).astype(f64))
         column("mu_hat", t, np.ascontiguousarray(block.mu_hat, dtype=f64))
         ends = t[[0, -1]] if n > 1 else t[:1]  # a constant: two points draw the line
-        column("mu_true", ends, np.tile(self._mu, (len(ends), 1)))
+        if self._mu is not None:
+            column("mu_true", ends, np.tile(self._mu, (len(ends), 1)))
         column("pulls", t, block.pulls.astype(f64))
         cand = np.asarray(block.candidates, dtype=bool)
         for k in range(self.K):

@@ -13,7 +13,6 @@ import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig
-from corraoi.model.theory import analyse
 from recorder import style
 
 #: Bars of the per-arm bar charts: width, and the offset of the empirical (left) and true
@@ -27,7 +26,7 @@ CARD_STATES = 12
 
 
 def _legend_names(config: RunConfig) -> list[str]:
-    return [style.arm_legend(k, name) for k, name in enumerate(config.instance.arm_names)]
+    return [style.arm_legend(k, name) for k, name in enumerate(config.arm_names)]
 
 
 def about_markdown(config: RunConfig) -> str:
@@ -35,11 +34,17 @@ def about_markdown(config: RunConfig) -> str:
     with its mean, Y row and role, the hidden states, and (beyond ``style.LINES_UP_TO``
     arms) what the bars show. Short lines and a list, which wrap to the panel's width (a
     table does not), so that the card fits its panel."""
-    inst = config.instance
-    th = analyse(inst)
-    K, n = inst.K, inst.n_states
+    inst, th = config.instance, config.theory
+    K = config.K
     params = ", ".join(f"{k}={v:g}" for k, v in config.policy.params.items())
     policy = _md(config.policy.name) + (f" ({params})" if params else "")
+    if inst is None or th is None:  # a loop logged without an instance: no p, Y or means
+        return "\n".join([
+            f"**{_md(config.label)}**", "",
+            f"{policy}: {K} arms, no instance (p and Y unknown: no hidden state, oracle "
+            f"or regret); seed {config.seed}, {config.horizon} slots",
+        ])  # fmt: skip
+    n = inst.n_states
     lines = [
         f"**{_md(config.label)}**",
         "",
@@ -99,7 +104,7 @@ def log_static(rec: rr.RecordingStream, base: str, config: RunConfig, color: sty
     then differ in the order of their chunks.
     """
     st = style
-    K = config.instance.K
+    K = config.K
     names = _legend_names(config)
     colors = [st.arm_color(k) for k in range(K)]
 
@@ -122,13 +127,16 @@ def log_static(rec: rr.RecordingStream, base: str, config: RunConfig, color: sty
     lines("estimator", [st.REFERENCE_COLOR], [st.ESTIMATOR_NAME], [st.WIDTH_SECONDARY])
     points("arm/success", st.SUCCESS_COLOR, st.SUCCESS_NAME, shape.Circle, st.MARKER_SUCCESS)
     points("arm/failure", st.FAILURE_COLOR, st.FAILURE_NAME, shape.Cross, st.MARKER_FAILURE)
-    best = int(analyse(config.instance).best_arm)
-    lines("arm/best", [st.REFERENCE_COLOR], [st.best_arm_name(best)], [st.WIDTH_REFERENCE])
+    theory = config.theory  # None without an instance: no best arm, no true means
+    if theory is not None:
+        best = int(theory.best_arm)
+        lines("arm/best", [st.REFERENCE_COLOR], [st.best_arm_name(best)], [st.WIDTH_REFERENCE])
     points("override", st.OVERRIDE_COLOR, st.OVERRIDE_NAME, shape.Diamond, st.MARKER_OVERRIDE)
     points("x", st.STATE_COLOR, st.STATE_NAME, shape.Square, st.MARKER_STATE)
     arms = range(K)
     lines("mu_hat", colors, names, [st.WIDTH_ARM] * K)
-    lines("mu_true", colors, names, [st.WIDTH_TRUE_MEAN] * K)
+    if theory is not None:
+        lines("mu_true", colors, names, [st.WIDTH_TRUE_MEAN] * K)
     lines("pulls", colors, names, [st.WIDTH_ARM] * K)
     if st.lines_for(K):
         for k in arms:
@@ -143,8 +151,9 @@ def log_static(rec: rr.RecordingStream, base: str, config: RunConfig, color: sty
         arm = np.arange(1, K + 1, dtype=np.float64)
         bars(rec, f"{base}/bars/mean", st.BAR_IN_SET_COLOR, arm - BAR_OFFSET)
         bars(rec, f"{base}/bars/mean_other", st.BAR_OUT_COLOR, arm - BAR_OFFSET)
-        mu = np.asarray(analyse(config.instance).mu, dtype=np.float64)
-        bars(rec, f"{base}/bars/mean_true", st.BAR_TRUE_COLOR, arm + BAR_OFFSET, values=mu)
+        if theory is not None:
+            mu = np.asarray(theory.mu, dtype=np.float64)
+            bars(rec, f"{base}/bars/mean_true", st.BAR_TRUE_COLOR, arm + BAR_OFFSET, values=mu)
         bars(rec, f"{base}/bars/pulls", st.BAR_IN_SET_COLOR, arm, width=2 * BAR_WIDTH)
     static("about", rr.TextDocument.columns(text=[about_markdown(config)],
                                             media_type=[rr.MediaType.MARKDOWN]))  # fmt: skip
@@ -156,7 +165,7 @@ def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color:
     that has scores arrives (a run without them has none of these entities):
     ``threshold`` when the run logs the AoI-aware rule's threshold."""
     st = style
-    K = config.instance.K
+    K = config.K
     names = [f"{n} {st.SCORE_UNIT}" if i == 0 else n for i, n in enumerate(_legend_names(config))]
     shape = rr.components.MarkerShape
 
@@ -187,7 +196,7 @@ def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color:
 def log_why_focus(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
                   color: style.RGB) -> None:  # fmt: skip
     """The styling of ``why/focus/<k>``: arm k's score, a line in its colour."""
-    name = style.arm_legend(k, config.instance.arm_names[k])
+    name = style.arm_legend(k, config.arm_names[k])
     rec.send_columns(f"{base}/why/focus/{k + 1}", indexes=[], columns=rr.SeriesLines.columns(
         colors=[color], names=[name], widths=[style.WIDTH_ARM]).partition([1]))  # fmt: skip
 
@@ -195,7 +204,7 @@ def log_why_focus(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
 def log_true_mean(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
                   color: style.RGB) -> None:  # fmt: skip
     """The styling of ``true_means/<k>``: dots in arm k's colour, named like its line."""
-    name = style.arm_legend(k, config.instance.arm_names[k])
+    name = style.arm_legend(k, config.arm_names[k])
     rec.send_columns(
         f"{base}/true_means/{k + 1}",
         indexes=[],
@@ -211,7 +220,7 @@ def log_focus(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
     """Arm k came to matter (beyond LINES_UP_TO arms): the styling of ``focus/<k>`` (its
     empirical mean, a line), of its true-mean dots, of its bars and of its row of the
     candidate set, all in ``color``."""
-    name = style.arm_legend(k, config.instance.arm_names[k])
+    name = style.arm_legend(k, config.arm_names[k])
     rec.send_columns(
         f"{base}/focus/{k + 1}",
         indexes=[],
@@ -222,7 +231,7 @@ def log_focus(rec: rr.RecordingStream, base: str, config: RunConfig, k: int,
     log_true_mean(rec, base, config, k, color)
     at = np.array([k + 1.0])
     # wider than one arm's share where there are many, so that its colour shows
-    K = config.instance.K
+    K = config.K
     bars(rec, f"{base}/bars/mean_arm/{k + 1}", color, at - BAR_OFFSET,
          width=max(BAR_WIDTH, K / 128))  # fmt: skip
     bars(rec, f"{base}/bars/pulls_arm/{k + 1}", color, at, width=max(2 * BAR_WIDTH, K / 64))

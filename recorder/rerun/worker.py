@@ -52,9 +52,14 @@ class RerunWorker:
     """A worker process that imports Rerun now and writes recordings when asked."""
 
     def __init__(self, before_import: Callable[[], None] | None = None) -> None:
-        self._worker = ForkedWorker(partial(_serve, before_import), "corraoi-rerun")
+        self._worker = ForkedWorker(partial(serve, before_import), "corraoi-rerun")
         self._conn = self._worker.conn
         self._busy: RemoteRecording | None = None
+
+    @property
+    def process(self) -> Any:
+        """The worker's process (``pid``, ``is_alive()``, ``join()``)."""
+        return self._worker.proc
 
     @classmethod
     def start(cls, before_import: Callable[[], None] | None = None) -> RerunWorker | None:
@@ -185,7 +190,7 @@ def _left(path: Path | None) -> str:
     return f"; the incomplete file is left as {partial_path(path)}"
 
 
-def _serve(before_import: Callable[[], None] | None, conn: Any) -> None:
+def serve(before_import: Callable[[], None] | None, conn: Any) -> None:
     """The worker's loop: import Rerun, then carry out the parent's messages."""
     if before_import is not None:
         before_import()
@@ -244,4 +249,4 @@ def _serve(before_import: Callable[[], None] | None, conn: Any) -> None:
             return
 
 
-__all__ = ["RemoteRecording", "RerunWorker"]
+__all__ = ["RemoteRecording", "RerunWorker", "serve"]

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import orjson
 
-from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
-from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, NAMES, OPTIONAL
+from corraoi.engine.block import FIELDS, NONE_FIELDS, RunConfig, SlotBlock, absent_column
+from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, NAMES, REQUIRED
 from corraoi.errors import LogError
 
 # The slot log's names (recorder.vocab)
@@ -149,7 +149,7 @@ def _table(values: list[Any], field: str, K: int, ok: Any, expected: str) -> np.
 
 
 def decode_messages(
-    payloads: Sequence[bytes | memoryview], K: int, n_states: int, *, where: str
+    payloads: Sequence[bytes | memoryview], K: int, n_states: int | None, *, where: str
 ) -> SlotBlock:
     """The SlotBlock of consecutive slot messages (JSON bytes), validated strictly.
 
@@ -170,15 +170,16 @@ def decode_messages(
     B = len(rows)
     first = rows[0] if type(rows[0]) is dict else {}
     names = list(first)
-    missing = [f for f in FIELDS if f not in first]
+    missing = [f for f in REQUIRED if f not in first]
     if type(rows[0]) is dict and missing:  # a required field lacking in the log
         raise LogError(
             f"{where}: {_slot_of(first, 0)} lacks {', '.join(missing)}, a required "
-            f"field of the slot log (expected the fields {', '.join(FIELDS)})"
+            f"field of the slot log (expected at least the fields {', '.join(REQUIRED)})"
         )
     # C-level checks first (map/set); the Python loop below runs only to name a bad row.
-    # Every message of a chunk has the keys of its first; an optional field of the slot
-    # record may come and go (a plug-in that gave scores from some slot on).
+    # Every message of a chunk has the keys of its first; a field a block holds as None
+    # when absent may come and go (a plug-in that gave scores from some slot on), a column
+    # of FIELDS may not (a log holds it from its first slot or never).
     fine = set(map(type, rows)) == {dict} and set(map(len, rows)) == {len(names)}
     cols: dict[str, list[Any]] = {}
     if fine:
@@ -191,36 +192,39 @@ def decode_messages(
         for i, r in enumerate(rows):
             if type(r) is not dict:
                 raise LogError(f"{where}: message {i + 1} is {_shown(r)}, expected a JSON object")
-            lacking = [f for f in names if f not in r and f not in OPTIONAL]
-            extra = sorted(k for k in r if k not in expect and k not in OPTIONAL)[:3]
+            lacking = [f for f in names if f not in r and f not in NONE_FIELDS]
+            extra = sorted(k for k in r if k not in expect and k not in NONE_FIELDS)[:3]
             if lacking or extra:
                 what = f"lacks {', '.join(lacking)}" if lacking else f"has extra keys {extra}"
                 raise LogError(f"{where}: {_slot_of(r, i)} {what}; expected exactly the fields "
                                f"{', '.join(names)}")  # fmt: skip
-        names += [f for f in OPTIONAL if f not in expect and any(f in r for r in rows)]
+        names += [f for f in NONE_FIELDS if f not in expect and any(f in r for r in rows)]
         cols = {f: [r.get(f) for r in rows] for f in names}
     unknown = [f for f in names if f not in BY_NAME]
     try:
         out = _columns(cols, B, K, n_states)
         # a bool hidden in a number column: numpy reads [1, true] as int64, so count them
         # (every known column now holds numbers, nulls or bools only; keys are fixed)
-        bools = 2 * B + sum(v is not None for v in cols.get("forced", ()))
+        bools = B * sum(f in cols for f in ("success", "override"))
+        bools += sum(v is not None for v in cols.get("forced", ()))
         bools += sum(_count_bools(v) for f in unknown for v in cols[f])
         if joined.count(b"true") + joined.count(b"false") != bools:
             for f in (*_INT_FIELDS, "estimator", "mu_hat", "pulls", "candidates"):
-                for i, v in enumerate(cols[f]):
+                for i, v in enumerate(cols.get(f, ())):
                     items = v if type(v) is list else [v]
                     if any(type(a) is bool for a in items):
                         raise _Bad(i, f, _shown(next(a for a in items if type(a) is bool)),
                                    "a number, not a bool")  # fmt: skip
-        optional = {f: _optional(f, cols[f], out["candidates"]) for f in names if f in OPTIONAL}
+        optional = {f: _optional(f, cols[f], out["candidates"]) for f in names
+                    if f in NONE_FIELDS}  # fmt: skip
     except _Bad as bad:
         raise LogError(
             f"{where}: {_slot_of(rows[bad.row], bad.row)}: {bad.field} is {bad.shown}, "
             f"expected {bad.expected}"
         ) from None
     kept = {f: _unknown(cols[f]) for f in unknown}
-    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=kept)
+    absent = tuple(f for f in FIELDS if f not in cols)
+    return SlotBlock(**{f: out[f] for f in FIELDS}, **optional, extra=kept, absent=absent)
 
 
 def _count_bools(v: Any) -> int:
@@ -293,22 +297,35 @@ def _infinite(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {}
+def _columns(
+    cols: dict[str, list[Any]], B: int, K: int, n_states: int | None
+) -> dict[str, np.ndarray]:
+    """The columns of FIELDS, checked; one the log lacks (not in ``cols``) is
+    :func:`~corraoi.engine.block.absent_column`'s fill."""
+    out: dict[str, np.ndarray] = {f: absent_column(f, B, K) for f in FIELDS if f not in cols}
+    if n_states is None and "x" in cols:
+        raise _Bad(0, "x", _shown(cols["x"][0]), "no hidden state (the run has no instance)")
     for f in _INT_FIELDS:
-        out[f] = _int_column(cols[f], f)
+        if f in cols:
+            out[f] = _int_column(cols[f], f)
     for f in ("success", "override"):
-        out[f] = _bool_column(cols[f], f)
-    est = np.asarray(cols["estimator"])
-    if est.dtype.kind not in ("i", "f") or est.ndim != 1:
-        i = _first(cols["estimator"], _real)
-        raise _Bad(max(i, 0), "estimator", _shown(cols["estimator"][max(i, 0)]), "a number")
-    out["estimator"] = est.astype(np.float64, copy=False)
-    mu = _table(cols["mu_hat"], "mu_hat", K, _real, "a number in [0, 1]")
-    out["mu_hat"] = mu.astype(np.float64, copy=False)
-    out["pulls"] = _table(cols["pulls"], "pulls", K, _is_int, "integers >= 0")
+        if f in cols:
+            out[f] = _bool_column(cols[f], f)
+    if "estimator" in cols:
+        est = np.asarray(cols["estimator"])
+        if est.dtype.kind not in ("i", "f") or est.ndim != 1:
+            i = _first(cols["estimator"], _real)
+            raise _Bad(max(i, 0), "estimator", _shown(cols["estimator"][max(i, 0)]), "a number")
+        out["estimator"] = est.astype(np.float64, copy=False)
+    if "mu_hat" in cols:
+        mu = _table(cols["mu_hat"], "mu_hat", K, _real, "a number in [0, 1]")
+        out["mu_hat"] = mu.astype(np.float64, copy=False)
+    if "pulls" in cols:
+        out["pulls"] = _table(cols["pulls"], "pulls", K, _is_int, "integers >= 0")
     for f, lo, hi in (("x", 1, n_states), ("arm", 1, K), ("aoi", 1, None),
                       ("oracle_aoi", 1, None), ("t", 1, None)):  # fmt: skip
+        if f not in cols:
+            continue
         col = out[f]
         bad = (col < lo) | (col > hi) if hi is not None else col < lo
         if bad.any():
@@ -320,13 +337,17 @@ def _columns(cols: dict[str, list[Any]], B: int, K: int, n_states: int) -> dict[
         ("pulls", out["pulls"], 0, None),
     )
     for f, arr, low, high in bounds:
+        if f not in cols:
+            continue
         bad = (arr < low) | (arr > high) if high is not None else arr < low
         if bad.any():
             i, j = divmod(int(np.argmax(bad)), K)
             want = f"in [{low:g}, {high:g}]" if high is not None else f">= {low:g}"
             raise _Bad(i, f"{f}[{j + 1}]", repr(arr[i, j].item()), f"a value {want}")
-    out["candidates"] = _candidates(cols["candidates"], B, K)
-    out["x"] = out["x"] - 1
+    if "candidates" in cols:
+        out["candidates"] = _candidates(cols["candidates"], B, K)
+    if "x" in cols:
+        out["x"] = out["x"] - 1
     out["arm"] = out["arm"] - 1
     return out
 
@@ -392,10 +413,10 @@ def check_agrees(p: Path, md: dict[str, str], config: RunConfig) -> None:
     facts = {
         "seed": str(config.seed),
         "horizon": str(config.horizon),
-        "arms": str(config.instance.K),
-        "states": str(config.instance.n_states),
+        "arms": str(config.K),
+        "states": str(config.n_states),
         "policy": config.policy.name,
-        "instance": config.instance.name,
+        "instance": config.instance_name,
     }
     for key, value in facts.items():
         if key in md and md[key] != value:

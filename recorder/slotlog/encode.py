@@ -16,7 +16,6 @@ import numpy as np
 import orjson
 
 from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, REQUIRED, SLOT_RECORD, SlotField
-from corraoi.model.theory import analyse
 from recorder.vocab import NS_PER_SLOT
 from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
@@ -28,16 +27,19 @@ if TYPE_CHECKING:  # types only: corraoi.engine.block's import circle stays out 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 
-def field_schema(f: SlotField, K: int, n: int) -> dict[str, Any]:
-    """The JSON Schema of one field of the slot record (a run with K arms and n states)."""
-    bound = {"K": K, "n": n}
+def field_schema(f: SlotField, K: int, n: int | None) -> dict[str, Any]:
+    """The JSON Schema of one field of the slot record (a run with K arms and n states;
+    ``n`` None: a run without an instance, whose states are unknown)."""
+    bound: dict[str, int | None] = {"K": K, "n": n}
 
     def number(v: str) -> int | float:
-        return bound[v] if v in bound else (float(v) if "." in v else int(v))
+        b = bound.get(v)
+        return b if b is not None else (float(v) if "." in v else int(v))
 
     desc = f.meaning
     if not f.per_arm:  # "numbered 1..K": the run's own numbers
-        desc = desc.replace("1..K", f"1..{K}").replace("1..n", f"1..{n}")
+        desc = desc.replace("1..K", f"1..{K}")
+        desc = desc.replace("1..n", f"1..{n}") if n is not None else desc
     if f.json == "candidate scores":
         return {
             "type": "array",
@@ -60,7 +62,7 @@ def field_schema(f: SlotField, K: int, n: int) -> dict[str, Any]:
     item: dict[str, Any] = {"type": kind}
     if f.minimum:
         item["minimum"] = number(f.minimum)
-    if f.maximum:
+    if f.maximum and bound.get(f.maximum, 0) is not None:
         item["maximum"] = number(f.maximum)
     if not f.per_arm:
         return {"type": kind, "description": desc, **{k: v for k, v in item.items() if k != "type"}}
@@ -70,7 +72,9 @@ def field_schema(f: SlotField, K: int, n: int) -> dict[str, Any]:
 def slot_schema(config: RunConfig) -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of one slot message of this run: a property per field
     of the slot record (corraoi.engine.slot_record), its required fields required."""
-    K, n = config.instance.K, config.instance.n_states
+    from corraoi.engine.block import FIELDS  # the columns versions 1 and 2 always hold
+
+    K, n = config.K, config.n_states
     properties = {f.name: field_schema(f, K, n) for f in SLOT_RECORD}
     version = config.format_version  # the run's own: the schema says what its metadata says
     return {
@@ -81,8 +85,9 @@ def slot_schema(config: RunConfig) -> dict[str, Any]:
         "arms and states are numbered from 1.",
         "type": "object",
         "properties": properties,
-        # the message keys in the order the encoder writes them (the optional ones last)
-        "required": list(REQUIRED),
+        # the fields the run's version always holds (a Logger's log, version 3, may lack
+        # every field the slot record says may be absent)
+        "required": list(REQUIRED if config.policy.tier == "external" else FIELDS),
         "additionalProperties": False,
     }
 
@@ -93,26 +98,30 @@ def schema_bytes(config: RunConfig) -> bytes:
 
 def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[str, str]:
     """The ``corraoi.run`` metadata record: flat strings, plus the full config as JSON."""
-    inst = config.instance
-    theory = analyse(inst)
+    inst, theory = config.instance, config.theory
+    model: dict[str, str] = {}  # what the instance says (a run without one: nothing)
+    if inst is not None and theory is not None:
+        model = {
+            "states": str(inst.n_states),
+            "p": json.dumps([float(v) for v in inst.p]),
+            "Y": json.dumps(inst.Y.astype(int).tolist()),
+            "mu": json.dumps([float(v) for v in theory.mu]),
+            "best_arm": str(theory.best_arm + 1),
+            "mu_star": repr(float(theory.mu_star)),
+            "competitive_arms": json.dumps([a + 1 for a in theory.competitive]),
+        }
     return {
         "format": FORMAT_NAME,
         "format_version": str(config.format_version),
         "corraoi_version": config.version,
         "label": config.label,
-        "instance": inst.name,
+        "instance": config.instance_name,
         "policy": config.policy.name,
         "params": json.dumps(config.policy.params, sort_keys=True),
         "seed": str(config.seed),
         "horizon": str(config.horizon),
-        "arms": str(inst.K),
-        "states": str(inst.n_states),
-        "p": json.dumps([float(v) for v in inst.p]),
-        "Y": json.dumps(inst.Y.astype(int).tolist()),
-        "mu": json.dumps([float(v) for v in theory.mu]),
-        "best_arm": str(theory.best_arm + 1),
-        "mu_star": repr(float(theory.mu_star)),
-        "competitive_arms": json.dumps([a + 1 for a in theory.competitive]),
+        "arms": str(config.K),
+        **model,
         "numbering": "arms and states from 1",
         "log_time": f"t * {NS_PER_SLOT} ns",
         "flush_every": str(flush_every),
@@ -121,18 +130,29 @@ def run_metadata(config: RunConfig, *, flush_every: int = FLUSH_EVERY) -> dict[s
 
 
 def end_metadata(
-    *, slots: int, horizon: int, last: SlotBlock | None, error: str | None = None
+    *,
+    slots: int,
+    horizon: int,
+    last: SlotBlock | None,
+    error: str | None = None,
+    complete: bool | None = None,
 ) -> dict[str, str]:
     """The ``corraoi.end`` metadata record written by a writer that finished its file
-    (``error``: the run stopped on that error, status ``failed``)."""
-    status = "complete" if slots >= horizon else "interrupted"
+    (``error``: the run stopped on that error, status ``failed``; ``complete``: the status
+    when the writer says it, else complete at the horizon)."""
+    done = slots >= horizon if complete is None else complete
+    status = "complete" if done else "interrupted"
     out = {"status": "failed" if error is not None else status, "slots": str(slots)}
     if error is not None:
         out["error"] = error
-    if last is not None and len(last):
-        out["regret"] = str(int(last.regret[-1]))
-        out["estimator"] = repr(float(last.estimator[-1]))
-        out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
+    if last is not None and len(last):  # what the run holds (a Logger's may lack them)
+        held = last.fields()
+        if "regret" in held:
+            out["regret"] = str(int(last.regret[-1]))
+        if "estimator" in held:
+            out["estimator"] = repr(float(last.estimator[-1]))
+        if "pulls" in held:
+            out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
     return out
 
 

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from corraoi.engine.block import FIELDS, SlotBlock, absent_fill
+from corraoi.engine.block import FIELDS, SlotBlock, absent_column, absent_fill
 from corraoi.engine.slot_record import BY_NAME, NAMES, SLOT_RECORD
 from corraoi.errors import UsageError
 
@@ -139,7 +139,7 @@ class RunData:
 
     @property
     def K(self) -> int:
-        return self.log.config.instance.K
+        return self.log.config.K
 
     @cached_property
     def config(self) -> Mapping[str, Any]:
@@ -153,9 +153,9 @@ class RunData:
                 "params": dict(cfg.policy.params),
                 "seed": cfg.seed,
                 "horizon": cfg.horizon,
-                "instance": cfg.instance.name,
-                "arms": cfg.instance.K,
-                "states": cfg.instance.n_states,
+                "instance": cfg.instance_name,
+                "arms": cfg.K,
+                "states": cfg.n_states,
                 "best_arm": int(md["best_arm"]) if "best_arm" in md else None,
                 "mu": json.loads(md["mu"]) if "mu" in md else None,
                 "corraoi_version": cfg.version,
@@ -209,6 +209,9 @@ def _conform(b: SlotBlock, fields: Sequence[str], extra: Mapping[str, np.ndarray
     """``b`` with exactly the fields of the table (absent ones filled)."""
     parts: dict[str, Any] = {f: absent_fill(b, f) for f in fields}
     parts["extra"] = {k: absent_fill(b, k) for k in extra}
+    parts["absent"] = tuple(f for f in FIELDS if f not in fields)
+    for f in parts["absent"]:
+        parts[f] = absent_column(f, len(b), b.mu_hat.shape[1])
     return SlotBlock(**parts)
 
 

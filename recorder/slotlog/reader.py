@@ -27,6 +27,7 @@ from corraoi.engine.slot_record import OPTIONAL
 from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
 from recorder.vocab import (
+    LACKING_FORMAT_VERSION,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     PROVENANCE_METADATA,
@@ -141,8 +142,8 @@ class RunLog:
             have += len(part)
             while have >= block:
                 whole = pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
-                yield _slice(whole, 0, block)
-                rest = _slice(whole, block, len(whole))
+                yield whole.slice(0, block)
+                rest = whole.slice(block, len(whole))
                 pending = [rest] if len(rest) else []
                 have = len(rest)
         if have:
@@ -152,7 +153,7 @@ class RunLog:
         """Every recorded slot in one block (memory grows with the log: prefer blocks())."""
         parts = list(self.blocks(block=max(self.n_slots, 1)))
         if not parts:
-            return empty_block(self.config.instance.K)
+            return empty_block(self.config.K)
         return parts[0] if len(parts) == 1 else SlotBlock.concat(parts)
 
     def window(self, first: int, last: int) -> Iterator[SlotBlock]:
@@ -165,7 +166,7 @@ class RunLog:
         first, last = max(int(first), 1), min(int(last), self.n_slots)
         if first > last:
             return
-        K, n = self.config.instance.K, self.config.instance.n_states
+        K, n = self.config.K, self.config.n_states
         lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
         expected = first
         with open_mcap(self.path) as f:
@@ -177,7 +178,7 @@ class RunLog:
                 if not keep.any():
                     continue
                 idx = np.flatnonzero(keep)
-                part = _slice(part, int(idx[0]), int(idx[-1]) + 1)
+                part = part.slice(int(idx[0]), int(idx[-1]) + 1)
                 expected = _follows(part, expected, self.path, offset)
                 yield part
         if expected != last + 1:
@@ -185,7 +186,15 @@ class RunLog:
 
     def _noted(self, part: SlotBlock) -> SlotBlock:
         """``part``, after one warning per log naming the fields a newer corraoi wrote that
-        this one does not know (they are kept: ``SlotBlock.extra``, ``Run.slots``)."""
+        this one does not know (they are kept: ``SlotBlock.extra``, ``Run.slots``). Only a
+        log of format version 3 (``corraoi.Logger``'s) may lack a column every block carries
+        (``SlotBlock.absent``): in an older one that is damage."""
+        if part.absent and self.format_version < LACKING_FORMAT_VERSION and len(part):
+            raise LogError(
+                f"{self.path}: slot {int(part.t[0])} lacks {', '.join(part.absent)}, a required "
+                f"field of a log of format version {self.format_version} (only a log of "
+                f"version {LACKING_FORMAT_VERSION}, corraoi.Logger's, may lack it)"
+            )
         new = [f for f in part.extra if f not in self._unknown]
         if new:
             self._unknown.extend(new)
@@ -199,7 +208,7 @@ class RunLog:
         return part
 
     def _chunk_blocks(self) -> Iterator[SlotBlock]:
-        K, n = self.config.instance.K, self.config.instance.n_states
+        K, n = self.config.K, self.config.n_states
         expected = 1
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
@@ -212,7 +221,7 @@ class RunLog:
                     continue
                 _follows(part, expected, self.path, item.offset)
                 if expected + len(part) - 1 > self.n_slots:
-                    part = _slice(part, 0, self.n_slots - expected + 1)
+                    part = part.slice(0, self.n_slots - expected + 1)
                 expected += len(part)
                 if len(part):
                     yield part
@@ -346,8 +355,8 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         status = "truncated"
     elif end_md.get("status") == "failed":
         status = "failed"
-    elif n_slots < config.horizon:
-        status = "interrupted"
+    elif n_slots < config.horizon and end_md.get("status") != "complete":
+        status = "interrupted"  # (a Logger's log without a horizon is complete when closed)
     else:
         status = "complete"
     if finished and end_md.get("slots") not in (None, str(n_slots)):
@@ -403,11 +412,11 @@ def _validate_chunk(
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     config = _config(p, run_md)
-    part = _decode(chunk, channel_id, p, config.instance.K, config.instance.n_states)
+    part = _decode(chunk, channel_id, p, config.K, config.n_states)
     return _follows(part, expected, p, chunk.offset) if len(part) else expected
 
 
-def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int) -> SlotBlock:
+def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int | None) -> SlotBlock:
     """The slots of one chunk, decoded and validated (an empty block when it holds none)."""
     assert chunk.records is not None
     found = channel_payloads(chunk.records, channel_id, p, chunk.offset)
@@ -423,7 +432,3 @@ def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
         raise LogError(f"{p}: chunk at byte {offset}: slots are not consecutive (expected "
                        f"slot {expected}, got {int(t[0])}..{int(t[-1])})")  # fmt: skip
     return expected + len(t)
-
-
-def _slice(b: SlotBlock, start: int, stop: int) -> SlotBlock:
-    return b.slice(start, stop)

@@ -107,7 +107,7 @@ class McapSink(Sink):
         self._fsync = fsync
         self._torn = False
         self._last: SlotBlock | None = None
-        self._encoder = BlockEncoder(config.instance.K)
+        self._encoder = BlockEncoder(config.K)
         self._file: BinaryIO = self._out.create().file
         try:
             self._writer = ChunkWriter(
@@ -144,7 +144,7 @@ class McapSink(Sink):
         n = len(block)
         if n == 0:
             return
-        K = self.config.instance.K
+        K = self.config.K
         if block.mu_hat.shape != (n, K):
             raise ValueError(f"block has {block.mu_hat.shape[1]} arms, the run has {K}")
         first = int(block.t[0])
@@ -180,17 +180,19 @@ class McapSink(Sink):
 
     # ------------------------------------------------------------------ closing
 
-    def close(self) -> Path:
+    def close(self, *, complete: bool | None = None) -> Path:
         """Finish the file (summary, footer), sync it and rename it into place.
 
         Returns the final path. Safe to call twice. If finishing fails (disk full, ...),
-        the ``.partial`` file is left and :class:`WriteError` says so.
+        the ``.partial`` file is left and :class:`WriteError` says so. ``complete``: the
+        status to write when the writer knows better than the horizon (a ``corraoi.Logger``
+        log without a horizon is complete when closed, interrupted on Ctrl-C).
         """
         if self.closed:
             return self.path if self.finished else self.partial_path
         if self._torn:  # a write was cut off half-way: keep what is surely whole
             return self.abort() or self.partial_path
-        self._write_end(error=None)
+        self._write_end(error=None, complete=complete)
         # synced by _write_end; renamed while still open: the lock is held until it is in place
         self._out.publish(sync=False)
         self.finished = True
@@ -208,7 +210,7 @@ class McapSink(Sink):
         self._close_file()
         return self.partial_path
 
-    def _write_end(self, *, error: str | None) -> None:
+    def _write_end(self, *, error: str | None, complete: bool | None = None) -> None:
         """The last chunk, the ``corraoi.end`` record (status failed with ``error``), the
         summary and the footer, synced (the file stays open: its lock is held)."""
         self.closed = True
@@ -217,7 +219,7 @@ class McapSink(Sink):
             self._writer.add_metadata(
                 END_METADATA,
                 end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last,
-                             error=error),
+                             error=error, complete=complete),
             )  # fmt: skip
             self._writer.finish()
             self._file.flush()

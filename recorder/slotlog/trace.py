@@ -20,10 +20,10 @@ def states_of_log(path: Path, instance: Instance, where: str) -> np.ndarray:
     """The 0-based states ``x`` of every slot of the log at ``path`` (a cut-short log gives
     the slots it holds), refused when its instance has another number of states."""
     log = open_log(path)
-    if log.config.instance.n_states != instance.n_states:
+    if log.config.n_states != instance.n_states:
         raise ConfigError(
-            f"{where}: the log's instance {log.config.instance.name} has "
-            f"{log.config.instance.n_states} states, instance {instance.name} has "
+            f"{where}: the log's instance {log.config.instance_name} has "
+            f"{log.config.n_states} states, instance {instance.name} has "
             f"{instance.n_states}"
         )
     blocks = [b.x for b in log.blocks()]

@@ -56,10 +56,9 @@ from recorder.vocab import (
 
 from .read import sweep_arms
 
-# corraoi.experiments.montecarlo imports the numba engine: readers need not pay for it
 if TYPE_CHECKING:
-    from corraoi.experiments.montecarlo import SweepPoint
     from corraoi.provenance import Provenance
+    from corraoi.stats import SweepPoint
 
 
 # ---------------------------------------------------------------------------- format
@@ -140,7 +139,7 @@ def sweep_metadata(
 
 
 class SweepMcapSink(Sink):
-    """Streams :class:`~corraoi.experiments.montecarlo.SweepPoint` rows of a sweep into an MCAP
+    """Streams :class:`~corraoi.stats.SweepPoint` rows of a sweep into an MCAP
     file.
 
     ``with SweepMcapSink(path, config) as sink: sink.write(point)``. The file is written as

@@ -24,8 +24,8 @@ import numpy as np
 import rerun as rr
 
 from corraoi.errors import WriteError
-from corraoi.experiments.montecarlo import SweepPoint
 from corraoi.files.partial import PartialFile, reason
+from corraoi.stats import SweepPoint
 from recorder import style
 from recorder.rerun.names import TIMELINE
 from recorder.rerun.output import check_rrd, finish_recording, first_line
@@ -101,7 +101,7 @@ def open_sweep_recording(
 
 
 class SweepRerunSink(Sink):
-    """Streams :class:`~corraoi.experiments.montecarlo.SweepPoint` rows into a Rerun recording.
+    """Streams :class:`~corraoi.stats.SweepPoint` rows into a Rerun recording.
 
     ``with SweepRerunSink(recording, config) as sink: sink.write(point)``. Points are
     buffered per policy and sent with ``send_columns`` every ``flush_every`` points, when

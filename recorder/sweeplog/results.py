@@ -22,14 +22,14 @@ import numpy as np
 
 from corraoi._version import __version__
 from corraoi.errors import ResultsError
-from corraoi.experiments.backends import sweep_backend
 from corraoi.files.partial import PartialFile, partial_path
-from corraoi.provenance import Provenance
 from recorder.vocab import SWEEP_METADATA
 
 if TYPE_CHECKING:
     import pandas as pd
     import pyarrow as pa
+
+    from corraoi.provenance import Provenance
 
 
 #: File name inside a sweep folder.
@@ -79,10 +79,13 @@ def results_metadata(config: dict[str, Any]) -> dict[str, str]:
     }
 
 
-def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list[Any]]) -> Path:
+def write_dataset(
+    path: str | os.PathLike[str], grid: Any, parts: dict[str, list[Any]], provenance: Provenance
+) -> Path:
     """Compact a grid's finished chunks into ``path`` (``results.parquet``), a dataset
     partitioned by instance: ``instance=<name>/part-0.parquet``, rows in grid order (cell,
-    checkpoint, run). Written to ``<path>.partial`` and swapped in when complete."""
+    checkpoint, run), with ``provenance`` (what made the rows) in its metadata. Written to
+    ``<path>.partial`` and swapped in when complete."""
     from urllib.parse import quote
 
     import pyarrow as pa
@@ -91,8 +94,7 @@ def write_dataset(path: str | os.PathLike[str], grid: Any, parts: dict[str, list
     out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True)
     full = results_schema()
     metadata = results_metadata({**grid.to_dict(), "version": __version__})
-    prov = Provenance.of([c.policy for c in grid.cells], backend=sweep_backend(grid.backend))
-    metadata["provenance"] = json.dumps(prov.to_dict(), sort_keys=True)  # what made the rows
+    metadata["provenance"] = json.dumps(provenance.to_dict(), sort_keys=True)
     schema = pa.schema([f for f in full if f.name != "instance"], metadata=metadata)
     by_instance: dict[str, list[Any]] = {}
     for cell in grid.cells:

@@ -1,6 +1,7 @@
-"""Summary figures of one recorded run, accumulated block by block (one pass, no recompute).
+"""Summary figures of one run, accumulated block by block (one pass, no recompute): measured
+by the recording as the blocks go by, and by the viewer from a log's blocks.
 
-Every figure comes from the logged slots; nothing is simulated. Arms are 0-based in the
+Every figure comes from the slots; nothing is simulated. Arms are 0-based in the
 Python objects and numbered from 1 in ``to_dict()`` and in everything printed.
 """
 
@@ -12,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from corraoi.model.theory import analyse
 
 
 @dataclass(frozen=True)
@@ -22,22 +22,25 @@ class RunSummary:
     ``settled_at`` is the first slot from which the run played the best arm in every slot
     up to its last recorded slot (``None`` when its last slot was not on the best arm or
     nothing was recorded). ``best_share`` is the share of recorded slots on the best arm.
+    A figure whose field the run lacks (``SlotBlock.absent``: a log written by
+    ``corraoi.Logger`` without the hidden state, say) is None; so are the best arm and
+    what depends on it for a run without an instance.
     """
 
     slots: int
-    best_arm: int
+    best_arm: int | None
     regret: int | None
     estimator: float | None
     pulls: tuple[int, ...]
     best_share: float | None
-    overrides: int
+    overrides: int | None
     settled_at: int | None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready figures; arms numbered from 1."""
         return {
             "slots": self.slots,
-            "best_arm": self.best_arm + 1,
+            "best_arm": None if self.best_arm is None else self.best_arm + 1,
             "regret": self.regret,
             "estimator": self.estimator,
             "pulls": list(self.pulls),
@@ -51,8 +54,11 @@ class SummaryAccumulator:
     """Feed it the blocks of one run in slot order; ``result()`` gives the RunSummary."""
 
     def __init__(self, config: RunConfig) -> None:
-        self.K = config.instance.K
-        self.best_arm = analyse(config.instance).best_arm
+        self.K = config.K
+        theory = config.theory  # None for a run without an instance: no best arm
+        self.best_arm: int | None = None if theory is None else theory.best_arm
+        #: the fields the run lacks, as its blocks say
+        self.absent: tuple[str, ...] = ()
         self.slots = 0
         self.overrides = 0
         self.last_off_best = 0  # last slot whose arm was not the best arm (0: none yet)
@@ -64,10 +70,12 @@ class SummaryAccumulator:
             return
         self.slots = int(block.t[-1])
         self.overrides += int(np.count_nonzero(block.override))
-        off = np.flatnonzero(block.arm != self.best_arm)
-        if off.size:
-            self.last_off_best = int(block.t[off[-1]])
+        if self.best_arm is not None:
+            off = np.flatnonzero(block.arm != self.best_arm)
+            if off.size:
+                self.last_off_best = int(block.t[off[-1]])
         self._last = block
+        self.absent = block.absent
 
     def result(self) -> RunSummary:
         last = self._last
@@ -79,20 +87,21 @@ class SummaryAccumulator:
                 estimator=None,
                 pulls=(0,) * self.K,
                 best_share=None,
-                overrides=0,
+                overrides=None if "override" in self.absent else 0,
                 settled_at=None,
             )
         pulls = tuple(int(v) for v in last.pulls[-1])
         settled = self.last_off_best + 1 if self.last_off_best < self.slots else None
+        best = self.best_arm
         return RunSummary(
             slots=self.slots,
             best_arm=self.best_arm,
-            regret=int(last.regret[-1]),
-            estimator=float(last.estimator[-1]),
+            regret=None if "regret" in self.absent else int(last.regret[-1]),
+            estimator=None if "estimator" in self.absent else float(last.estimator[-1]),
             pulls=pulls,
-            best_share=pulls[self.best_arm] / self.slots,
-            overrides=self.overrides,
-            settled_at=settled,
+            best_share=None if best is None else pulls[best] / self.slots,
+            overrides=None if "override" in self.absent else self.overrides,
+            settled_at=None if best is None else settled,
         )
 
 
