@@ -36,13 +36,13 @@ from .errors import (  # noqa: E402
 )
 
 if TYPE_CHECKING:
-    from .face.load import load
+    from .face.load import export, load
     from .face.logger import Logger
     from .face.recording import record
     from .face.runs import Run
     from .face.show import show
     from .face.sweeps import Sweep, sweep
-    from .face.views import compare, diff
+    from .face.views import compare, diff, info, recover, replay
     from .model.instance import Instance
     from .policies import Choice, CompiledPolicy, Param, Policy, register
 
@@ -51,6 +51,10 @@ _LAZY = {
     "record": "corraoi.face.recording",
     "sweep": "corraoi.face.sweeps",
     "load": "corraoi.face.load",
+    "export": "corraoi.face.load",
+    "info": "corraoi.face.views",
+    "recover": "corraoi.face.views",
+    "replay": "corraoi.face.views",
     "Logger": "corraoi.face.logger",
     "compare": "corraoi.face.views",
     "diff": "corraoi.face.views",
@@ -102,9 +106,13 @@ __all__ = [
     "compare",
     "diff",
     "errors",
+    "export",
+    "info",
     "load",
     "record",
+    "recover",
     "register",
+    "replay",
     "show",
     "sweep",
 ]

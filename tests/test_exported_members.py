@@ -11,8 +11,8 @@ import corraoi
 EXPECTED = [
     "Choice", "CompiledPolicy", "ConfigError", "CorraoiError", "CorraoiWarning", "Instance",
     "InstanceError", "LogError", "Logger", "OutputError", "Param", "Policy", "PolicyError", "Run",
-    "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "load", "record",
-    "register", "show", "sweep",
+    "Sweep", "UsageError", "__version__", "compare", "diff", "errors", "export", "info", "load",
+    "record", "recover", "register", "replay", "show", "sweep",
 ]  # fmt: skip
 
 
@@ -36,7 +36,8 @@ def test_every_error_is_in_corraoi_errors_under_corraoi_error():
 
 
 def test_every_function_of_the_face_documents_parameters_return_and_errors():
-    for name in ("record", "sweep", "load", "compare", "diff", "show"):
+    for name in ("record", "sweep", "load", "compare", "diff", "show", "info", "recover",
+                 "replay", "export"):  # fmt: skip
         func = getattr(corraoi, name)
         doc = inspect.getdoc(func) or ""
         assert doc, name

@@ -42,17 +42,14 @@ def main() -> None:
       corraoi sweep exp.toml -o grid    a grid of experiments, resumable, on Dask if asked
       corraoi sweep ... --backend gpu   built-in policies on a CUDA GPU (docs/gpu.md)
     """
-    import os
-
-    from corraoi.engine import kernels
+    from corraoi.face.about import say_compiles
 
     # Rerun's own log lines (a file writer stopped by a full disk, ...) would come before our
-    # one line about the same thing: we report its problems ourselves.
-    os.environ.setdefault("RUST_LOG", "off")
-    # The first use of a policy family compiles its kernel (seconds): say so, on stderr.
-    kernels.on_compile = lambda message: click.echo(
+    # one line about the same thing: we report its problems ourselves. The first use of a
+    # policy family compiles its kernel (seconds): say so, on stderr.
+    say_compiles(lambda message: click.echo(
         f"corraoi: {message}" + ("" if message.startswith(" ") else " ..."), err=True
-    )
+    ))  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- instances
@@ -67,12 +64,10 @@ def instance() -> None:
 @handle_errors
 def instance_list() -> None:
     """List the built-in instances."""
-    from corraoi.model.instance import BUILTINS, load_instance
-    from corraoi.model.theory import analyse
+    from corraoi.face.about import builtin_instances
 
-    for name in BUILTINS:
-        inst = load_instance(name)
-        th = analyse(inst)
+    for inst, th in builtin_instances():
+        name = inst.name
         mu = " ".join(f"{v:g}" for v in th.mu)
         click.echo(
             f"{name}  K={inst.K} states={inst.n_states}  mu=[{mu}]  best arm {th.best_arm + 1}"
@@ -95,21 +90,10 @@ def instance_show(spec: str, horizon: int, bound_beta: float | None, as_json: bo
     Arms and states are numbered from 1. phi is the expected pseudo-reward of each arm with
     respect to the best arm k*; an arm l != k* is competitive when mu* - phi_{l,k*} <= 0.
     """
-    from corraoi.model.bounds import DEFAULT_BOUND_BETA, cts_bound, cucb_bound
-    from corraoi.model.instance import load_instance
-    from corraoi.model.theory import analyse
+    from corraoi.face.about import instance_theory
 
-    inst = load_instance(spec)
-    th = analyse(inst)
-    bounds = {
-        "cucb": cucb_bound(inst, horizon),
-        "cts": cts_bound(inst, horizon, DEFAULT_BOUND_BETA if bound_beta is None else bound_beta),
-    }
-    chain = None
-    if inst.transition is not None:
-        from corraoi.model.markov import mixing
-
-        chain = mixing(inst.transition, inst.p)
+    found = instance_theory(spec, horizon=horizon, bound_beta=bound_beta)
+    inst, th, bounds, chain = found.instance, found.theory, found.bounds, found.chain
     if as_json:
         out: dict[str, Any] = {"name": inst.name, "instance": inst.to_dict(), **th.to_dict()}
         out["bounds"] = {k: b.to_dict() for k, b in bounds.items()}
@@ -181,28 +165,9 @@ def policies_cmd(as_json: bool) -> None:
     (see docs/extending.md). A broken entry point is listed with its error; the rest work.
     --param NAME=VALUE sets a parameter of every listed policy that declares NAME.
     """
-    from corraoi.policies import available, paper_names
+    from corraoi.face.about import paper_policies, policy_entries
 
-    paper = set(paper_names())
-    entries = []
-    for a in available():
-        entry: dict[str, Any] = {"name": a.name, "source": a.source}
-        if a.cls is None:
-            entry.update(status="broken", error=a.error)
-        else:
-            entry.update(
-                status="ok",
-                tier=a.cls.tier,
-                paper=a.name in paper,
-                summary=a.cls.describe(),
-                reference=a.cls.reference,
-                color=list(a.cls.color) if a.cls.color else None,
-                params={
-                    k: {"default": p.default, "range": p.range_text(), "help": p.help}
-                    for k, p in a.cls.params.items()
-                },
-            )
-        entries.append(entry)
+    entries = policy_entries()
     if as_json:
         click.echo(json.dumps({"policies": entries}, indent=2))
         return
@@ -224,12 +189,12 @@ def policies_cmd(as_json: bool) -> None:
                 )
     click.echo(
         "--policy all: the paper's twelve ("
-        + ", ".join(paper_names())
+        + ", ".join(paper_policies())
         + ")"
     )
 
 
-# Commands defined in their own modules (they import recorder/viewer inside their bodies).
+# Commands defined in their own modules (they import the face inside their bodies).
 # --- command registrations (keep this block at the end) ---
 from .compare import compare  # noqa: E402
 from .figure import figure  # noqa: E402

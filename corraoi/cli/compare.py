@@ -1,6 +1,6 @@
 """``corraoi compare``: recorded runs side by side in one Rerun recording, with their summary
-table; with ``--from SWEEP``, the chosen runs of a sweep are recorded first. ``viewer``,
-``recorder`` and ``rerun`` are imported inside the command, so ``corraoi --help`` stays fast.
+table; with ``--from SWEEP``, the chosen runs of a sweep are recorded first. The face
+(:mod:`corraoi.face.views`) is imported inside the command, so ``corraoi --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from corraoi.errors import UsageError
 from corraoi.text import safe_text
 
 from .common import handle_errors, keep_pandas_out, say, warn
-from .live import ViewerChoice, viewer_options
+from .live import viewer_choice, viewer_options
 from .options import code_options, from_only, output_option
-from .reading import LOG, not_an_input, progress
+from .reading import LOG, progress
 
 
 @click.command("compare")
@@ -70,8 +70,7 @@ def compare(
       corraoi compare runs/*.mcap --serve-web
       corraoi compare --from sweeps/I2 --run worst    # each policy's worst run of a sweep
     """
-    from viewer.compare import compare as do_compare
-    from viewer.compare import prepare
+    from corraoi.face.views import compare_logs
 
     if from_ is not None:
         if logs:
@@ -86,28 +85,11 @@ def compare(
     keep_pandas_out()
 
     out = output
-    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    viewer = viewer_choice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if no_rrd and (out is not None or viewer.asked):
         raise UsageError("--no-rrd: nothing to send; leave out -o and the viewer options")
-    runs, warnings = prepare(logs)  # bad input: one line, exit 2, nothing written
-    if out is None and not viewer.asked and not no_rrd:
-        out = Path("compare.rrd")
-    if out is not None:
-        from corraoi.files.partial import check_target
-
-        not_an_input(out, logs)
-        check_target(out, overwrite=force, what="Rerun recording")
-    for w in warnings:
-        warn(w)
-    url = viewer.start() if viewer.asked else None
-    total = sum(r.log.n_slots for r in runs)
-    try:
-        with progress(total, "compare") as bar:
-            result = do_compare([r.log for r in runs], rrd_path=out, viewer_url=url,
-                                overwrite=force, on_block=bar.update)  # fmt: skip
-    except BaseException:
-        viewer.stop()
-        raise
+    result, url = compare_logs(logs, out, viewer=viewer, write=not no_rrd, force=force,
+                               progress=progress, warn=warn)  # fmt: skip
     if as_json:
         click.echo(json.dumps(result.to_dict(), indent=2))
     else:
@@ -115,10 +97,10 @@ def compare(
         if result.path is not None:
             click.echo(f"Rerun recording: {safe_text(result.path)}")
             if not viewer.asked:
-                from recorder.live.viewers import view_command
+                from corraoi.face.live import open_command
 
                 click.echo(
-                    f"open in the Rerun viewer:  {safe_text(view_command([str(result.path)]))}"
+                    f"open in the Rerun viewer:  {safe_text(open_command([str(result.path)]))}"
                 )
     viewer.serve_until_stopped()
 
@@ -127,15 +109,11 @@ def _record_from(folder: str, run: str, cells: tuple[str, ...], force: bool, *,
                  kept_code: bool = False, allow_changed_code: bool = False) -> tuple[Path, ...]:
     """``compare --from``: the chosen runs of the sweep, recorded into ``runs/``
     (:meth:`corraoi.face.sweeps.Sweep.record_each`)."""
-    from corraoi.experiments.drill import parse_run
-    from corraoi.experiments.folder import CLI_WORDS
-    from corraoi.face.sweeps import Sweep
+    from corraoi.face.sweeps import record_each_from
 
-    parse_run(run)  # a bad --run in the command line's words
-    runs = Sweep(folder).record_each(run, cells=cells, force=force, kept_code=kept_code,
-                                     allow_changed_code=allow_changed_code,
-                                     say=lambda line: click.echo(line, err=True),
-                                     warn=warn, words=CLI_WORDS)  # fmt: skip
+    runs = record_each_from(folder, run, cells=cells, force=force, kept_code=kept_code,
+                            allow_changed_code=allow_changed_code,
+                            say=lambda line: click.echo(line, err=True), warn=warn)  # fmt: skip
     return tuple(r.path for r in runs)
 
 

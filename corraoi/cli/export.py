@@ -30,9 +30,9 @@ def export(log: Path, out: Path, force: bool) -> None:
       corraoi export runs/cucb-I1-s0.mcap -o cucb.parquet
       corraoi export sweeps/I1 -o I1-runs.csv
     """
-    from recorder.export import export as run_export
+    from corraoi.face.load import export as export_table
 
     keep_pandas_out()
 
-    done = run_export(log, out, overwrite=force)
+    done = export_table(log, out, force=force)
     click.echo(f"wrote {done.path}: {done.rows} rows ({done.kind}, {done.format})")

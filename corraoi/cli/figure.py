@@ -7,15 +7,9 @@ from pathlib import Path
 
 import click
 
-from corraoi.errors import UsageError
 from corraoi.text import safe_text
 
 from .common import handle_errors, say, warn
-
-
-def _split(values: tuple[str, ...]) -> list[str] | None:
-    names = [n.strip() for v in values for n in v.split(",") if n.strip()]
-    return names or None
 
 
 @click.command("figure")
@@ -62,23 +56,11 @@ def figure(
       corraoi figure sweeps/I1/sweep.mcap -o i1.png --log-x --policies ucb,cucb,ts,cts
       corraoi figure sweeps/I1/sweep.mcap -o i1.pdf --split --log-y
     """
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
+    from corraoi.face.sweeps import draw_sweep_figure
 
-    if output.is_dir():
-        raise UsageError(f"{output}: is a directory; give a file name for the figure")
-    figure_format(output)  # before reading the log: a wrong name is the first thing said
-    check_dpi(dpi)
-    if output.exists() and not force:
-        raise UsageError(f"{output}: already exists (use --force to overwrite it)")
-    sweep = read_sweep(sweep_log)
-    names = check_policies(sweep, _split(policies))
-    if not sweep.complete:
-        warn(
-            f"{sweep_log}: the sweep did not finish ({sweep.status}); drawing the "
-            f"{sweep.messages} checkpoint(s) it holds"
-        )
-    draw_figure(sweep, output, log_x=log_x, log_y=log_y, dpi=dpi, split=split, policies=names)
+    sweep, names = draw_sweep_figure(sweep_log, output, log_x=log_x, log_y=log_y, dpi=dpi,
+                                     split=split, policies=policies, force=force,
+                                     warn=warn)  # fmt: skip
     if as_json:
         click.echo(json.dumps({
             "output": str(output), "sweep": str(sweep_log), "policies": list(names),

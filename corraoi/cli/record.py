@@ -9,17 +9,16 @@ The recorder (and rerun) are imported inside the command, so ``corraoi --help`` 
 from __future__ import annotations
 
 import json
-import os
 import sys
 from typing import Any
 
 import click
 
-from corraoi.errors import ConfigError, OutputError, UsageError
+from corraoi.errors import ConfigError, UsageError
 from corraoi.text import safe_text
 
 from .common import handle_errors, keep_pandas_out, warn
-from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
+from .live import foxglove_choice, foxglove_options, viewer_choice, viewer_options
 from .options import (
     backend_option,
     channel_option,
@@ -32,7 +31,8 @@ from .options import (
     policy_option,
     seed_option,
 )
-from .record_loop import record_all, report
+from .reading import progress
+from .record_loop import report
 from .record_plan import from_sweep, say_where_from
 
 
@@ -124,8 +124,7 @@ def record(
       corraoi record -p cucb --foxglove --pace 200   # live in Foxglove
       corraoi record --from sweeps/I2 --run worst -p cts   # a sweep's worst run
     """  # noqa: D301
-    from corraoi.engine.block import RunConfig
-    from corraoi.face.resolve import channel as resolve_channel
+    from corraoi.face.sessions import plan_runs, record_runs, run_configs
 
     if backend == "gpu":
         raise ConfigError(
@@ -134,11 +133,8 @@ def record(
         )
     if backend == "auto":
         warn("--backend auto: record runs on the CPU (per-slot logs are a CPU feature)")
-    from corraoi.model.instance import load_instance
-    from corraoi.policies import make_policies, parse_param_assignments
-
-    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
-    live = FoxgloveChoice(foxglove, pace=pace)
+    viewer = viewer_choice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    live = foxglove_choice(foxglove, pace=pace)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
     drills = None
@@ -151,28 +147,10 @@ def record(
         if run is not None or cell or kept_code or allow_changed_code:
             raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
                              "--from SWEEP")  # fmt: skip
-        inst = load_instance(instance)
-        specs = make_policies(policy, parse_param_assignments(param), c=c, beta=beta, warn=warn)
-        chan = resolve_channel(channel, inst)
-        chan.check(inst, horizon)
-        configs = [RunConfig(inst, spec, seed, horizon, channel=chan, score=score)
-                   for spec in specs]  # fmt: skip
-    from corraoi.face.recording import plan_files
+        configs = run_configs(instance, policy, param, c=c, beta=beta, channel=channel,
+                              seed=seed, horizon=horizon, score=score, warn=warn)  # fmt: skip
 
-    plans = plan_files(configs, output, rrd, no_rrd, drills)
-    if drills:
-        say_where_from(drills)  # once the plan stands: a refusal above stays one line
-    live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
-
-    from corraoi.experiments.drill import row_verdict
-    from corraoi.face.recording import Outlets, refuse, up_to_date
-
-    live_option = _live_option(viewer, foxglove)
-    if live_option is not None and not force:  # a live view records again: say so, truly
-        _refuse_recorded(plans, live_option, up_to_date)
-    fresh = [p for p in plans if up_to_date(p)] if not (force or viewer.asked or foxglove) else []
-    plans = [p for p in plans if p not in fresh]  # recording them again would change nothing
-    for p in fresh:
+    def fresh_line(p: Any) -> None:
         click.echo(
             f"up to date: {safe_text(p.mcap)}"
             + (f" and {safe_text(p.rrd)}" if p.rrd is not None else "")
@@ -180,53 +158,36 @@ def record(
             + " this run (same configuration, complete); use --force to record it again",
             err=as_json,
         )
+
+    plans, fresh = plan_runs(
+        configs, output, rrd, no_rrd, drills, force=force,
+        live_option=_live_option(viewer, foxglove), again=bool(force or viewer.asked or foxglove),
+        on_planned=lambda _: say_where_from(drills) if drills else None, on_fresh=fresh_line,
+    )  # fmt: skip
+    live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
     if not plans:
         if as_json:
             click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in fresh]}))
         return
-    refuse(plans, force=force)  # before simulating anything
-
-    worker = None
     if any(p.rrd for p in plans) or viewer.asked:
         from corraoi.extras import require_package
 
         # said here, not as a traceback of the process that would write the .rrd
         require_package("rerun", "corraoi record's Rerun recording (--no-rrd: none)")
-    if any(p.rrd for p in plans):
-        os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
-        if not viewer.asked:
-            # the .rrd files are written by a process that imports Rerun now, while this
-            # one imports numba and loads the kernel (recorder/rerun/worker.py says why)
-            from recorder.rerun.worker import RerunWorker
-
-            worker = RerunWorker.start(before_import=keep_pandas_out)
-    # A viewer that cannot be reached is one error line; the files are still written.
-    viewer_url = viewer.start(tolerant=True)
-    # a port in use: one error line; the files are still written
-    live.start([p.config for p in plans], tolerant=True)
-    viewer_failed = viewer.problem is not None or live.problem is not None
-    outlets = Outlets(viewer_url=viewer_url, overwrite=force, live=live, rerun=worker)
-    try:
-        results, stopped, viewer_problem = record_all(plans, outlets)
-    except BaseException:
-        viewer.stop()
-        raise
-    finally:
-        live.stop()
-        if worker is not None:
-            worker.stop()
+    session = record_runs(plans, viewer=viewer, live=live, force=force, progress=progress,
+                          before_rerun=keep_pandas_out)  # fmt: skip
+    viewer_failed = session.viewer_failed
+    viewer_problem = session.viewer_problem
     if viewer_problem:
         click.echo(f"corraoi: error: {safe_text(viewer_problem)}", err=True)
         viewer_failed = True
-    report(results, as_json=as_json)
-    for r in results:  # a run recorded with changed code: does it still give the sweep's row?
-        verdict = row_verdict(r.plan.drill, r.slots, r.regret) if r.plan.drill else None
-        if verdict is not None:
-            click.echo(safe_text(verdict), err=as_json)
-    if stopped:
-        last = results[-1]
+    report(session, as_json=as_json)
+    for verdict in session.verdicts():  # a run recorded with changed code: the sweep's row?
+        click.echo(safe_text(verdict), err=as_json)
+    if session.stopped:
+        last = session.results[-1]
         click.echo(
-            f"corraoi: interrupted ({stopped}) after slot {last.slots} of "
+            f"corraoi: interrupted ({session.stopped}) after slot {last.slots} of "
             f"{last.plan.config.horizon}; the files hold every slot simulated so far",
             err=True,
         )
@@ -237,25 +198,13 @@ def record(
         sys.exit(1)
 
 
-def _live_option(viewer: ViewerChoice, foxglove: str | None) -> str | None:
+def _live_option(viewer: Any, foxglove: str | None) -> str | None:
     """The option that shows the runs live as they are recorded, if one was given."""
     if foxglove is not None:
         return "--foxglove"
     if viewer.asked:
         return "--spawn" if viewer.spawn else "--connect" if viewer.connect else "--serve-web"
     return None
-
-
-def _refuse_recorded(plans: list[Any], option: str, up_to_date: Any) -> None:
-    """A live view of a run whose complete log is there already would record it again:
-    refused as such (not as "another run"), with --force and ``replay`` as the ways out."""
-    done = next((p for p in plans if up_to_date(p)), None)
-    if done is not None:
-        log = safe_text(done.mcap)
-        raise OutputError(f"{log}: already holds this run (same configuration, complete); "
-                          f"{option} shows a run as it is recorded, which would write it "
-                          f"again: use --force to record it again, or `corraoi replay {log} "
-                          f"{option}` to show this log")  # fmt: skip
 
 
 __all__ = ["record"]

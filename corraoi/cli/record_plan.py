@@ -27,12 +27,11 @@ def from_sweep(
     kept_code: bool = False,
     allow_changed_code: bool = False,
 ) -> list[Any]:
-    """The runs ``--from`` names (corraoi.experiments.drill); what the sweep fixed cannot be given
-    too."""
+    """The runs ``--from`` names (:func:`corraoi.face.sessions.runs_from_sweep`); what the
+    sweep fixed cannot be given too."""
     from click.core import ParameterSource
 
-    from corraoi.experiments.drill import choose, split_policy_words
-    from corraoi.policies import make_policies, parse_param_assignments
+    from corraoi.face.sessions import runs_from_sweep
 
     ctx = click.get_current_context()
     fixed = [("instance", "--instance"), ("horizon", "--horizon"), ("seed", "--seed"),
@@ -42,21 +41,9 @@ def from_sweep(
             raise UsageError(f"{option} and --from: the sweep fixes the {name} of its runs; "
                              "leave out " + option)  # fmt: skip
     given = ctx.get_parameter_source("policy") not in (ParameterSource.DEFAULT, None)
-    if not given and (param or c is not None or beta is not None):
-        raise UsageError("--c/--beta/--param and --from: the sweep fixes its policies' "
-                         "parameters (with --policy they set those of a policy added)")
-    # the labels the sweep's table prints select its cells; any other word is a policy
-    labels, words = split_policy_words(folder, policy) if given else ([], [])
-    specs = (make_policies(words, parse_param_assignments(param), c=c, beta=beta, warn=warn)
-             if words else [])  # fmt: skip
-    from corraoi.experiments.drill import kept_code_scope
-    from corraoi.face.resolve import TRACE_READERS
-
-    # the kept copies are handed over while this command runs (its runs are recorded later)
-    ctx.with_resource(kept_code_scope(folder, kept_code))
-    return choose(folder, run, cells=cells, policies=specs, swept_labels=labels, warn=warn,
-                  kept_code=kept_code, allow_changed_code=allow_changed_code,
-                  trace_readers=TRACE_READERS)  # fmt: skip
+    return runs_from_sweep(folder, run, cells, policy if given else None, param, c=c, beta=beta,
+                           kept_code=kept_code, allow_changed_code=allow_changed_code,
+                           hold=ctx.with_resource, warn=warn)  # fmt: skip
 
 
 def say_where_from(drills: list[Any]) -> None:

@@ -1,6 +1,6 @@
 """``corraoi replay``: one recorded run re-rendered into Rerun (an ``.rrd`` file or a viewer),
-or served to Foxglove, without recomputing anything. ``viewer``, ``recorder`` and ``rerun``
-are imported inside the command, so ``corraoi --help`` stays fast.
+or served to Foxglove, without recomputing anything (:mod:`corraoi.face.views`, imported
+inside the command, so ``corraoi --help`` stays fast).
 """
 
 from __future__ import annotations
@@ -14,16 +14,9 @@ from corraoi.errors import UsageError
 from corraoi.text import safe_text
 
 from .common import handle_errors, keep_pandas_out, warn
-from .live import FoxgloveChoice, ViewerChoice, foxglove_options, viewer_options
+from .live import foxglove_choice, foxglove_options, viewer_choice, viewer_options
 from .options import output_option
-from .reading import LOG, not_an_input, progress
-
-
-def _default_rrd(log: Path) -> Path:
-    """``run.mcap`` -> ``run.rrd`` (``run.mcap.partial`` -> ``run.rrd`` as well)."""
-    name = log.name.removesuffix(".partial")
-    base = log.with_name(name)
-    return base.with_suffix(".rrd") if base.suffix == ".mcap" else log.with_name(name + ".rrd")
+from .reading import LOG, progress
 
 
 @click.command("replay")
@@ -64,14 +57,11 @@ def replay(
       corraoi replay runs/cucb-I1-s0.mcap --serve-web      # then open the printed URL
       corraoi replay runs/cucb-I1-s0.mcap --foxglove --pace 100 --start 5000
     """
-    from recorder.slotlog.reader import open_log
-    from viewer.replay import replay as do_replay
-    from viewer.runs import require_slots
+    from corraoi.face.views import replay_log
 
     keep_pandas_out()
 
-    rrd = output
-    viewer = ViewerChoice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
+    viewer = viewer_choice(spawn=spawn, connect=connect, serve_web=serve_web, web_port=web_port)
     if foxglove is not None or pace is not None or start != 1:
         if foxglove is None:
             raise UsageError("--pace and --start: only with --foxglove")
@@ -80,26 +70,8 @@ def replay(
                              "Rerun viewer options")  # fmt: skip
         _replay_foxglove(log, foxglove, pace=pace, start=start, as_json=as_json)
         return
-    # bad input: one line, exit 2, nothing written. Every chunk is checked up front before
-    # sending to a viewer; a file is discarded if a damaged chunk turns up on the way.
-    run = require_slots(open_log(log, verify=viewer.asked), "replay")
-    if rrd is None and not viewer.asked:
-        rrd = _default_rrd(log)
-    if rrd is not None:
-        from corraoi.files.partial import check_target
-
-        not_an_input(rrd, [log])
-        check_target(rrd, overwrite=force, what="Rerun recording")
-    if run.cut_short and not as_json:
-        warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
-    url = viewer.start() if viewer.asked else None
-    try:
-        with progress(run.n_slots, "replay") as bar:
-            done = do_replay(run, rrd_path=rrd, viewer_url=url, overwrite=force,
-                             on_block=bar.update)  # fmt: skip
-    except BaseException:
-        viewer.stop()
-        raise
+    done, url = replay_log(log, output, viewer=viewer, force=force, progress=progress,
+                           warn=None if as_json else warn)  # fmt: skip
     if as_json:
         click.echo(json.dumps({
             "log": str(log), "label": done.label, "slots": done.slots,
@@ -114,37 +86,25 @@ def replay(
     click.echo(f"replayed {safe_text(done.label)}: slots 1..{done.slots} of {done.horizon} "
                f"({done.status}) to {' and '.join(where)}")  # fmt: skip
     if done.path is not None and not viewer.asked:
-        from recorder.live.viewers import view_command
+        from corraoi.face.live import open_command
 
-        click.echo(f"open in the Rerun viewer:  {safe_text(view_command([str(done.path)]))}")
+        click.echo(f"open in the Rerun viewer:  {safe_text(open_command([str(done.path)]))}")
     viewer.serve_until_stopped()
 
 
 def _replay_foxglove(log: Path, address: str, *, pace: float | None, start: int,
                      as_json: bool) -> None:  # fmt: skip
     """``replay --foxglove``: serve the log's slots from ``start`` on, then stop."""
-    from recorder.live.foxglove import stream_log
-    from recorder.slotlog.reader import open_log
-    from viewer.runs import require_slots
+    from corraoi.face.views import replay_foxglove
 
-    live = FoxgloveChoice(address, pace=pace)
-    run = require_slots(open_log(log, verify=True), "replay")
-    if not 1 <= start <= run.n_slots:
-        raise UsageError(f"--start {start}: {log} holds slots 1..{run.n_slots}, "
-                         "expected a slot there")  # fmt: skip
-    server = live.start([run.config])
-    try:
-        with progress(run.n_slots - start + 1, "replay") as bar:
-            last = stream_log(server, run, start=start, on_block=bar.update,
-                              sink=live.sink(run.config, lambda: False))  # fmt: skip
-    finally:
-        live.stop()
+    live = foxglove_choice(address, pace=pace)
+    run, last, url = replay_foxglove(log, live, start=start, progress=progress)
     if as_json:
         click.echo(json.dumps({"log": str(log), "label": run.label, "first": start,
-                               "last": last, "foxglove": server.url}, indent=2))  # fmt: skip
+                               "last": last, "foxglove": url}, indent=2))  # fmt: skip
         return
     click.echo(f"replayed {safe_text(run.label)}: slots {start}..{last} of "
-               f"{run.config.horizon} to Foxglove at {server.url}")  # fmt: skip
+               f"{run.config.horizon} to Foxglove at {url}")  # fmt: skip
 
 
 __all__ = ["replay"]

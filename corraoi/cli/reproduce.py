@@ -53,9 +53,7 @@ def reproduce(
     Example:
       corraoi reproduce -o paper && open paper/I1/figure.png
     """
-    from corraoi.experiments.folder import write_text
-    from corraoi.experiments.summary import summary_markdown
-    from corraoi.experiments.sweeps import PAPER_INSTANCES, paper_grid
+    from corraoi.face.sweeps import paper_grid, write_paper_summary
 
     out = output
     limits.check_seed(seed, runs=runs, name="--seed")
@@ -66,28 +64,18 @@ def reproduce(
     start = time.perf_counter()
     outcome = run_grid(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
                    label="reproduce")  # fmt: skip
-    parts = []
     summaries: dict[str, Any] = {}
     for summary in outcome.summaries:
         summaries[summary["instance"]["name"]] = summary
         if not as_json:
             print_table(summary, output)
             click.echo("")
-        parts.append(summary_markdown(summary).replace("# Sweep:", "## Sweep:", 1))
-    head = (
-        "# The paper's simulations, regenerated\n\n"
-        f"`corraoi reproduce --runs {runs} --horizon {horizon} --seed {seed}`; figures in "
-        + ", ".join(f"`{n}/figure.png`" for n in PAPER_INSTANCES)
-        + ".\n\n"
-    )
-    write_text(
-        out / "summary.md",
-        head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
-    )
+    instances = write_paper_summary(out, outcome.summaries, runs=runs, horizon=horizon,
+                                    seed=seed)  # fmt: skip
     if as_json:
         click.echo(json.dumps({"output": str(out), "instances": summaries}, indent=2))
     else:
-        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(f"{n}/" for n in PAPER_INSTANCES)
+        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(f"{n}/" for n in instances)
                    + ", summary.md")  # fmt: skip
     click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)
 

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import click
 
 from corraoi import limits
-from corraoi.errors import ConfigError, CorraoiError
+from corraoi.errors import ConfigError
 
 from .common import handle_errors, warn
 from .options import (
@@ -132,7 +131,8 @@ def sweep(
       corraoi sweep -p ucb,cucb -n 1000000 -T 10000 --backend gpu -o big
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from corraoi.experiments.grid import build_grid, parse_param_lists, read_experiment, split_list
+    from corraoi.face.sweeps import check_grid, grid_from_options, grid_notes
+    from corraoi.face.sweeps import kept_code as kept_copies
 
     out = output
     if resume and out is None:
@@ -141,50 +141,28 @@ def sweep(
         if not resume or out is None:
             raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
                               "of its plug-ins run)")  # fmt: skip
-        from corraoi.experiments.kept_code import use_kept_code
-
         # while this command runs, before the grid is built: its plug-ins load from the copies
-        click.get_current_context().with_resource(use_kept_code(out, pin=True))
-    spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
-    given_params = parse_param_lists(param)
-    for key, value in (("c", c), ("beta", beta)):
-        if value is not None:
-            given_params[key] = [value]
-    cli = {
-        "instances": split_list(instance) or None,
+        click.get_current_context().with_resource(kept_copies(out))
+    options = {
+        "instances": _split(instance) or None,
         "policies": list(policy) or None,
         "horizons": _horizons(horizon) or None,
         "runs": runs,
-        "seed": seed if seed != 0 or "seed" not in spec else None,
+        "seed": seed,
         "chunk": chunk,
         "checkpoints": checkpoints,
         "channel": channel,
         "baseline": baseline,
         "backend": backend,
     }
-    spec.update({k: v for k, v in cli.items() if v is not None})
-    spec.setdefault("instances", ["I1"])
-    spec.setdefault("policies", ["all"])
-    spec.setdefault("horizons", [10_000])
-    spec.setdefault("runs", 200)
-    spec["params"] = {**spec.get("params", {}), **given_params}
-    limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
-    from corraoi.face.resolve import TRACE_READERS
-
-    try:
-        grid = build_grid(**spec, warn=warn, trace_readers=TRACE_READERS)
-    except CorraoiError as exc:
-        if experiment is None:
-            raise
-        raise type(exc)(f"{experiment}: {exc}") from None
+    grid = grid_from_options(experiment, options, params=param, scalars={"c": c, "beta": beta},
+                             warn=warn)  # fmt: skip
     grid = settle_backend(grid)
-    from corraoi.face.sweeps import check_grid
-
     size = check_grid(grid, out, allow_huge=allow_huge)
     run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
     if run_slots >= SAY_SIZE_FROM:
         click.echo(f"corraoi: sweep of {size}; the progress bar shows the time left", err=True)
-    for note in _notes(grid):
+    for note in grid_notes(grid):
         warn(note)
     outcome = run_grid(grid, out=out, scheduler=scheduler, resume=resume, force=force,
                    workers=workers, label="sweep")  # fmt: skip
@@ -199,39 +177,23 @@ def sweep(
                 click.echo("")
             print_table(summary, out)
     if out is not None:
+        from corraoi.face.sweeps import wrote_line
+
         click.echo(wrote_line(out, outcome), err=as_json)
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
 
 
 
-def wrote_line(out: Path, outcome: Any) -> str:
-    """What a sweep into ``out`` wrote, by name: ``wrote sw/: manifest.json, ...`` and, for a
-    grid of several groups, their folders with the files each holds; then the chunks run."""
-    from corraoi.experiments.folder import GROUP_FILES
+def _split(values: tuple[str, ...]) -> list[str]:
+    from corraoi.face.sweeps import split_words
 
-    def n(count: int, what: str) -> str:
-        return f"{count} {what}{'' if count == 1 else 's'}"
-
-    done = n(outcome.chunks_run, "chunk") + " run"
-    if outcome.chunks_skipped:
-        done += f", {outcome.chunks_skipped} already done"
-    names = [f for f in ("manifest.json", "results.parquet", "plugins") if (out / f).exists()]
-    folders = [p for p in outcome.folders if p != out]
-    group = outcome.folders[0] if outcome.folders else out
-    files = [f for f in GROUP_FILES if (group / f).exists()]
-    if folders:
-        names += [f"{p.relative_to(out)}/" for p in folders]
-        return (f"wrote {out}/: {', '.join(names)}, each group folder with "
-                f"{', '.join(files)} ({done})")  # fmt: skip
-    return f"wrote {out}/: {', '.join(names + files)} ({done})"
+    return split_words(values)
 
 
 def _horizons(values: tuple[str, ...]) -> list[int]:
-    from corraoi.experiments.grid import split_list
-
     out = []
-    for item in split_list(values):
+    for item in _split(values):
         try:
             h = int(item)
         except ValueError:
@@ -242,16 +204,6 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
                                      param_hint="'--horizon' / '-T'")  # fmt: skip
         out.append(h)
     return out
-
-
-def _notes(grid: Any) -> list[str]:
-    from corraoi.experiments.summary import instance_notes
-
-    seen: dict[str, list[str]] = {}
-    for cell in grid.cells:
-        if cell.instance.name not in seen:
-            seen[cell.instance.name] = instance_notes(cell.instance)
-    return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
 
 
 __all__ = [

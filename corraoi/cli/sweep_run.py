@@ -17,13 +17,13 @@ from .common import keep_pandas_out, warn
 def settle_backend(grid: Any) -> Any:
     """The grid with ``auto`` resolved (a notice when it falls back to the CPU) and ``gpu``
     checked; says which device runs it."""
+    from corraoi.face.sweeps import device_name
     from corraoi.face.sweeps import settle_backend as settle
 
     grid = settle(grid, warn=warn)
-    if grid.backend == "gpu":
-        from corraoi.gpu import get_device
-
-        click.echo(f"backend gpu: {get_device().name}", err=True)
+    name = device_name(grid)
+    if name is not None:
+        click.echo(f"backend gpu: {name}", err=True)
     return grid
 
 

@@ -1,8 +1,9 @@
 """``corraoi diff | info | recover``: commands that read logs only, and nothing else.
 
-Nothing here simulates: the logs hold every slot. ``viewer`` is imported inside the command
-functions, so ``corraoi --help`` stays fast. ``replay`` and ``compare`` are
-:mod:`corraoi.cli.replay`'s and :mod:`corraoi.cli.compare`'s (importable from here too).
+Nothing here simulates: the logs hold every slot. Each command calls the face
+(:mod:`corraoi.face.views`), imported inside the command so that ``corraoi --help`` stays
+fast. ``replay`` and ``compare`` are :mod:`corraoi.cli.replay`'s and
+:mod:`corraoi.cli.compare`'s.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from corraoi.engine.slot_record import FLOAT_FIELDS, NAMES
+from corraoi.face.words import DIFF_FIELDS, TOLERANT_FIELDS
 from corraoi.text import safe_text
 
 from .common import errors_exit, handle_errors, say, warn
@@ -21,10 +22,6 @@ from .options import output_option
 from .reading import LOG
 
 # ---------------------------------------------------------------------------- diff
-
-#: The fields diff compares (viewer.diffs.DIFF_FIELDS, read from the slot record here so
-#: that the help does not import the viewer).
-_DIFFED = tuple(f for f in NAMES if f != "t")
 
 
 @click.command("diff")
@@ -35,10 +32,10 @@ _DIFFED = tuple(f for f in NAMES if f != "t")
     "--fields",
     multiple=True,
     metavar="NAME[,NAME...]",
-    help=f"Compare only these fields ({', '.join(_DIFFED)}) [default: all].",
+    help=f"Compare only these fields ({', '.join(DIFF_FIELDS)}) [default: all].",
 )
 @click.option("--atol", type=float, default=0.0, show_default=True,
-              help=f"Absolute tolerance of the float fields ({', '.join(FLOAT_FIELDS)}); the "
+              help=f"Absolute tolerance of the float fields ({', '.join(TOLERANT_FIELDS)}); the "
               "others compare exactly.")  # fmt: skip
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing; only the exit status.")
 @errors_exit(2)  # any trouble exits 2, as diff(1)
@@ -59,9 +56,9 @@ def diff(
       corraoi diff a.mcap b.mcap                  # the same seed twice: exit 0
       corraoi diff ucb.mcap cucb.mcap --fields x,arm
     """
-    from viewer.diffs import diff as do_diff
+    from corraoi.face.views import diff_files
 
-    report = do_diff(a, b, fields=fields or None, atol=atol)
+    report = diff_files(a, b, fields=fields, atol=atol)
     if not quiet:
         if as_json:
             click.echo(json.dumps(report.to_dict(), indent=2))
@@ -87,21 +84,13 @@ def info(log: Path, as_json: bool) -> None:
     A log whose writer was killed (RUN.mcap.partial, or a file without footer) is
     reported as cut short, with the last slot it holds; `corraoi recover` finishes it.
     """
-    if log.is_dir() and any((d / "manifest.json").is_file() for d in (log, log.parent)):
-        # a sweep folder (or one group's folder in it): its runs worth watching
-        from viewer.info import sweep_info, sweep_info_text
+    from corraoi.face.views import info as log_info
 
-        data = sweep_info(log)
-        text = sweep_info_text
-    else:
-        from viewer.info import info_text, log_info
-
-        data = log_info(log)
-        text = info_text
+    found = log_info(log)
     if as_json:
-        click.echo(json.dumps(data, indent=2))
+        click.echo(json.dumps(found.to_dict(), indent=2))
     else:
-        say(text(data))
+        say(found.text())
 
 
 # ---------------------------------------------------------------------------- recover
@@ -129,11 +118,9 @@ def recover(log: Path, output: Path | None, force: bool, as_json: bool) -> None:
       corraoi recover runs/cucb-I1-s0.mcap.partial     # -> runs/cucb-I1-s0.recovered.mcap
       corraoi recover runs/cucb-I1-s0.mcap.partial -o runs/cucb-I1-s0.mcap
     """
-    from viewer.recover import default_output
-    from viewer.recover import recover as do_recover
+    from corraoi.face.views import recover as recover_log
 
-    out = output if output is not None else default_output(log)
-    done = do_recover(log, out, overwrite=force)
+    done = recover_log(log, output, force=force)
     if as_json:
         click.echo(json.dumps(done.to_dict(), indent=2))
         return

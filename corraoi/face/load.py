@@ -14,6 +14,8 @@ from corraoi import arguments
 from corraoi.errors import UsageError
 
 if TYPE_CHECKING:
+    from recorder.export import Exported
+
     from .runs import Run
     from .sweeps import Sweep
 
@@ -51,4 +53,23 @@ def load(path: str | os.PathLike[str], *, slots: tuple[int, int] | None = None) 
     return Run(p, slots=slots)
 
 
-__all__ = ["load"]
+def export(
+    path: str | os.PathLike[str], out: str | os.PathLike[str], *, force: bool = False
+) -> Exported:
+    """Write the table :func:`load` gives for ``path`` (a slot log's ``.slots``, a sweep's
+    ``.runs``) to ``out``, CSV or Parquet by its extension, as ``corraoi export`` does;
+    ``force`` replaces an existing ``out``. Returns what was written (``.path``, ``.rows``,
+    ``.kind``, ``.format``); raises :class:`~corraoi.errors.UsageError` for an unknown
+    extension, :class:`~corraoi.errors.LogError` for what is not a readable log,
+    :class:`~corraoi.errors.OutputError` for an ``out`` that must not be written, and names
+    the ``analysis`` extra when pyarrow is missing."""
+    from recorder.export import export as export_table
+
+    arguments.path(path, name="path", kind=UsageError,
+                   what="the path of a slot log or a sweep folder")  # fmt: skip
+    arguments.path(out, name="out", what="the table's path (.csv or .parquet)")
+    arguments.flag(force, name="force")
+    return export_table(path, out, overwrite=force)
+
+
+__all__ = ["export", "load"]

@@ -229,13 +229,11 @@ class Sweep(SweepData):
                log_y: bool = False) -> Path:  # fmt: skip
         """Draw the sweep figure (regret against t, a line and 95% band per policy) from the
         sweep log to ``path`` (its extension picks the format); the ``plot`` extra."""
-        from recorder.sweeplog.read import read_sweep
-        from viewer.figure import draw_figure
-
         arguments.path(path, name="path", what="the figure's path")
         arguments.flag(log_x, name="log_x")
         arguments.flag(log_y, name="log_y")
-        return draw_figure(read_sweep(self.log_path), Path(path), log_x=log_x, log_y=log_y)
+        draw_sweep_figure(self.log_path, path, log_x=log_x, log_y=log_y, force=True)
+        return Path(path)
 
     def recordings(self) -> list[Path]:
         """The sweep's Rerun recording (``sweep.rrd``); for a grid's folder, each group's.
@@ -285,6 +283,192 @@ class Sweep(SweepData):
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in r) + "</tr>"
                        for r in rows)  # fmt: skip
         return f"<p>{html.escape(title)}</p><table><tr>{cells}</tr>{body}</table>"
+
+
+def draw_sweep_figure(
+    sweep_log: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    log_x: bool = False,
+    log_y: bool = False,
+    dpi: int = 150,
+    split: bool = False,
+    policies: Sequence[str] | None = None,
+    force: bool = False,
+    warn: Callable[[str], None] | None = None,
+) -> tuple[Any, list[str]]:
+    """``corraoi figure``: the sweep figure of the sweep log ``sweep_log`` to ``output`` (its
+    extension picks the format), ``policies`` (names or comma lists; None: every one) in that
+    order. The output's name, ``dpi`` and an existing ``output`` (without ``force``) are
+    refused before the log is read; a sweep that did not finish is drawn up to its last
+    checkpoint, said through ``warn``. Returns the sweep log read and the policies drawn.
+    Raises :class:`~corraoi.errors.UsageError` for a bad output or policy,
+    :class:`~corraoi.errors.LogError` for a log that cannot be read."""
+    from recorder.sweeplog.read import read_sweep
+    from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
+
+    out = Path(output)
+    if out.is_dir():
+        raise UsageError(f"{out}: is a directory; give a file name for the figure")
+    figure_format(out)  # before reading the log: a wrong name is the first thing said
+    check_dpi(dpi)
+    if out.exists() and not force:
+        raise UsageError(f"{out}: already exists (use --force to overwrite it)")
+    sweep = read_sweep(sweep_log)
+    wanted = [n.strip() for v in policies or () for n in v.split(",") if n.strip()]
+    names = check_policies(sweep, wanted or None)
+    if not sweep.complete and warn is not None:
+        warn(f"{sweep_log}: the sweep did not finish ({sweep.status}); drawing the "
+             f"{sweep.messages} checkpoint(s) it holds")  # fmt: skip
+    draw_figure(sweep, out, log_x=log_x, log_y=log_y, dpi=dpi, split=split, policies=names)
+    return sweep, names
+
+
+def record_each_from(folder: str | os.PathLike[str], run: str, *, cells: Sequence[str] = (),
+                     force: bool = False, kept_code: bool = False,
+                     allow_changed_code: bool = False, say: Callable[[str], None] | None = None,
+                     warn: Callable[[str], None] = python_warn) -> list[Run]:  # fmt: skip
+    """``corraoi compare --from``: :meth:`Sweep.record_each` of the sweep folder ``folder``
+    with ``run`` and the refusals in the command line's words (``--run``, ``--cell``). Raises
+    :class:`~corraoi.errors.UsageError` for a bad ``run`` before the folder is read."""
+    from corraoi.experiments.drill import parse_run
+    from corraoi.experiments.folder import CLI_WORDS
+
+    parse_run(run)  # a bad --run in the command line's words
+    return Sweep(folder).record_each(run, cells=cells, force=force, kept_code=kept_code,
+                                     allow_changed_code=allow_changed_code, say=say,
+                                     warn=warn, words=CLI_WORDS)  # fmt: skip
+
+
+def split_words(values: Sequence[str]) -> list[str]:
+    """The command line's comma lists and repeated options (``-i I1,I2 -i I3``), in order,
+    without repeats or empty items."""
+    from corraoi.experiments.grid import split_list
+
+    return split_list(values)
+
+
+def kept_code(folder: str | os.PathLike[str]) -> Any:
+    """A context in which the plug-ins of the sweep in ``folder`` load from its kept copies
+    (``--resume --kept-code``), entered before the grid is built."""
+    from corraoi.experiments.kept_code import use_kept_code
+
+    return use_kept_code(Path(folder), pin=True)
+
+
+def grid_from_options(
+    experiment: str | os.PathLike[str] | None,
+    options: Mapping[str, Any],
+    *,
+    params: Sequence[str] = (),
+    scalars: Mapping[str, float | None] | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> Grid:
+    """``corraoi sweep``'s grid: the experiment file ``experiment`` (TOML, if any) with the
+    command line's ``options`` over it (``instances``, ``policies``, ``horizons``, ``runs``,
+    ``seed``, ... a None left out), ``params`` (``NAME=v1,v2`` words) and ``scalars`` (``c``,
+    ``beta``); every cell checked. Raises :class:`~corraoi.errors.ConfigError` (an error in
+    the file names it), :class:`~corraoi.errors.InstanceError`,
+    :class:`~corraoi.errors.PolicyError`."""
+    from corraoi import limits
+    from corraoi.experiments.grid import build_grid, parse_param_lists, read_experiment
+
+    from .resolve import TRACE_READERS
+
+    spec: dict[str, Any] = read_experiment(experiment) if experiment is not None else {}
+    given_params = parse_param_lists(params)
+    for key, value in (scalars or {}).items():
+        if value is not None:
+            given_params[key] = [value]
+    chosen = dict(options)
+    if chosen.get("seed") == 0 and "seed" in spec:
+        chosen["seed"] = None  # the file's seed unless one is given
+    spec.update({k: v for k, v in chosen.items() if v is not None})
+    spec.setdefault("instances", ["I1"])
+    spec.setdefault("policies", ["all"])
+    spec.setdefault("horizons", [10_000])
+    spec.setdefault("runs", 200)
+    spec["params"] = {**spec.get("params", {}), **given_params}
+    limits.check_seed(spec.get("seed", 0), runs=int(spec["runs"]), name="--seed")
+    try:
+        return build_grid(**spec, warn=warn, trace_readers=TRACE_READERS)
+    except CorraoiError as exc:
+        if experiment is None:
+            raise
+        raise type(exc)(f"{experiment}: {exc}") from None
+
+
+def grid_notes(grid: Grid) -> list[str]:
+    """What to know about the grid's instances before it runs (one line each, the instance
+    named when there are several)."""
+    from corraoi.experiments.summary import instance_notes
+
+    seen: dict[str, list[str]] = {}
+    for cell in grid.cells:
+        if cell.instance.name not in seen:
+            seen[cell.instance.name] = instance_notes(cell.instance)
+    return [f"{name}: {n}" if len(seen) > 1 else n for name, notes in seen.items() for n in notes]
+
+
+def wrote_line(out: Path, outcome: SweepOutcome) -> str:
+    """What a sweep into ``out`` wrote, by name: ``wrote sw/: manifest.json, ...`` and, for a
+    grid of several groups, their folders with the files each holds; then the chunks run."""
+    from corraoi.experiments.folder import GROUP_FILES
+
+    def n(count: int, what: str) -> str:
+        return f"{count} {what}{'' if count == 1 else 's'}"
+
+    done = n(outcome.chunks_run, "chunk") + " run"
+    if outcome.chunks_skipped:
+        done += f", {outcome.chunks_skipped} already done"
+    names = [f for f in ("manifest.json", "results.parquet", "plugins") if (out / f).exists()]
+    folders = [p for p in outcome.folders if p != out]
+    group = outcome.folders[0] if outcome.folders else out
+    files = [f for f in GROUP_FILES if (group / f).exists()]
+    if folders:
+        names += [f"{p.relative_to(out)}/" for p in folders]
+        return (f"wrote {out}/: {', '.join(names)}, each group folder with "
+                f"{', '.join(files)} ({done})")  # fmt: skip
+    return f"wrote {out}/: {', '.join(names + files)} ({done})"
+
+
+def device_name(grid: Grid) -> str | None:
+    """The GPU that runs ``grid`` (None for the CPU backend)."""
+    if grid.backend != "gpu":
+        return None
+    from corraoi.gpu import get_device
+
+    return str(get_device().name)
+
+
+def paper_grid(*, runs: int, horizon: int, seed: int, backend: str = "cpu") -> Grid:
+    """``corraoi reproduce``'s grid: the paper's instances and twelve policies."""
+    from corraoi.experiments.sweeps import paper_grid as grid_of
+
+    return grid_of(runs=runs, horizon=horizon, seed=seed, backend=backend)
+
+
+def write_paper_summary(out: Path, summaries: Sequence[dict[str, Any]], *, runs: int,
+                        horizon: int, seed: int) -> list[str]:  # fmt: skip
+    """``corraoi reproduce``'s ``out/summary.md``: the ranked table of each instance's sweep
+    (``summaries``, in order) side by side. Returns the paper's instances (``out``'s
+    folders)."""
+    from corraoi.experiments.folder import write_text
+    from corraoi.experiments.summary import summary_markdown
+    from corraoi.experiments.sweeps import PAPER_INSTANCES
+
+    parts = [summary_markdown(s).replace("# Sweep:", "## Sweep:", 1) for s in summaries]
+    head = (
+        "# The paper's simulations, regenerated\n\n"
+        f"`corraoi reproduce --runs {runs} --horizon {horizon} --seed {seed}`; figures in "
+        + ", ".join(f"`{n}/figure.png`" for n in PAPER_INSTANCES)
+        + ".\n\n"
+    )
+    write_text(
+        out / "summary.md",
+        head + "\n".join(p.replace("\n## Theory", "\n### Theory") for p in parts),
+    )
+    return list(PAPER_INSTANCES)
 
 
 def check_which(which: object) -> int | str:
@@ -502,4 +686,8 @@ def sweep(
     return result
 
 
-__all__ = ["Sweep", "check_grid", "run_grid", "settle_backend", "sweep"]
+__all__ = [
+    "Sweep", "check_grid", "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes",
+    "kept_code", "paper_grid", "record_each_from", "run_grid", "settle_backend", "split_words",
+    "sweep", "write_paper_summary", "wrote_line",
+]  # fmt: skip
