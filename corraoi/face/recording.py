@@ -525,8 +525,6 @@ def record(
     config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score)
     if rrd is True:
         rrd = None
-    if rrd is not None and not isinstance(rrd, (str, os.PathLike)) and rrd is not False:
-        raise UsageError(f"rrd: expected a path, None or False, got {rrd!r}")
     (plan,) = plan_files([config], path, None if rrd is False else rrd, no_rrd=rrd is False)
     if not force and viewer is None and not sinks and up_to_date(plan):
         return Run(plan.mcap, rrd=plan.rrd)
