@@ -262,8 +262,11 @@ def test_a_damaged_emulation_library_is_rebuilt_and_a_killed_record_never_blocks
 
     res = cli("sweep", "-p", "ucb", "-n", 4, "-T", 200, "--backend", "gpu", "-o", "sw")
     assert res.returncode == 0, res.stderr
+    # record --from builds the capture library (CAI_CAPTURE=1) beside the sweep's
+    res = cli("record", "--from", "sw", "--run", 1, "--no-rrd", "-o", "first.mcap")
+    assert res.returncode == 0, res.stderr
     libs = list((tmp_path / "cache").rglob("kernel-K*.so"))
-    assert libs and all(Path(f"{lib}.sha256").is_file() for lib in libs)
+    assert len(libs) == 2 and all(Path(f"{lib}.sha256").is_file() for lib in libs)
     for lib in libs:  # cut short, as a full disk or a kill during its copy would leave it
         lib.write_bytes(lib.read_bytes()[:4096])
     res = cli("record", "--from", "sw", "--run", 2, "--no-rrd", "-o", "r.mcap")
