@@ -4,11 +4,13 @@ is one, on a CUDA GPU: what the kernel captures is the run the sweep counted."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -85,6 +87,88 @@ def test_a_captured_run_holds_together_slot_by_slot(device: Device) -> None:
     chosen = b.candidates[np.arange(len(b)), b.arm]
     assert chosen[~b.override].all()
     assert (~b.candidates.all(axis=1)).any()  # the correlated set left arms out
+
+
+#: A policy of each family and form: the why-this-arm fields of its captured runs are checked.
+WHY = ("ucb", "cucb", "aoi-aware-cucb", "aoi-aware-q-ucb", "cts", "aoi-aware-ts-gauss",
+       "sw-ucb", "aoi-aware-d-ts")  # fmt: skip
+
+
+def _cpu_hook(policy_name: str, hook: str) -> Any:
+    """The CPU engine's hook of a built-in as plain Python (its numba function's py_func)."""
+    module, _, name = getattr(make_policy(policy_name).resolve(), hook).partition(":")
+    return getattr(importlib.import_module(module), name).py_func
+
+
+@pytest.mark.parametrize("name", WHY)
+def test_a_captured_run_says_why_as_the_cpu_record_does(
+    device: Device, name: str, tmp_path: Path
+) -> None:
+    """Issue 40: a captured run has score, forced and (AoI-aware) override_threshold, defined
+    as the CPU engine's record defines them. On a trace channel the CPU engine and the kernel
+    see one hidden path, so up to the first slot where their random draws part (that slot
+    included: its state is still the same) every field is the CPU's, an index policy's scores
+    within float32's tolerance. Over the whole run: the threshold is 1 / max mu_hat before the slot,
+    the score is NaN exactly off the candidates and at slots forced or overridden, the arm
+    maximises it elsewhere, and an index policy's score is the CPU's index of the captured
+    state."""
+    from corraoi.engine.problem import Problem
+    from corraoi.engine.simulation import simulate_run
+    from corraoi.model.channels import parse_channel
+
+    horizon = 1500
+    path = tmp_path / "states.txt"
+    rng = np.random.default_rng(3)
+    path.write_text("\n".join(str(v) for v in rng.integers(1, 5, horizon)) + "\n")
+    channel = parse_channel(f"trace:{path}", I2)
+    policy = make_policy(name)
+    aware = name.startswith("aoi-aware")
+    gpu_blocks = list(capture_run(I2, policy, seed=5, horizon=horizon, channel=channel,
+                                  block=600, device=device))  # fmt: skip
+    g = gpu_blocks[0].concat(gpu_blocks)
+    cpu_blocks = list(simulate_run(I2, policy, 5, horizon, channel=channel))
+    c = cpu_blocks[0].concat(cpu_blocks)
+    assert g.score is not None and g.forced is not None
+    assert g.score.dtype == np.float32 and g.score.shape == (horizon, 4)
+    assert (g.override_threshold is not None) == aware == (c.override_threshold is not None)
+    assert np.array_equal(g.x, c.x)
+    # the same slots while the decisions agree (and at the first that differs)
+    parted = np.flatnonzero(g.arm != c.arm)
+    n = int(parted[0]) + 1 if parted.size else horizon
+    assert np.array_equal(g.forced[:n], c.forced[:n])
+    if "ts" in name:  # a sample: the two engines draw from streams of their own
+        assert np.array_equal(np.isnan(g.score[:n]), np.isnan(c.score[:n]))
+    else:
+        np.testing.assert_allclose(g.score[:n], c.score[:n], rtol=1e-5, equal_nan=True)
+    if aware:
+        np.testing.assert_allclose(g.override_threshold[:n], c.override_threshold[:n],
+                                   rtol=1e-6)  # fmt: skip
+    # the whole captured run: each field from the state before the slot
+    one = np.eye(4, dtype=np.int64)[g.arm]
+    pulls = np.cumsum(one, axis=0) - one
+    succ = np.cumsum(one * g.success[:, None], axis=0) - one * g.success[:, None]
+    mu = np.where(pulls > 0, succ / np.maximum(pulls, 1), 0.0)
+    if aware:
+        top = mu.max(axis=1)
+        want = np.where(top > 0, 1.0 / np.where(top > 0, top, 1.0), np.inf)
+        np.testing.assert_allclose(g.override_threshold, want.astype(np.float32), rtol=1e-6)
+    scored = ~g.forced & ~g.override
+    assert scored.any()
+    assert np.array_equal(np.isnan(g.score), ~(scored[:, None] & g.candidates))
+    chosen = g.score[np.arange(horizon), g.arm]
+    assert np.array_equal(chosen[scored], np.nanmax(g.score[scored], axis=1))
+    if name.removeprefix("aoi-aware-").removeprefix("c") in ("ucb", "q-ucb"):
+        assert not (g.forced & g.override).any()
+        if "q-ucb" not in name:  # UCB forces each arm once; Q-UCB also explores at random
+            assert np.array_equal(g.forced, (pulls == 0).any(axis=1) & ~g.override)
+        score = _cpu_hook(name, "score")
+        params = Problem.of(I2, policy, horizon, channel).params
+        vals = np.zeros(4)
+        for j in np.flatnonzero(scored):
+            cand = g.candidates[j]
+            score(j + 1, 4, pulls[j], succ[j], mu[j], cand, vals, params, None, None, None)
+            np.testing.assert_allclose(g.score[j][cand], vals[cand].astype(np.float32),
+                                       rtol=1e-5, err_msg=f"slot {j + 1}")  # fmt: skip
 
 
 def test_two_policies_on_one_seed_share_the_hidden_path(device: Device) -> None:
@@ -178,8 +262,11 @@ def test_a_damaged_emulation_library_is_rebuilt_and_a_killed_record_never_blocks
 
     res = cli("sweep", "-p", "ucb", "-n", 4, "-T", 200, "--backend", "gpu", "-o", "sw")
     assert res.returncode == 0, res.stderr
+    # record --from builds the capture library (CAI_CAPTURE=1) beside the sweep's
+    res = cli("record", "--from", "sw", "--run", 1, "--no-rrd", "-o", "first.mcap")
+    assert res.returncode == 0, res.stderr
     libs = list((tmp_path / "cache").rglob("kernel-K*.so"))
-    assert libs and all(Path(f"{lib}.sha256").is_file() for lib in libs)
+    assert len(libs) == 2 and all(Path(f"{lib}.sha256").is_file() for lib in libs)
     for lib in libs:  # cut short, as a full disk or a kill during its copy would leave it
         lib.write_bytes(lib.read_bytes()[:4096])
     res = cli("record", "--from", "sw", "--run", 2, "--no-rrd", "-o", "r.mcap")

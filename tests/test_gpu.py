@@ -512,6 +512,39 @@ def test_sums_past_2_to_the_31_are_kept_in_64_bits(emulated: Device):
 # ---------------------------------------------------------------------------- compiling
 
 
+def _preprocessed(*defines: str) -> list[str]:
+    """kernel.cu as the compiler sees it (the host's preprocessor): its lines, stripped."""
+    cxx = host_compiler()
+    assert cxx is not None
+    done = subprocess.run([cxx, "-E", "-P", "-std=c++17", "-x", "c++", "-DKARMS=4",
+                           *(f"-D{d}" for d in defines), str(SOURCE_PATH)],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    return [ln.strip() for ln in done.stdout.splitlines() if ln.strip()]
+
+
+@needs_cxx
+@pytest.mark.parametrize("target", [(), ("__CUDACC__",)], ids=["host", "cuda"])
+def test_a_sweep_module_has_none_of_the_capture_of_scores(target: tuple[str, ...]):
+    """Issue 40: the GPU computes score, forced and the override's threshold only in the
+    module that captures one run (CAI_CAPTURE=1, record --from), never in a sweep's hot loop.
+    The sweep's module, preprocessed for the host and for CUDA, holds none of that code; the
+    capture module's text is the sweep's with lines added, and the row's width changed."""
+    import difflib
+
+    sweep = _preprocessed(*target)
+    capture = _preprocessed(*target, "CAI_CAPTURE=1")
+    for word in ("cai_f32_word", "cap_max", "row[9]", "row[11 + k]"):
+        assert not any(word in ln for ln in sweep), word
+        assert any(word in ln for ln in capture), word
+    changed = [(op, sweep[i1:i2], capture[j1:j2]) for op, i1, i2, j1, j2 in
+               difflib.SequenceMatcher(None, sweep, capture, autojunk=False).get_opcodes()
+               if op != "equal"]  # fmt: skip
+    assert len([op for op, _, _ in changed if op == "insert"]) >= 3
+    assert [(a, b) for op, a, b in changed if op != "insert"] == [
+        (["i64* row = cap + (i64)j * 9;"], ["i64* row = cap + (i64)j * (11 + 4);"])
+    ]
+
+
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not installed here")
 @pytest.mark.slow
 def test_the_kernels_compile_for_the_gpu_with_nvcc(tmp_path: Path):

@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 from corraoi.engine.block import FIELDS, NONE_FIELDS, RunConfig, SlotBlock
 from corraoi.engine.simulation import simulate, simulate_run
 from corraoi.engine.slot_record import (
+    GPU_CAPTURE_PER_ARM,
     GPU_CAPTURE_ROW,
     NAMES,
     SLOT_RECORD,
@@ -256,16 +257,25 @@ def test_docs_field_table_is_the_declarations():
 
 def test_the_gpu_capture_row_is_the_declared_one():
     source = (ROOT / "corraoi" / "gpu" / "kernel.cu").read_text()
-    rows = re.findall(r"row\[(\d+)\] = [^;]+;\s*// (\w+)", source)
-    assert [int(i) for i, _ in rows] == list(range(len(rows)))
-    assert tuple(name for _, name in rows) == GPU_CAPTURE_ROW
-    width = re.search(r"#define CAI_CAPW (\d+)", source)
-    assert width is not None and int(width.group(1)) == len(GPU_CAPTURE_ROW)
-    from corraoi.gpu.runner import CAPTURE_WIDTH
+    rows = re.findall(r"row\[(\d+)( \+ k)?\] = [^;]+;\s*// (\w+)", source)
+    assert tuple(name for _, _, name in rows) == GPU_CAPTURE_ROW
+    assert tuple(name for _, per_arm, name in rows if per_arm) == GPU_CAPTURE_PER_ARM
+    from corraoi.gpu.runner import capture_columns, capture_width
 
-    assert CAPTURE_WIDTH == len(GPU_CAPTURE_ROW)
+    for K in (1, 4, 64):  # each value at its place in the kernel's row, one a slot and arm
+        cols = capture_columns(K)
+        assert [cols[name].start for _, _, name in rows] == [int(i) for i, _, _ in rows]
+        assert all(cols[name].stop - cols[name].start == (K if per_arm else 1)
+                   for _, per_arm, name in rows)  # fmt: skip
+        assert capture_width(K) == len(GPU_CAPTURE_ROW) - 1 + K
+    # the capture module (CAI_CAPTURE=1) captures every field, a sweep's up to the candidates
+    assert GPU_CAPTURE_ROW[-1] == "score"  # the K words last: CAI_CAPW is that arithmetic
+    ours = GPU_CAPTURE_ROW.index("forced")
+    assert (f"#if CAI_CAPTURE\n#define CAI_CAPW ({ours + 2} + KARMS)\n" in source
+            and f"#else\n#define CAI_CAPW {ours}\n#endif" in source)  # fmt: skip
     # every captured value is a field, or what one derives from (the estimator from aoisum)
     assert set(GPU_CAPTURE_ROW) - set(NAMES) == {"aoisum"}
+    assert {"score", "forced", "override_threshold"} <= set(GPU_CAPTURE_ROW)
 
 
 def test_a_log_before_the_score_replays_without_the_why_entities(tmp_path):

@@ -305,9 +305,14 @@ FLOAT32_MAX = 3.4028234663852886e38
 #: The GPU kernel's capture row (``corraoi/gpu/kernel.cu``, ``row[i] = ...``): what each of
 #: its int64 values holds, from which ``corraoi.gpu.runner.capture_run`` builds the fields
 #: (``aoisum`` gives the estimator, ``candidates`` is a bitset; pulls and mu_hat follow from
-#: the arms played). The GPU captures neither score nor forced: those fields are absent.
+#: the arms played; ``override_threshold`` and ``score`` are float32 bits in the low word).
+#: The fields from ``forced`` on are captured by the capture module only (CAI_CAPTURE=1,
+#: ``record --from``), never by a sweep's.
 GPU_CAPTURE_ROW = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "aoisum",
-                   "override", "candidates")  # fmt: skip
+                   "override", "candidates", "forced", "override_threshold",
+                   "score")  # fmt: skip
+#: The fields of the capture row that take K values (one per arm, ``row[i + k]``).
+GPU_CAPTURE_PER_ARM = ("score",)
 
 
 def markdown_table() -> str:
@@ -329,6 +334,7 @@ __all__ = [
     "DIFF_KINDS",
     "FLOAT32_MAX",
     "FLOAT_FIELDS",
+    "GPU_CAPTURE_PER_ARM",
     "GPU_CAPTURE_ROW",
     "JSON_KINDS",
     "NAMES",

@@ -13,6 +13,11 @@ same arguments (:data:`corraoi.gpu.runner` builds them):
   g++ or c++) into a shared library in corraoi's cache folder, its runs spread over the cores
   with OpenMP. It runs the GPU code where no GPU is (tests, development); it is not fast.
   ``CORRAOI_GPU_DEVICE=emulate`` makes ``--backend gpu`` use it.
+
+A captured run (``record --from``, :func:`corraoi.gpu.runner.capture_run`) launches a module
+of its own, compiled with ``-DCAI_CAPTURE=1`` (``capture=True``): it also captures why each
+arm was played (score, forced, the override's threshold). A sweep's modules are compiled
+without it, from the same preprocessed text as before that capture existed.
 """
 
 from __future__ import annotations
@@ -104,30 +109,31 @@ class Device(ABC):
             self.reduction = reduction
 
     @abstractmethod
-    def _compile(self, K: int, family: str) -> Any:
+    def _compile(self, K: int, family: str, capture: bool = False) -> Any:
         """Build (or load from a cache) kernel.cu for K arms with (at least) ``family``'s entry
-        points: a CuPy module or a library."""
+        points: a CuPy module or a library (``capture``: the capture module, CAI_CAPTURE=1)."""
 
-    def _module_key(self, K: int, family: str) -> Any:
-        return (K, family)
+    def _module_key(self, K: int, family: str, capture: bool = False) -> Any:
+        return (K, family, capture)
 
-    def module(self, K: int, family: str) -> Any:
-        """The K-arm module of ``family``, compiled once per process (the time goes to
-        compile_seconds)."""
-        key = self._module_key(K, family)
+    def module(self, K: int, family: str, capture: bool = False) -> Any:
+        """The K-arm module of ``family`` (``capture``: the one that captures a run's scores),
+        compiled once per process (the time goes to compile_seconds)."""
+        key = self._module_key(K, family, capture)
         with self._lock:
             mod = self._compiled.get(key)
             if mod is None:
                 start = time.perf_counter()
-                mod = self._compile(K, family)
+                mod = self._compile(K, family, capture)
                 self.compile_seconds += time.perf_counter() - start
                 self._compiled[key] = mod
             return mod
 
     @abstractmethod
-    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
-        """Run ``entry`` (``advance_<family>_<c><a>``) of the K-arm module of ``family`` over
-        ``runs`` runs."""
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList, *,
+               capture: bool = False) -> None:  # fmt: skip
+        """Run ``entry`` (``advance_<family>_<c><a>``) of the K-arm module of ``family`` (its
+        capture module with ``capture``) over ``runs`` runs."""
 
     @abstractmethod
     def reduce(self, K: int, family: str, nck: int, runs: int, args: ArgList) -> None:
@@ -202,10 +208,11 @@ class CudaDevice(Device):
         #: multiprocessor (several rounds of the 3 it holds at once at 74 registers a thread).
         self.reduce_blocks = 32 * int(props.get("multiProcessorCount", 132))
 
-    def _compile(self, K: int, family: str) -> Any:
+    def _compile(self, K: int, family: str, capture: bool = False) -> Any:
         import cupy
 
-        options = (*self.options, f"-DKARMS={K}", f"-DCAI_FAMILY={family_id(family)}")
+        options = (*self.options, f"-DKARMS={K}", f"-DCAI_FAMILY={family_id(family)}",
+                   *(("-DCAI_CAPTURE=1",) if capture else ()))  # fmt: skip
         mod = cupy.RawModule(code=source(), options=options)
         mod.compile()  # NVRTC, or CuPy's on-disk cache
         return mod
@@ -214,8 +221,9 @@ class CudaDevice(Device):
         conv = {"i": np.int32, "q": np.int64, "Q": np.uint64, "d": np.float64}
         return tuple(v if kind == "p" else conv[kind](v) for kind, v in args)
 
-    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
-        func = self.module(K, family).get_function(entry)
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList, *,
+               capture: bool = False) -> None:  # fmt: skip
+        func = self.module(K, family, capture).get_function(entry)
         blocks = (runs + self.block - 1) // self.block
         func((blocks,), (self.block,), self._args(args))
 
@@ -284,22 +292,24 @@ class EmulatedDevice(Device):
         self._cxx = cxx
         self._defines = tuple(f"-D{d}" for d in defines)
 
-    def _module_key(self, K: int, family: str) -> Any:
-        return K  # one library per K holds every family
+    def _module_key(self, K: int, family: str, capture: bool = False) -> Any:
+        return (K, capture)  # one library per K holds every family
 
-    def _compile(self, K: int, family: str) -> Any:
-        return ctypes.CDLL(str(self.build(K)))
+    def _compile(self, K: int, family: str, capture: bool = False) -> Any:
+        return ctypes.CDLL(str(self.build(K, capture=capture)))
 
-    def build(self, K: int) -> Path:
-        """The emulation library for ``K`` arms: from the kernel cache when intact, else
-        compiled once (one process compiles, the others wait for it)."""
+    def build(self, K: int, *, capture: bool = False) -> Path:
+        """The emulation library for ``K`` arms (``capture``: the capture module): from the
+        kernel cache when intact, else compiled once (one process compiles, the others wait
+        for it)."""
         from corraoi.engine import kernel_cache, kernels
 
         text = source()
-        flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}")
+        flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}",
+                 *(("-DCAI_CAPTURE=1",) if capture else ()))  # fmt: skip
         digest = hashlib.sha256("\0".join((text, self._cxx, *flags)).encode()).hexdigest()[:16]
         folder = kernel_cache.folder("gpu-emulation")  # else the system's temp folder
-        lib = folder / f"kernel-K{K}-{digest}.so"
+        lib = folder / f"kernel-K{K}{'-capture' if capture else ''}-{digest}.so"
         if _intact(lib):  # checked before it is mapped: a cut-short library is never loaded
             return lib
         with kernel_cache.locked(folder, lib.stem):  # two processes, a fresh cache: one compiles
@@ -344,8 +354,9 @@ class EmulatedDevice(Device):
                 out.append(conv[kind](v))
         return out
 
-    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList) -> None:
-        func = getattr(self.module(K, family), entry)
+    def launch(self, K: int, family: str, entry: str, runs: int, args: ArgList, *,
+               capture: bool = False) -> None:  # fmt: skip
+        func = getattr(self.module(K, family, capture), entry)
         func.restype = None
         func(*self._args(args))
 

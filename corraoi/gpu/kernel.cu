@@ -4,7 +4,10 @@
 // plain C++ (the emulated device: a loop over runs instead of a thread grid), so that the
 // policy logic is tested on machines without a GPU. Compile-time constants: KARMS (arms) and,
 // optionally, CAI_FAMILY (compile one family's entry points only: its index in FAMILIES of
-// device.py, plus one; 0 or unset: all), and two switches that benchmarks/bench_gpu.py times
+// device.py, plus one; 0 or unset: all), CAI_CAPTURE (1: the module that captures one run's
+// slots for `record --from`, with the policy's scores; 0, default: a sweep's, compiled from
+// the same text as before the capture of scores existed, see CAI_CAPW), and two switches
+// that benchmarks/bench_gpu.py times
 // against the default: CAI_FP64 (1: the arithmetic in double precision; default 0, single)
 // and CAI_LOG_TEST (how the gamma trials' log tests run: 0, default, for every trial; 1, only
 // where the squeeze leaves one undecided; 2, batched after the arms; see cai_betas).
@@ -67,6 +70,9 @@ typedef long long i64;
 #endif
 #ifndef CAI_LOG_TEST
 #define CAI_LOG_TEST 0
+#endif
+#ifndef CAI_CAPTURE
+#define CAI_CAPTURE 0
 #endif
 
 // Per-arm arrays stay in registers only while each index is a compile-time constant: on the
@@ -813,11 +819,33 @@ struct DTsForm {
 
 // The per-slot capture of run `cap_run` (-1: none), CAI_CAPW values a slot of this launch into
 // `cap`: the hidden state, the arm, the reward, the ages (own, oracle's), the regret and the
-// AoI sum after the slot, the override flag and the candidate set as a bit mask (K <= 64).
-// What `corraoi record --from` of a GPU sweep turns into the slots of one run. The row's
-// layout is corraoi.engine.slot_record.GPU_CAPTURE_ROW (each `row[i] =` below names its
-// field in a comment; tests/test_slot_record.py checks the two agree).
+// AoI sum after the slot, the override flag and the candidate set as a bit mask (K <= 64);
+// and, compiled with CAI_CAPTURE=1 only, why the arm was played, as the CPU engine's record
+// defines it (corraoi/engine/_kernel.py): the forced flag (not chosen by the score: the
+// policy forced it and the override did not act), the override's threshold 1 / max mu_hat
+// before the slot (+infinity while every mean is 0) and the score of each arm (what the
+// policy maximised; NaN outside the candidate set and at a slot not scored), as float32 bits
+// in the low word. Those are values the slot already has in registers: capturing them draws
+// nothing and changes no decision, and a sweep's module (CAI_CAPTURE=0) is compiled from the
+// same text as before they existed. What `corraoi record --from` of a GPU sweep turns into
+// the slots of one run. The row's layout is corraoi.engine.slot_record.GPU_CAPTURE_ROW (each
+// `row[i] =` below names its field in a comment, `row[i + k] =` a per-arm field of KARMS
+// words; tests/test_slot_record.py checks the two agree).
+#if CAI_CAPTURE
+#define CAI_CAPW (11 + KARMS)
+
+CAI_FN i64 cai_f32_word(float v) {  // float32 bits, in the low word
+#if defined(__CUDACC__)
+    return (i64)__float_as_uint(v);
+#else
+    u32 b;
+    memcpy(&b, &v, sizeof b);
+    return (i64)b;
+#endif
+}
+#else
 #define CAI_CAPW 9
+#endif
 
 // The hidden state of slot t from its word w (w / 2^32 a uniform), through the CDF of row 0
 // (X_1 and every X_t of an i.i.d. channel) or of row X_{t-1} + 1 (Markov). `thr` holds a row
@@ -970,6 +998,10 @@ CAI_FN void cai_run(int r, const u64* comb_tab, CAI_PARAMS) {
         bool override_ = false;
         int arm;
         real top;
+#if CAI_CAPTURE
+        real cap_max = (real)0;  // max mu_hat before the slot: the override's threshold
+        CAI_FOR_ARMS(k) cap_max = cai_max(cap_max, mu[k]);
+#endif
         if (AWARE) {
             real maxmu = (real)0;
             CAI_FOR_ARMS(k) maxmu = cai_max(maxmu, mu[k]);
@@ -1014,6 +1046,17 @@ CAI_FN void cai_run(int r, const u64* comb_tab, CAI_PARAMS) {
             row[6] = asum;                // aoisum
             row[7] = override_ ? 1 : 0;   // override
             row[8] = (i64)cand;           // candidates
+#if CAI_CAPTURE
+            const bool scored = !override_ && forced < 0;
+            const i64 nan_word = 0x7fc00000, inf_word = 0x7f800000;  // float32 NaN, +infinity
+            const i64 thr = cap_max > (real)0 ? cai_f32_word((float)((real)1 / cap_max)) : inf_word;
+            row[9] = forced >= 0 && !override_ ? 1 : 0;  // forced
+            row[10] = thr;                               // override_threshold
+            CAI_FOR_ARMS(k) {
+                bool on = scored && CAI_HAS(cand, k);
+                row[11 + k] = on ? cai_f32_word((float)vals[k]) : nan_word;     // score
+            }
+#endif
         }
         if (t == next_ck) {
             ck_reg[(i64)ci * R + r] = asum - osum;

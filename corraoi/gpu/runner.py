@@ -26,7 +26,7 @@ import numpy as np
 
 from corraoi.engine.block import SlotBlock
 from corraoi.engine.problem import Problem
-from corraoi.engine.slot_record import GPU_CAPTURE_ROW
+from corraoi.engine.slot_record import GPU_CAPTURE_PER_ARM, GPU_CAPTURE_ROW
 from corraoi.errors import ConfigError, GpuUnavailable
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
@@ -147,7 +147,8 @@ class _Problem:
                ck_reg: Any = None, ck_asum: Any = None, ck_pulls: Any = None,
                cap_run: int = -1, cap: Any = None) -> None:  # fmt: skip
         """Advance every run from slot ``t`` by ``nslots`` (capturing the checkpoints in
-        ``ck_t`` it passes, and every slot of run ``cap_run`` into ``cap``)."""
+        ``ck_t`` it passes, and every slot of run ``cap_run`` into ``cap``, with the capture
+        module: ``capture_width(K)`` values a slot)."""
         c, st, none = self.consts, self.st, self.consts["none"]
         xp = self.dev.xp
         lnt = xp.log(xp.arange(t + 1, t + nslots + 1, dtype=np.float64))  # the same for every run
@@ -162,7 +163,7 @@ class _Problem:
                                                                        ck_pulls)),
             ("i", int(cap_run)), ("p", none if cap is None else cap),
         ]  # fmt: skip
-        self.dev.launch(self.K, self.family, self.entry, self.R, args)
+        self.dev.launch(self.K, self.family, self.entry, self.R, args, capture=cap is not None)
 
 
 def simulate(
@@ -244,9 +245,25 @@ def simulate(
     )  # fmt: skip
 
 
-#: Values the kernel captures per slot (kernel.cu, CAI_CAPW): the slot record's capture row.
-CAPTURE_WIDTH = len(GPU_CAPTURE_ROW)
-_COL = {name: i for i, name in enumerate(GPU_CAPTURE_ROW)}
+def capture_columns(K: int) -> dict[str, slice]:
+    """Where each field of the slot record's capture row (``GPU_CAPTURE_ROW``) lies in the
+    K-arm kernel's row (kernel.cu, CAI_CAPW): one value, or K for a per-arm field."""
+    out, at = {}, 0
+    for name in GPU_CAPTURE_ROW:
+        width = K if name in GPU_CAPTURE_PER_ARM else 1
+        out[name] = slice(at, at + width)
+        at += width
+    return out
+
+
+def capture_width(K: int) -> int:
+    """Values the K-arm capture module captures per slot (kernel.cu, CAI_CAPW)."""
+    return capture_columns(K)[GPU_CAPTURE_ROW[-1]].stop
+
+
+def _float32(words: np.ndarray) -> np.ndarray:
+    """The float32 values whose bits the kernel wrote in the low words of ``words``."""
+    return np.ascontiguousarray(words & 0xFFFFFFFF).astype(np.uint32).view(np.float32)
 
 
 def capture_run(
@@ -262,11 +279,16 @@ def capture_run(
     """The slots of the device's run with seed ``seed`` (run ``seed - grid seed`` of a GPU
     sweep), captured by the kernel as it decides them, as the :class:`SlotBlock` a CPU
     record yields: the GPU's own random streams and rule, slot for slot (on the emulated
-    device, the host compiler's arithmetic)."""
+    device, the host compiler's arithmetic). With them, why each arm was played, as the CPU
+    engine's record gives it: ``score`` (float32, NaN outside the candidates and at a slot
+    not scored), ``forced`` and, for an AoI-aware policy, ``override_threshold``; the
+    kernel's capture module computes them (CAI_CAPTURE=1), a sweep's never does."""
     dev = device if device is not None else get_device()
     prob = _Problem(instance, policy, horizon, channel, 1, dev)
     K, mu_star = prob.K, float(prob.theory.mu_star)
-    cap = dev.xp.zeros(block * CAPTURE_WIDTH, dtype=np.int64)
+    aware = bool(getattr(prob.cls, "aoi_aware", False))
+    cols, width = capture_columns(K), capture_width(K)
+    cap = dev.xp.zeros(block * width, dtype=np.int64)
     pulls = np.zeros(K, dtype=np.int64)
     succ = np.zeros(K, dtype=np.int64)
     bits = np.uint64(1) << np.arange(K, dtype=np.uint64)
@@ -274,9 +296,11 @@ def capture_run(
     while t < horizon:
         n = min(block, horizon - t)
         prob.launch(seed, t, n, cap_run=0, cap=cap)
-        rows = dev.asnumpy(cap)[: n * CAPTURE_WIDTH].reshape(n, CAPTURE_WIDTH)
-        arm = rows[:, _COL["arm"]]
-        success = rows[:, _COL["success"]] == 1
+        rows = dev.asnumpy(cap)[: n * width].reshape(n, width)
+        col = {name: rows[:, at] if name in GPU_CAPTURE_PER_ARM else rows[:, at.start]
+               for name, at in cols.items()}  # fmt: skip
+        arm = col["arm"]
+        success = col["success"] == 1
         hit = np.zeros((n, K), dtype=np.int64)
         hit[np.arange(n), arm] = 1
         p = pulls + np.cumsum(hit, axis=0)
@@ -284,13 +308,14 @@ def capture_run(
         with np.errstate(invalid="ignore", divide="ignore"):
             mu_hat = np.where(p > 0, s / np.maximum(p, 1), 0.0)
         ts = np.arange(t + 1, t + n + 1, dtype=np.int64)
-        col = {name: rows[:, i] for name, i in _COL.items()}
-        yield SlotBlock(  # no score, forced or override_threshold: the GPU captures none
+        yield SlotBlock(
             t=ts, x=col["x"].copy(), arm=arm.copy(), success=success, aoi=col["aoi"].copy(),
             oracle_aoi=col["oracle_aoi"].copy(), regret=col["regret"].copy(),
             estimator=col["aoisum"] - ts / mu_star, override=col["override"] == 1,
             mu_hat=mu_hat, pulls=p,
             candidates=(col["candidates"][:, None].astype(np.uint64) & bits[None, :]) != 0,
+            forced=col["forced"] == 1, score=_float32(col["score"]),
+            override_threshold=_float32(col["override_threshold"]) if aware else None,
         )  # fmt: skip
         pulls, succ = p[-1].copy(), s[-1].copy()
         t += n
