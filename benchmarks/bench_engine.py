@@ -78,7 +78,8 @@ def per_policy(runs: int, horizon: int, repeat: int, extra: bool) -> None:
 #: kernel loaded first, so that neither compiling nor loading is counted).
 _SIDE = (
     "import json, sys, time\n"
-    "from corraoi.engine.simulation import Simulation, set_workers\n"
+    "from corraoi.engine.simulation import Simulation\n"
+    "from corraoi.engine.threads import set_workers\n"
     "from corraoi.model.instance import load_instance\n"
     "from corraoi.policies import make_policy\n"
     "names, runs, horizon = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])\n"
