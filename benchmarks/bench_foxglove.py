@@ -27,7 +27,7 @@ from corraoi.engine.block import RunConfig, SlotBlock  # noqa: E402
 from corraoi.engine.simulation import simulate_run  # noqa: E402
 from corraoi.model.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder.live.foxglove import TOPIC, Address, FoxgloveServer  # noqa: E402
+from corraoi.recorder.live.foxglove import TOPIC, Address, FoxgloveServer  # noqa: E402
 
 
 def _rss_mib() -> float:

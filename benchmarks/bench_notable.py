@@ -45,7 +45,7 @@ def _sweep_once(out: Path, named: bool) -> float:
 def _parts(tmp: Path) -> dict[str, float]:
     """The two costs inside one named sweep: computing the runs, drawing them in sweep.rrd."""
     import corraoi.experiments.summary as so
-    from recorder.sweeplog.recording import SweepRerunSink
+    from corraoi.recorder.sweeplog.recording import SweepRerunSink
 
     took = {"naming (corraoi.experiments.notable)": 0.0, "drawing 36 runs into sweep.rrd": 0.0}
     real_name, real_mark = so.group_notable, SweepRerunSink.mark

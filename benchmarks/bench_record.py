@@ -45,9 +45,9 @@ from corraoi.engine.simulation import simulate_run
 from corraoi.engine.threads import set_workers
 from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
-from recorder.slotlog.sink import McapSink
-from recorder.rerun.sink import RerunSink
-from recorder.rerun.output import RrdOutput
+from corraoi.recorder.slotlog.sink import McapSink
+from corraoi.recorder.rerun.sink import RerunSink
+from corraoi.recorder.rerun.output import RrdOutput
 set_workers(1)
 config = RunConfig(Instance.from_dict(json.loads({inst!r})), make_policy("cucb"), 0, {horizon})
 with McapSink({mcap!r}, config, overwrite=True) as mcap, \\
@@ -121,13 +121,13 @@ def main() -> None:
     from corraoi.engine.simulation import simulate_run
     from corraoi.engine.threads import set_workers
     from corraoi.policies import make_policy
-    from recorder.rerun.output import RrdOutput
-    from recorder.rerun.sink import RerunSink
-    from recorder.slotlog.chunks import ChunkWriter
-    from recorder.slotlog.encode import BlockEncoder
-    from recorder.slotlog.sink import McapSink
-    from recorder.vocab import NS_PER_SLOT
-    from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+    from corraoi.recorder.rerun.output import RrdOutput
+    from corraoi.recorder.rerun.sink import RerunSink
+    from corraoi.recorder.slotlog.chunks import ChunkWriter
+    from corraoi.recorder.slotlog.encode import BlockEncoder
+    from corraoi.recorder.slotlog.sink import McapSink
+    from corraoi.recorder.vocab import NS_PER_SLOT
+    from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 
     inst = instance_for(args.arms)
     config = RunConfig(inst, make_policy("cucb"), 0, T)

@@ -9,11 +9,11 @@ interleaved rounds:
 
 * the floor: every message of the long log read with ``mcap.stream_reader.StreamReader``
   and decoded with ``orjson.loads`` (nothing else);
-* ``viewer.replay`` of the long log to an .rrd (read, check, decode, RerunSink, file),
+* ``corraoi.viewer.replay`` of the long log to an .rrd (read, check, decode, RerunSink, file),
   with its ratio to the floor (target: at most 1.5);
-* ``viewer.compare`` of the short logs into one .rrd (target: under 2 s), and the same
+* ``corraoi.viewer.compare`` of the short logs into one .rrd (target: under 2 s), and the same
   two commands end to end as ``corraoi`` processes (interpreter and imports included);
-* ``viewer.diff`` and ``viewer.info.log_info`` of the long log, for reference.
+* ``corraoi.viewer.diff`` and ``corraoi.viewer.info.log_info`` of the long log, for reference.
 
 ``--arms K``: the logs are of an instance of K arms (benchmarks/alternate.py).
 ``--baseline DIR``: this checkout and another one, alternately, side by side (issue 35:
@@ -51,7 +51,7 @@ def record(path: Path, policy: str, horizon: int, seed: int = 0, arms: int = 4) 
     from corraoi.engine.block import RunConfig
     from corraoi.engine.simulation import simulate_run
     from corraoi.policies import make_policy
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     config = RunConfig(instance_for(arms), make_policy(policy), seed, horizon)
     with McapSink(path, config, overwrite=True, fsync=False) as sink:
@@ -129,12 +129,12 @@ def main() -> None:
         print_comparison(both, opts.slots, "us/slot", opts.baseline)
         return
 
-    # submodules, not ``import viewer``: an editable install made before the packages had
+    # submodules, not ``import corraoi.viewer``: an editable install made before the packages had
     # an __init__.py maps them as namespace packages outside the checkout
-    from viewer.compare import compare
-    from viewer.diffs import diff
-    from viewer.info import log_info
-    from viewer.replay import replay
+    from corraoi.viewer.compare import compare
+    from corraoi.viewer.diffs import diff
+    from corraoi.viewer.info import log_info
+    from corraoi.viewer.replay import replay
 
     with tempfile.TemporaryDirectory(prefix="bench-replay-") as tmp:
         d = Path(tmp)

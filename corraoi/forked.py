@@ -2,8 +2,8 @@
 
 corraoi forks two workers, each to put a slow import on the other core while this process
 goes on (``docs/performance.md`` has what each buys, measured with ``CORRAOI_WORKERS=0``):
-the Rerun writer of ``corraoi record`` (:mod:`recorder.rerun.worker`) and the figure
-drawer of ``corraoi sweep -o`` (:mod:`viewer.figure_worker`). Each is a
+the Rerun writer of ``corraoi record`` (:mod:`corraoi.recorder.rerun.worker`) and the figure
+drawer of ``corraoi sweep -o`` (:mod:`corraoi.viewer.figure_worker`). Each is a
 :class:`ForkedWorker`: a process serving one end of a pipe.
 
 The rule, :func:`can_fork`: fork only where ``fork`` exists and this process runs one

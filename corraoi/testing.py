@@ -33,7 +33,7 @@ def assert_runs_equal(a: Any, b: Any, *, fields: Sequence[str] | None = None) ->
     ``corraoi.load``. Runs whose configurations differ (other than the corraoi version) or
     whose slot counts differ are not equal either.
     """
-    from viewer.diffs import diff
+    from corraoi.viewer.diffs import diff
 
     report = diff(_log(a), _log(b), fields=fields)
     if report.identical:
@@ -227,8 +227,8 @@ def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
     if tmp_path is None:
         return
     from corraoi.engine.block import RunConfig
-    from recorder.slotlog.reader import open_log
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.sink import McapSink
 
     path = Path(tmp_path) / f"check-{case.spec.name}-K{case.instance.K}.mcap"
     config = RunConfig(case.instance, case.spec, case.seeds[0], case.horizon)

@@ -3,7 +3,7 @@ MCAP), its Rerun recording (``rerun/``), a sweep's files (``sweeplog/``), live v
 (``live/``); the MCAP walker, the sink protocol, the names and numbers of the logs and the
 views' colours beside them.
 
-This front names nothing: callers import the modules (``recorder.slotlog.reader.open_log``,
-``recorder.slotlog.sink.McapSink``, ``recorder.rerun.sink.RerunSink``), so that reading a
+This front names nothing: callers import the modules (``corraoi.recorder.slotlog.reader.open_log``,
+``corraoi.recorder.slotlog.sink.McapSink``, ``corraoi.recorder.rerun.sink.RerunSink``), so that reading a
 log imports neither Rerun nor the writers (docs/architecture.md).
 """

@@ -55,8 +55,8 @@ def export(
     out_p = Path(out)
     fmt = export_format(out_p)
     require("analysis", "corraoi export", ("pyarrow",))
-    from recorder.slotlog.frames import RunData
-    from recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
+    from corraoi.recorder.slotlog.frames import RunData
+    from corraoi.recorder.sweeplog.results import SweepData, is_sweep_path, read_results_table
 
     src = Path(source)
     # a .partial a killed export left is made again from the source: never in the way

@@ -59,8 +59,8 @@ class Sink:
 
 class RunRecording(Sink):
     """One run's Rerun recording (an ``.rrd`` file and/or a viewer), whoever writes it:
-    this process (:class:`recorder.rerun.sink.LocalRecording`) or a forked worker
-    (:class:`recorder.rerun.worker.RemoteRecording`). ``record_run`` hands either the run's
+    this process (:class:`corraoi.recorder.rerun.sink.LocalRecording`) or a forked worker
+    (:class:`corraoi.recorder.rerun.worker.RemoteRecording`). ``record_run`` hands either the run's
     blocks like any other sink.
 
     :meth:`close` returns the ``.rrd`` path (None without a file) once the file is complete

@@ -1,8 +1,8 @@
 """The vocabulary of corraoi's MCAP files: every name and number of the slot log and the
 sweep log, defined once.
 
-Writers, readers, the walker (:mod:`recorder.walk`), ``corraoi recover`` and the live
-viewers import these; ``recorder.slotlog.decode`` and ``recorder.sweeplog.log`` re-export them under
+Writers, readers, the walker (:mod:`corraoi.recorder.walk`), ``corraoi recover`` and the live
+viewers import these; ``corraoi.recorder.slotlog.decode`` and ``corraoi.recorder.sweeplog.log`` re-export them under
 their older short names (``TOPIC``, ``FORMAT_VERSION``, ...), each for its own format.
 ``docs/log-format.md`` is the human description. Nothing here imports corraoi's core.
 """

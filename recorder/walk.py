@@ -1,7 +1,7 @@
 """The one MCAP walker: every reader of corraoi's MCAP files walks their records here.
 
-The slot-log reader (:mod:`recorder.slotlog.reader`), the sweep-log reader, the sweep sniffing of
-:mod:`recorder.sweeplog.results` and ``corraoi recover`` (:mod:`viewer.recover`) read through
+The slot-log reader (:mod:`corraoi.recorder.slotlog.reader`), the sweep-log reader, the sweep sniffing of
+:mod:`corraoi.recorder.sweeplog.results` and ``corraoi recover`` (:mod:`corraoi.viewer.recover`) read through
 :class:`Walker`, as ``mcap``'s ``reader.py`` builds on its ``stream_reader.py``. Record
 bodies are parsed by ``mcap``'s record classes (:mod:`mcap.records`) over its
 :class:`~mcap.data_stream.ReadDataStream`; a finished file's chunk index is read by

@@ -178,7 +178,7 @@ def drawn_share(png: bytes) -> float:
 def serve_rrd(path: str | os.PathLike[str]) -> Iterator[str]:
     """The Rerun web viewer serving ``path`` on 127.0.0.1; yields the page's URL. The
     server (its whole process group) is stopped when the block ends."""
-    from recorder.live.viewers import rerun_binary
+    from corraoi.recorder.live.viewers import rerun_binary
 
     grpc, web = free_port(), free_port()
     proc = subprocess.Popen(

@@ -112,7 +112,7 @@ def engine() -> Callable[..., list[SlotBlock]]:
 @pytest.fixture
 def record_mcap(tmp_path: Path) -> Callable[..., Recorded]:
     """record_mcap(policy, horizon=, seed=, name=, block=) -> (path, config, engine output)."""
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     def record(
         policy: str = "cucb",

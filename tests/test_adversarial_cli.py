@@ -24,9 +24,9 @@ from corraoi.files import partial as partial_file
 from corraoi.files.locks import lock_holder
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
 from corraoi.text import MAX_NAME, safe_name, safe_text
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
 
 T = 1500
 
@@ -540,7 +540,7 @@ def test_a_reader_that_stops_reading_is_not_an_error(tmp_path, args):
     err = proc.stderr.read().decode()
     assert (proc.wait(timeout=120), err) == (141, "")
     if args[0] == "record":
-        from recorder.slotlog.reader import open_log
+        from corraoi.recorder.slotlog.reader import open_log
 
         assert open_log(tmp_path / "p.mcap").status == "complete"
 

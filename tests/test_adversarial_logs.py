@@ -20,9 +20,9 @@ from corraoi.engine.simulation import simulate_run
 from corraoi.errors import LogError
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.encode import BlockEncoder
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
+from corraoi.recorder.slotlog.encode import BlockEncoder
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
 
 T = 2500
 EDIT_SLOT = 1500  # in the second chunk (slots 1001..2000)

@@ -145,6 +145,6 @@ def test_a_base_exception_while_running_is_reported_like_any_failure(
     assert says in line and "marked failed" in line, line
     partial = tmp_path / "out.mcap.partial"
     assert partial.exists()
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     assert open_log(partial, verify=False).status == "failed"

@@ -20,8 +20,8 @@ from corraoi.engine.block import RunConfig
 from corraoi.engine.simulation import simulate_run
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 

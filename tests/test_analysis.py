@@ -17,8 +17,8 @@ pytest.importorskip("pyarrow")
 
 import corraoi  # noqa: E402
 from corraoi.errors import MissingExtraError, UsageError  # noqa: E402
-from recorder.slotlog.frames import slot_columns  # noqa: E402
-from recorder.slotlog.sink import McapSink  # noqa: E402
+from corraoi.recorder.slotlog.frames import slot_columns  # noqa: E402
+from corraoi.recorder.slotlog.sink import McapSink  # noqa: E402
 
 from .conftest import Recorded  # noqa: E402
 
@@ -68,7 +68,7 @@ def test_a_window_equals_the_same_rows_of_a_full_load(
 ):
     path, _, _ = cucb_log
     full = corraoi.load(path).slots
-    import recorder.slotlog.reader as reader
+    import corraoi.recorder.slotlog.reader as reader
 
     decoded: list[int] = []
     real = reader.decode_messages
@@ -154,7 +154,7 @@ def test_results_reader_takes_a_partitioned_dataset(tmp_path: Path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from recorder.sweeplog.results import read_results, results_metadata, results_schema
+    from corraoi.recorder.sweeplog.results import read_results, results_metadata, results_schema
 
     md = results_metadata({"horizon": 10, "seed": 0, "instance": {"name": "I1"}})
     schema = results_schema(md)

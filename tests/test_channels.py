@@ -19,7 +19,7 @@ from corraoi.face.resolve import channel as resolve_channel
 from corraoi.model.channels import Channel, parse_channel, trace_channel
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 I1 = load_instance("I1")
 

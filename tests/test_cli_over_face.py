@@ -71,14 +71,14 @@ def test_the_check_sees_every_way_in(tmp_path):
         "import json\nimport click\nfrom corraoi.errors import UsageError\n"
         "from corraoi import limits, errors\nfrom . import common\nfrom .common import say\n"
         "from corraoi.face.views import info\nimport corraoi.face.runs\n"
-        "def f():\n    from recorder.export import export\n    import viewer.info\n"
+        "def f():\n    from corraoi.recorder.export import export\n    import corraoi.viewer.info\n"
         "    from corraoi.engine import kernels\n    from corraoi import gpu\n"
         "X = __import__('corraoi.model.theory')\n"
     )
     path = tmp_path / "x.py"
     path.write_text(code, encoding="utf-8")
     bad = [m for _, m in _imports(path) if not _allowed(m)]
-    assert bad == ["recorder.export.export", "viewer.info", "corraoi.engine.kernels",
+    assert bad == ["corraoi.recorder.export.export", "corraoi.viewer.info", "corraoi.engine.kernels",
                    "corraoi.gpu", "corraoi.model.theory"]  # fmt: skip
 
 

@@ -27,7 +27,7 @@ from click.testing import CliRunner
 from corraoi.cli import main
 from corraoi.engine.block import SlotBlock
 from corraoi.files.partial import partial_path
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 PYTHON = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
@@ -137,7 +137,7 @@ def test_help_does_not_import_rerun_or_the_recorder():
         "from corraoi.cli import main\n"
         "r = CliRunner().invoke(main, ['record', '--help'])\n"
         "assert r.exit_code == 0 and '--serve-web' in r.output and '--no-rrd' in r.output\n"
-        "print(sorted(m for m in ('rerun', 'mcap', 'recorder.slotlog.sink') if m in sys.modules))\n"
+        "print(sorted(m for m in ('rerun', 'mcap', 'corraoi.recorder.slotlog.sink') if m in sys.modules))\n"
     )
     out = subprocess.run([PYTHON, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
@@ -234,7 +234,7 @@ def test_spawn_without_a_display_says_so_and_writes_the_files(tmp_path, monkeypa
 
 
 def _rerun_binary() -> str:
-    from recorder.live.viewers import rerun_binary
+    from corraoi.recorder.live.viewers import rerun_binary
 
     return rerun_binary()
 
@@ -260,7 +260,7 @@ def test_the_viewer_gets_the_same_recording_as_the_file(tmp_path, monkeypatch, h
             time.sleep(0.1)
         url = f"rerun+http://127.0.0.1:{port}/proxy"
         if how == "--spawn":
-            from recorder.live import viewers as live
+            from corraoi.recorder.live import viewers as live
 
             monkeypatch.setenv("DISPLAY", ":99")
             monkeypatch.setattr(live, "spawn_viewer", lambda: url)

@@ -12,7 +12,7 @@ from corraoi.cli import main
 from corraoi.engine.simulation import Simulation
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.sweeplog.read import read_sweep
+from corraoi.recorder.sweeplog.read import read_sweep
 
 
 def run(*args: str):

@@ -48,8 +48,8 @@ def _other_tool(path: Path) -> Path:
 
 
 def _newer(path: Path) -> Path:
-    from recorder.slotlog.encode import run_metadata
-    from recorder.vocab import RUN_METADATA
+    from corraoi.recorder.slotlog.encode import run_metadata
+    from corraoi.recorder.vocab import RUN_METADATA
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 0, 100)
     meta = run_metadata(config)
@@ -297,8 +297,8 @@ def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
 
 def test_the_viewer_does_not_import_the_engine():
     code = (
-        "import sys, viewer, viewer.compare, viewer.replay, viewer.diffs, viewer.info, "
-        "viewer.recover, corraoi.cli.viewer, recorder.slotlog.reader, recorder.rerun.sink\n"
+        "import sys, corraoi.viewer, corraoi.viewer.compare, corraoi.viewer.replay, corraoi.viewer.diffs, corraoi.viewer.info, "
+        "corraoi.viewer.recover, corraoi.cli.viewer, corraoi.recorder.slotlog.reader, corraoi.recorder.rerun.sink\n"
         "bad = sorted(m for m in ('corraoi.engine.simulation', 'corraoi.engine.kernels', 'numba') "
         "if m in sys.modules)\n"
         "print(','.join(bad))"
@@ -329,7 +329,7 @@ def test_a_log_with_no_complete_slot_is_refused(tmp_path, record_mcap):
     path, _, _ = record_mcap("cucb", horizon=3000)
     empty = tmp_path / "empty.mcap.partial"
     empty.write_bytes(path.read_bytes()[:5000])  # killed before the first chunk was written
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     assert open_log(empty).n_slots == 0
     for cmd, out in (
@@ -347,7 +347,7 @@ def test_a_log_with_no_complete_slot_is_refused(tmp_path, record_mcap):
 def test_ctrl_c_in_replay_or_compare_leaves_no_half_written_rrd(tmp_path, record_mcap):
     import pytest
 
-    from viewer import compare, replay
+    from corraoi.viewer import compare, replay
 
     path, _, _ = record_mcap("cucb", horizon=3000)
     good = tmp_path / "out.rrd"

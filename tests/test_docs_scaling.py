@@ -48,7 +48,7 @@ def test_every_command_and_example_runs_as_shown(tmp_path: Path):
     for folder in ("grid-cli", "grid", "grid-cluster"):
         assert (tmp_path / folder / "manifest.json").exists(), folder
     # the cluster's runs are the laptop's (which were then extended to 60 runs and ts)
-    from recorder.sweeplog.results import read_results
+    from corraoi.recorder.sweeplog.results import read_results
 
     keys = ["instance", "policy", "params", "horizon", "run", "t"]
     cluster = read_results(tmp_path / "grid-cluster" / "results.parquet")

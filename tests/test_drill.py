@@ -21,8 +21,8 @@ from corraoi.experiments.grid import build_grid  # noqa: E402
 from corraoi.experiments.notable import MAX_PAIRED_CELLS, cell_runs, notable_runs  # noqa: E402
 from corraoi.experiments.sweeps import sweep  # noqa: E402
 from corraoi.face.outputs import FolderOutputs  # noqa: E402
-from recorder.slotlog.reader import open_log  # noqa: E402
-from recorder.sweeplog.read import read_sweep  # noqa: E402
+from corraoi.recorder.slotlog.reader import open_log  # noqa: E402
+from corraoi.recorder.sweeplog.read import read_sweep  # noqa: E402
 
 POLICIES = ["ucb", "cucb", "aoi-aware-cts"]
 SEED = 100

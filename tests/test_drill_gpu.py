@@ -19,7 +19,7 @@ from corraoi.gpu.device import DEVICE_ENV, CudaDevice, Device, EmulatedDevice, h
 from corraoi.gpu.runner import capture_run, simulate
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 needs_cxx = pytest.mark.skipif(
     host_compiler() is None, reason="no C++ compiler: the emulated GPU device cannot be built"

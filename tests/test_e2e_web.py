@@ -27,7 +27,7 @@ from urllib.parse import unquote, urlsplit
 
 import pytest
 
-from recorder import style
+from corraoi.recorder import style
 
 from .browser import (
     Chromium,

@@ -16,7 +16,7 @@ import pytest
 
 import corraoi
 from corraoi import Param, Policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -15,10 +15,10 @@ from click.testing import CliRunner
 
 from corraoi.cli import main
 from corraoi.errors import FigureUnavailable, UsageError
-from recorder.style import POLICY_COLORS
-from recorder.sweeplog.log import SweepMcapSink
-from recorder.sweeplog.read import read_sweep
-from viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, draw_figure
+from corraoi.recorder.style import POLICY_COLORS
+from corraoi.recorder.sweeplog.log import SweepMcapSink
+from corraoi.recorder.sweeplog.read import read_sweep
+from corraoi.viewer.figure import DPI, FIGSIZE, MISSING_MATPLOTLIB, draw_figure
 
 from .test_sweep_log import POLICIES, small_sweep, write_log
 

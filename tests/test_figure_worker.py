@@ -24,7 +24,7 @@ if how == "no-matplotlib":
     sys.modules["matplotlib"] = None  # as on a machine without the plot extra
 from corraoi.experiments.sweeps import sweep
 from corraoi.experiments.grid import build_grid
-from viewer.figure_worker import FigureWorker
+from corraoi.viewer.figure_worker import FigureWorker
 from corraoi.face.outputs import FolderOutputs
 
 grid = build_grid(instances=["I1", "I2"], policies=["ucb", "cts"], horizons=[300], runs=8)
@@ -51,15 +51,15 @@ def _run(how: str, out: Path) -> dict:
 
 def _drawn_here(folder: Path, tmp_path: Path) -> bytes:
     """The figure of a group's sweep log as drawn in this process."""
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import draw_figure
+    from corraoi.recorder.sweeplog.read import read_sweep
+    from corraoi.viewer.figure import draw_figure
 
     out = tmp_path / f"here-{folder.name}.png"
     return draw_figure(read_sweep(folder / "sweep.mcap"), out).read_bytes()
 
 
 def test_sweep_o_draws_its_figures_in_the_worker_as_they_are_drawn_in_process(tmp_path: Path):
-    code = ("import sys, viewer.figure_worker as w; calls = []; real = w.FigureWorker.draw\n"
+    code = ("import sys, corraoi.viewer.figure_worker as w; calls = []; real = w.FigureWorker.draw\n"
             "def draw(self, log, out):\n    calls.append(str(out)); real(self, log, out)\n"
             "w.FigureWorker.draw = draw\n"
             "import atexit; atexit.register(lambda: print('DRAWN', len(calls)))\n"
@@ -101,8 +101,8 @@ def test_without_matplotlib_the_worker_path_warns_once_per_figure(tmp_path: Path
 
 _ORPHAN = r"""
 import sys, time
-import viewer.figure_worker as fw
-from recorder.rerun.worker import RerunWorker
+import corraoi.viewer.figure_worker as fw
+from corraoi.recorder.rerun.worker import RerunWorker
 fw.draw_from_log = lambda log, out: time.sleep(60)  # a figure that takes a minute
 figures = fw.FigureWorker.start()
 figures.draw("sweep.mcap", "figure.png")  # busy: it does not read the pipe meanwhile
@@ -150,8 +150,8 @@ def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path:
     from corraoi.experiments.grid import build_grid
     from corraoi.experiments.sweeps import sweep
     from corraoi.face.outputs import FolderOutputs
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import draw_figure
+    from corraoi.recorder.sweeplog.read import read_sweep
+    from corraoi.viewer.figure import draw_figure
 
     grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[200], runs=4)
     sweep(grid, out=tmp_path / "sw", workers=1, outputs=FolderOutputs())

@@ -87,8 +87,8 @@ def test_a_worker_dies_with_its_parent_even_by_sigkill(tmp_path):
 def test_workers_off_does_every_job_in_this_process(monkeypatch):
     import multiprocessing
 
-    from recorder.rerun.worker import RerunWorker
-    from viewer.figure_worker import FigureWorker
+    from corraoi.recorder.rerun.worker import RerunWorker
+    from corraoi.viewer.figure_worker import FigureWorker
 
     monkeypatch.setenv(forked.ENV, "0")
     assert RerunWorker.start() is None

@@ -19,10 +19,10 @@ from corraoi.cli import main
 from corraoi.experiments.montecarlo import sweep_config
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies, paper_names
-from recorder.sweeplog.read import read_sweep
-from recorder.vocab import SWEEP_METADATA
-from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
-from recorder.vocab import SWEEP_TOPIC as TOPIC
+from corraoi.recorder.sweeplog.read import read_sweep
+from corraoi.recorder.vocab import SWEEP_METADATA
+from corraoi.recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import SWEEP_TOPIC as TOPIC
 
 from .conftest import Recorded
 

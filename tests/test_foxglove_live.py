@@ -1,10 +1,10 @@
-"""Live in Foxglove (recorder.live.foxglove, record/replay --foxglove): a real protocol client
+"""Live in Foxglove (corraoi.recorder.live.foxglove, record/replay --foxglove): a real protocol client
 over `websockets` gets the MCAP log's messages, late and slow clients, and the ways a run ends.
 
 Everything listens on 127.0.0.1, and every server is stopped by the test that started it.
 The SDK (0.30) speaks the Foxglove WebSocket protocol under its current subprotocol name
 ``foxglove.sdk.v1`` (it refuses the older ``foxglove.websocket.v1`` alone); the front
-(recorder.live.front) admits both. The client here offers both unless a test says
+(corraoi.recorder.live.front) admits both. The client here offers both unless a test says
 otherwise; one test drives the official ``@foxglove/ws-protocol`` client with node.
 """
 
@@ -32,7 +32,7 @@ from mcap.reader import make_reader  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
 from corraoi.engine.block import SlotBlock  # noqa: E402
-from recorder.live.foxglove import (  # noqa: E402
+from corraoi.recorder.live.foxglove import (  # noqa: E402
     BACKLOG,
     RUN_TOPIC,
     Address,
@@ -43,11 +43,11 @@ from recorder.live.foxglove import (  # noqa: E402
     parse_address,
     stream_log,
 )
-from recorder.slotlog.encode import schema_bytes  # noqa: E402
-from recorder.slotlog.reader import open_log  # noqa: E402
-from recorder.slotlog.sink import McapSink  # noqa: E402
-from recorder.vocab import SLOT_TOPIC as TOPIC  # noqa: E402
-from recorder.vocab import SWEEP_TOPIC  # noqa: E402
+from corraoi.recorder.slotlog.encode import schema_bytes  # noqa: E402
+from corraoi.recorder.slotlog.reader import open_log  # noqa: E402
+from corraoi.recorder.slotlog.sink import McapSink  # noqa: E402
+from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC  # noqa: E402
+from corraoi.recorder.vocab import SWEEP_TOPIC  # noqa: E402
 
 CORRAOI = [sys.executable, "-m", "corraoi"]
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) must be used:DeprecationWarning")
@@ -410,7 +410,7 @@ def test_a_client_offering_neither_name_is_refused_as_before():
 
 
 def test_the_front_renames_only_the_subprotocol_header():
-    from recorder.live.front import offered, set_protocol
+    from corraoi.recorder.live.front import offered, set_protocol
 
     head = (b"GET / HTTP/1.1\r\nHost: x\r\nsec-websocket-protocol: a, foxglove.websocket.v1"
             b"\r\nSec-WebSocket-Protocol: b\r\nUpgrade: websocket")  # fmt: skip
@@ -423,7 +423,7 @@ def test_the_front_renames_only_the_subprotocol_header():
 
 
 def test_a_paced_sink_waits_for_a_first_client_and_no_longer(make_config, engine, monkeypatch):
-    import recorder.live.foxglove as live
+    import corraoi.recorder.live.foxglove as live
 
     monkeypatch.setattr(live, "FIRST_CLIENT_WAIT", 0.6)
     config = make_config(horizon=1000)

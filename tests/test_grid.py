@@ -33,7 +33,7 @@ def run(*args: object):  # type: ignore[no-untyped-def]
 
 
 def results(folder: Path):  # type: ignore[no-untyped-def]
-    from recorder.sweeplog.results import read_results
+    from corraoi.recorder.sweeplog.results import read_results
 
     return read_results(folder / "results.parquet")
 
@@ -137,8 +137,8 @@ def test_appending_runs_policies_and_values_equals_running_them_all_at_once(tmp_
         assert (tmp_path / "grow" / inst / "sweep.mcap").read_bytes() == (
             tmp_path / "once" / inst / "sweep.mcap"
         ).read_bytes()
-    from recorder.style import config_colors, policy_color
-    from recorder.sweeplog.read import read_sweep
+    from corraoi.recorder.style import config_colors, policy_color
+    from corraoi.recorder.sweeplog.read import read_sweep
 
     colors = config_colors(read_sweep(tmp_path / "once" / "I1" / "sweep.mcap").config)
     shades = [rgb for name, rgb in colors.items() if name.startswith("sw-ucb(")]

@@ -15,7 +15,7 @@ gymnasium = pytest.importorskip("gymnasium")
 
 import corraoi  # noqa: E402
 from corraoi.errors import SlotError, UsageError  # noqa: E402
-from recorder.slotlog.reader import open_log  # noqa: E402
+from corraoi.recorder.slotlog.reader import open_log  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 MAKE = "corraoi.gym:corraoi/CorrelatedAoI-v0"

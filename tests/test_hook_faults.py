@@ -18,7 +18,7 @@ from corraoi.engine.simulation import Simulation
 from corraoi.errors import PolicyRuntimeError
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 PLUGINS = Path(__file__).parent / "plugins" / "bad_compiled.py"
 

@@ -68,7 +68,7 @@ SWEEP = ["sweep", "-i", "I1", "-p", "ucb,cucb", "-n", 4, "-T", 300, "--seed", 7,
 
 
 def _results(folder: Path) -> Any:
-    from recorder.sweeplog.results import read_results
+    from corraoi.recorder.sweeplog.results import read_results
 
     return read_results(folder / "results.parquet").sort_values(["policy", "run", "t"])
 

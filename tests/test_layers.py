@@ -286,19 +286,19 @@ def test_the_floor_check_sees_strings_and_lazy_tables():
         "import importlib\n"
         "_LAZY = {'RerunSink': 'rerun.sink'}\n"
         "def __getattr__(name):\n"
-        "    return importlib.import_module('viewer.diffs')\n"
+        "    return importlib.import_module('corraoi.viewer.diffs')\n"
         "WORKER = 'from corraoi.engine import kernels'\n"
         "PATHS = ['corraoi', 'recorder', 'viewer', 'corraoi.cli']\n"
         "SEAM = 'corraoi.face.load:load'\n"
     )
     found = _string_imports("recorder", ast.parse(code))
-    assert found >= {"recorder.rerun.sink", "viewer.diffs", "corraoi.engine.kernels",
+    assert found >= {"corraoi.recorder.rerun.sink", "corraoi.viewer.diffs", "corraoi.engine.kernels",
                      "corraoi.face.load"}  # fmt: skip
     assert not found & {"corraoi", "recorder", "viewer", "corraoi.cli"}
     assert "corraoi.face.recording" in _edges()["corraoi"]  # the package's lazy table
-    assert _climbs({"recorder.x": {"viewer.diffs", "corraoi.engine.block"},
+    assert _climbs({"recorder.x": {"corraoi.viewer.diffs", "corraoi.engine.block"},
                     "viewer.y": {"recorder.x", "corraoi.face.load"}}) == {
-        "recorder.x": ["viewer.diffs"], "viewer.y": ["corraoi.face.load"]}  # fmt: skip
+        "recorder.x": ["corraoi.viewer.diffs"], "viewer.y": ["corraoi.face.load"]}  # fmt: skip
 
 
 def _rooms(edges: dict[str, set[str]]) -> dict[str, set[str]]:
@@ -353,8 +353,8 @@ def test_the_checks_see_a_circle_and_a_climb():
     """The check itself: a made-up circle is found, and the top floor's climbs are seen."""
     assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == {frozenset("abc")}
     edges = _edges()
-    assert "recorder.slotlog.sink" in edges["corraoi.face.recording"]
-    assert "corraoi.engine.block" in edges["recorder.slotlog.reader"]
+    assert "corraoi.recorder.slotlog.sink" in edges["corraoi.face.recording"]
+    assert "corraoi.engine.block" in edges["corraoi.recorder.slotlog.reader"]
     assert _wing("corraoi.engine.kernels") == "corraoi.engine"
     assert _wing("corraoi.rng") == "corraoi.rng"
 

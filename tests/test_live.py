@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from recorder.live import viewers as live
+from corraoi.recorder.live import viewers as live
 
 
 def test_on_path_it_is_the_plain_name(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):

@@ -21,8 +21,8 @@ import corraoi
 from corraoi.cli import main
 from corraoi.engine.block import FIELDS
 from corraoi.errors import SlotError
-from recorder.slotlog.encode import BlockEncoder
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.encode import BlockEncoder
+from corraoi.recorder.slotlog.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 T = 3500
@@ -255,7 +255,7 @@ def test_a_log_is_read_with_exactly_the_fields_it_says_it_holds(cucb):
     """What a log lacks is what its first message lacks (the slot record says what may be
     absent); a later message may not add or drop such a column, nor any log a required one."""
     from corraoi.errors import LogError
-    from recorder.slotlog.decode import decode_messages
+    from corraoi.recorder.slotlog.decode import decode_messages
 
     run, b = cucb
     absent = ("x", "oracle_aoi", "regret")

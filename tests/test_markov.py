@@ -17,7 +17,7 @@ from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.model.markov import mixing, period
 from corraoi.policies import make_policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 I1 = load_instance("I1")
 

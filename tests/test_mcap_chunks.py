@@ -1,4 +1,4 @@
-"""The hand-framed MCAP writer (recorder.slotlog.chunks) against mcap's own writer and readers."""
+"""The hand-framed MCAP writer (corraoi.recorder.slotlog.chunks) against mcap's own writer and readers."""
 
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, IndexType, Writer
 
 from corraoi.engine.block import SlotBlock
-from recorder.slotlog.chunks import ZSTD_LEVEL, ChunkWriter
-from recorder.slotlog.encode import BlockEncoder
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
-from recorder.vocab import NS_PER_SLOT
-from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from corraoi.recorder.slotlog.chunks import ZSTD_LEVEL, ChunkWriter
+from corraoi.recorder.slotlog.encode import BlockEncoder
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
+from corraoi.recorder.vocab import NS_PER_SLOT
+from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 
 
 def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from recorder import style
+from corraoi.recorder import style
 
 from .browser import (
     Chromium,

@@ -20,7 +20,7 @@ from corraoi.cli import main
 from corraoi.engine.simulation import Simulation
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies, make_policy
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 PLUGINS = Path(__file__).parent / "plugins"
 I1 = load_instance("I1")

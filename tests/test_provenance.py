@@ -20,8 +20,8 @@ from mcap.reader import make_reader
 from corraoi.errors import CodeChanged
 from corraoi.policies import PolicySpec, make_policy
 from corraoi.provenance import KERNEL_SOURCES, Provenance, kernel_sources_hash
-from recorder.slotlog.reader import open_log
-from recorder.sweeplog.read import read_sweep
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.sweeplog.read import read_sweep
 
 PLUGIN = '''"""A plain-Python plug-in: greedy after a forced first pull of every arm."""
 import numpy as np

@@ -14,7 +14,7 @@ import corraoi
 from corraoi.errors import PolicyRuntimeError
 from corraoi.policies import Policy
 from corraoi.policies.api import RunState
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 #: A write into each field, as a policy would make it by mistake.
 WRITES = {

@@ -15,10 +15,10 @@ from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import OutputError, WriteError
 from corraoi.files import partial as partial_file
 from corraoi.files.partial import partial_path
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
-from recorder.vocab import NS_PER_SLOT
-from recorder.vocab import SLOT_TOPIC as TOPIC
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
+from corraoi.recorder.vocab import NS_PER_SLOT
+from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
 
 
 @pytest.mark.parametrize("policy", ["cucb", "ts", "aoi-aware-cts", "aoi-aware-ucb"])

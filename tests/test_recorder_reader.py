@@ -10,9 +10,9 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from corraoi.errors import LogError, UsageError
-from recorder.slotlog.encode import run_metadata
-from recorder.slotlog.reader import open_log
-from recorder.vocab import RUN_METADATA, SLOT_FORMAT_VERSION
+from corraoi.recorder.slotlog.encode import run_metadata
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.vocab import RUN_METADATA, SLOT_FORMAT_VERSION
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000, 4096])

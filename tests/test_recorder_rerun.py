@@ -14,11 +14,11 @@ from rerun.chunk import RrdReader  # noqa: E402
 from corraoi.engine.block import SlotBlock  # noqa: E402
 from corraoi.errors import OutputError  # noqa: E402
 from corraoi.files.partial import partial_path  # noqa: E402
-from recorder.rerun.layout import one_run_blueprint  # noqa: E402
-from recorder.rerun.names import new_recording, run_path  # noqa: E402
-from recorder.rerun.output import RrdOutput  # noqa: E402
-from recorder.rerun.sink import RerunSink  # noqa: E402
-from recorder.slotlog.reader import open_log  # noqa: E402
+from corraoi.recorder.rerun.layout import one_run_blueprint  # noqa: E402
+from corraoi.recorder.rerun.names import new_recording, run_path  # noqa: E402
+from corraoi.recorder.rerun.output import RrdOutput  # noqa: E402
+from corraoi.recorder.rerun.sink import RerunSink  # noqa: E402
+from corraoi.recorder.slotlog.reader import open_log  # noqa: E402
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 
@@ -120,7 +120,7 @@ def test_same_run_same_recording_and_a_replay_renders_the_same(tmp_path, make_co
     b = write_rrd(tmp_path / "b.rrd", config, engine(config, block=1000))
     assert compare(a, b).returncode == 0
     # the MCAP log read back and sent through the same sink gives the same recording
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     with McapSink(tmp_path / "a.mcap", config, fsync=False) as sink:
         for block in blocks:

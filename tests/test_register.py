@@ -25,8 +25,8 @@ from corraoi.policies import (
     resolve,
 )
 from corraoi.policies.spec import PolicySpec
+from corraoi.recorder.slotlog.reader import open_log
 from corraoi.testing import check_policy
-from recorder.slotlog.reader import open_log
 
 MODULE = textwrap.dedent(
     """

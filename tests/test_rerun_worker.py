@@ -21,8 +21,8 @@ from corraoi.face.recording import record_run
 from corraoi.files.partial import partial_path
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
-from recorder.rerun.worker import RerunWorker
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.rerun.worker import RerunWorker
+from corraoi.recorder.slotlog.reader import open_log
 
 from .rrd_util import RERUN, read_rrd
 from .test_cli_record import _wait_for
@@ -153,7 +153,7 @@ def test_a_killed_record_leaves_no_worker_behind(tmp_path):
 
 _PROBE = """
 import json, os, sys
-import recorder.rerun.worker as w
+import corraoi.recorder.rerun.worker as w
 serve = w.serve
 def spy(*args):
     try:

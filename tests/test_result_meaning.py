@@ -22,8 +22,8 @@ from corraoi.cli import main
 from corraoi.engine.block import FIELDS, RunConfig, SlotBlock
 from corraoi.errors import CorraoiWarning
 from corraoi.model.instance import Instance
-from recorder.slotlog.reader import open_log
-from viewer import diff
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.viewer import diff
 
 PLUGIN = '''"""A plain-Python plug-in: greedy after a forced first pull of every arm."""
 from corraoi.policies import Param, Policy
@@ -49,7 +49,7 @@ def _cli(*args: object, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 
 def _write(path: Path, config: RunConfig, block: SlotBlock) -> Path:
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     with McapSink(path, config, fsync=False) as sink:
         sink.write(SlotBlock(**{f: block.column(f) for f in FIELDS}))

@@ -20,9 +20,9 @@ import corraoi  # noqa: E402
 from corraoi._version import __version__  # noqa: E402
 from corraoi.cli import main  # noqa: E402
 from corraoi.experiments.montecarlo import mean_ci95  # noqa: E402
-from recorder.slotlog.frames import slot_columns  # noqa: E402
-from recorder.sweeplog.read import read_sweep  # noqa: E402
-from recorder.sweeplog.results import COLUMNS, read_results  # noqa: E402
+from corraoi.recorder.slotlog.frames import slot_columns  # noqa: E402
+from corraoi.recorder.sweeplog.read import read_sweep  # noqa: E402
+from corraoi.recorder.sweeplog.results import COLUMNS, read_results  # noqa: E402
 
 from .conftest import Recorded  # noqa: E402
 

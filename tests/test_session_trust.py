@@ -20,7 +20,7 @@ import pytest
 
 import corraoi
 from corraoi.errors import CodeChanged, ConfigError, OutputError
-from recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.reader import open_log
 
 CELL = '''
 import numpy as np

@@ -72,7 +72,7 @@ def served_sources(grpc_url: str, into: Path) -> list[tuple[str, str]]:
     gets; read once the run has arrived and a moment more has passed."""
     from rerun.chunk import RrdReader
 
-    from recorder.live.viewers import rerun_binary
+    from corraoi.recorder.live.viewers import rerun_binary
 
     proc = subprocess.Popen([rerun_binary(), "--connect", grpc_url, "--save", str(into)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
@@ -168,7 +168,7 @@ def test_spawn_with_a_display_opens_the_files_in_the_native_viewer(tmp_path, mon
                     "time.sleep(60)\n")  # fmt: skip
     fake.chmod(0o755)
     monkeypatch.setenv("DISPLAY", ":99")
-    monkeypatch.setattr("recorder.live.viewers.rerun_executable", lambda: str(fake))
+    monkeypatch.setattr("corraoi.recorder.live.viewers.rerun_executable", lambda: str(fake))
     shown = corraoi.show(recorded, spawn=True)
     try:
         assert shown.kind == "native" and shown.url is None

@@ -1,6 +1,6 @@
 """One sink protocol (issue 23): everything in the recorder that takes a run's slots or a
 sweep's points implements ``write``, ``close`` and ``abort`` and is a context manager, by
-deriving from ``recorder.sink.Sink``; leaving the ``with`` through an error aborts."""
+deriving from ``corraoi.recorder.sink.Sink``; leaving the ``with`` through an error aborts."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ from pathlib import Path
 
 import pytest
 
-import recorder
+import corraoi.recorder
 from corraoi.files.partial import partial_path
-from recorder.sink import Sink
+from corraoi.recorder.sink import Sink
 
 
 def _writers() -> dict[str, type]:
     found = {}
-    for info in pkgutil.walk_packages(recorder.__path__, "recorder."):
+    for info in pkgutil.walk_packages(corraoi.recorder.__path__, "corraoi.recorder."):
         module = importlib.import_module(info.name)
         for name, obj in vars(module).items():
             if (inspect.isclass(obj) and obj.__module__ == module.__name__
@@ -45,7 +45,7 @@ def test_an_error_inside_the_with_aborts_and_leaves_the_partial_file(tmp_path: P
     from corraoi.face.slots import slots_of
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     config = RunConfig(load_instance("I1"), make_policy("ucb"), 3, 50)
     out = tmp_path / "a.mcap"
@@ -78,7 +78,7 @@ def test_record_run_hands_every_block_to_the_sinks_it_is_given(tmp_path: Path):
     from corraoi.face.recording import record_run
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policy
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     config = RunConfig(load_instance("I1"), make_policy("cucb"), 4, 2500)
     mine = _Collect()

@@ -25,10 +25,10 @@ from corraoi.errors import CorraoiWarning, LogError, PolicyRuntimeError
 from corraoi.face.resolve import policies
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import Choice, Policy, builtins, make_policy
-from recorder.slotlog.encode import BlockEncoder
-from recorder.slotlog.reader import open_log
-from recorder.slotlog.sink import McapSink
-from recorder.vocab import SLOT_TOPIC
+from corraoi.recorder.slotlog.encode import BlockEncoder
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.slotlog.sink import McapSink
+from corraoi.recorder.vocab import SLOT_TOPIC
 
 ROOT = Path(__file__).parent.parent
 #: A slot log written by corraoi before the score (commit 2347ea6): aoi-aware-cucb on I1,
@@ -174,7 +174,7 @@ def test_a_log_written_before_the_score_reads_and_its_slots_equal_todays(tmp_pat
         for key in NEW:
             del mine[key]
         assert json.dumps(mine, separators=(",", ":")).encode() == a  # byte for byte
-    from viewer.diffs import diff
+    from corraoi.viewer.diffs import diff
 
     report = diff(BEFORE, new)
     assert report.same_slots
@@ -224,7 +224,7 @@ def test_a_field_from_a_newer_corraoi_is_kept_and_named_once(tmp_path):
     got = SlotBlock.concat(blocks)
     assert np.array_equal(got.extra["novelty"], 2 * got.t)
     pytest.importorskip("pandas")
-    from recorder.slotlog.frames import RunData
+    from corraoi.recorder.slotlog.frames import RunData
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CorraoiWarning)
@@ -272,7 +272,7 @@ def test_a_log_before_the_score_replays_without_the_why_entities(tmp_path):
     pytest.importorskip("rerun")
     from rerun.chunk import RrdReader
 
-    from viewer.replay import replay
+    from corraoi.viewer.replay import replay
 
     out = tmp_path / "old.rrd"
     replay(BEFORE, rrd_path=out)
@@ -310,7 +310,7 @@ def test_the_score_is_an_option_on_by_default_up_to_64_arms(tmp_path):
 
 
 def test_every_declared_rerun_entity_is_one_the_recording_has():
-    from recorder.rerun.names import ENTITIES, WHY
+    from corraoi.recorder.rerun.names import ENTITIES, WHY
 
     for f in SLOT_RECORD:
         for part in filter(None, (p.strip() for p in f.entity.split(","))):

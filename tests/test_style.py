@@ -1,4 +1,4 @@
-"""recorder.style is the one place for colours and names: every view draws a policy alike.
+"""corraoi.recorder.style is the one place for colours and names: every view draws a policy alike.
 
 The same policy gets the same colour in a ``record`` recording, a ``compare`` recording,
 the sweep recording and the sweep figure; a policy's own colour (``spec.color``) wins; the
@@ -15,13 +15,13 @@ import pytest
 from rerun.chunk import RrdReader
 
 from corraoi.model.theory import analyse
-from recorder import style
-from recorder.rerun.names import run_path
-from recorder.rerun.output import RrdOutput
-from recorder.rerun.sink import RerunSink
-from recorder.sweeplog.layout import regret_path
-from recorder.sweeplog.recording import SweepRerunSink
-from viewer.compare import compare
+from corraoi.recorder import style
+from corraoi.recorder.rerun.names import run_path
+from corraoi.recorder.rerun.output import RrdOutput
+from corraoi.recorder.rerun.sink import RerunSink
+from corraoi.recorder.sweeplog.layout import regret_path
+from corraoi.recorder.sweeplog.recording import SweepRerunSink
+from corraoi.viewer.compare import compare
 
 from .rrd_util import read_rrd
 from .test_sweep_log import small_sweep
@@ -105,9 +105,9 @@ def test_one_policy_one_colour_in_record_compare_sweep_and_figure(
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweeplog.log import SweepMcapSink
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import draw_figure
+    from corraoi.recorder.sweeplog.log import SweepMcapSink
+    from corraoi.recorder.sweeplog.read import read_sweep
+    from corraoi.viewer.figure import draw_figure
 
     with SweepMcapSink(tmp_path / "s.mcap", config_s, fsync=False) as log:
         for p in points:
@@ -138,9 +138,9 @@ def test_a_sweep_policy_with_its_own_colour_keeps_it_in_the_recording_and_figure
     pytest.importorskip("matplotlib")
     from matplotlib.image import imread
 
-    from recorder.sweeplog.log import SweepMcapSink
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import draw_figure
+    from corraoi.recorder.sweeplog.log import SweepMcapSink
+    from corraoi.recorder.sweeplog.read import read_sweep
+    from corraoi.viewer.figure import draw_figure
 
     config, points = small_sweep(("cucb", "ucb"), runs=2, horizon=300)
     assert [p["name"] for p in config["policies"]] == ["cucb", "ucb"]

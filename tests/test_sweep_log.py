@@ -23,14 +23,14 @@ from corraoi.errors import LogError, SweepLogError, UsageError
 from corraoi.experiments.montecarlo import checkpoint_point, run_sweep, sweep_config
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policies
+from corraoi.recorder.style import POLICY_COLORS, lighter, policy_color
+from corraoi.recorder.sweeplog.log import SweepMcapSink
+from corraoi.recorder.sweeplog.read import read_sweep
+from corraoi.recorder.vocab import NS_PER_SLOT, SWEEP_METADATA
+from corraoi.recorder.vocab import SWEEP_END_METADATA as END_METADATA
+from corraoi.recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import SWEEP_TOPIC as TOPIC
 from corraoi.stats import SweepPoint
-from recorder.style import POLICY_COLORS, lighter, policy_color
-from recorder.sweeplog.log import SweepMcapSink
-from recorder.sweeplog.read import read_sweep
-from recorder.vocab import NS_PER_SLOT, SWEEP_METADATA
-from recorder.vocab import SWEEP_END_METADATA as END_METADATA
-from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
-from recorder.vocab import SWEEP_TOPIC as TOPIC
 
 POLICIES = ("ucb", "cucb", "aoi-aware-cucb", "cts")
 CHECKPOINTS = (1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 100, 150, 200, 250, 300)
@@ -296,7 +296,7 @@ def test_reader_errors(tmp_path: Path, sweep: Sweep, record_mcap):
 
 
 def test_newer_format_is_refused(tmp_path: Path, sweep: Sweep, monkeypatch):
-    import recorder.sweeplog.log as sweep_log
+    import corraoi.recorder.sweeplog.log as sweep_log
 
     real = sweep_log.sweep_metadata
     monkeypatch.setattr(
@@ -339,8 +339,8 @@ def _rgba(rgb: tuple[int, int, int]) -> int:
 def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
     from rerun.chunk import RrdReader
 
-    from recorder.sweeplog.layout import sweep_recording_id
-    from recorder.sweeplog.recording import open_sweep_recording
+    from corraoi.recorder.sweeplog.layout import sweep_recording_id
+    from corraoi.recorder.sweeplog.recording import open_sweep_recording
 
     config, points = sweep
     path = tmp_path / "sweep.rrd"
@@ -380,8 +380,8 @@ def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
 def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
     import rerun as rr
 
-    from recorder.sweeplog.layout import sweep_blueprint
-    from recorder.sweeplog.recording import SweepRerunSink
+    from corraoi.recorder.sweeplog.layout import sweep_blueprint
+    from corraoi.recorder.sweeplog.recording import SweepRerunSink
 
     config, points = small_sweep(("ts", "aoi-aware-ts"), runs=1, horizon=40)
     rec = rr.RecordingStream("corraoi", recording_id="test-sweep")
@@ -399,7 +399,7 @@ def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
 
 
 def test_rerun_recordings_compare_equal(tmp_path: Path, sweep: Sweep):
-    from recorder.sweeplog.recording import open_sweep_recording
+    from corraoi.recorder.sweeplog.recording import open_sweep_recording
 
     exe = Path(sys.executable).parent / "rerun"
     if not exe.exists():
@@ -421,8 +421,8 @@ def test_channel_metadata_carries_the_format_version(tmp_path):
 
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies
-    from recorder.sweeplog.log import SweepMcapSink
-    from recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
+    from corraoi.recorder.sweeplog.log import SweepMcapSink
+    from corraoi.recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
 
     specs = make_policies(["ucb"])
     config = sweep_config(load_instance("I1"), specs, runs=2, horizon=10, seed=0, checkpoints=[10])

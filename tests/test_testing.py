@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from corraoi.recorder.slotlog.reader import open_log
 from corraoi.testing import assert_runs_equal
-from recorder.slotlog.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -33,7 +33,7 @@ def test_a_difference_names_the_first_slot_field_values_and_extent(
 ):
     a = corraoi_run(policy="ucb", seed=1, horizon=2000)
     b = corraoi_run(policy="cucb", seed=1, horizon=2000)
-    # where the runs first differ, found independently of viewer.diff
+    # where the runs first differ, found independently of corraoi.viewer.diff
     la, lb = open_log(a).read_all(), open_log(b).read_all()
     firsts = {}
     for name in ("arm", "aoi", "pulls", "candidates"):

@@ -1,4 +1,4 @@
-"""viewer.diff and the run summary: slot-by-slot comparison of recorded runs (logs only)."""
+"""corraoi.viewer.diff and the run summary: slot-by-slot comparison of recorded runs (logs only)."""
 
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ from corraoi.engine.summary import summarize_blocks
 from corraoi.errors import UsageError
 from corraoi.model.instance import Instance
 from corraoi.policies import make_policy
-from viewer import diff
-from viewer.diffs import DIFF_FIELDS, parse_fields
+from corraoi.viewer import diff
+from corraoi.viewer.diffs import DIFF_FIELDS, parse_fields
 
 
 def _write(path, config: RunConfig, block: SlotBlock):
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     with McapSink(path, config, fsync=False) as sink:
         for start in range(0, len(block), 1000):
@@ -117,7 +117,7 @@ def test_an_integer_change_is_not_forgiven_by_atol(tmp_path, make_config, engine
 
 def test_a_cut_short_log_against_the_full_one(tmp_path, record_mcap):
     full, config, ref = record_mcap("cucb", horizon=3000)
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     with McapSink(tmp_path / "short.mcap", config, fsync=False) as sink:
         for start in (0, 1000):

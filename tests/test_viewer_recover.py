@@ -1,4 +1,4 @@
-"""viewer.recover: a log whose writer died becomes a finished, indexed MCAP file."""
+"""corraoi.viewer.recover: a log whose writer died becomes a finished, indexed MCAP file."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from mcap.stream_reader import StreamReader
 
 from corraoi.engine.block import FIELDS, SlotBlock
 from corraoi.errors import LogError, OutputError
-from recorder.slotlog.reader import open_log
-from viewer import diff, recover
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.viewer import diff, recover
 
 #: A chunk record (opcode 6) announcing 10,000 bytes, of which only a few were written.
 TORN = bytes([0x06]) + struct.pack("<Q", 10_000) + b"\x00" * 37
@@ -24,7 +24,7 @@ TORN = bytes([0x06]) + struct.pack("<Q", 10_000) + b"\x00" * 37
 
 def _killed(tmp_path: Path, make_config, engine, *, slots: int = 3000, torn: bool = True):
     """A .partial log as a writer killed after ``slots`` slots leaves it."""
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     config = make_config("cts", horizon=5000, seed=9)
     ref = SlotBlock.concat(engine(config))

@@ -1,4 +1,4 @@
-"""viewer.replay and viewer.compare: logs re-rendered into Rerun, read back and compared."""
+"""corraoi.viewer.replay and corraoi.viewer.compare: logs re-rendered into Rerun, read back and compared."""
 
 from __future__ import annotations
 
@@ -17,15 +17,15 @@ from corraoi.engine.block import RunConfig, SlotBlock  # noqa: E402
 from corraoi.engine.summary import summarize_blocks  # noqa: E402
 from corraoi.model.instance import load_instance  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder.rerun.names import run_path  # noqa: E402
-from viewer import compare, replay  # noqa: E402
-from viewer.compare import (  # noqa: E402
+from corraoi.recorder.rerun.names import run_path  # noqa: E402
+from corraoi.viewer import compare, replay  # noqa: E402
+from corraoi.viewer.compare import (  # noqa: E402
     SUMMARY_ENTITY,
     comparability_warnings,
     log_colors,
     summary_table,
 )
-from viewer.runs import safe_label, unique_labels  # noqa: E402
+from corraoi.viewer.runs import safe_label, unique_labels  # noqa: E402
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 
@@ -75,7 +75,7 @@ def test_a_replayed_rrd_equals_the_live_one(tmp_path):
 
 
 def test_replay_of_a_cut_short_log_renders_the_slots_it_holds(tmp_path, make_config, engine):
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     config = make_config("cucb", horizon=4000, seed=1)
     ref = SlotBlock.concat(engine(config))
@@ -229,7 +229,7 @@ def test_read_ahead_hands_on_errors_and_stops_early():
     import threading
 
     from corraoi.errors import LogError
-    from viewer import readahead
+    from corraoi.viewer import readahead
 
     got = []
     with pytest.raises(LogError, match="boom: chunk at byte 7"):

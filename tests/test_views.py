@@ -26,11 +26,11 @@ from corraoi.engine.simulation import simulate_run  # noqa: E402
 from corraoi.model.instance import Instance, load_instance  # noqa: E402
 from corraoi.model.theory import analyse  # noqa: E402
 from corraoi.policies import make_policy  # noqa: E402
-from recorder import style  # noqa: E402
-from recorder.rerun.layout import one_run_blueprint, title_chars  # noqa: E402
-from recorder.rerun.names import ENTITIES, PRESENTATION, WHY, run_path, snapshot_every  # noqa: E402
-from recorder.rerun.output import RrdOutput  # noqa: E402
-from recorder.rerun.sink import RerunSink  # noqa: E402
+from corraoi.recorder import style  # noqa: E402
+from corraoi.recorder.rerun.layout import one_run_blueprint, title_chars  # noqa: E402
+from corraoi.recorder.rerun.names import ENTITIES, PRESENTATION, WHY, run_path, snapshot_every  # noqa: E402
+from corraoi.recorder.rerun.output import RrdOutput  # noqa: E402
+from corraoi.recorder.rerun.sink import RerunSink  # noqa: E402
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: E402, F401
 
@@ -178,7 +178,7 @@ def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
 
 
 def test_titles_fit_and_legend_room_grows_with_the_names():
-    from recorder.rerun.layout import first_fit, legend_room, names_in_title
+    from corraoi.recorder.rerun.layout import first_fit, legend_room, names_in_title
 
     assert first_fit(400, "a" * 200, "short") == "short"
     assert len(first_fit(200, "b" * 200)) == title_chars(200)
@@ -419,7 +419,7 @@ def test_logs_and_the_old_entities_are_unchanged_only_presentation_entities_are_
     config = golden.write_log(key, tmp_path / "a.mcap")
     stored = json.loads((GOLDEN / "logs.json").read_text())[golden.case_name(key)]
     assert golden.differences(stored, golden.log_values(tmp_path / "a.mcap")) == []
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     block = open_log(tmp_path / "a.mcap").read_all()
     with RrdOutput(config, rrd_path=tmp_path / "a.rrd") as out:
@@ -447,7 +447,7 @@ def test_logs_and_the_old_entities_are_unchanged_only_presentation_entities_are_
 
 
 def test_compare_shares_its_scales_and_uses_the_same_views(tmp_path, record_mcap):
-    from viewer.compare import compare, compare_blueprint
+    from corraoi.viewer.compare import compare, compare_blueprint
 
     a, _, ref_a = record_mcap("ucb", seed=4, horizon=1500, name="a.mcap")
     b, _, ref_b = record_mcap("cucb", seed=4, horizon=1500, name="b.mcap")
@@ -473,7 +473,7 @@ def test_compare_shares_its_scales_and_uses_the_same_views(tmp_path, record_mcap
 
 
 def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
-    from recorder.sweeplog.recording import SweepRerunSink, share_widths
+    from corraoi.recorder.sweeplog.recording import SweepRerunSink, share_widths
 
     from .test_sweep_log import small_sweep
 
@@ -493,9 +493,9 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
 
 
 def test_a_sweep_of_many_arms_draws_bars_and_the_arms_that_matter(tmp_path):
+    from corraoi.recorder.sweeplog.layout import shown_arms, sweep_blueprint
+    from corraoi.recorder.sweeplog.recording import SweepRerunSink
     from corraoi.stats import SweepPoint
-    from recorder.sweeplog.layout import shown_arms, sweep_blueprint
-    from recorder.sweeplog.recording import SweepRerunSink
 
     inst = random_instance(64, seed=7)
     config = {"instance": inst.to_dict(), "policies": [{"name": "cucb"}], "runs": 3,

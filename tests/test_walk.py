@@ -1,6 +1,6 @@
-"""recorder.walk, the one MCAP walker (issue 23): a file cut short is told from a damaged one,
+"""corraoi.recorder.walk, the one MCAP walker (issue 23): a file cut short is told from a damaged one,
 it gives the records mcap's StreamReader gives, every MCAP reader walks through it, and the
-formats' names are defined once, in recorder.vocab."""
+formats' names are defined once, in corraoi.recorder.vocab."""
 
 from __future__ import annotations
 
@@ -17,14 +17,14 @@ from mcap.stream_reader import StreamReader
 
 from corraoi.engine.block import FIELDS
 from corraoi.errors import LogError
-from recorder import vocab
-from recorder.slotlog.encode import slot_schema
-from recorder.slotlog.reader import open_log
-from recorder.sweeplog.read import read_sweep
-from recorder.sweeplog.results import is_sweep_path
-from recorder.walk import Walker, records_in
+from corraoi.recorder import vocab
+from corraoi.recorder.slotlog.encode import slot_schema
+from corraoi.recorder.slotlog.reader import open_log
+from corraoi.recorder.sweeplog.read import read_sweep
+from corraoi.recorder.sweeplog.results import is_sweep_path
+from corraoi.recorder.walk import Walker, records_in
+from corraoi.viewer.recover import recover
 from tests.test_sweep_log import small_sweep, write_log
-from viewer.recover import recover
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -170,7 +170,7 @@ def test_every_mcap_reader_walks_through_the_walker(tmp_path, slot_log, monkeypa
     for what, read in readers.items():
         seen.clear()
         read()
-        assert seen, f"the {what} reader did not walk through recorder.walk.Walker"
+        assert seen, f"the {what} reader did not walk through corraoi.recorder.walk.Walker"
     assert (tmp_path / "fixed.mcap").is_file()
 
 

@@ -1,9 +1,9 @@
 """Replay, compare, diff and inspect recorded corraoi runs. Reads logs; never simulates.
 
-``viewer.diff(a, b)`` compares two logs slot by slot (a :class:`DiffReport` with
+``corraoi.viewer.diff(a, b)`` compares two logs slot by slot (a :class:`DiffReport` with
 ``.identical``, per-field first divergence and ``.message()``); :func:`compare`,
 :func:`replay` and :func:`recover` are what the ``corraoi compare``, ``replay`` and
-``recover`` commands call (``info`` is :mod:`viewer.info`'s). Rerun is imported only by
+``recover`` commands call (``info`` is :mod:`corraoi.viewer.info`'s). Rerun is imported only by
 ``compare`` and ``replay``, when they run.
 """
 

@@ -1,6 +1,6 @@
 """``corraoi compare``: several recorded runs in one Rerun recording, side by side.
 
-Each run goes through the same :class:`recorder.rerun.sink.RerunSink` as ``record`` and
+Each run goes through the same :class:`corraoi.recorder.rerun.sink.RerunSink` as ``record`` and
 ``replay``, under ``runs/<label>/...`` (labels from the policy names, made unique with the
 instance, seed, horizon or parameters where needed). The embedded blueprint puts one
 column per run -- its AoI against the oracle's, the channel played, the empirical means
@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi.engine.summary import RunSummary, SummaryAccumulator
 from corraoi.policies import RGB
-from recorder.style import REGRET_UNIT, run_colors, spec_color
+from corraoi.recorder.style import REGRET_UNIT, run_colors, spec_color
 
 from .info import summary_rows
 from .readahead import read_ahead
@@ -30,7 +30,7 @@ from .runs import LogLike, as_log, require_slots, unique_labels
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
-    from recorder.slotlog.reader import RunLog
+    from corraoi.recorder.slotlog.reader import RunLog
 
 #: Slots per block handed to the sinks.
 BLOCK = 1000
@@ -117,7 +117,7 @@ def comparability_warnings(logs: Sequence[RunLog]) -> list[str]:
 
 
 def log_colors(logs: Sequence[RunLog]) -> list[RGB]:
-    """A colour per log (:func:`recorder.style.run_colors`): its policy's, in lighter
+    """A colour per log (:func:`corraoi.recorder.style.run_colors`): its policy's, in lighter
     shades for runs that would share one."""
     return run_colors([spec_color(log.config.policy) for log in logs])
 
@@ -140,7 +140,7 @@ def compare_blueprint(
 ) -> rrb.Blueprint:
     """One column per run above an overlay of every run's regret and the summary table.
 
-    The columns are the views ``record`` shows (:class:`recorder.rerun.layout.RunViews`,
+    The columns are the views ``record`` shows (:class:`corraoi.recorder.rerun.layout.RunViews`,
     chosen by each run's number of arms), on y-scales shared by every column: the AoI up
     to ``aoi_max`` (the largest AoI of any run; None: each column its own), the arms up to
     the largest K.
@@ -148,8 +148,15 @@ def compare_blueprint(
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from recorder.rerun.layout import LEGEND, VIEWER_PX, RunViews, fit, legend_room, time_windows
-    from recorder.rerun.names import TIMELINE, run_path
+    from corraoi.recorder.rerun.layout import (
+        LEGEND,
+        VIEWER_PX,
+        RunViews,
+        fit,
+        legend_room,
+        time_windows,
+    )
+    from corraoi.recorder.rerun.names import TIMELINE, run_path
 
     horizon = max(r.config.horizon for r in runs)
     tw = time_windows(window, horizon)
@@ -244,8 +251,8 @@ def compare(
 
     import rerun as rr
 
-    from recorder.rerun.output import RrdOutput
-    from recorder.rerun.sink import RerunSink
+    from corraoi.recorder.rerun.output import RrdOutput
+    from corraoi.recorder.rerun.sink import RerunSink
 
     with RrdOutput(
         runs[0].config,

@@ -1,6 +1,6 @@
 """What ``diff`` finds, and how it reads: :class:`DiffReport` (the configuration differences,
 per field the first slot where two runs diverge, the final figures of both), its text
-(``corraoi diff``) and its JSON (``--json``). :func:`viewer.diffs.diff` makes one.
+(``corraoi diff``) and its JSON (``--json``). :func:`corraoi.viewer.diffs.diff` makes one.
 
 Arms and states are numbered from 1 in everything the report shows.
 """

@@ -5,12 +5,12 @@ logged field the first slot where the runs diverge and how many slots differ, an
 final figures of both runs. It is what ``corraoi diff`` prints and what a test suite
 asserts on::
 
-    report = viewer.diff("a.mcap", "b.mcap")
+    report = corraoi.viewer.diff("a.mcap", "b.mcap")
     assert report.identical, report.message()
 
 Arms and states are numbered from 1 in everything the report shows.
 
-The report itself (its text and JSON) is :mod:`viewer.diff_report`'s; its classes stay
+The report itself (its text and JSON) is :mod:`corraoi.viewer.diff_report`'s; its classes stay
 importable from here.
 """
 

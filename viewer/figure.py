@@ -1,7 +1,7 @@
 """The sweep figure: AoI regret against t, one line per policy with its 95% band.
 
-Drawn from a sweep log alone (:func:`recorder.sweeplog.log.read_sweep`), never by simulating.
-Style of the paper's figures, from :mod:`recorder.style` (the colours of every view): a
+Drawn from a sweep log alone (:func:`corraoi.recorder.sweeplog.log.read_sweep`), never by simulating.
+Style of the paper's figures, from :mod:`corraoi.recorder.style` (the colours of every view): a
 line per policy in its base policy's colour, AoI-aware variants dashed in the same colour,
 a shaded 95% confidence band, the legend outside the axes so that twelve curves never hide
 behind it. ``split=True`` draws small multiples instead: the base policies beside their
@@ -23,7 +23,7 @@ import numpy as np
 from corraoi.errors import FigureUnavailable, UsageError
 from corraoi.files.partial import PartialFile
 from corraoi.policies import RGB
-from recorder.style import (
+from corraoi.recorder.style import (
     DASH_AOI_AWARE,
     REGRET_UNIT,
     config_colors,
@@ -31,7 +31,7 @@ from recorder.style import (
     mpl,
     policy_color,
 )
-from recorder.sweeplog.read import SweepCurve, SweepLog
+from corraoi.recorder.sweeplog.read import SweepCurve, SweepLog
 
 #: Figure size in inches and resolution: 1500 x 900 pixels (split: 2100 x 900).
 FIGSIZE = (10.0, 6.0)

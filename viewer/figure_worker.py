@@ -6,7 +6,7 @@ and the parent then still imports Rerun (0.6 s) for ``sweep.rrd``. Forked when t
 starts, the worker imports matplotlib on the other core while the engine loads and runs;
 then it draws each group's figure from its finished sweep log while this process writes
 the group's Rerun recording (``benchmarks/bench_start.py``, the ``sweep -o`` row). The
-figure is the one :func:`viewer.figure.draw_figure` draws in-process: only the process
+figure is the one :func:`corraoi.viewer.figure.draw_figure` draws in-process: only the process
 differs.
 
 ``FigureWorker.start()`` returns None where a process cannot be forked safely
@@ -113,7 +113,7 @@ _LOST = object()
 
 def draw_from_log(log: str, out: str) -> BaseException | None:
     """draw_figure(read_sweep(log), out): None, or the exception it raised."""
-    from recorder.sweeplog.read import read_sweep
+    from corraoi.recorder.sweeplog.read import read_sweep
 
     from .figure import draw_figure
 

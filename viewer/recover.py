@@ -29,7 +29,7 @@ from .runs import require_slots
 RECOVER_SUFFIX = ".recovering"
 
 if TYPE_CHECKING:
-    from recorder.slotlog.reader import RunLog
+    from corraoi.recorder.slotlog.reader import RunLog
 
 #: Chunks of the copy are closed by slot count like the writer's; this only caps a chunk.
 _CHUNK_BYTES = 64 * 1024 * 1024
@@ -89,7 +89,7 @@ def recover(
     directory, or is the source itself. Nothing is written on error.
     """
     from corraoi.errors import OutputError
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     src = Path(source)
     log = require_slots(open_log(src, salvage=True), "recover")
@@ -140,13 +140,17 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.writer import CompressionType, Writer
 
     from corraoi.errors import LogError
-    from recorder.slotlog.decode import decode_messages
-    from recorder.slotlog.encode import end_metadata as make_end
-    from recorder.vocab import MCAP_INDEX_TYPES, MCAP_INDEX_TYPES_WITH_ATTACHMENTS, NS_PER_SLOT
-    from recorder.vocab import RUN_END_METADATA as END_METADATA
-    from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-    from recorder.vocab import SLOT_TOPIC as TOPIC
-    from recorder.walk import Walker
+    from corraoi.recorder.slotlog.decode import decode_messages
+    from corraoi.recorder.slotlog.encode import end_metadata as make_end
+    from corraoi.recorder.vocab import (
+        MCAP_INDEX_TYPES,
+        MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
+        NS_PER_SLOT,
+    )
+    from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
+    from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+    from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
+    from corraoi.recorder.walk import Walker
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
     try:
@@ -230,7 +234,7 @@ def _complete_length(f: BinaryIO, path: Path) -> int:
     closing magic after a footer), as the MCAP walker finds them; damage ends the count
     where it starts."""
     from corraoi.errors import LogError
-    from recorder.walk import Walker
+    from corraoi.recorder.walk import Walker
 
     f.seek(0)
     walker = Walker(f, path)

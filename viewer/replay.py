@@ -1,8 +1,8 @@
 """``corraoi replay``: re-render one log into Rerun, through the sink ``corraoi record`` uses.
 
 The log is read back into the SlotBlocks that were recorded and handed, block by block,
-to the very :class:`recorder.rerun.sink.RerunSink` that ``record`` streams into, with the
-same label, recording id and default blueprint (:class:`recorder.rerun.output.RrdOutput`).
+to the very :class:`corraoi.recorder.rerun.sink.RerunSink` that ``record`` streams into, with the
+same label, recording id and default blueprint (:class:`corraoi.recorder.rerun.output.RrdOutput`).
 So the replayed ``.rrd`` of a finished log equals the live one under ``rerun rrd
 compare``. Nothing is simulated.
 """
@@ -55,9 +55,9 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
-    from recorder.rerun.layout import one_run_blueprint
-    from recorder.rerun.output import RrdOutput
-    from recorder.rerun.sink import RerunSink
+    from corraoi.recorder.rerun.layout import one_run_blueprint
+    from corraoi.recorder.rerun.output import RrdOutput
+    from corraoi.recorder.rerun.sink import RerunSink
 
     run = require_slots(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"

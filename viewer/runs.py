@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Union
 
 if TYPE_CHECKING:
-    from recorder.slotlog.reader import RunLog
+    from corraoi.recorder.slotlog.reader import RunLog
 
 #: What the viewer functions accept for a log: a path or an opened RunLog.
 LogLike = Union[str, "os.PathLike[str]", "RunLog"]
@@ -23,7 +23,7 @@ def as_log(log: LogLike, *, verify: bool = True) -> RunLog:
     ``verify`` checks every chunk (CRC, decompression) now; without it a damaged chunk is
     found when it is read.
     """
-    from recorder.slotlog.reader import RunLog, open_log
+    from corraoi.recorder.slotlog.reader import RunLog, open_log
 
     if isinstance(log, RunLog):
         return log

@@ -52,7 +52,7 @@ def viewer_options(func: F) -> F:
 
 
 def foxglove_options(func: F) -> F:
-    """Add --foxglove [[HOST:]PORT] and --pace SLOTS_PER_S (recorder.live.foxglove)."""
+    """Add --foxglove [[HOST:]PORT] and --pace SLOTS_PER_S (corraoi.recorder.live.foxglove)."""
     func = click.option(
         "--pace",
         type=click.FloatRange(min=0, min_open=True),

@@ -2,7 +2,7 @@
 URL, or served on the web) and a Foxglove server, chosen by ``corraoi record``, ``replay`` and
 ``compare``'s options; their notices go through ``say`` (stderr by default).
 
-recorder.live.viewers (and so rerun) is imported only when a viewer is asked for.
+corraoi.recorder.live.viewers (and so rerun) is imported only when a viewer is asked for.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ class ViewerChoice:
         #: Why the viewer could not be reached (``start(tolerant=True)`` only).
         self.problem: str | None = None
         if connect is not None:
-            from recorder.live.viewers import normalize_url
+            from corraoi.recorder.live.viewers import normalize_url
 
             self.connect = normalize_url(connect)  # a bad URL is a usage error: say it now
 
@@ -61,7 +61,7 @@ class ViewerChoice:
         if not self.asked:
             return None
         from corraoi.errors import ViewerError
-        from recorder.live import viewers as live
+        from corraoi.recorder.live import viewers as live
 
         os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
         try:
@@ -126,7 +126,7 @@ class FoxgloveChoice:
         self.problem: str | None = None
         self.address: Any = None
         if address is not None:
-            from recorder.live.foxglove import parse_address, require_foxglove
+            from corraoi.recorder.live.foxglove import parse_address, require_foxglove
 
             self.address = parse_address(address)  # a bad value: one line, exit 2
             require_foxglove()  # no extra: name it before anything runs
@@ -139,7 +139,7 @@ class FoxgloveChoice:
         if self.address is None:
             return None
         from corraoi.errors import FoxgloveError
-        from recorder.live.foxglove import FoxgloveServer
+        from corraoi.recorder.live.foxglove import FoxgloveServer
 
         try:
             self.server = FoxgloveServer(self.address)
@@ -172,7 +172,7 @@ class FoxgloveChoice:
 
 def open_command(recordings: list[str]) -> str:
     """The shell command that opens ``recordings`` in the Rerun viewer."""
-    from recorder.live.viewers import view_command
+    from corraoi.recorder.live.viewers import view_command
 
     return view_command(recordings)
 

@@ -14,7 +14,7 @@ from corraoi import arguments
 from corraoi.errors import UsageError
 
 if TYPE_CHECKING:
-    from recorder.export import Exported
+    from corraoi.recorder.export import Exported
 
     from .runs import Run
     from .sweeps import Sweep
@@ -39,7 +39,7 @@ def load(path: str | os.PathLike[str], *, slots: tuple[int, int] | None = None) 
         path, name="path", kind=UsageError, what="the path of a slot log or a sweep folder"
     )
     slots = arguments.optional(arguments.window, slots, name="slots")
-    from recorder.sweeplog.results import is_sweep_path
+    from corraoi.recorder.sweeplog.results import is_sweep_path
 
     p = Path(path)
     if is_sweep_path(p):
@@ -63,7 +63,7 @@ def export(
     extension, :class:`~corraoi.errors.LogError` for what is not a readable log,
     :class:`~corraoi.errors.OutputError` for an ``out`` that must not be written, and names
     the ``analysis`` extra when pyarrow is missing."""
-    from recorder.export import export as export_table
+    from corraoi.recorder.export import export as export_table
 
     arguments.path(path, name="path", kind=UsageError,
                    what="the path of a slot log or a sweep folder")  # fmt: skip

@@ -10,9 +10,9 @@ regret. What is neither given nor computable is left absent from the log (a fiel
 record says may be absent; ``SlotBlock.absent``); every reader and view leaves it out.
 
 The slots become :class:`~corraoi.engine.block.SlotBlock` s, as the engine's do, and go to
-the sinks ``record_run`` feeds: the MCAP log (:class:`~recorder.slotlog.sink.McapSink`,
+the sinks ``record_run`` feeds: the MCAP log (:class:`~corraoi.recorder.slotlog.sink.McapSink`,
 written as ``.partial`` and published when closed, a chunk flushed every 1,000 slots), the
-Rerun recording and any further :class:`~recorder.sink.Sink`.
+Rerun recording and any further :class:`~corraoi.recorder.sink.Sink`.
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ from corraoi.engine.block import ARM_FIELDS, FIELDS, RunConfig, SlotBlock, absen
 from corraoi.engine.slot_record import BY_NAME, REQUIRED
 from corraoi.errors import ConfigError, CorraoiError, PolicyError, SlotError, UsageError
 from corraoi.provenance import Provenance, versions
-from recorder.sink import RunRecording, Sink
-from recorder.slotlog.sink import McapSink
-from recorder.vocab import SLOT_FLUSH_EVERY
+from corraoi.recorder.sink import RunRecording, Sink
+from corraoi.recorder.slotlog.sink import McapSink
+from corraoi.recorder.vocab import SLOT_FLUSH_EVERY
 
 if TYPE_CHECKING:
     from typing_extensions import Self
@@ -161,7 +161,7 @@ class Logger:
         arguments.text(version, name="version", empty=True)
         arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
         arguments.flag(overwrite, name="overwrite")
-        arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
+        arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a corraoi.recorder.sink.Sink")
         if params is not None and not isinstance(params, Mapping):
             raise arguments.wrong_type(PolicyError, "params", params, "a dict of numbers")
         params = {k: arguments.number(v, name=f"params[{k!r}]", kind=PolicyError)
@@ -386,7 +386,7 @@ class Logger:
         """Open the sinks, once the first slot said which fields the log holds."""
         if self._stack is not None:
             return
-        from recorder.rerun.sink import LocalRecording
+        from corraoi.recorder.rerun.sink import LocalRecording
 
         self.config = self._base
         wrote = f"slots given to corraoi.Logger by {self.source or 'an unnamed program'}"

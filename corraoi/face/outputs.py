@@ -4,7 +4,7 @@ group the sweep log (``sweep.mcap``), its Rerun recording (``sweep.rrd``) and th
 has finished, so their order and bytes do not depend on which worker finished first.
 
 :class:`FolderOutputs` is what the top floor hands ``corraoi.experiments.sweeps.sweep``.
-Handed a :class:`~viewer.figure_worker.FigureWorker` (``corraoi sweep -o`` and
+Handed a :class:`~corraoi.viewer.figure_worker.FigureWorker` (``corraoi sweep -o`` and
 ``corraoi.sweep`` start one with the sweep), it has each group's figure drawn there while it
 writes the group's Rerun recording, and waits for the figures in :meth:`FolderOutputs.finish`.
 """
@@ -21,10 +21,10 @@ from corraoi.experiments.grid import Grid
 from corraoi.experiments.montecarlo import sweep_config
 from corraoi.experiments.sweeps import folder_provenance
 from corraoi.provenance import Provenance
-from recorder.style import spec_color, variant_colors
-from recorder.sweeplog.log import SweepMcapSink
-from recorder.sweeplog.results import write_dataset
-from viewer.figure_worker import FigureWorker, draw_from_log
+from corraoi.recorder.style import spec_color, variant_colors
+from corraoi.recorder.sweeplog.log import SweepMcapSink
+from corraoi.recorder.sweeplog.results import write_dataset
+from corraoi.viewer.figure_worker import FigureWorker, draw_from_log
 
 
 def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
@@ -93,7 +93,7 @@ def write_group_recording(
 ) -> None:
     """A group's Rerun recording (``sweep.rrd``): the points of its sweep log, with the runs
     worth watching drawn over the mean. Imports Rerun (only here)."""
-    from recorder.sweeplog.recording import open_sweep_recording
+    from corraoi.recorder.sweeplog.recording import open_sweep_recording
 
     with open_sweep_recording(folder / "sweep.rrd", config) as rec:
         for c in cells:

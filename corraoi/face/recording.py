@@ -32,8 +32,8 @@ from corraoi.errors import (
     WriteError,
 )
 from corraoi.provenance import Provenance
-from recorder.sink import RunRecording, Sink
-from recorder.slotlog.sink import McapSink
+from corraoi.recorder.sink import RunRecording, Sink
+from corraoi.recorder.slotlog.sink import McapSink
 
 if TYPE_CHECKING:
     from corraoi.model.instance import Instance
@@ -78,9 +78,9 @@ def record_run(
     each policy). ``should_stop()`` is asked after every block: the files are then finished
     with the slots so far (status interrupted). A failed run (a plug-in's bad arm) leaves its
     log at the ``.partial`` name, marked failed, and raises. Ctrl-C finishes both files.
-    ``rerun``, a :class:`recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
+    ``rerun``, a :class:`corraoi.recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
     its process (the same file), else it is written in this one. ``sinks``: further
-    :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
+    :class:`~corraoi.recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
     block after those two, closed with the run, or aborted when it fails.
 
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
@@ -99,7 +99,7 @@ def record_run(
             recording = rerun.open(config, rrd_path=where, viewer_url=viewer_url,
                                    overwrite=overwrite)  # fmt: skip
         else:
-            from recorder.rerun.sink import LocalRecording
+            from corraoi.recorder.rerun.sink import LocalRecording
 
             recording = LocalRecording(config, rrd_path=where, viewer_url=viewer_url,
                                        overwrite=overwrite)  # fmt: skip
@@ -243,7 +243,7 @@ def stale(plan: Plan) -> str | None:
     policy edited and defined again in this session is other code."""
     from corraoi.errors import LogError
     from corraoi.provenance import short, versions
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     if not plan.mcap.is_file():
         return "no log"
@@ -301,8 +301,8 @@ def refuse(plans: Sequence[Plan], *, force: bool, hint: str = "--force") -> None
     a folder, a sweep folder's own file. A ``.partial`` a killed attempt at the same run
     left is taken over."""
     from corraoi.files.partial import check_target
-    from recorder.sink import made_again
-    from recorder.slotlog.sink import same_run_partial
+    from corraoi.recorder.sink import made_again
+    from corraoi.recorder.slotlog.sink import same_run_partial
 
     for plan in plans:
         if not force and plan.mcap.is_file():
@@ -326,7 +326,7 @@ class Outlets:
     """Where every run of one recording goes besides its files, decided once: a Rerun
     viewer's URL, whether files may be overwritten, a live Foxglove server (``.sink(config,
     stopping)`` gives each run's sink) and a forked Rerun writer
-    (:class:`recorder.rerun.worker.RerunWorker`)."""
+    (:class:`corraoi.recorder.rerun.worker.RerunWorker`)."""
 
     viewer_url: str | None = None
     overwrite: bool = False
@@ -447,7 +447,7 @@ def _record_one(
 # ---------------------------------------------------------------------------- the face
 
 
-#: What every sink has (:class:`recorder.sink.Sink`): written to, closed, and a context manager.
+#: What every sink has (:class:`corraoi.recorder.sink.Sink`): written to, closed, and a context manager.
 SINK_METHODS = ("write", "close", "__enter__", "__exit__")
 
 
@@ -486,7 +486,7 @@ def record(
     (:class:`~corraoi.errors.OutputError`) unless ``force``.
 
     ``viewer``: the URL of a running Rerun viewer that also gets every slot; ``sinks``:
-    further :class:`~recorder.sink.Sink` s (a Foxglove live server's, your own);
+    further :class:`~corraoi.recorder.sink.Sink` s (a Foxglove live server's, your own);
     ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
     next block, the files finished with the slots so far (Ctrl-C does the same).
     ``score``: log what the policy maximised at every slot (``score``, ``forced``; by
@@ -515,7 +515,7 @@ def record(
     arguments.optional(arguments.flag, score, name="score")
     arguments.optional(arguments.text, viewer, name="viewer",
                        expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
-    arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a recorder.sink.Sink")
+    arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a corraoi.recorder.sink.Sink")
     arguments.optional(arguments.callback, on_block, name="on_block")
     arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)

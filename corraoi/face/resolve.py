@@ -23,7 +23,7 @@ from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicyBase, PolicySpec, make_policies, register
 from corraoi.policies.registry import policy_name
-from recorder.slotlog.trace import states_of_log
+from corraoi.recorder.slotlog.trace import states_of_log
 
 #: Readers of trace files that are not text, by suffix: a corraoi slot log.
 TRACE_READERS: Mapping[str, TraceReader] = {".mcap": states_of_log}

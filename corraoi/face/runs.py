@@ -1,5 +1,5 @@
 """:class:`Run`: one recorded run, what :func:`corraoi.record` returns and :func:`corraoi.load`
-gives for a slot log. The recorder's :class:`~recorder.slotlog.frames.RunData` (``.slots``,
+gives for a slot log. The recorder's :class:`~corraoi.recorder.slotlog.frames.RunData` (``.slots``,
 ``.config``, ``.to_arrow()``) with what a person asks of a run next: its summary, a diff
 against another, the viewer, and a table in Jupyter."""
 
@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import UsageError
-from recorder.slotlog.frames import RunData
-from recorder.slotlog.reader import RunLog
+from corraoi.recorder.slotlog.frames import RunData
+from corraoi.recorder.slotlog.reader import RunLog
 
 if TYPE_CHECKING:
     from corraoi.engine.summary import RunSummary
-    from viewer.diff_report import DiffReport
+    from corraoi.viewer.diff_report import DiffReport
 
     from .viewing import Shown
 
@@ -35,7 +35,7 @@ class Run(RunData):
       slots on the best arm, AoI-aware overrides and the slot from which it stayed on the best
       arm (:class:`corraoi.engine.summary.RunSummary`; arms 0-based, ``.to_dict()`` numbers
       them from 1);
-    * ``.diff(other)``: a :class:`viewer.DiffReport`.
+    * ``.diff(other)``: a :class:`corraoi.viewer.DiffReport`.
 
     ``slots=(first, last)`` restricts the tables to those slots (1-based, inclusive).
     """
@@ -91,7 +91,7 @@ class Run(RunData):
              *, atol: float = 0.0) -> DiffReport:  # fmt: skip
         """Slot by slot against ``other`` (a Run or a log's path): the first divergence per
         field (``fields``, default all), as :func:`corraoi.diff`."""
-        from viewer.diffs import diff
+        from corraoi.viewer.diffs import diff
 
         chosen, atol = diff_arguments(fields, atol)
         return diff(self.log, log_of(other, "other"), fields=chosen, atol=atol)
@@ -104,7 +104,7 @@ class Run(RunData):
 
         if self.rrd is not None:
             return checked_rrd(self.rrd)
-        from viewer.replay import replay
+        from corraoi.viewer.replay import replay
 
         done = replay(self.log, rrd_path=rrd_beside(self.path))
         assert done.path is not None
@@ -172,7 +172,7 @@ def diff_arguments(fields: object, atol: object) -> tuple[list[str] | None, floa
     """``fields`` and ``atol`` of :func:`corraoi.diff` and :meth:`Run.diff`, checked: one
     field's name (a ``str`` is one name, or a comma list, never its letters) or a list of
     them, None for all; ``atol`` a finite number >= 0."""
-    from viewer.diffs import DIFF_FIELDS, parse_fields
+    from corraoi.viewer.diffs import DIFF_FIELDS, parse_fields
 
     chosen = arguments.optional(arguments.names, fields, name="fields", empty=True,
                                 what="fields")  # fmt: skip

@@ -213,7 +213,7 @@ def record_runs(
         if not asked:
             # the .rrd files are written by a process that imports Rerun now, while this
             # one imports numba and loads the kernel (recorder/rerun/worker.py says why)
-            from recorder.rerun.worker import RerunWorker
+            from corraoi.recorder.rerun.worker import RerunWorker
 
             worker = RerunWorker.start(before_import=before_rerun)
     # A viewer that cannot be reached is one error line; the files are still written.

@@ -72,7 +72,7 @@ def show(
         raise LogError(f"{p}: no such file or folder (show expected {EXPECTED})")
     if p.suffix == ".rrd" and p.is_file():
         return open_viewer(lambda: [checked_rrd(p)], **options)  # type: ignore[arg-type]
-    from recorder.sweeplog.results import is_sweep_path
+    from corraoi.recorder.sweeplog.results import is_sweep_path
 
     if p.is_dir() and not is_sweep_path(p) and not any(p.glob("*/sweep.rrd")):
         raise LogError(f"{p}: a folder without a sweep (show expected {EXPECTED})")

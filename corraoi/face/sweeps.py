@@ -2,7 +2,7 @@
 :func:`corraoi.load` gives for a sweep folder too; ``corraoi sweep`` and ``corraoi reproduce``
 run their grids through :func:`run_grid`.
 
-A :class:`Sweep` is the recorder's :class:`~recorder.sweeplog.results.SweepData` (``.runs``,
+A :class:`Sweep` is the recorder's :class:`~corraoi.recorder.sweeplog.results.SweepData` (``.runs``,
 ``.summary``, ``.curves``, ``.config``) with what comes next: the runs worth watching
 (``.notable``), one of them recorded slot by slot (``.record``, what ``corraoi record --from``
 does), its figure, the viewer, and a table in Jupyter.
@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import ConfigError, CorraoiError, InstanceError, PolicyError, UsageError
-from recorder.sweeplog.results import SweepData
+from corraoi.recorder.sweeplog.results import SweepData
 
 from .resolve import PolicyLike, python_warn
 
@@ -304,8 +304,8 @@ def draw_sweep_figure(
     checkpoint, said through ``warn``. Returns the sweep log read and the policies drawn.
     Raises :class:`~corraoi.errors.UsageError` for a bad output or policy,
     :class:`~corraoi.errors.LogError` for a log that cannot be read."""
-    from recorder.sweeplog.read import read_sweep
-    from viewer.figure import check_dpi, check_policies, draw_figure, figure_format
+    from corraoi.recorder.sweeplog.read import read_sweep
+    from corraoi.viewer.figure import check_dpi, check_policies, draw_figure, figure_format
 
     out = Path(output)
     if out.is_dir():
@@ -551,7 +551,7 @@ def run_grid(
                 # the figures are drawn by a process that imports matplotlib now, while this
                 # one runs the sweep and then writes the Rerun recordings
                 # (viewer/figure_worker.py)
-                from viewer.figure_worker import FigureWorker
+                from corraoi.viewer.figure_worker import FigureWorker
 
                 figures = FigureWorker.start()
                 if figures is not None:

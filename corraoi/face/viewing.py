@@ -5,7 +5,7 @@ existing ``.rrd`` files (nothing is simulated), and the :class:`Shown` handle. W
   ``notebook`` extra), its JavaScript and WebAssembly served from the installed package on
   127.0.0.1, so no network is needed;
 * elsewhere: the Rerun web viewer served on 127.0.0.1 by a ``rerun --serve-web`` child
-  process (:class:`recorder.live.viewers.WebViewer`, what ``--serve-web`` starts), which
+  process (:class:`corraoi.recorder.live.viewers.WebViewer`, what ``--serve-web`` starts), which
   keeps serving until :meth:`Shown.close`;
 * ``spawn=True``: the native viewer, only where there is a display.
 """
@@ -116,7 +116,7 @@ def open_viewer(
                          "choose one")  # fmt: skip
     in_notebook = not spawn and (notebook if notebook is not None else in_kernel())
     if spawn:
-        from recorder.live.viewers import display_problem
+        from corraoi.recorder.live.viewers import display_problem
 
         problem = display_problem()
         if problem:  # rr.spawn without a display blocks for seconds and drops the data
@@ -185,7 +185,7 @@ def _execution_count() -> int | None:
 
 def _web(recordings: list[Path], *, web_port: int) -> Shown:
     """``rerun --serve-web`` on 127.0.0.1 (the ``--serve-web`` server), fed the recordings."""
-    from recorder.live.viewers import WebViewer, free_port
+    from corraoi.recorder.live.viewers import WebViewer, free_port
 
     os.environ.setdefault("RUST_LOG", "off")  # Rerun's own log lines: we report problems
     # 0: any free port, as in socket: one is bound and read back, so that the URL names it
@@ -239,7 +239,7 @@ def store_of(rrd: Path) -> tuple[str, str | None]:
 
 def _native(recordings: list[Path]) -> Shown:
     """The native viewer opening the files itself (a display was checked for)."""
-    from recorder.live.viewers import rerun_executable
+    from corraoi.recorder.live.viewers import rerun_executable
 
     cmd = [rerun_executable(), *map(str, recordings)]
     try:

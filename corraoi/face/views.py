@@ -12,15 +12,15 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import UsageError
-from recorder.slotlog.reader import RunLog
+from corraoi.recorder.slotlog.reader import RunLog
 
 from .runs import Run, diff_arguments, log_of
 
 if TYPE_CHECKING:
-    from viewer.compare import Comparison
-    from viewer.diff_report import DiffReport
-    from viewer.recover import Recovered
-    from viewer.replay import Replayed
+    from corraoi.viewer.compare import Comparison
+    from corraoi.viewer.diff_report import DiffReport
+    from corraoi.viewer.recover import Recovered
+    from corraoi.viewer.replay import Replayed
 
     from .live import FoxgloveChoice, ViewerChoice
 
@@ -41,10 +41,10 @@ def compare(
     column per run and every run's regret overlaid, into ``rrd`` (a file) and/or ``viewer``
     (a running viewer's URL); with neither, only the summary figures are gathered; ``force``
     replaces an existing ``rrd``. ``runs``: :class:`corraoi.Run` objects or slot logs' paths.
-    Returns a :class:`viewer.compare.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
+    Returns a :class:`corraoi.viewer.compare.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
     :class:`~corraoi.errors.LogError` for a log that cannot be read,
     :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
-    from viewer.compare import compare as compare_logs
+    from corraoi.viewer.compare import compare as compare_logs
 
     if isinstance(runs, (str, os.PathLike)) or not isinstance(runs, Sequence):
         raise arguments.wrong_type(UsageError, "runs", runs, "a list of corraoi.Run or slot "
@@ -71,12 +71,12 @@ def diff(
     atol: float = 0.0,
 ) -> DiffReport:
     """Where two recorded runs ``a`` and ``b`` diverge, slot by slot, as ``corraoi diff``
-    does; returns a :class:`viewer.DiffReport` (``.identical``, ``report["arm"].first_slot``,
+    does; returns a :class:`corraoi.viewer.DiffReport` (``.identical``, ``report["arm"].first_slot``,
     ``.message()``).
     ``fields`` restricts the comparison (default every logged field); ``atol`` is the
     tolerance of the float fields. Raises :class:`~corraoi.errors.LogError` for a log that
     cannot be read."""
-    from viewer.diffs import diff as diff_logs
+    from corraoi.viewer.diffs import diff as diff_logs
 
     chosen, atol = diff_arguments(fields, atol)  # before any log is opened
     return diff_logs(log_of(a, "a"), log_of(b, "b"), fields=chosen, atol=atol)
@@ -88,7 +88,7 @@ def diff_files(a: str | os.PathLike[str], b: str | os.PathLike[str], *,
     ``fields`` in its words (names or comma lists, ``--fields x,arm``). Raises
     :class:`~corraoi.errors.UsageError` for an unknown field, :class:`~corraoi.errors.LogError`
     for a log that cannot be read."""
-    from viewer.diffs import diff as diff_logs
+    from corraoi.viewer.diffs import diff as diff_logs
 
     return diff_logs(a, b, fields=fields or None, atol=atol)
 
@@ -104,7 +104,7 @@ class Info:
         return self.data
 
     def text(self) -> str:
-        from viewer.info import info_text, sweep_info_text
+        from corraoi.viewer.info import info_text, sweep_info_text
 
         return sweep_info_text(self.data) if self.sweep else info_text(self.data)
 
@@ -118,10 +118,10 @@ def info(path: str | os.PathLike[str]) -> Info:
     p = Path(arguments.path(path, name="path", kind=UsageError,
                             what="the path of a slot log or a sweep folder"))  # fmt: skip
     if p.is_dir() and any((d / "manifest.json").is_file() for d in (p, p.parent)):
-        from viewer.info import sweep_info
+        from corraoi.viewer.info import sweep_info
 
         return Info(sweep_info(p), sweep=True)
-    from viewer.info import log_info
+    from corraoi.viewer.info import log_info
 
     return Info(log_info(p), sweep=False)
 
@@ -134,12 +134,12 @@ def recover(
 ) -> Recovered:
     """Rewrite the log ``log`` whose writer died into a finished, indexed log at ``out``
     (default ``RUN.recovered.mcap`` beside it), as ``corraoi recover`` does; ``log`` itself is
-    not modified. Returns a :class:`viewer.recover.Recovered` (``.slots``, ``.status``,
+    not modified. Returns a :class:`corraoi.viewer.recover.Recovered` (``.slots``, ``.status``,
     ``.damage``, ``.to_dict()``); raises :class:`~corraoi.errors.LogError` for a log that
     cannot be read, :class:`~corraoi.errors.OutputError` for an ``out`` that exists (unless
     ``force``) or is ``log`` itself."""
-    from viewer.recover import default_output
-    from viewer.recover import recover as recover_log
+    from corraoi.viewer.recover import default_output
+    from corraoi.viewer.recover import recover as recover_log
 
     arguments.path(log, name="log", kind=UsageError, what="a slot log's path")
     arguments.optional(arguments.path, out, name="out", what="the recovered log's path")
@@ -191,9 +191,9 @@ def replay_log(
     the viewer's URL (None without one). Raises :class:`~corraoi.errors.LogError` for a log
     that cannot be read, :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be
     written, :class:`~corraoi.errors.ViewerError` for a viewer that cannot be reached."""
-    from recorder.slotlog.reader import open_log
-    from viewer.replay import replay as replay_slots
-    from viewer.runs import require_slots
+    from corraoi.recorder.slotlog.reader import open_log
+    from corraoi.viewer.replay import replay as replay_slots
+    from corraoi.viewer.runs import require_slots
 
     asked = viewer is not None and viewer.asked
     # bad input: one line, nothing written. Every chunk is checked up front before sending to
@@ -226,9 +226,9 @@ def replay_foxglove(log: Path, live: FoxgloveChoice, *, start: int = 1,
     Foxglove server ``live`` chose, which stops afterwards. Returns the log read, the last slot
     sent and the server's URL. Raises :class:`~corraoi.errors.LogError` for a log that cannot
     be read, :class:`~corraoi.errors.UsageError` for a ``start`` past its last slot."""
-    from recorder.live.foxglove import stream_log
-    from recorder.slotlog.reader import open_log
-    from viewer.runs import require_slots
+    from corraoi.recorder.live.foxglove import stream_log
+    from corraoi.recorder.slotlog.reader import open_log
+    from corraoi.viewer.runs import require_slots
 
     run = require_slots(open_log(log, verify=True), "replay")
     if not 1 <= start <= run.n_slots:
@@ -281,8 +281,8 @@ def compare_logs(
     comparison and the viewer's URL (None without one). Raises
     :class:`~corraoi.errors.LogError` for a log that cannot be read,
     :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
-    from viewer.compare import compare as compare_runs
-    from viewer.compare import prepare
+    from corraoi.viewer.compare import compare as compare_runs
+    from corraoi.viewer.compare import prepare
 
     asked = viewer is not None and viewer.asked
     runs, warnings = prepare(logs)  # bad input: one line, nothing written

@@ -4,8 +4,8 @@ The server is the maintained ``foxglove-sdk`` package (the optional extra ``foxg
 imported only when ``--foxglove`` is asked for. What a client sees:
 
 - ``/corraoi/slot``: one JSON message per slot, with the very schema
-  (:func:`recorder.slotlog.encode.slot_schema`) and the very bytes
-  (:class:`recorder.slotlog.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
+  (:func:`corraoi.recorder.slotlog.encode.slot_schema`) and the very bytes
+  (:class:`corraoi.recorder.slotlog.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
   the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
 - ``/corraoi/run``: the ``corraoi.run`` metadata record of the MCAP log as one JSON object
   (flat strings). The WebSocket protocol keeps no message for a client that connects
@@ -14,7 +14,7 @@ imported only when ``--foxglove`` is asked for. What a client sees:
   ``/corraoi/slot/<label>`` and ``/corraoi/run/<label>``.
 
 Every client: the SDK speaks the protocol as ``foxglove.sdk.v1`` only; a
-:class:`~recorder.live.front.SubprotocolFront` on the address asked for admits clients
+:class:`~corraoi.recorder.live.front.SubprotocolFront` on the address asked for admits clients
 offering its older name, ``foxglove.websocket.v1``, too. With ``pace`` a slot sink waits
 up to :data:`FIRST_CLIENT_WAIT` s for a subscriber before its first slot.
 
@@ -38,11 +38,11 @@ from typing import Any
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
-from recorder.sink import Sink
-from recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
-from recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
-from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
-from recorder.vocab import SLOT_TOPIC as TOPIC
+from corraoi.recorder.sink import Sink
+from corraoi.recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
+from corraoi.recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
+from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -248,7 +248,7 @@ class FoxgloveServer:
 class FoxgloveSlotSink(Sink):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
-    The messages are :class:`recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
+    The messages are :class:`corraoi.recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
     ``log_time`` is ``t`` seconds. ``pace``: at most that many slots per second (the
     writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C).
     """
@@ -360,7 +360,7 @@ def stream_log(
     on_block: Callable[[int], None] | None = None,
     sink: FoxgloveSlotSink | None = None,
 ) -> int:
-    """Publish the slots ``start..`` of a recorded log (a :class:`recorder.slotlog.reader.RunLog`),
+    """Publish the slots ``start..`` of a recorded log (a :class:`corraoi.recorder.slotlog.reader.RunLog`),
     through ``sink`` if given (made beforehand for the log's config); returns the last slot
     sent (``start - 1`` if none)."""
     if not 1 <= start <= log.n_slots:

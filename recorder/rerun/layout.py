@@ -2,7 +2,7 @@
 embed, and the views and time windows it is made of (``compare`` builds its columns from
 the same views, so that a run reads the same in both).
 
-The views are chosen by the number of arms K (:func:`recorder.style.lines_for`): up to
+The views are chosen by the number of arms K (:func:`corraoi.recorder.style.lines_for`): up to
 ``style.LINES_UP_TO`` arms a line per arm; beyond it the per-arm values at the time cursor
 as bar charts, strips of arms x slots for the arm played and the candidate set, and lines
 for the arms that matter only. Legends stand in room right of the data: a view's time axis
@@ -20,7 +20,7 @@ from typing import Any
 import rerun.blueprint as rrb
 
 from corraoi.engine.block import RunConfig
-from recorder import style
+from corraoi.recorder import style
 
 from .names import TIMELINE, run_path
 
@@ -99,7 +99,7 @@ def title_chars(panel_px: float) -> int:
 
 
 def fit(title: str, panel_px: float) -> str:
-    """A view title cut to what its panel shows (:func:`recorder.style.shorten`)."""
+    """A view title cut to what its panel shows (:func:`corraoi.recorder.style.shorten`)."""
     return style.shorten(title, title_chars(panel_px))
 
 

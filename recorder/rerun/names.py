@@ -30,7 +30,7 @@ The ``why/`` entities come from the fields a run may lack (``score``, ``forced``
 plug-in that gives no scores) has none of them, and its recording is what it was before.
 
 Presentation entities (:data:`PRESENTATION`), drawn from the same slots to make the views
-read at any K (:data:`recorder.style.LINES_UP_TO`):
+read at any K (:data:`corraoi.recorder.style.LINES_UP_TO`):
 
 ====================  ===================================================================
 ``arm/best``          the best arm k*, a reference line (slots 1 and T, sent at the start)
@@ -39,7 +39,7 @@ read at any K (:data:`recorder.style.LINES_UP_TO`):
                       start: every arm up to LINES_UP_TO arms, beyond it the arms that
                       matter (from the slot each came to matter)
 ``focus/<k>``         beyond LINES_UP_TO arms: arm k's empirical mean from the slot it came
-                      to matter (:func:`recorder.style.arms_that_matter`; it became the most
+                      to matter (:func:`corraoi.recorder.style.arms_that_matter`; it became the most
                       played, or was in a candidate set of at most FOCUS_MAX arms)
 ``bars/mean``         beyond LINES_UP_TO arms, at slot 1, every :func:`snapshot_every`-th
                       slot and the last: the empirical means of the arms in the candidate
@@ -57,8 +57,8 @@ read at any K (:data:`recorder.style.LINES_UP_TO`):
                       matter (as ``focus/<k>``)
 ====================  ===================================================================
 
-:mod:`recorder.rerun.static` logs what they look like, :mod:`recorder.rerun.sink` their data
-and :mod:`recorder.rerun.layout` arranges them.
+:mod:`corraoi.recorder.rerun.static` logs what they look like, :mod:`corraoi.recorder.rerun.sink` their data
+and :mod:`corraoi.recorder.rerun.layout` arranges them.
 """
 
 from __future__ import annotations

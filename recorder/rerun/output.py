@@ -13,7 +13,7 @@ import rerun.blueprint as rrb
 from corraoi.engine.block import RunConfig
 from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import PartialFile, reason
-from recorder.sink import Sink, made_again
+from corraoi.recorder.sink import Sink, made_again
 
 from .layout import one_run_blueprint
 from .names import new_recording

@@ -1,15 +1,15 @@
 """RerunSink: one run's slots streamed into a Rerun recording, a block at a time.
 
-The entities and their paths are :mod:`recorder.rerun.names`'s, their static styling and
-the ``about`` note :mod:`recorder.rerun.static`'s (logged when the sink is made), the
-layout :mod:`recorder.rerun.layout`'s. Besides the slots' own values the sink draws the
+The entities and their paths are :mod:`corraoi.recorder.rerun.names`'s, their static styling and
+the ``about`` note :mod:`corraoi.recorder.rerun.static`'s (logged when the sink is made), the
+layout :mod:`corraoi.recorder.rerun.layout`'s. Besides the slots' own values the sink draws the
 presentation entities (``names.PRESENTATION``): the best arm's line, the true means
 as dots, and beyond ``style.LINES_UP_TO`` arms the per-arm bars at every
 ``snapshot_every``-th slot and the lines of the arms that matter. Data go with
 ``send_columns``, one call per entity and batch of :data:`BATCH` slots (blocks are
 gathered first): ``rr.log`` per slot would cost ~50 us a call. No global Rerun state: the
-caller passes a ``RecordingStream`` (:func:`~recorder.rerun.names.new_recording` makes one
-with reproducible settings) and owns where it goes; :class:`~recorder.rerun.output.RrdOutput`
+caller passes a ``RecordingStream`` (:func:`~corraoi.recorder.rerun.names.new_recording` makes one
+with reproducible settings) and owns where it goes; :class:`~corraoi.recorder.rerun.output.RrdOutput`
 is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
 """
 
@@ -23,8 +23,8 @@ import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig, SlotBlock
-from recorder import style
-from recorder.sink import RunRecording, Sink
+from corraoi.recorder import style
+from corraoi.recorder.sink import RunRecording, Sink
 
 from .names import (
     TIMELINE,
@@ -342,7 +342,7 @@ class RerunSink(Sink):
 
 class LocalRecording(RunRecording):
     """One run's recording written in this process: an :class:`RrdOutput` (the file and/or
-    viewer) fed by a :class:`RerunSink` (:class:`~recorder.sink.RunRecording`'s meaning).
+    viewer) fed by a :class:`RerunSink` (:class:`~corraoi.recorder.sink.RunRecording`'s meaning).
     A forked worker writes its recordings with this class too."""
 
     def __init__(

@@ -1,5 +1,5 @@
 """The static data of one run's Rerun recording, logged once before its slots: how every
-entity looks (names, colours, markers; :mod:`recorder.style` owns them) and the ``about``
+entity looks (names, colours, markers; :mod:`corraoi.recorder.style` owns them) and the ``about``
 note, the run card (the run configuration, its arms and what the views show, as markdown).
 
 rerun-sdk 0.41 has no axis titles: units are in the view titles and series names.
@@ -13,7 +13,7 @@ import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig
-from recorder import style
+from corraoi.recorder import style
 
 #: Bars of the per-arm bar charts: width, and the offset of the empirical (left) and true
 #: (right) bar from the arm's number.

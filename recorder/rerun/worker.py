@@ -5,17 +5,17 @@ long as numba's import and the first kernel load together, and a one-run ``corra
 would otherwise pay the two one after the other (issue 22). Forked before the parent
 imports numba, the worker imports Rerun on the other core, then receives the run's
 :class:`~corraoi.engine.block.SlotBlock` s over a pipe and feeds them to the same
-:class:`~recorder.rerun.output.RrdOutput` and :class:`~recorder.rerun.sink.RerunSink` that an
+:class:`~corraoi.recorder.rerun.output.RrdOutput` and :class:`~corraoi.recorder.rerun.sink.RerunSink` that an
 in-process recording uses: the file is the same, only the process differs.
 ``benchmarks/bench_start.py`` measures the gain (the "record --policy cucb" row).
 
 ``with RerunWorker.start() as worker: rec = worker.open(config, rrd_path=...)``, then
 ``rec.write(block)`` for each block and ``rec.close()`` (or ``rec.abort()``) with
-:class:`~recorder.sink.RunRecording`'s meaning: the file is renamed into place only when complete; a
+:class:`~corraoi.recorder.sink.RunRecording`'s meaning: the file is renamed into place only when complete; a
 problem raises the same :class:`~corraoi.errors.WriteError` or
 :class:`~corraoi.errors.ViewerError`. :meth:`RerunWorker.start` returns None where
 a process cannot be forked safely (:func:`corraoi.forked.can_fork`; then record in this
-process, :class:`~recorder.rerun.sink.LocalRecording`).
+process, :class:`~corraoi.recorder.rerun.sink.LocalRecording`).
 
 The worker is a :class:`corraoi.forked.ForkedWorker`: it ignores Ctrl-C, SIGTERM and
 SIGHUP (the terminal sends them to the whole process group): the parent decides, and tells
@@ -37,7 +37,7 @@ from typing import Any
 from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import check_target
 from corraoi.forked import ForkedWorker, can_fork
-from recorder.sink import RunRecording, made_again
+from corraoi.recorder.sink import RunRecording, made_again
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -132,7 +132,7 @@ class RerunWorker:
 
 class RemoteRecording(RunRecording):
     """One run's recording in a :class:`RerunWorker`: ``write``, then ``close`` or
-    ``abort``, with :class:`~recorder.sink.RunRecording`'s meaning."""
+    ``abort``, with :class:`~corraoi.recorder.sink.RunRecording`'s meaning."""
 
     def __init__(self, worker: RerunWorker, path: Path | None) -> None:
         self._worker = worker

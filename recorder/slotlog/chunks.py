@@ -20,7 +20,7 @@ calls (the first chunk carries the schema and channel records, then the messages
 ``uncompressed_crc`` is set), except that no empty summary group is written: the mcap 1.6
 writer always writes an attachment-index group, empty in our files. The tests pin both:
 equal to the mcap writer's file without that group, and readable by mcap's readers and
-:mod:`recorder.slotlog.reader`. We write level 1 (:data:`ZSTD_LEVEL`).
+:mod:`corraoi.recorder.slotlog.reader`. We write level 1 (:data:`ZSTD_LEVEL`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from recorder.vocab import MAGIC
+from corraoi.recorder.vocab import MAGIC
 
 #: opcode u8, record length u64, channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE_HEADER = np.dtype(

@@ -2,8 +2,8 @@
 
 One MCAP message per slot on :data:`SLOT_TOPIC`, JSON encoded. Arms and states are numbered
 from 1 in the log (``SlotBlock`` arrays are 0-based: the decoder subtracts 1). The names
-of the format are defined in :mod:`recorder.vocab` and its writing side (schema, metadata,
-encoder) in :mod:`recorder.slotlog.encode`, whose functions are re-exported here.
+of the format are defined in :mod:`corraoi.recorder.vocab` and its writing side (schema, metadata,
+encoder) in :mod:`corraoi.recorder.slotlog.encode`, whose functions are re-exported here.
 ``docs/log-format.md`` is the human description.
 """
 
@@ -22,8 +22,8 @@ from corraoi.engine.block import FIELDS, NONE_FIELDS, RunConfig, SlotBlock, abse
 from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, NAMES, REQUIRED
 from corraoi.errors import LogError
 
-# The slot log's names (recorder.vocab)
-from recorder.vocab import (
+# The slot log's names (corraoi.recorder.vocab)
+from corraoi.recorder.vocab import (
     RUN_METADATA,
     SLOT_FORMAT_NAME,
     SLOT_FORMAT_VERSION,

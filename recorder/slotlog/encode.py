@@ -1,8 +1,8 @@
 """The slot log written: its JSON Schema, its metadata records and the block encoder.
 
-One MCAP message per slot on the slot topic (:data:`recorder.vocab.SLOT_TOPIC`), JSON
+One MCAP message per slot on the slot topic (:data:`corraoi.recorder.vocab.SLOT_TOPIC`), JSON
 encoded, arms and states numbered from 1 (``SlotBlock`` arrays are 0-based: the encoder
-adds 1). The reading side, the strict decoder, is :mod:`recorder.slotlog.decode`, which re-exports
+adds 1). The reading side, the strict decoder, is :mod:`corraoi.recorder.slotlog.decode`, which re-exports
 these names; ``docs/log-format.md`` is the human description.
 """
 
@@ -16,10 +16,10 @@ import numpy as np
 import orjson
 
 from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, REQUIRED, SLOT_RECORD, SlotField
-from recorder.vocab import NS_PER_SLOT
-from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-from recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
-from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import NS_PER_SLOT
+from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from corraoi.recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
+from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 
 if TYPE_CHECKING:  # types only: corraoi.engine.block's import circle stays out of this module
     from corraoi.engine.block import RunConfig, SlotBlock

@@ -1,7 +1,7 @@
 """A slot log as a table: pandas DataFrames and Arrow record batches, numbered from 1.
 
 :class:`RunData` is what ``corraoi.load("run.mcap")`` returns. It reads the log with the
-one reader (:func:`recorder.slotlog.reader.open_log`) and turns each SlotBlock into an Arrow
+one reader (:func:`corraoi.recorder.slotlog.reader.open_log`) and turns each SlotBlock into an Arrow
 record batch whose columns are the log's fields exactly as the file holds them: arms and
 states numbered from 1, per-arm arrays spread into wide columns. pandas and pyarrow are
 the optional extra ``analysis``; they are imported when a table is built.

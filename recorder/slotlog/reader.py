@@ -5,7 +5,7 @@ streams the slots (memory bounded by one chunk plus one block). A log whose writ
 killed (no footer, or a ``.partial`` file) is read up to its last complete chunk and
 reported as cut short.
 
-The records are walked by :mod:`recorder.walk`, the one MCAP walker, which tells a
+The records are walked by :mod:`corraoi.recorder.walk`, the one MCAP walker, which tells a
 truncated tail (recover) from a damaged chunk (refuse); this module reads the slots.
 """
 
@@ -27,7 +27,7 @@ from corraoi.engine.slot_record import OPTIONAL
 from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
 from corraoi.limits import MAX_HORIZON
-from recorder.vocab import (
+from corraoi.recorder.vocab import (
     LACKING_FORMAT_VERSION,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
@@ -38,7 +38,7 @@ from recorder.vocab import (
     SLOT_TOPIC,
     SWEEP_METADATA,
 )
-from recorder.walk import (
+from corraoi.recorder.walk import (
     ChunkData,
     Walker,
     channel_payloads,

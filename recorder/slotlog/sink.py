@@ -1,12 +1,12 @@
 """McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
 
 The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
-so a file at ``<path>`` is always complete. Every :data:`~recorder.vocab.SLOT_FLUSH_EVERY`
+so a file at ``<path>`` is always complete. Every :data:`~corraoi.recorder.vocab.SLOT_FLUSH_EVERY`
 slots the current chunk is closed and handed to the operating system, so a writer killed
 with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
 the ``.partial`` file and says the log was cut short.
 
-The chunks are framed by :class:`recorder.slotlog.chunks.ChunkWriter` (whole chunks built
+The chunks are framed by :class:`corraoi.recorder.slotlog.chunks.ChunkWriter` (whole chunks built
 with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
 """
 
@@ -25,8 +25,8 @@ from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
-from recorder.sink import Sink
-from recorder.vocab import (
+from corraoi.recorder.sink import Sink
+from corraoi.recorder.vocab import (
     MAX_SLOT,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
@@ -36,10 +36,10 @@ from recorder.vocab import (
     SCHEMA_ENCODING,
     library_name,
 )
-from recorder.vocab import RUN_END_METADATA as END_METADATA
-from recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-from recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
-from recorder.vocab import SLOT_TOPIC as TOPIC
+from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
+from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
+from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
 
 from .chunks import ChunkWriter
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes

@@ -12,14 +12,14 @@ Entities (timeline ``slot``, a sequence; arms numbered from 1):
   shares that coincide show both colours (a thin line inside a wide one);
 * ``sweep/share/<policy>``: beyond ``style.LINES_UP_TO`` arms, the shares of every arm at
   each checkpoint as a bar chart (the pull shares at the time cursor); the lines are then
-  drawn for the arms that matter only (:func:`recorder.style.arms_that_matter`).
+  drawn for the arms that matter only (:func:`corraoi.recorder.style.arms_that_matter`).
 
 The recording is named after its folder and instance (:func:`sweep_recording_name`), as
 the viewer lists it.
 
 
 :func:`sweep_blueprint` is the default layout: the regret overlay on top, the pulls per arm
-of each policy in tabs below. :class:`recorder.sweeplog.recording.SweepRerunSink` sends the data.
+of each policy in tabs below. :class:`corraoi.recorder.sweeplog.recording.SweepRerunSink` sends the data.
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from typing import Any
 import rerun as rr
 import rerun.blueprint as rrb
 
-from recorder import style
-from recorder.rerun.names import TIMELINE
-from recorder.style import REGRET_UNIT, is_aoi_aware
+from corraoi.recorder import style
+from corraoi.recorder.rerun.names import TIMELINE
+from corraoi.recorder.style import REGRET_UNIT, is_aoi_aware
 
 ROOT = "sweep"
 #: More policies than this: the regret view opens as small multiples (base policies beside
@@ -113,12 +113,12 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
         f"AoI regret {REGRET_UNIT}, {inst.get('name', '?')}: {config.get('runs', '?')} runs, "
         "mean and 95% band"
     )
-    from recorder.rerun.layout import LEGEND, VIEWER_PX, legend_room, time_windows
+    from corraoi.recorder.rerun.layout import LEGEND, VIEWER_PX, legend_room, time_windows
 
     horizon = config.get("horizon")
     names = policy_names(config)
     # the whole horizon, not a window around the time cursor, and room right of it for the
-    # legend (recorder.rerun.layout's rule): the policies' names, or the arms'
+    # legend (corraoi.recorder.rerun.layout's rule): the policies' names, or the arms'
     tw = time_windows(1, horizon if isinstance(horizon, int) and horizon > 0 else None)
     axis = tw.whole_axis(legend_room(names, VIEWER_PX))
     legend = LEGEND

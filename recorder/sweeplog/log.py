@@ -11,7 +11,7 @@ runs, horizon, seed, checkpoints, version) is stored in the metadata record
 The writer is byte-reproducible: no wall clock anywhere (log_time = publish_time =
 ``t * NS_PER_SLOT``, sequence = 1-based index of the message in the file). It writes
 ``<path>.partial`` and renames it to ``path`` only when closed normally. The reader
-(:func:`read_sweep`, :class:`SweepLog`) lives in :mod:`recorder.sweeplog.read` and is
+(:func:`read_sweep`, :class:`SweepLog`) lives in :mod:`corraoi.recorder.sweeplog.read` and is
 re-exported here.
 """
 
@@ -30,11 +30,11 @@ from mcap.writer import CompressionType, Writer
 from corraoi._version import __version__
 from corraoi.errors import WriteError
 from corraoi.files.partial import PartialFile, reason
-from recorder.sink import Sink
+from corraoi.recorder.sink import Sink
 
-# Colours live in recorder.style (one place for every view); re-exported for old imports.
-# The sweep log's names (recorder.vocab)
-from recorder.vocab import (
+# Colours live in corraoi.recorder.style (one place for every view); re-exported for old imports.
+# The sweep log's names (corraoi.recorder.vocab)
+from corraoi.recorder.vocab import (
     MCAP_INDEX_TYPES,
     MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
     MESSAGE_ENCODING,

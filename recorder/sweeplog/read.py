@@ -1,9 +1,9 @@
 """The sweep log read back: a sweep's curves, its configuration and how it ended.
 
-:func:`read_sweep` reads a sweep log written by :class:`recorder.sweeplog.log.SweepMcapSink`
+:func:`read_sweep` reads a sweep log written by :class:`corraoi.recorder.sweeplog.log.SweepMcapSink`
 (also a ``.partial`` file, or one cut short: every complete chunk) into a
 :class:`SweepLog` of :class:`SweepCurve` per policy. The records are walked by
-:mod:`recorder.walk`; the names come from :mod:`recorder.vocab`. ``docs/log-format.md``
+:mod:`corraoi.recorder.walk`; the names come from :mod:`corraoi.recorder.vocab`. ``docs/log-format.md``
 (section 3) describes the format.
 """
 
@@ -21,14 +21,14 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 
 from corraoi.errors import LogError, SweepLogError
 from corraoi.files.partial import PARTIAL_SUFFIX, partial_path, reason
-from recorder.vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
-from recorder.vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
-from recorder.vocab import SWEEP_END_METADATA as END_METADATA
-from recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
-from recorder.vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
-from recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
-from recorder.vocab import SWEEP_TOPIC as TOPIC
-from recorder.walk import Walker
+from corraoi.recorder.vocab import MAGIC, RUN_METADATA, SWEEP_METADATA
+from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as _SLOT_SCHEMA
+from corraoi.recorder.vocab import SWEEP_END_METADATA as END_METADATA
+from corraoi.recorder.vocab import SWEEP_FORMAT_VERSION as FORMAT_VERSION
+from corraoi.recorder.vocab import SWEEP_OPTIONAL_KEYS as OPTIONAL_KEYS
+from corraoi.recorder.vocab import SWEEP_SCHEMA_NAME as SCHEMA_NAME
+from corraoi.recorder.vocab import SWEEP_TOPIC as TOPIC
+from corraoi.recorder.walk import Walker
 
 
 def sweep_arms(config: dict[str, Any]) -> int:

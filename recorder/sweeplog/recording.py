@@ -1,10 +1,10 @@
 """SweepRerunSink: the aggregated curves of a sweep, streamed into a Rerun recording.
 
-The entities, their paths and the default layout are :mod:`recorder.sweeplog.layout`'s
+The entities, their paths and the default layout are :mod:`corraoi.recorder.sweeplog.layout`'s
 (its names stay importable from here).
 
 Styling (``SeriesLines``/``SeriesPoints`` colours, names, widths) is logged once as static.
-Colours, widths and markers come from :mod:`recorder.style`: each base policy has a colour;
+Colours, widths and markers come from :mod:`corraoi.recorder.style`: each base policy has a colour;
 its ``aoi-aware-`` variant uses the same colour with a thinner line plus a cross marker at
 every checkpoint, since Rerun 0.41 lines cannot be dashed. Units are in the view titles
 and series names (Rerun 0.41 has no axis titles).
@@ -25,12 +25,11 @@ import rerun as rr
 
 from corraoi.errors import WriteError
 from corraoi.files.partial import PartialFile, reason
-from corraoi.stats import SweepPoint
-from recorder import style
-from recorder.rerun.names import TIMELINE
-from recorder.rerun.output import check_rrd, finish_recording, first_line
-from recorder.sink import Sink
-from recorder.style import (
+from corraoi.recorder import style
+from corraoi.recorder.rerun.names import TIMELINE
+from corraoi.recorder.rerun.output import check_rrd, finish_recording, first_line
+from corraoi.recorder.sink import Sink
+from corraoi.recorder.style import (
     MARKER_AOI_AWARE,
     WIDTH_AOI_AWARE,
     WIDTH_BAND,
@@ -42,7 +41,8 @@ from recorder.style import (
     lighter,
     policy_color,
 )
-from recorder.vocab import SWEEP_FLUSH_EVERY
+from corraoi.recorder.vocab import SWEEP_FLUSH_EVERY
+from corraoi.stats import SweepPoint
 
 from .layout import (
     entity_part,
@@ -57,7 +57,7 @@ from .layout import (
     sweep_recording_name,
 )
 
-#: Line widths (UI points) of the mean curves (AoI-aware and band: recorder.style).
+#: Line widths (UI points) of the mean curves (AoI-aware and band: corraoi.recorder.style).
 WIDTH_BASE = WIDTH_MAIN
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
@@ -212,7 +212,7 @@ class SweepRerunSink(Sink):
                 rgb = style.BAR_IN_SET_COLOR
             static(pulls_path(name, k + 1), line(rgb, self._widths.get(k, style.WIDTH_ARM), label))
         if not self._lines:
-            from recorder.rerun.static import bars
+            from corraoi.recorder.rerun.static import bars
 
             bars(rec, share_path(name), color, np.arange(1, self.K + 1, dtype=np.float64),
                  width=0.9)  # fmt: skip
@@ -267,7 +267,7 @@ class SweepRerunSink(Sink):
         for k in range(self.K):
             send(pulls_path(name, k + 1), t, np.ascontiguousarray(share[:, k]))
         if not self._lines and t.size:
-            from recorder.rerun.static import tensor_batch
+            from corraoi.recorder.rerun.static import tensor_batch
 
             rec.send_columns(
                 share_path(name), indexes=[rr.TimeColumn(TIMELINE, sequence=t)],

@@ -23,7 +23,7 @@ import numpy as np
 from corraoi._version import __version__
 from corraoi.errors import ResultsError
 from corraoi.files.partial import PartialFile, partial_path
-from recorder.vocab import SWEEP_METADATA
+from corraoi.recorder.vocab import SWEEP_METADATA
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -220,7 +220,7 @@ def _first_metadata(p: Path) -> str | None:
     """The name of the first metadata record of an MCAP file (None: none, or not MCAP)."""
     from mcap.records import Metadata
 
-    from recorder.walk import Walker
+    from corraoi.recorder.walk import Walker
 
     try:
         with open(p, "rb") as f:

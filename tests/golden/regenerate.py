@@ -106,7 +106,7 @@ def golden() -> dict[str, object]:
 def log_values(path: Path) -> dict[str, Any]:
     """A slot log read back by the recorder: its run and end metadata (JSON values decoded)
     and every column of every slot, as plain numbers (integers stay integers)."""
-    from recorder.slotlog.reader import open_log
+    from corraoi.recorder.slotlog.reader import open_log
 
     log = open_log(path)
     meta: dict[str, Any] = {}
@@ -131,7 +131,7 @@ def log_values(path: Path) -> dict[str, Any]:
 def write_log(key: tuple[str, str, int, int], path: Path) -> Any:
     """Record the log of one of :data:`LOG_CASES` at ``path``; returns its RunConfig."""
     from corraoi.engine.block import RunConfig
-    from recorder.slotlog.sink import McapSink
+    from corraoi.recorder.slotlog.sink import McapSink
 
     inst_name, policy, seed, horizon = key
     config = RunConfig(load_instance(inst_name), make_policy(policy), seed, horizon)
