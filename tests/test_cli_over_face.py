@@ -41,8 +41,6 @@ def _imports(path: Path) -> list[tuple[int, str]]:
 
 def _allowed(module: str) -> bool:
     parts = module.split(".")
-    if parts[0] in ("recorder", "viewer"):
-        return False
     if parts[0] != "corraoi" or len(parts) == 1:
         return True  # the standard library, click and other third parties
     if parts[1] in ("face", "cli") or parts[1] in GROUND:
