@@ -257,7 +257,8 @@ def test_check_policy_takes_the_class() -> None:
 
 @pytest.mark.parametrize(("touch", "loaded"), [
     ("", []),  # import corraoi: the face's names only, nothing of the engine or the formats
-    ("corraoi.record; corraoi.Run; corraoi.Sweep; corraoi.load; corraoi.diff", ["corraoi.recorder"]),
+    ("corraoi.record; corraoi.Run; corraoi.Sweep; corraoi.load; corraoi.diff",
+     ["corraoi.recorder"]),
 ])
 def test_import_corraoi_stays_light(touch: str, loaded: list[str]) -> None:
     heavy = ("numba", "rerun", "pandas", "pyarrow", "corraoi.recorder", "corraoi.engine.simulation")
