@@ -29,16 +29,11 @@ import sys
 from pathlib import Path
 
 import pytest
-import tomllib
 
 ROOT = Path(__file__).resolve().parent.parent
-#: The checkout's folders and the packages they install as (pyproject.toml's package-dir):
-#: recorder/ is corraoi.recorder, viewer/ is corraoi.viewer.
-FOLDERS = {
-    "corraoi": "corraoi",
-    **{folder: package for package, folder in tomllib.loads(
-        (ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"].items()},
-}  # fmt: skip
+#: The checkout's folders and the packages they install as (pyproject.toml's package-dir;
+#: tests/test_packaging.py checks the wheel): recorder/ is corraoi.recorder.
+FOLDERS = {"corraoi": "corraoi", "recorder": "corraoi.recorder", "viewer": "corraoi.viewer"}
 RECORDER, VIEWER = FOLDERS["recorder"], FOLDERS["viewer"]
 #: what composes the layers for a user: the only modules that import recorder or viewer
 TOP = ("corraoi.face", "corraoi.cli", "corraoi.testing", "corraoi.pytest_plugin", "corraoi.gym")
