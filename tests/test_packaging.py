@@ -135,7 +135,8 @@ def test_the_installed_wheel_has_no_recorder_or_viewer_package(wheel: Path, tmp_
 
 def test_the_installed_package_outside_the_checkout(tmp_path: Path):
     """The environment's own install (``pip install -e .``), imported from elsewhere: corraoi's
-    recorder and viewer come from the checkout's folders, and ``import recorder`` fails."""
+    recorder and viewer come from the checkout's folders, and the old top-level names
+    ``recorder`` and ``viewer`` do not import."""
     probe = subprocess.run(
         [sys.executable, "-c", "import importlib.util as u; print(u.find_spec('corraoi') is None)"],
         cwd=tmp_path, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"},
