@@ -40,8 +40,10 @@ def _can_build_wheels() -> bool:
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if not _can_build_wheels():
-        pytest.skip("building a wheel without the network needs setuptools >= 70.1 or wheel "
-                    "(pip install -e '.[test]')")
+        pytest.skip(
+            "building a wheel without the network needs setuptools >= 70.1 or wheel "
+            "(pip install -e '.[test]')"
+        )
     work = tmp_path_factory.mktemp("wheel")
     src = work / "src"
     src.mkdir()
