@@ -344,7 +344,7 @@ def sources_of(spec: Any) -> list[Source]:
             modules.append(name)
     out = []
     for name in modules:
-        if name.split(".")[0] in ("corraoi", "recorder", "viewer"):
+        if name.split(".")[0] == "corraoi":
             continue
         # the class's own module: a session without a file gives the class's text instead,
         # and a class without a text its code (policies.loading.class_source)

@@ -4,6 +4,6 @@ MCAP), its Rerun recording (``rerun/``), a sweep's files (``sweeplog/``), live v
 views' colours beside them.
 
 This front names nothing: callers import the modules (``corraoi.recorder.slotlog.reader.open_log``,
-``corraoi.recorder.slotlog.sink.McapSink``, ``corraoi.recorder.rerun.sink.RerunSink``), so that reading a
-log imports neither Rerun nor the writers (docs/architecture.md).
+``corraoi.recorder.slotlog.sink.McapSink``, ``corraoi.recorder.rerun.sink.RerunSink``), so that
+reading a log imports neither Rerun nor the writers (docs/architecture.md).
 """

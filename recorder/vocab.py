@@ -2,8 +2,9 @@
 sweep log, defined once.
 
 Writers, readers, the walker (:mod:`corraoi.recorder.walk`), ``corraoi recover`` and the live
-viewers import these; ``corraoi.recorder.slotlog.decode`` and ``corraoi.recorder.sweeplog.log`` re-export them under
-their older short names (``TOPIC``, ``FORMAT_VERSION``, ...), each for its own format.
+viewers import these; ``corraoi.recorder.slotlog.decode`` and ``corraoi.recorder.sweeplog.log``
+re-export them under their older short names (``TOPIC``, ``FORMAT_VERSION``, ...), each for its
+own format.
 ``docs/log-format.md`` is the human description. Nothing here imports corraoi's core.
 """
 

@@ -1,11 +1,11 @@
 """The one MCAP walker: every reader of corraoi's MCAP files walks their records here.
 
-The slot-log reader (:mod:`corraoi.recorder.slotlog.reader`), the sweep-log reader, the sweep sniffing of
-:mod:`corraoi.recorder.sweeplog.results` and ``corraoi recover`` (:mod:`corraoi.viewer.recover`) read through
-:class:`Walker`, as ``mcap``'s ``reader.py`` builds on its ``stream_reader.py``. Record
-bodies are parsed by ``mcap``'s record classes (:mod:`mcap.records`) over its
-:class:`~mcap.data_stream.ReadDataStream`; a finished file's chunk index is read by
-``mcap.reader.SeekingReader``.
+The slot-log reader (:mod:`corraoi.recorder.slotlog.reader`), the sweep-log reader, the sweep
+sniffing of :mod:`corraoi.recorder.sweeplog.results` and ``corraoi recover``
+(:mod:`corraoi.viewer.recover`) read through :class:`Walker`, as ``mcap``'s ``reader.py``
+builds on its ``stream_reader.py``. Record bodies are parsed by ``mcap``'s record classes
+(:mod:`mcap.records`) over its :class:`~mcap.data_stream.ReadDataStream`; a finished file's
+chunk index is read by ``mcap.reader.SeekingReader``.
 
 The rest is our own code for one reason: a reader must tell a file *cut short* (its writer
 was killed: a torn last record, no footer; every complete chunk before is good) from a

@@ -137,7 +137,8 @@ def test_help_does_not_import_rerun_or_the_recorder():
         "from corraoi.cli import main\n"
         "r = CliRunner().invoke(main, ['record', '--help'])\n"
         "assert r.exit_code == 0 and '--serve-web' in r.output and '--no-rrd' in r.output\n"
-        "print(sorted(m for m in ('rerun', 'mcap', 'corraoi.recorder.slotlog.sink') if m in sys.modules))\n"
+        "print(sorted(m for m in ('rerun', 'mcap', 'corraoi.recorder.slotlog.sink')\n"
+        "             if m in sys.modules))\n"
     )
     out = subprocess.run([PYTHON, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr

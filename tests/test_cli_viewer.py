@@ -297,8 +297,9 @@ def test_no_viewer_command_simulates(tmp_path, record_mcap, monkeypatch):
 
 def test_the_viewer_does_not_import_the_engine():
     code = (
-        "import sys, corraoi.viewer, corraoi.viewer.compare, corraoi.viewer.replay, corraoi.viewer.diffs, corraoi.viewer.info, "
-        "corraoi.viewer.recover, corraoi.cli.viewer, corraoi.recorder.slotlog.reader, corraoi.recorder.rerun.sink\n"
+        "import sys, corraoi.viewer, corraoi.viewer.compare, corraoi.viewer.replay, "
+        "corraoi.viewer.diffs, corraoi.viewer.info, corraoi.viewer.recover, corraoi.cli.viewer, "
+        "corraoi.recorder.slotlog.reader, corraoi.recorder.rerun.sink\n"
         "bad = sorted(m for m in ('corraoi.engine.simulation', 'corraoi.engine.kernels', 'numba') "
         "if m in sys.modules)\n"
         "print(','.join(bad))"

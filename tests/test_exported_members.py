@@ -59,7 +59,7 @@ def test_every_packages_all_resolves():
     import importlib
     import pkgutil
 
-    for top in ("corraoi", "recorder", "viewer"):
+    for top in ("corraoi", "corraoi.recorder", "corraoi.viewer"):
         root = importlib.import_module(top)
         packages = [root] + [importlib.import_module(m.name)
                              for m in pkgutil.walk_packages(root.__path__, f"{top}.")

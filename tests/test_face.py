@@ -257,10 +257,11 @@ def test_check_policy_takes_the_class() -> None:
 
 @pytest.mark.parametrize(("touch", "loaded"), [
     ("", []),  # import corraoi: the face's names only, nothing of the engine or the formats
-    ("corraoi.record; corraoi.Run; corraoi.Sweep; corraoi.load; corraoi.diff", ["recorder"]),
+    ("corraoi.record; corraoi.Run; corraoi.Sweep; corraoi.load; corraoi.diff",
+     ["corraoi.recorder"]),
 ])
 def test_import_corraoi_stays_light(touch: str, loaded: list[str]) -> None:
-    heavy = ("numba", "rerun", "pandas", "pyarrow", "recorder", "corraoi.engine.simulation")
+    heavy = ("numba", "rerun", "pandas", "pyarrow", "corraoi.recorder", "corraoi.engine.simulation")
     code = (f"import sys, json, corraoi; {touch}\n"
             f"print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

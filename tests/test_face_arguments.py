@@ -154,7 +154,12 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("record", {"score": "on"}, ArgumentTypeError, "score 'on': expected True or False"),
     ("record", {"viewer": 9876}, ArgumentTypeError, "viewer 9876: expected a running Rerun"),
     ("record", {"sinks": "x"}, ArgumentTypeError, "sinks 'x': expected a list or tuple"),
-    ("record", {"sinks": [3]}, ArgumentTypeError, "sinks[0] 3: expected a corraoi.recorder.sink.Sink"),
+    (
+        "record",
+        {"sinks": [3]},
+        ArgumentTypeError,
+        "sinks[0] 3: expected a corraoi.recorder.sink.Sink",
+    ),
     ("record", {"on_block": 3}, ArgumentTypeError, "on_block 3: expected a function"),
     ("record", {"should_stop": True}, ArgumentTypeError, "should_stop True: expected a function"),
     # corraoi.sweep

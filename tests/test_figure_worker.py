@@ -59,7 +59,8 @@ def _drawn_here(folder: Path, tmp_path: Path) -> bytes:
 
 
 def test_sweep_o_draws_its_figures_in_the_worker_as_they_are_drawn_in_process(tmp_path: Path):
-    code = ("import sys, corraoi.viewer.figure_worker as w; calls = []; real = w.FigureWorker.draw\n"
+    code = ("import sys, corraoi.viewer.figure_worker as w; calls = []\n"
+            "real = w.FigureWorker.draw\n"
             "def draw(self, log, out):\n    calls.append(str(out)); real(self, log, out)\n"
             "w.FigureWorker.draw = draw\n"
             "import atexit; atexit.register(lambda: print('DRAWN', len(calls)))\n"

@@ -1,5 +1,6 @@
-"""Live in Foxglove (corraoi.recorder.live.foxglove, record/replay --foxglove): a real protocol client
-over `websockets` gets the MCAP log's messages, late and slow clients, and the ways a run ends.
+"""Live in Foxglove (corraoi.recorder.live.foxglove, record/replay --foxglove): a real
+protocol client over `websockets` gets the MCAP log's messages, late and slow clients, and the
+ways a run ends.
 
 Everything listens on 127.0.0.1, and every server is stopped by the test that started it.
 The SDK (0.30) speaks the Foxglove WebSocket protocol under its current subprotocol name

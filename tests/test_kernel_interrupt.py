@@ -7,7 +7,8 @@ uninterrupted sweep).
 The log: a KeyboardInterrupt between two writes finishes it with the slots so far, marked
 ``interrupted``, at its name; one that lands inside a write (the kernel raises it wherever
 the main thread is) leaves it at its ``.partial`` name, its whole chunks readable
-(``corraoi.recorder.slotlog.sink.McapSink``, docs/log-format.md). Either is accepted; both say so."""
+(``corraoi.recorder.slotlog.sink.McapSink``, docs/log-format.md). Either is accepted; both say
+so."""
 
 from __future__ import annotations
 

@@ -31,7 +31,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("corraoi", "recorder", "viewer")
+#: The checkout's folders and the packages they install as (pyproject.toml's package-dir;
+#: tests/test_packaging.py checks the wheel): recorder/ is corraoi.recorder.
+FOLDERS = {"corraoi": "corraoi", "recorder": "corraoi.recorder", "viewer": "corraoi.viewer"}
+RECORDER, VIEWER = FOLDERS["recorder"], FOLDERS["viewer"]
 #: what composes the layers for a user: the only modules that import recorder or viewer
 TOP = ("corraoi.face", "corraoi.cli", "corraoi.testing", "corraoi.pytest_plugin", "corraoi.gym")
 HEAVY = ("numba", "rerun", "pandas", "pyarrow", "matplotlib")
@@ -40,13 +43,16 @@ HEAVY = ("numba", "rerun", "pandas", "pyarrow", "matplotlib")
 OWED_CLIMBS: dict[str, str] = {}
 
 
+def module_name(path: Path) -> str:
+    """The module a file of the checkout is once installed: recorder/walk.py is
+    corraoi.recorder.walk; tests/test_x.py is tests.test_x."""
+    top, *rest = path.relative_to(ROOT).with_suffix("").parts
+    parts = [*FOLDERS.get(top, top).split("."), *rest]
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
 def _modules() -> dict[str, Path]:
-    out = {}
-    for pkg in PACKAGES:
-        for path in (ROOT / pkg).rglob("*.py"):
-            parts = path.relative_to(ROOT).with_suffix("").parts
-            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    return out
+    return {module_name(path): path for folder in FOLDERS for path in (ROOT / folder).rglob("*.py")}
 
 
 MODULES = _modules()
@@ -206,7 +212,7 @@ FLOORS = ("corraoi's lower wings", "recorder", "viewer", "the top floor")
 def _floor(name: str) -> int:
     if _is_top(name) or name == "corraoi.__main__":
         return 3
-    return {"recorder": 1, "viewer": 2}.get(name.split(".")[0], 0)
+    return 2 if name.startswith(VIEWER) else 1 if name.startswith(RECORDER) else 0
 
 
 def _climbs(edges: dict[str, set[str]]) -> dict[str, list[str]]:
@@ -241,7 +247,7 @@ def test_the_formats_import_no_experiment_module_even_for_types():
     typing imports and the imports of what it imports counted."""
     edges = _edges(typing=True)
     wrong = {m: sorted(t for t in _reach(edges, m) if t.startswith("corraoi.experiments"))
-             for m in edges if m.startswith("recorder")}  # fmt: skip
+             for m in edges if m.startswith(RECORDER)}  # fmt: skip
     assert {m: ts for m, ts in wrong.items() if ts} == {}
 
 
@@ -250,7 +256,7 @@ def test_recording_imports_no_viewer_module():
     ``recording``, the recorder, what they import at module level) imports no module of
     the viewer."""
     edges = _edges()
-    assert not [t for t in edges["corraoi.face.recording"] if t.startswith("viewer")]
+    assert not [t for t in edges["corraoi.face.recording"] if t.startswith(VIEWER)]
     module_level: dict[str, set[str]] = {}
     for name, path in MODULES.items():
         tree = ast.parse(path.read_text(encoding="utf-8"))
@@ -261,7 +267,7 @@ def test_recording_imports_no_viewer_module():
                                                  for a in node.names)])
             if (t := _known(w)) is not None and t != name
         }  # fmt: skip
-    assert not [t for t in _reach(module_level, "corraoi.face.recording") if t.startswith("viewer")]
+    assert not [t for t in _reach(module_level, "corraoi.face.recording") if t.startswith(VIEWER)]
 
 
 def test_a_plain_record_loads_no_viewer_module(tmp_path: Path):
@@ -270,7 +276,7 @@ def test_a_plain_record_loads_no_viewer_module(tmp_path: Path):
     code = ("import sys, corraoi\n"
             "run = corraoi.record('ucb', 'I1', seed=0, horizon=50, path='a.mcap', rrd=False)\n"
             "assert run.summary.slots == 50\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'viewer'\n"
+            "print(sorted(m for m in sys.modules if m.startswith('corraoi.viewer')\n"
             "             or m.startswith('corraoi.experiments')))")  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -291,24 +297,30 @@ def test_the_floor_check_sees_strings_and_lazy_tables():
         "PATHS = ['corraoi', 'recorder', 'viewer', 'corraoi.cli']\n"
         "SEAM = 'corraoi.face.load:load'\n"
     )
-    found = _string_imports("recorder", ast.parse(code))
-    assert found >= {"corraoi.recorder.rerun.sink", "corraoi.viewer.diffs", "corraoi.engine.kernels",
-                     "corraoi.face.load"}  # fmt: skip
+    found = _string_imports("corraoi.recorder", ast.parse(code))
+    assert found >= {"corraoi.recorder.rerun.sink", "corraoi.viewer.diffs",
+                     "corraoi.engine.kernels", "corraoi.face.load"}  # fmt: skip
     assert not found & {"corraoi", "recorder", "viewer", "corraoi.cli"}
     assert "corraoi.face.recording" in _edges()["corraoi"]  # the package's lazy table
-    assert _climbs({"recorder.x": {"corraoi.viewer.diffs", "corraoi.engine.block"},
-                    "viewer.y": {"recorder.x", "corraoi.face.load"}}) == {
-        "recorder.x": ["corraoi.viewer.diffs"], "viewer.y": ["corraoi.face.load"]}  # fmt: skip
+    assert _climbs({"corraoi.recorder.x": {"corraoi.viewer.diffs", "corraoi.engine.block"},
+                    "corraoi.viewer.y": {"corraoi.recorder.x", "corraoi.face.load"}}) == {
+        "corraoi.recorder.x": ["corraoi.viewer.diffs"],
+        "corraoi.viewer.y": ["corraoi.face.load"]}  # fmt: skip
+
+
+def _in_corraoi_folder(name: str) -> bool:
+    """A module of the corraoi/ folder (not of recorder/ or viewer/, installed under it)."""
+    return name.startswith("corraoi.") and not name.startswith((RECORDER, VIEWER))
 
 
 def _rooms(edges: dict[str, set[str]]) -> dict[str, set[str]]:
-    """The wings of ``corraoi`` and the wings each imports."""
+    """The wings of the corraoi/ folder and the wings each imports."""
     rooms: dict[str, set[str]] = {}
     for src, targets in edges.items():
-        if not src.startswith("corraoi.") or src == "corraoi.__main__":
+        if not _in_corraoi_folder(src) or src == "corraoi.__main__":
             continue
         room = rooms.setdefault(_wing(src), set())
-        room |= {_wing(t) for t in targets if t.startswith("corraoi.") and _wing(t) != _wing(src)}
+        room |= {_wing(t) for t in targets if _in_corraoi_folder(t) and _wing(t) != _wing(src)}
     return rooms
 
 
@@ -391,7 +403,7 @@ def test_no_module_re_exports_what_it_imports():
             if not isinstance(node, ast.ImportFrom):
                 continue
             base = _base(name, node)
-            if base.split(".")[0] not in PACKAGES:
+            if base.split(".")[0] != "corraoi":
                 continue
             for a in node.names:
                 bind = a.asname or a.name
@@ -432,7 +444,7 @@ def _private_reaches(name: str, tree: ast.Module) -> list[str]:
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             base = _base(name, node)
-            if base.split(".")[0] not in PACKAGES:
+            if base.split(".")[0] != "corraoi":
                 continue
             for a in node.names:
                 if f"{base}.{a.name}" in MODULES:
@@ -527,9 +539,9 @@ def test_the_private_check_sees_each_way_in():
 
 def test_no_string_names_a_module_of_recorder_or_viewer_below_the_top_floor():
     """No string seam: below the top floor, no string names a module of the recorder or the
-    viewer (``"recorder.x:f"``) to be imported later; what the layers below need from above
-    is handed down (a trace channel's readers, a sweep folder's outputs)."""
-    pattern = r"[\"']((?:recorder|viewer)(?:\.\w+)+(?::\w+)?)[\"']"
+    viewer (``"corraoi.recorder.x:f"``) to be imported later; what the layers below need
+    from above is handed down (a trace channel's readers, a sweep folder's outputs)."""
+    pattern = r"[\"']((?:corraoi\.recorder|corraoi\.viewer)(?:\.\w+)+(?::\w+)?)[\"']"
     for mod, path in MODULES.items():
         if not mod.startswith("corraoi") or _is_top(mod):
             continue
@@ -561,8 +573,7 @@ def _through_fronts() -> dict[str, set[str]]:
     used: dict[str, set[str]] = {f: set() for f in FRONTS}
     for folder in CALLERS:
         for path in (ROOT / folder).rglob("*.py"):
-            parts = path.relative_to(ROOT).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            name = module_name(path)
             tree = ast.parse(path.read_text(encoding="utf-8"))
             alias: dict[str, str] = {}
             for node in ast.walk(tree):

@@ -1,4 +1,5 @@
-"""The hand-framed MCAP writer (corraoi.recorder.slotlog.chunks) against mcap's own writer and readers."""
+"""The hand-framed MCAP writer (corraoi.recorder.slotlog.chunks) against mcap's own writer and
+readers."""
 
 from __future__ import annotations
 

@@ -75,7 +75,8 @@ def test_loaded_runs_compare_too(corraoi_run: Callable[..., Path]):
 def test_the_plugin_imports_nothing_heavy():
     code = (
         "import sys, corraoi.pytest_plugin; "
-        "print([m for m in ('numba', 'numpy', 'recorder', 'viewer', 'corraoi.engine.simulation') "
+        "print([m for m in ('numba', 'numpy', 'corraoi.recorder', 'corraoi.viewer', "
+        "'corraoi.engine.simulation') "
         "if m in sys.modules])"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

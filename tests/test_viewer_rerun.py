@@ -1,4 +1,5 @@
-"""corraoi.viewer.replay and corraoi.viewer.compare: logs re-rendered into Rerun, read back and compared."""
+"""corraoi.viewer.replay and corraoi.viewer.compare: logs re-rendered into Rerun, read back and
+compared."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""corraoi.recorder.walk, the one MCAP walker (issue 23): a file cut short is told from a damaged one,
-it gives the records mcap's StreamReader gives, every MCAP reader walks through it, and the
+"""corraoi.recorder.walk, the one MCAP walker (issue 23): a file cut short is told from a damaged
+one, it gives the records mcap's StreamReader gives, every MCAP reader walks through it, and the
 formats' names are defined once, in corraoi.recorder.vocab."""
 
 from __future__ import annotations

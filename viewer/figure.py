@@ -1,6 +1,7 @@
 """The sweep figure: AoI regret against t, one line per policy with its 95% band.
 
-Drawn from a sweep log alone (:func:`corraoi.recorder.sweeplog.log.read_sweep`), never by simulating.
+Drawn from a sweep log alone (:func:`corraoi.recorder.sweeplog.log.read_sweep`), never by
+simulating.
 Style of the paper's figures, from :mod:`corraoi.recorder.style` (the colours of every view): a
 line per policy in its base policy's colour, AoI-aware variants dashed in the same colour,
 a shaded 95% confidence band, the legend outside the axes so that twelve curves never hide

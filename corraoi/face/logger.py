@@ -161,7 +161,8 @@ class Logger:
         arguments.text(version, name="version", empty=True)
         arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
         arguments.flag(overwrite, name="overwrite")
-        arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a corraoi.recorder.sink.Sink")
+        arguments.objects(sinks, name="sinks", has=SINK_METHODS,
+                          what="a corraoi.recorder.sink.Sink")  # fmt: skip
         if params is not None and not isinstance(params, Mapping):
             raise arguments.wrong_type(PolicyError, "params", params, "a dict of numbers")
         params = {k: arguments.number(v, name=f"params[{k!r}]", kind=PolicyError)

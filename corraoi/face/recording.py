@@ -447,7 +447,8 @@ def _record_one(
 # ---------------------------------------------------------------------------- the face
 
 
-#: What every sink has (:class:`corraoi.recorder.sink.Sink`): written to, closed, and a context manager.
+#: What every sink has (:class:`corraoi.recorder.sink.Sink`): written to, closed, and a
+#: context manager.
 SINK_METHODS = ("write", "close", "__enter__", "__exit__")
 
 

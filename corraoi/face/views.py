@@ -41,8 +41,8 @@ def compare(
     column per run and every run's regret overlaid, into ``rrd`` (a file) and/or ``viewer``
     (a running viewer's URL); with neither, only the summary figures are gathered; ``force``
     replaces an existing ``rrd``. ``runs``: :class:`corraoi.Run` objects or slot logs' paths.
-    Returns a :class:`corraoi.viewer.compare.Comparison` (``.table()``, ``.to_dict()``, ``.path``); raises
-    :class:`~corraoi.errors.LogError` for a log that cannot be read,
+    Returns a :class:`corraoi.viewer.compare.Comparison` (``.table()``, ``.to_dict()``, ``.path``);
+    raises :class:`~corraoi.errors.LogError` for a log that cannot be read,
     :class:`~corraoi.errors.OutputError` for an ``rrd`` that must not be written."""
     from corraoi.viewer.compare import compare as compare_logs
 
@@ -71,8 +71,8 @@ def diff(
     atol: float = 0.0,
 ) -> DiffReport:
     """Where two recorded runs ``a`` and ``b`` diverge, slot by slot, as ``corraoi diff``
-    does; returns a :class:`corraoi.viewer.DiffReport` (``.identical``, ``report["arm"].first_slot``,
-    ``.message()``).
+    does; returns a :class:`corraoi.viewer.DiffReport` (``.identical``,
+    ``report["arm"].first_slot``, ``.message()``).
     ``fields`` restricts the comparison (default every logged field); ``atol`` is the
     tolerance of the float fields. Raises :class:`~corraoi.errors.LogError` for a log that
     cannot be read."""

@@ -5,8 +5,8 @@ imported only when ``--foxglove`` is asked for. What a client sees:
 
 - ``/corraoi/slot``: one JSON message per slot, with the very schema
   (:func:`corraoi.recorder.slotlog.encode.slot_schema`) and the very bytes
-  (:class:`corraoi.recorder.slotlog.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds as in
-  the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
+  (:class:`corraoi.recorder.slotlog.encode.BlockEncoder`) of the MCAP log, ``log_time = t`` seconds
+  as in the file, so a layout made for the file (``docs/foxglove-layout.json``) works live.
 - ``/corraoi/run``: the ``corraoi.run`` metadata record of the MCAP log as one JSON object
   (flat strings). The WebSocket protocol keeps no message for a client that connects
   later, so it is sent again with every block of slots (every 1,000 slots).
@@ -360,9 +360,9 @@ def stream_log(
     on_block: Callable[[int], None] | None = None,
     sink: FoxgloveSlotSink | None = None,
 ) -> int:
-    """Publish the slots ``start..`` of a recorded log (a :class:`corraoi.recorder.slotlog.reader.RunLog`),
-    through ``sink`` if given (made beforehand for the log's config); returns the last slot
-    sent (``start - 1`` if none)."""
+    """Publish the slots ``start..`` of a recorded log (a
+    :class:`corraoi.recorder.slotlog.reader.RunLog`), through ``sink`` if given (made
+    beforehand for the log's config); returns the last slot sent (``start - 1`` if none)."""
     if not 1 <= start <= log.n_slots:
         raise UsageError(
             f"--start {start}: {log.path} holds slots 1..{log.n_slots}, expected a slot there"

@@ -57,8 +57,8 @@ read at any K (:data:`corraoi.recorder.style.LINES_UP_TO`):
                       matter (as ``focus/<k>``)
 ====================  ===================================================================
 
-:mod:`corraoi.recorder.rerun.static` logs what they look like, :mod:`corraoi.recorder.rerun.sink` their data
-and :mod:`corraoi.recorder.rerun.layout` arranges them.
+:mod:`corraoi.recorder.rerun.static` logs what they look like, :mod:`corraoi.recorder.rerun.sink`
+their data and :mod:`corraoi.recorder.rerun.layout` arranges them.
 """
 
 from __future__ import annotations

@@ -9,8 +9,9 @@ as dots, and beyond ``style.LINES_UP_TO`` arms the per-arm bars at every
 ``send_columns``, one call per entity and batch of :data:`BATCH` slots (blocks are
 gathered first): ``rr.log`` per slot would cost ~50 us a call. No global Rerun state: the
 caller passes a ``RecordingStream`` (:func:`~corraoi.recorder.rerun.names.new_recording` makes one
-with reproducible settings) and owns where it goes; :class:`~corraoi.recorder.rerun.output.RrdOutput`
-is the owner ``corraoi record`` uses (an ``.rrd`` file and/or a viewer).
+with reproducible settings) and owns where it goes;
+:class:`~corraoi.recorder.rerun.output.RrdOutput` is the owner ``corraoi record`` uses (an
+``.rrd`` file and/or a viewer).
 """
 
 from __future__ import annotations

@@ -5,14 +5,15 @@ long as numba's import and the first kernel load together, and a one-run ``corra
 would otherwise pay the two one after the other (issue 22). Forked before the parent
 imports numba, the worker imports Rerun on the other core, then receives the run's
 :class:`~corraoi.engine.block.SlotBlock` s over a pipe and feeds them to the same
-:class:`~corraoi.recorder.rerun.output.RrdOutput` and :class:`~corraoi.recorder.rerun.sink.RerunSink` that an
-in-process recording uses: the file is the same, only the process differs.
+:class:`~corraoi.recorder.rerun.output.RrdOutput` and
+:class:`~corraoi.recorder.rerun.sink.RerunSink` that an in-process recording uses: the file is
+the same, only the process differs.
 ``benchmarks/bench_start.py`` measures the gain (the "record --policy cucb" row).
 
 ``with RerunWorker.start() as worker: rec = worker.open(config, rrd_path=...)``, then
 ``rec.write(block)`` for each block and ``rec.close()`` (or ``rec.abort()``) with
-:class:`~corraoi.recorder.sink.RunRecording`'s meaning: the file is renamed into place only when complete; a
-problem raises the same :class:`~corraoi.errors.WriteError` or
+:class:`~corraoi.recorder.sink.RunRecording`'s meaning: the file is renamed into place only when
+complete; a problem raises the same :class:`~corraoi.errors.WriteError` or
 :class:`~corraoi.errors.ViewerError`. :meth:`RerunWorker.start` returns None where
 a process cannot be forked safely (:func:`corraoi.forked.can_fork`; then record in this
 process, :class:`~corraoi.recorder.rerun.sink.LocalRecording`).

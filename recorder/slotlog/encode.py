@@ -2,8 +2,8 @@
 
 One MCAP message per slot on the slot topic (:data:`corraoi.recorder.vocab.SLOT_TOPIC`), JSON
 encoded, arms and states numbered from 1 (``SlotBlock`` arrays are 0-based: the encoder
-adds 1). The reading side, the strict decoder, is :mod:`corraoi.recorder.slotlog.decode`, which re-exports
-these names; ``docs/log-format.md`` is the human description.
+adds 1). The reading side, the strict decoder, is :mod:`corraoi.recorder.slotlog.decode`, which
+re-exports these names; ``docs/log-format.md`` is the human description.
 """
 
 from __future__ import annotations

@@ -19,7 +19,8 @@ the viewer lists it.
 
 
 :func:`sweep_blueprint` is the default layout: the regret overlay on top, the pulls per arm
-of each policy in tabs below. :class:`corraoi.recorder.sweeplog.recording.SweepRerunSink` sends the data.
+of each policy in tabs below. :class:`corraoi.recorder.sweeplog.recording.SweepRerunSink` sends the
+data.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 :func:`read_sweep` reads a sweep log written by :class:`corraoi.recorder.sweeplog.log.SweepMcapSink`
 (also a ``.partial`` file, or one cut short: every complete chunk) into a
 :class:`SweepLog` of :class:`SweepCurve` per policy. The records are walked by
-:mod:`corraoi.recorder.walk`; the names come from :mod:`corraoi.recorder.vocab`. ``docs/log-format.md``
-(section 3) describes the format.
+:mod:`corraoi.recorder.walk`; the names come from :mod:`corraoi.recorder.vocab`.
+``docs/log-format.md`` (section 3) describes the format.
 """
 
 from __future__ import annotations
