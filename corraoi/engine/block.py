@@ -252,7 +252,9 @@ class SlotBlock(Columns):
         """The blocks joined; a field some of them lack is filled in them (absent_fill)."""
         if not blocks:
             raise ValueError("no blocks to concatenate")
-        names = [f for f in NAMES if any(f in b.fields() for b in blocks) or f in FIELDS]
+        # a field of FIELDS is an array in every block (held, or filled as absent); another
+        # is None in a block that lacks it
+        names = [f for f in NAMES if f in FIELDS or any(getattr(b, f) is not None for b in blocks)]
         extra = list(dict.fromkeys(k for b in blocks for k in b.extra))
         out: dict[str, Any] = {f: np.concatenate([absent_fill(b, f) for b in blocks])
                                for f in names}  # fmt: skip
@@ -279,8 +281,10 @@ class SlotBlock(Columns):
 def absent_fill(block: Columns, name: str) -> np.ndarray:
     """``block``'s column ``name``, or where it lacks the field the column a table needs:
     NaN for numbers, False for flags (extra fields: None, as objects)."""
-    if name in block.fields() or name in block.extra or name in block.absent:
-        return block.column(name)
+    # (a declared field is held where it is not None: in fields(), or in absent as a fill)
+    held = getattr(block, name) if name in BY_NAME else block.extra.get(name)
+    if held is not None:
+        return held
     n = len(block)
     decl = BY_NAME.get(name)
     if decl is None:

@@ -212,14 +212,26 @@ class BlockEncoder:
         for i, (key, column) in enumerate(zip(keys, columns, strict=True)):
             parts[2 * i :: step] = [key] * n
             parts[2 * i + 1 :: step] = column
-        return b"".join(parts)[:-1].split(b"\n")
+        messages = b"".join(parts).split(b"\n")
+        messages.pop()  # the empty text after the last newline (no copy of the whole text)
+        return messages
 
 
 def _candidate_rows(table: np.ndarray) -> list[bytes]:
     """JSON text of each row of a (B, K) float32 table without its NaN items (the arms
-    outside the candidate set, a slot not scored) nor the brackets: the table written at
-    once (NaN as null), its nulls dropped by three replaces over the whole text (after the
-    first two a row keeps a null only where it was all nulls: ``[null]``), then split."""
+    outside the candidate set, a slot not scored) nor the brackets. Where every row has its
+    NaN at the same arms, the other arms' columns written at once; else the table written
+    at once (NaN as null), its nulls dropped by three replaces over the whole text (after
+    the first two a row keeps a null only where it was all nulls: ``[null]``), then split
+    (0.3 us a slot at K = 4, against 0.15 without the replaces)."""
+    has = ~np.isnan(table)
+    if len(has) and (has == has[0]).all():  # the same arms scored at every slot (the usual
+        # block: a candidate set that holds, or every arm): only those columns are written
+        if not has[0].any():
+            return [b""] * len(table)
+        if not has[0].all():
+            table = table[:, has[0]]
+        return _rows(table, len(table))
     text = orjson.dumps(np.ascontiguousarray(table), option=_NUMPY)
     if b"null" in text:
         text = text.replace(b"null,", b"").replace(b",null", b"").replace(b"[null]", b"[]")
