@@ -4,6 +4,7 @@ reader; logs written before it still read; the consumers agree with the declarat
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import warnings
@@ -302,6 +303,28 @@ def test_the_foxglove_layout_plots_declared_paths_and_the_score():
     declared = {f.foxglove for f in SLOT_RECORD if f.foxglove}
     assert used <= declared, used - declared
     assert {"/corraoi/slot.score[:]", "/corraoi/slot.forced"} <= used
+
+
+def test_the_candidates_scores_read_the_same_whether_or_not_their_arms_hold_over_a_block():
+    """The encoder writes a block whose scores are NaN at the same arms in every slot column
+    by column, any other block through the whole table's text: the messages are the same."""
+    b = next(simulate_run(load_instance("I1"), make_policy("cucb"), 0, 300))
+    score = np.linspace(-3.5, 7.25, 300 * 4, dtype=np.float32).reshape(300, 4)
+    score[:, [1, 3]] = np.nan  # arms 2 and 4 outside the candidate set throughout
+    score[7, 0] = np.inf  # written as +FLOAT32_MAX
+    mixed = score.copy()
+    mixed[0] = np.nan  # a slot not scored: the block's arms no longer hold
+    encoder = BlockEncoder(4)
+    held = [json.loads(m) for m in encoder.encode(dataclasses.replace(b, score=score))]
+    other = [json.loads(m) for m in encoder.encode(dataclasses.replace(b, score=mixed))]
+    assert other[0]["score"] == [] and held[1:] == other[1:]
+    top = float(np.finfo(np.float32).max)
+    for i in range(300):  # the finite scores of the row, as float32
+        want = [min(v, top) for v in score[i].tolist() if v == v]
+        assert [float(np.float32(v)) for v in held[i]["score"]] == want
+    nothing = np.full((300, 4), np.nan, dtype=np.float32)
+    none = encoder.encode(dataclasses.replace(b, score=nothing))
+    assert all(json.loads(m)["score"] == [] for m in none)
 
 
 def test_the_score_is_an_option_on_by_default_up_to_64_arms(tmp_path):
