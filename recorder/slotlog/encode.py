@@ -8,6 +8,7 @@ re-exports these names; ``docs/log-format.md`` is the human description.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 from typing import TYPE_CHECKING, Any
@@ -171,28 +172,29 @@ class BlockEncoder:
         self._weights = (1 << np.arange(self.K, dtype=np.int64)) if self.K <= 62 else None
         self._sets: dict[int, bytes] = {}
 
-    def _candidates(self, mask: np.ndarray) -> list[bytes]:
+    def _candidates(self, mask: np.ndarray) -> list[bytes] | _Lookup:
         if self._weights is None:  # too many arms for a bit code: one row at a time
             return [orjson.dumps(np.flatnonzero(row) + 1, option=_NUMPY) for row in mask]
         codes, inverse = np.unique(mask.astype(np.int64) @ self._weights, return_inverse=True)
         sets = self._sets
-        texts = np.empty(len(codes), dtype=object)
-        for i, code in enumerate(codes.tolist()):
+        texts: list[bytes] = []
+        for code in codes.tolist():
             text = sets.get(code)
             if text is None:
                 text = orjson.dumps([k + 1 for k in range(self.K) if code >> k & 1])
                 sets[code] = text
-            texts[i] = text
-        return texts[inverse].tolist()
+            texts.append(text)
+        return _Lookup(texts, inverse)
 
-    def _column(self, f: SlotField, values: np.ndarray, n: int) -> list[bytes]:
-        """JSON text of each slot's value of field ``f`` (a list's without its brackets)."""
+    def _column(self, f: SlotField, values: np.ndarray, n: int) -> list[bytes] | _Lookup:
+        """JSON text of each slot's value of field ``f`` (a list's without its brackets), or
+        for a field of few distinct texts those texts and each slot's index into them."""
         if f.json == "arm set":
             return self._candidates(values)
         if f.json == "candidate scores":
             return _candidate_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX))
         if f.json == "boolean":
-            return _BOOLS[np.asarray(values, dtype=np.intp)].tolist()
+            return _Lookup(_BOOL_TEXTS, np.asarray(values, dtype=np.intp))
         if f.json == "float32":  # JSON has no infinity: +-FLOAT32_MAX stand for it
             values = np.clip(np.asarray(values, dtype=np.float32), -FLOAT32_MAX, FLOAT32_MAX)
         elif f.one_based:
@@ -205,13 +207,32 @@ class BlockEncoder:
             return []
         names = b.fields()
         keys = _keys(names)
-        columns = [self._column(BY_NAME[f], b.column(f), n) for f in names]
-        step = 2 * len(keys) + 1
         end = b"]}\n" if _bracketed(BY_NAME[names[-1]]) else b"}\n"
-        parts: list[bytes] = [end] * (step * n)
-        for i, (key, column) in enumerate(zip(keys, columns, strict=True)):
-            parts[2 * i :: step] = [key] * n
-            parts[2 * i + 1 :: step] = column
+        # the texts of a message in order: key, value, key, value, ..., end; a field of few
+        # distinct texts (a flag, a candidate set) takes the keys on either side into its
+        # texts, so the join has fewer parts
+        segments: list[bytes | list[bytes] | _Lookup] = []
+        for key, f in zip(keys, names, strict=True):
+            segments += [key, self._column(BY_NAME[f], b.column(f), n)]
+        segments.append(end)
+        folded: list[bytes | list[bytes]] = []
+        for i, seg in enumerate(segments):
+            if isinstance(seg, _Lookup):
+                last = folded[-1] if folded else None
+                before = last if isinstance(last, bytes) else b""
+                if before:
+                    folded.pop()
+                following = segments[i + 1] if i + 1 < len(segments) else None
+                after = following if isinstance(following, bytes) else b""
+                table = np.empty(len(seg.texts), dtype=object)
+                table[:] = [before + text + after for text in seg.texts]
+                folded.append(table[seg.index].tolist())
+            elif not (isinstance(seg, bytes) and i and isinstance(segments[i - 1], _Lookup)):
+                folded.append(seg)  # (a key after a lookup is in the lookup's texts)
+        step = len(folded)
+        parts: list[bytes] = [b""] * (step * n)
+        for i, seg in enumerate(folded):
+            parts[i::step] = [seg] * n if isinstance(seg, bytes) else seg
         messages = b"".join(parts).split(b"\n")
         messages.pop()  # the empty text after the last newline (no copy of the whole text)
         return messages
@@ -256,7 +277,15 @@ def _keys(names: tuple[str, ...]) -> tuple[bytes, ...]:
     return tuple(out)
 
 
-_BOOLS = np.array([b"false", b"true"], dtype=object)
+_BOOL_TEXTS = [b"false", b"true"]
+
+
+@dataclasses.dataclass
+class _Lookup:
+    """A column of few distinct texts: ``texts[index[i]]`` is slot i's."""
+
+    texts: list[bytes]
+    index: np.ndarray
 
 
 def _items(column: np.ndarray) -> list[bytes]:
