@@ -195,6 +195,10 @@ class BlockEncoder:
             return _candidate_rows(np.clip(values, -FLOAT32_MAX, FLOAT32_MAX))
         if f.json == "boolean":
             return _Lookup(_BOOL_TEXTS, np.asarray(values, dtype=np.intp))
+        if f.one_based and not f.per_arm and n:  # an arm or a state: few distinct numbers
+            top = int(values.max())
+            if top < _LOOKUP_MAX and int(values.min()) >= 0:
+                return _Lookup(_numbers(top + 1), np.asarray(values, dtype=np.intp))
         if f.json == "float32":  # JSON has no infinity: +-FLOAT32_MAX stand for it
             values = np.clip(np.asarray(values, dtype=np.float32), -FLOAT32_MAX, FLOAT32_MAX)
         elif f.one_based:
@@ -208,31 +212,38 @@ class BlockEncoder:
         names = b.fields()
         keys = _keys(names)
         end = b"]}\n" if _bracketed(BY_NAME[names[-1]]) else b"}\n"
-        # the texts of a message in order: key, value, key, value, ..., end; a field of few
-        # distinct texts (a flag, a candidate set) takes the keys on either side into its
-        # texts, so the join has fewer parts
-        segments: list[bytes | list[bytes] | _Lookup] = []
-        for key, f in zip(keys, names, strict=True):
-            segments += [key, self._column(BY_NAME[f], b.column(f), n)]
-        segments.append(end)
-        folded: list[bytes | list[bytes]] = []
-        for i, seg in enumerate(segments):
-            if isinstance(seg, _Lookup):
-                last = folded[-1] if folded else None
-                before = last if isinstance(last, bytes) else b""
-                if before:
-                    folded.pop()
-                following = segments[i + 1] if i + 1 < len(segments) else None
-                after = following if isinstance(following, bytes) else b""
-                table = np.empty(len(seg.texts), dtype=object)
-                table[:] = [before + text + after for text in seg.texts]
-                folded.append(table[seg.index].tolist())
-            elif not (isinstance(seg, bytes) and i and isinstance(segments[i - 1], _Lookup)):
-                folded.append(seg)  # (a key after a lookup is in the lookup's texts)
+        # the texts of a message in order: key, value, key, value, ..., end. A field of
+        # few distinct texts (a flag, an arm, a state, a candidate set) takes the keys on
+        # either side into its texts, and neighbours of that kind are one (their texts'
+        # product), so the join has fewer parts
+        folded: list[bytes | list[bytes] | _Lookup] = []
+        segments = [s for key, f in zip(keys, names, strict=True)
+                    for s in (key, self._column(BY_NAME[f], b.column(f), n))]  # fmt: skip
+        for seg in (*segments, end):
+            prev = folded[-1] if folded else None
+            if isinstance(seg, bytes) and isinstance(prev, _Lookup):
+                folded[-1] = _Lookup([t + seg for t in prev.texts], prev.index)
+                continue
+            if isinstance(seg, _Lookup) and isinstance(prev, bytes):
+                folded.pop()
+                seg = _Lookup([prev + t for t in seg.texts], seg.index)
+                prev = folded[-1] if folded else None
+            if isinstance(seg, _Lookup) and isinstance(prev, _Lookup):
+                m = len(seg.texts)
+                if len(prev.texts) * m <= _LOOKUP_MAX:
+                    folded[-1] = _Lookup([a + z for a in prev.texts for z in seg.texts],
+                                         prev.index * m + seg.index)  # fmt: skip
+                    continue
+            folded.append(seg)
         step = len(folded)
         parts: list[bytes] = [b""] * (step * n)
         for i, seg in enumerate(folded):
-            parts[i::step] = [seg] * n if isinstance(seg, bytes) else seg
+            if isinstance(seg, _Lookup):
+                table = np.empty(len(seg.texts), dtype=object)
+                table[:] = seg.texts
+                parts[i::step] = table[seg.index].tolist()
+            else:
+                parts[i::step] = [seg] * n if isinstance(seg, bytes) else seg
         messages = b"".join(parts).split(b"\n")
         messages.pop()  # the empty text after the last newline (no copy of the whole text)
         return messages
@@ -278,6 +289,15 @@ def _keys(names: tuple[str, ...]) -> tuple[bytes, ...]:
 
 
 _BOOL_TEXTS = [b"false", b"true"]
+#: the most texts a lookup column holds (an arm or state numbered beyond is written as
+#: numbers are; two neighbouring lookups beyond it stay two)
+_LOOKUP_MAX = 4096
+
+
+@functools.cache
+def _numbers(m: int) -> list[bytes]:
+    """The texts of 1..m."""
+    return [b"%d" % (v + 1) for v in range(m)]
 
 
 @dataclasses.dataclass
