@@ -164,7 +164,9 @@ class BlockEncoder:
     the decoder gets back the same float64 values); the messages are then put together by
     one ``bytes.join`` over the columns interleaved with the constant key texts, and split
     at a separator no JSON text of ours contains (a newline). That is about twice as fast
-    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py).
+    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py). A column of few
+    distinct texts (flags, arm, state, candidate set) is a lookup: the key texts beside it
+    and neighbouring lookups are folded into its texts, so the join has fewer parts.
     """
 
     def __init__(self, K: int) -> None:
