@@ -5,7 +5,6 @@ fresh one; and CI's own empty kernel cache (issue 45, item 6)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import shutil
@@ -17,16 +16,14 @@ from typing import Any
 
 import pytest
 
+from .scripts import load_script
+
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = ROOT / "tests" / "golden"
 
 
 def regenerate() -> Any:
-    spec = importlib.util.spec_from_file_location("golden_regenerate", GOLDEN / "regenerate.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("tests/golden/regenerate.py")
 
 
 def test_differences_pins_integers_exactly_and_floats_within_1e_12():

@@ -194,13 +194,9 @@ def test_mabwisers_ucb1_in_the_environment_matches_corraois_ucb_seed_by_seed():
     hidden paths: the same algorithm, so the mean paired difference is within 1.96 standard
     errors of zero (20 seeds x 1,000 slots here; the docs show a larger run)."""
     pytest.importorskip("mabwiser")
-    import importlib.util
+    from .scripts import load_script
 
-    path = Path(__file__).resolve().parent.parent / "docs" / "examples" / "mabwiser_ucb1.py"
-    spec = importlib.util.spec_from_file_location("mabwiser_ucb1", path)
-    assert spec is not None and spec.loader is not None
-    example = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(example)
+    example = load_script("docs/examples/mabwiser_ucb1.py")
     got = example.compare("I1", 20, 1000)
     assert 100 < got["mabwiser"] < 1000 and 100 < got["corraoi"] < 1000  # UCB's regret on I1
     assert 0 < got["se"] < 100

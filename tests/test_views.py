@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from .scripts import load_script
+
 rr = pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
@@ -352,13 +354,7 @@ GOLDEN = Path(__file__).parent / "golden"
 
 
 def golden_module() -> Any:
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("golden_regenerate", GOLDEN / "regenerate.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("tests/golden/regenerate.py")
 
 
 def entities_by_value(path: Path, base: str) -> tuple[dict[str, tuple[list[int], list[Any]]],
