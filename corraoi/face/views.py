@@ -147,6 +147,28 @@ def recover(
     return recover_log(log, out if out is not None else default_output(log), overwrite=force)
 
 
+def _writable_rrd(rrd: Path | None, inputs: Sequence[Path], force: bool) -> None:
+    """An ``.rrd`` about to be written: not one of the logs read, and writable (one line if
+    not, before anything is written)."""
+    if rrd is not None:
+        from corraoi.files.partial import check_target
+
+        not_an_input(rrd, inputs)
+        check_target(rrd, overwrite=force, what="Rerun recording")
+
+
+@contextmanager
+def _viewer_started(viewer: ViewerChoice | None) -> Iterator[str | None]:
+    """The viewer asked for, started: its URL (None without one); stopped if the work fails."""
+    url = viewer.start() if viewer is not None and viewer.asked else None
+    try:
+        yield url
+    except BaseException:
+        if viewer is not None:
+            viewer.stop()
+        raise
+
+
 @contextmanager
 def _bar(progress: ProgressBar | None, total: int, label: str) -> Iterator[Any]:
     if progress is None:
@@ -201,22 +223,12 @@ def replay_log(
     run = require_slots(open_log(log, verify=asked), "replay")
     if rrd is None and not asked:
         rrd = default_rrd(log)
-    if rrd is not None:
-        from corraoi.files.partial import check_target
-
-        not_an_input(rrd, [log])
-        check_target(rrd, overwrite=force, what="Rerun recording")
+    _writable_rrd(rrd, [log], force)
     if run.cut_short and warn is not None:
         warn(f"{run.path}: {run.summary}; replaying slots 1..{run.n_slots}")
-    url = viewer.start() if viewer is not None and asked else None
-    try:
-        with _bar(progress, run.n_slots, "replay") as bar:
-            done = replay_slots(run, rrd_path=rrd, viewer_url=url, overwrite=force,
-                                on_block=None if bar is None else bar.update)  # fmt: skip
-    except BaseException:
-        if viewer is not None:
-            viewer.stop()
-        raise
+    with _viewer_started(viewer) as url, _bar(progress, run.n_slots, "replay") as bar:
+        done = replay_slots(run, rrd_path=rrd, viewer_url=url, overwrite=force,
+                            on_block=None if bar is None else bar.update)  # fmt: skip
     return done, url
 
 
@@ -288,25 +300,15 @@ def compare_logs(
     runs, warnings = prepare(logs)  # bad input: one line, nothing written
     if rrd is None and not asked and write:
         rrd = Path("compare.rrd")
-    if rrd is not None:
-        from corraoi.files.partial import check_target
-
-        not_an_input(rrd, logs)
-        check_target(rrd, overwrite=force, what="Rerun recording")
+    _writable_rrd(rrd, logs, force)
     for w in warnings:
         if warn is not None:
             warn(w)
-    url = viewer.start() if viewer is not None and asked else None
     total = sum(r.log.n_slots for r in runs)
-    try:
-        with _bar(progress, total, "compare") as bar:
-            result = compare_runs([r.log for r in runs], rrd_path=rrd, viewer_url=url,
-                                  overwrite=force,
-                                  on_block=None if bar is None else bar.update)  # fmt: skip
-    except BaseException:
-        if viewer is not None:
-            viewer.stop()
-        raise
+    with _viewer_started(viewer) as url, _bar(progress, total, "compare") as bar:
+        result = compare_runs([r.log for r in runs], rrd_path=rrd, viewer_url=url,
+                              overwrite=force,
+                              on_block=None if bar is None else bar.update)  # fmt: skip
     return result, url
 
 
