@@ -22,6 +22,7 @@ from corraoi.engine.slot_record import (
     NAMES,
     SLOT_RECORD,
     markdown_table,
+    record_for,
 )
 from corraoi.errors import CorraoiWarning, LogError, PolicyRuntimeError
 from corraoi.face.resolve import policies
@@ -143,7 +144,9 @@ def test_the_log_round_trips_the_new_fields_with_infinity_and_nan(tmp_path):
     with McapSink(path, config, fsync=False) as sink:
         sink.write(ref)
     got = open_log(path).read_all()
-    assert got.fields() == ref.fields() == NAMES
+    # every field a single source's run may hold (not `collided`, a field of several sources)
+    assert got.fields() == ref.fields() == tuple(f.name for f in record_for(1))
+    assert "collided" in NAMES and "collided" not in got.fields()
     assert got.equals(ref)
     msg = json.loads(_payloads(path)[7])
     assert msg["score"] == [3.4028235e38, -3.4028235e38, 0.5]  # +-infinity, and no NaN
@@ -348,4 +351,7 @@ def test_every_declared_rerun_entity_is_one_the_recording_has():
     for f in SLOT_RECORD:
         for part in filter(None, (p.strip() for p in f.entity.split(","))):
             assert part.removesuffix("/<k>") in ENTITIES + WHY, (f.name, part)
-    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(NONE_FIELDS)
+    # the fields a run may lack are the why/ ones and those of several sources (collided)
+    several = {f.name for f in SLOT_RECORD if f.sources_only}
+    assert several == {"collided"}
+    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(NONE_FIELDS) - several

@@ -59,6 +59,9 @@ class RunConfig:
     score: bool | None = None
     #: the number of arms of a run without an instance (None with one: the instance's)
     arms: int | None = None
+    #: the number of sources M sharing the channels (1 <= M <= K): each picks a channel a
+    #: slot; two on one channel collide and neither delivers (docs/model.md, "Many sources")
+    sources: int = 1
 
     def __post_init__(self) -> None:
         check_horizon(self.horizon)
@@ -87,6 +90,11 @@ class RunConfig:
             object.__setattr__(self, "channel", chan)
         if self.score is None:
             object.__setattr__(self, "score", self.K <= SCORE_ARMS)
+        if type(self.sources) is not int or not 1 <= self.sources <= self.K:
+            raise ConfigError(
+                f"sources {self.sources!r}: expected an integer from 1 to the number of "
+                f"arms, {self.K}"
+            )
 
     @property
     def K(self) -> int:
@@ -149,7 +157,8 @@ class RunConfig:
     @property
     def label(self) -> str:
         gpu = "" if self.streams == "cpu" else "-gpu"
-        return f"{self.policy.name}-{self.instance_name}-s{self.seed}{gpu}"
+        many = "" if self.sources == 1 else f"-m{self.sources}"
+        return f"{self.policy.name}-{self.instance_name}{many}-s{self.seed}{gpu}"
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = (
@@ -168,6 +177,8 @@ class RunConfig:
             out["streams"] = self.streams
         if self.score != (self.K <= SCORE_ARMS):  # the default is not written
             out["score"] = bool(self.score)
+        if self.sources != 1:  # a single source's log reads as before
+            out["sources"] = self.sources
         return out
 
     @classmethod
@@ -184,6 +195,7 @@ class RunConfig:
             streams=str(data.get("streams", "cpu")),
             score=bool(data["score"]) if "score" in data else None,
             arms=data["arms"] if "instance" not in data and "arms" in data else None,
+            sources=data.get("sources", 1),
         )
 
 
@@ -216,6 +228,7 @@ class Columns:
     pulls: np.ndarray
     candidates: np.ndarray
     forced: np.ndarray | None = None
+    collided: np.ndarray | None = None
     override_threshold: np.ndarray | None = None
     score: np.ndarray | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
@@ -278,6 +291,58 @@ class SlotBlock(Columns):
         )  # fmt: skip
 
 
+@dataclass
+class SourcesBlock:
+    """Consecutive slots of one run of M >= 2 sources sharing the channels: one
+    :class:`SlotBlock` per source, in source order (source m is ``sources[m - 1]``), each
+    holding that source's own fields (its arm, delivery, ``collided``, age, oracle age and
+    regret, means, pulls, candidates, scores) and the slot's shared ``t`` and ``x``
+    (:data:`~corraoi.engine.slot_record.SHARED`, equal in every source). A source's
+    ``oracle_aoi`` is the age on the channel the orthogonal oracle gives it (the m-th best,
+    ties by lowest index) and its ``regret`` sum(aoi - oracle_aoi); the run's regret is
+    the sum over the sources (docs/model.md, "Many sources")."""
+
+    sources: tuple[SlotBlock, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.sources) < 2:
+            raise ValueError("a SourcesBlock holds two sources or more")
+
+    @property
+    def M(self) -> int:
+        """The number of sources."""
+        return len(self.sources)
+
+    def __len__(self) -> int:
+        return len(self.sources[0])
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.sources[0].t
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.sources[0].x
+
+    @classmethod
+    def concat(cls, blocks: list[SourcesBlock]) -> SourcesBlock:
+        """The blocks joined, source by source."""
+        if not blocks:
+            raise ValueError("no blocks to concatenate")
+        M = blocks[0].M
+        return cls(tuple(SlotBlock.concat([b.sources[m] for b in blocks]) for m in range(M)))
+
+    def slice(self, start: int | None, stop: int | None) -> SourcesBlock:
+        """Slots ``start:stop`` of every source (views)."""
+        return SourcesBlock(tuple(s.slice(start, stop) for s in self.sources))
+
+    def equals(self, other: SourcesBlock) -> bool:
+        """The same sources with the same slots and fields."""
+        return self.M == other.M and all(
+            a.equals(b) for a, b in zip(self.sources, other.sources, strict=True)
+        )
+
+
 def absent_fill(block: Columns, name: str) -> np.ndarray:
     """``block``'s column ``name``, or where it lacks the field the column a table needs:
     NaN for numbers, False for flags (extra fields: None, as objects)."""
@@ -325,8 +390,9 @@ assert set(REQUIRED) <= set(FIELDS)
 _BUFFER_DTYPES = {"x": "int32", "arm": "int32"}
 #: Fields the engine derives after a kernel call rather than buffers in it.
 _DERIVED = ("t", "estimator")
-#: The fields the engine buffers per slot, in the order the kernel takes them.
-BUFFERED = tuple(f for f in NAMES if f not in _DERIVED)
+#: The fields the engine buffers per slot, in the order the kernel takes them (a single
+#: source's: not ``collided``).
+BUFFERED = tuple(f for f in NAMES if f not in _DERIVED and not BY_NAME[f].sources_only)
 
 
 class Outputs:

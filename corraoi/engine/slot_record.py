@@ -62,6 +62,12 @@ class SlotField:
     view: str = ""
     #: its path in Foxglove (the layout's plots read it)
     foxglove: str = ""
+    #: each source of a run of several sources has its own (``t`` and ``x`` are the slot's,
+    #: shared by every source)
+    per_source: bool = True
+    #: only a run of several sources has it (``collided``): a single source's record, its
+    #: log's schema included, is as it was before sources were added
+    sources_only: bool = False
 
     def __post_init__(self) -> None:
         assert self.json in JSON_KINDS, self
@@ -96,6 +102,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         "slot number, 1..horizon",
         "integer",
         minimum="1",
+        per_source=False,
         view="the timeline `slot`",
     ),
     _f(
@@ -112,6 +119,7 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         entity="x",
         view="hidden state",
         foxglove="/corraoi/slot.x",
+        per_source=False,
     ),
     _f(
         "arm",
@@ -137,6 +145,18 @@ SLOT_RECORD: tuple[SlotField, ...] = (
         entity="arm/success, arm/failure",
         view="arm played",
         foxglove="/corraoi/slot.success",
+    ),
+    _f(
+        "collided",
+        "bool",
+        False,
+        "",
+        "another source played the same channel at slot t (a run of several sources only); "
+        "then nobody on it delivers and success is false",
+        "boolean",
+        may_be_absent=True,
+        sources_only=True,
+        foxglove="/corraoi/slot.collided",
     ),
     _f(
         "aoi",
@@ -296,6 +316,9 @@ NAMES: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD)
 #: Per-slot fields (not ``t``) and per-arm fields.
 SCALAR: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD if not f.per_arm and f.name != "t")
 PER_ARM: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD if f.per_arm)
+#: Fields each source of a run of several sources has its own, and those shared by all.
+PER_SOURCE: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD if f.per_source)
+SHARED: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD if not f.per_source)
 #: Fields ``corraoi diff`` compares within a tolerance.
 FLOAT_FIELDS: tuple[str, ...] = tuple(f.name for f in SLOT_RECORD if f.diff == "float")
 #: The largest float32: a "float32" field's +-infinity as the slot log writes it (JSON has
@@ -313,6 +336,14 @@ GPU_CAPTURE_ROW = ("x", "arm", "success", "aoi", "oracle_aoi", "regret", "aoisum
                    "score")  # fmt: skip
 #: The fields of the capture row that take K values (one per arm, ``row[i + k]``).
 GPU_CAPTURE_PER_ARM = ("score",)
+
+
+def record_for(sources: int) -> tuple[SlotField, ...]:
+    """The fields a run of ``sources`` sources may hold: a single source's record has no
+    field that only a run of several sources has (``collided``)."""
+    if sources > 1:
+        return SLOT_RECORD
+    return tuple(f for f in SLOT_RECORD if not f.sources_only)
 
 
 def markdown_table() -> str:
@@ -340,9 +371,12 @@ __all__ = [
     "NAMES",
     "OPTIONAL",
     "PER_ARM",
+    "PER_SOURCE",
     "REQUIRED",
     "SCALAR",
+    "SHARED",
     "SLOT_RECORD",
     "SlotField",
     "markdown_table",
+    "record_for",
 ]

@@ -16,7 +16,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 
-from corraoi.engine.slot_record import BY_NAME, FLOAT32_MAX, REQUIRED, SLOT_RECORD, SlotField
+from corraoi.engine.slot_record import (
+    BY_NAME,
+    FLOAT32_MAX,
+    REQUIRED,
+    SlotField,
+    record_for,
+)
 from corraoi.recorder.vocab import NS_PER_SLOT
 from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from corraoi.recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
@@ -76,7 +82,7 @@ def slot_schema(config: RunConfig) -> dict[str, Any]:
     from corraoi.engine.block import FIELDS  # the columns versions 1 and 2 always hold
 
     K, n = config.K, config.n_states
-    properties = {f.name: field_schema(f, K, n) for f in SLOT_RECORD}
+    properties = {f.name: field_schema(f, K, n) for f in record_for(config.sources)}
     version = config.format_version  # the run's own: the schema says what its metadata says
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",

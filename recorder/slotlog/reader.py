@@ -23,7 +23,7 @@ from mcap.records import Attachment, Header, Metadata
 
 from corraoi._version import __version__
 from corraoi.engine.block import RunConfig, SlotBlock
-from corraoi.engine.slot_record import OPTIONAL
+from corraoi.engine.slot_record import OPTIONAL, record_for
 from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
 from corraoi.limits import MAX_HORIZON
@@ -95,12 +95,14 @@ class RunLog:
 
     @property
     def absent(self) -> tuple[str, ...]:
-        """The fields a run may lack (corraoi.engine.slot_record.OPTIONAL) that this log
-        lacks, as its first chunk shows (a log written before a field existed lacks it)."""
+        """The fields a run of its sources may lack (corraoi.engine.slot_record.OPTIONAL,
+        ``record_for``) that this log lacks, as its first chunk shows (a log written before a
+        field existed lacks it)."""
         if self._absent is None:
             first = next(iter(self._chunk_blocks()), None)
             have = first.fields() if first is not None else ()
-            self._absent = tuple(f for f in OPTIONAL if f not in have)
+            mine = {f.name for f in record_for(self.config.sources)}
+            self._absent = tuple(f for f in OPTIONAL if f not in have and f in mine)
         return self._absent
 
     @property
