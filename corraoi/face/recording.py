@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import (
+    ConfigError,
     OutputError,
     PolicyError,
     PolicyRuntimeError,
@@ -403,6 +404,7 @@ def _record_one(
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
+    from corraoi.engine.block import SourcesBlock
     from corraoi.engine.summary import SummaryAccumulator
     from corraoi.files.partial import partial_path
 
@@ -415,9 +417,13 @@ def _record_one(
     def each(block: Any) -> None:
         summary.update(block)
         result.slots = int(block.t[-1])
-        result.regret = int(block.regret[-1])
-        result.estimator = float(block.estimator[-1])
-        result.pulls = [int(v) for v in block.pulls[-1]]
+        if isinstance(block, SourcesBlock):  # several sources: the run's regret, the sum
+            result.regret = sum(int(s.regret[-1]) for s in block.sources)
+            result.pulls = [int(v) for v in sum(s.pulls[-1] for s in block.sources)]
+        else:
+            result.regret = int(block.regret[-1])
+            result.estimator = float(block.estimator[-1])
+            result.pulls = [int(v) for v in block.pulls[-1]]
         if on_block is not None:
             on_block(plan, block)
 
@@ -468,6 +474,7 @@ def record(
     on_block: Callable[[Any], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     score: bool | None = None,
+    sources: int = 1,
 ) -> Run:
     """Simulate one run and record every slot, as ``corraoi record`` does with the same
     arguments (the same bytes in the log); returns the recorded :class:`corraoi.Run`.
@@ -491,7 +498,9 @@ def record(
     ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
     next block, the files finished with the slots so far (Ctrl-C does the same).
     ``score``: log what the policy maximised at every slot (``score``, ``forced``; by
-    default up to 64 arms).
+    default up to 64 arms). ``sources``: the number of sources M sharing the channels
+    (1..K; a run of several sources logs each source's slots and its collisions,
+    docs/model.md "Many sources").
 
     Raises :class:`~corraoi.errors.PolicyError`, :class:`~corraoi.errors.InstanceError`,
     :class:`~corraoi.errors.ConfigError` (bad input, before anything runs),
@@ -514,16 +523,20 @@ def record(
     arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
     arguments.flag(force, name="force")
     arguments.optional(arguments.flag, score, name="score")
+    sources = arguments.integer(sources, name="sources", lo=1, kind=ConfigError, floats=False)
     arguments.optional(arguments.text, viewer, name="viewer",
                        expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
     arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a corraoi.recorder.sink.Sink")
     arguments.optional(arguments.callback, on_block, name="on_block")
     arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
+    arguments.integer(sources, name="sources", lo=1, hi=inst.K, kind=ConfigError,
+                      why=f"at most the {inst.K} arms of instance {inst.name}")  # fmt: skip
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)
-    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score)
+    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score,
+                       sources=sources)  # fmt: skip
     if rrd is True:
         rrd = None
     (plan,) = plan_files([config], path, None if rrd is False else rrd, no_rrd=rrd is False)

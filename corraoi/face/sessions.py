@@ -26,22 +26,28 @@ if TYPE_CHECKING:
 def run_configs(instance: str | os.PathLike[str], policies: Sequence[str], params: Sequence[str],
                 *, c: float | None, beta: float | None, channel: str | None, seed: int,
                 horizon: int, score: bool | None,
-                warn: Callable[[str], None] | None = None) -> list[Any]:  # fmt: skip
+                warn: Callable[[str], None] | None = None,
+                sources: int = 1) -> list[Any]:  # fmt: skip
     """The runs ``corraoi record`` is given: the instance, the policies (words, with the
-    command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon and
-    channel, as ``RunConfig`` values. Raises :class:`~corraoi.errors.InstanceError`,
+    command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon,
+    channel and number of sources (``--sources``, 1..K), as ``RunConfig`` values. Raises :class:`~corraoi.errors.InstanceError`,
     :class:`~corraoi.errors.PolicyError` or :class:`~corraoi.errors.ConfigError`."""
+    from corraoi import arguments
     from corraoi.engine.block import RunConfig
+    from corraoi.errors import ConfigError
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies, parse_param_assignments
 
     from .resolve import channel as resolve_channel
 
     inst = load_instance(instance)
+    arguments.integer(sources, name="--sources", lo=1, hi=inst.K, kind=ConfigError,
+                      why=f"at most the {inst.K} arms of instance {inst.name}")  # fmt: skip
     specs = make_policies(policies, parse_param_assignments(params), c=c, beta=beta, warn=warn)
     chan = resolve_channel(channel, inst)
     chan.check(inst, horizon)
-    return [RunConfig(inst, spec, seed, horizon, channel=chan, score=score) for spec in specs]
+    return [RunConfig(inst, spec, seed, horizon, channel=chan, score=score, sources=sources)
+            for spec in specs]  # fmt: skip
 
 
 def runs_from_sweep(
