@@ -15,7 +15,7 @@ from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.recorder.sink import Sink, made_again
 
-from .layout import one_run_blueprint
+from .layout import run_blueprint
 from .names import new_recording
 
 
@@ -81,7 +81,7 @@ class RrdOutput(Sink):
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
         self.recording = new_recording(config, recording_id=recording_id, name=name)
-        first = None if blueprint_at_end else blueprint or one_run_blueprint(self.label, config)
+        first = None if blueprint_at_end else blueprint or run_blueprint(self.label, config)
         try:
             self.recording.set_sinks(*sinks, default_blueprint=first)
         except (OSError, RuntimeError, ValueError) as exc:

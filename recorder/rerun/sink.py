@@ -341,6 +341,17 @@ class RerunSink(Sink):
         return self.problem
 
 
+def run_sink(recording: rr.RecordingStream, label: str, config: RunConfig, *,
+             color: style.RGB | None = None) -> RerunSink | Any:  # fmt: skip
+    """The sink of one run: a :class:`RerunSink`, or for a run of several sources a
+    :class:`corraoi.recorder.rerun.sources.SourcesSink` (the same interface)."""
+    if config.sources > 1:
+        from .sources import SourcesSink
+
+        return SourcesSink(recording, label, config, color=color)
+    return RerunSink(recording, label, config, color=color)
+
+
 class LocalRecording(RunRecording):
     """One run's recording written in this process: an :class:`RrdOutput` (the file and/or
     viewer) fed by a :class:`RerunSink` (:class:`~corraoi.recorder.sink.RunRecording`'s meaning).
@@ -357,7 +368,7 @@ class LocalRecording(RunRecording):
         self.output = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url,
                                 overwrite=overwrite)  # fmt: skip
         self.path = self.output.path
-        self.sink = RerunSink(self.output.recording, config.label, config)
+        self.sink = run_sink(self.output.recording, config.label, config)
 
     def _write(self, block: SlotBlock) -> None:
         self.sink.write(block)
@@ -376,4 +387,5 @@ __all__ = [
     "BATCH",
     "LocalRecording",
     "RerunSink",
+    "run_sink",
 ]
