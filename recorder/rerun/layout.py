@@ -386,6 +386,10 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW,
     )
 
 
+#: The most sources the views of a run of several sources give a legend.
+LEGEND_SOURCES = 4
+
+
 @dataclass(frozen=True)
 class SourcesViews:
     """The views of a run of several sources (:mod:`corraoi.recorder.rerun.sources`), each
@@ -414,11 +418,18 @@ class SourcesViews:
 
         return [source_name(m) for m in range(1, self.config.sources + 1)]
 
+    def _legend(self, *entries: str) -> list[str]:
+        """A legend of up to LEGEND_SOURCES sources (beyond, the views would be all legend:
+        the colours are named in the run card and the titles)."""
+        return list(entries) if self.config.sources <= LEGEND_SOURCES else []
+
     def regret(self, px: float) -> rrb.TimeSeriesView:
         return self._series(
             f"AoI regret {style.REGRET_UNIT}: all sources (black) and each source",
-            ["$origin/regret", "$origin/sources/*/regret"], px, windowed=False,
-            legend=["all sources", *self._names()],
+            ["$origin/regret", *(f"$origin/sources/{m}/regret"
+                                 for m in range(1, self.config.sources + 1))],
+            px, windowed=False,
+            legend=self._legend("all sources", *self._names()),
         )  # fmt: skip
 
     def occupancy(self, px: float) -> rrb.TimeSeriesView:
@@ -426,7 +437,7 @@ class SourcesViews:
         return self._series(
             f"channel played (1..{K}) by each source, collisions: red crosses, last {w} slots",
             ["$origin/occupancy/**"], px, windowed=True, y=(0.5, K + 0.5),
-            legend=[*self._names(), "collision"],
+            legend=self._legend(*self._names(), "collision"),
         )  # fmt: skip
 
     def ages(self, px: float) -> list[rrb.TimeSeriesView]:
@@ -439,9 +450,20 @@ class SourcesViews:
             for m in range(1, self.config.sources + 1)
         ]
 
-    def means(self, px: float) -> rrb.BarChartView:
+    def means(self, px: float) -> rrb.View:
+        from .sources import BARS_UP_TO
+
+        M, K = self.config.sources, self.config.K
+        if K > BARS_UP_TO:  # a heatmap: rows the sources, columns the arms
+            title = (f"mean {style.MEAN_UNIT} at the cursor: rows sources 1..{M}, columns "
+                     f"arms 1..{K}, dark 0 .. bright 1")  # fmt: skip
+            return rrb.TensorView(
+                origin=f"{run_path(self.label)}/means",
+                name=fit(f"{self.prefix}: {title}" if self.prefix else title, px),
+                view_fit="fill",
+            )
         title = (f"mean {style.MEAN_UNIT} per arm at the cursor: each source's bar in its "
-                 "colour, true (grey) behind")  # fmt: skip
+                 "colour, then the true mean (dark grey)")  # fmt: skip
         return rrb.BarChartView(
             origin=run_path(self.label), contents=["$origin/true_means", "$origin/means/**"],
             name=fit(f"{self.prefix}: {title}" if self.prefix else title, px),
@@ -457,7 +479,7 @@ def sources_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
     source's colour, red crosses where sources collided), the last ``window`` slots. Middle:
     a panel per source, its age against its oracle's (last ``window`` slots), in a grid of
     up to four columns. Bottom: each source's empirical means at the cursor (the sources'
-    bars side by side over each arm, the true means grey behind them), and the run card.
+    bars side by side over each arm, then the true mean's), and the run card.
     """
     M = config.sources
     v = SourcesViews(label, config, time_windows(window, config.horizon))
@@ -469,7 +491,7 @@ def sources_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) ->
         rrb.Horizontal(v.means(W * 0.8),
                        rrb.TextDocumentView(origin=f"{run_path(label)}/about", name="run"),
                        column_shares=[4, 1]),  # fmt: skip
-        row_shares=[3.0, 2.0 * -(-M // columns), 2.5],
+        row_shares=[3.0, 2.0 if M <= columns else 3.0, 2.5],
     )
     return rrb.Blueprint(
         root,

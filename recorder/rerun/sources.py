@@ -10,14 +10,19 @@ colour (:func:`source_color`); its entities, under ``runs/<label>`` (timeline ``
                            path; near-black dots)
 ``sources/<m>/regret``     source m's pathwise regret (line, its colour)
 ``regret``                 the run's regret, the sum over the sources (thick, near-black)
-``occupancy/<m>``          the channel source m played, at every slot (points, its colour)
+``occupancy/<m>``          the channel source m played, at every slot (points, its colour,
+                           a little above or below the channel's line: :func:`lane_offsets`)
 ``occupancy/collided``     the channel at the slots where sources collided on it (red
                            crosses over the points)
 ``x``                      the hidden state X_t (points)
-``means/<m>``              source m's empirical means of every arm at slot 1, every
+``means/<m>``              up to :data:`BARS_UP_TO` arms: source m's empirical means of
+                           every arm at slot 1, every
                            :func:`~corraoi.recorder.rerun.names.snapshot_every`-th slot and
                            the last (a bar chart, its bars beside the other sources')
-``true_means``             the true means (a static bar chart, grey, behind the others)
+``means``                  beyond: every source's means at those slots as one sources x
+                           arms tensor (a heatmap, 0..1)
+``true_means``             the true means (a static bar chart, dark grey, right of the
+                           sources' bars of each arm)
 ``about``                  the run card (markdown)
 =========================  ==============================================================
 
@@ -49,6 +54,11 @@ TOTAL_COLOR: style.RGB = style.ORACLE_COLOR
 WIDTH_TOTAL = 3.0
 #: Share of a unit on the arm axis the bars of all the sources of an arm take together.
 GROUP_WIDTH = 0.8
+#: The most arms whose means are drawn as bars, each source's beside the others' (beyond,
+#: a heatmap of sources x arms).
+BARS_UP_TO = 16
+#: Share of a channel's row the sources' points spread over in the channel view.
+LANES = 0.6
 
 
 def source_color(m: int) -> style.RGB:
@@ -61,10 +71,17 @@ def source_name(m: int) -> str:
 
 
 def bar_offsets(M: int) -> np.ndarray:
-    """Where source m's bar stands beside its arm (m - 1 in 0..M - 1), and their width
-    is GROUP_WIDTH / M: the sources' bars of an arm side by side around it."""
-    w = GROUP_WIDTH / M
-    return (np.arange(M) - (M - 1) / 2) * w
+    """Where the bars of an arm stand beside it, side by side, each GROUP_WIDTH / (M + 1)
+    wide: source m's at [m - 1], the true mean's last, at [M]."""
+    w = GROUP_WIDTH / (M + 1)
+    return (np.arange(M + 1) - M / 2) * w
+
+
+def lane_offsets(M: int) -> np.ndarray:
+    """Source m's points in the channel view stand ``[m - 1]`` above or below the channel's
+    line, so that sources on one channel are seen side by side (the collisions' crosses
+    sit on the line)."""
+    return (np.arange(M) - (M - 1) / 2) * (LANES / M)
 
 
 def log_sources_static(rec: rr.RecordingStream, base: str, config: RunConfig) -> None:
@@ -86,7 +103,7 @@ def log_sources_static(rec: rr.RecordingStream, base: str, config: RunConfig) ->
 
     line("regret", TOTAL_COLOR, f"all sources {style.REGRET_UNIT}", WIDTH_TOTAL)
     arm = np.arange(1, K + 1, dtype=np.float64)
-    width = GROUP_WIDTH / M
+    width = GROUP_WIDTH / (M + 1)
     for m in range(1, M + 1):
         rgb, name = source_color(m), source_name(m)
         line(f"sources/{m}/aoi", rgb, f"{name} {style.AOI_UNIT}", style.WIDTH_MAIN)
@@ -94,13 +111,16 @@ def log_sources_static(rec: rr.RecordingStream, base: str, config: RunConfig) ->
                shape.Circle, style.MARKER_ORACLE)  # fmt: skip
         line(f"sources/{m}/regret", rgb, name, style.WIDTH_SECONDARY * 1.5)
         points(f"occupancy/{m}", rgb, name, shape.Circle, MARKER_OCCUPANCY)
-        bars(rec, f"{base}/means/{m}", rgb, arm + bar_offsets(M)[m - 1], width=width)
+        if K <= BARS_UP_TO:
+            bars(rec, f"{base}/means/{m}", rgb, arm + bar_offsets(M)[m - 1], width=width)
     points("occupancy/collided", COLLISION_COLOR, COLLISION_NAME, shape.Cross, MARKER_COLLISION)
     points("x", style.STATE_COLOR, style.STATE_NAME, shape.Square, style.MARKER_STATE)
     theory = config.theory
-    if theory is not None:  # the true means behind the sources' bars, as wide as their group
-        bars(rec, f"{base}/true_means", style.BAR_OUT_COLOR, arm,
-             values=np.asarray(theory.mu, dtype=np.float64), width=GROUP_WIDTH)  # fmt: skip
+    if K > BARS_UP_TO:
+        static("means", rr.Tensor.columns(value_range=[[0.0, 1.0]]))
+    if theory is not None and K <= BARS_UP_TO:  # the true means right of the sources' bars
+        bars(rec, f"{base}/true_means", style.BAR_TRUE_COLOR, arm + bar_offsets(M)[M],
+             values=np.asarray(theory.mu, dtype=np.float64), width=width)  # fmt: skip
     static("about", rr.TextDocument.columns(text=[sources_markdown(config)],
                                             media_type=[rr.MediaType.MARKDOWN]))  # fmt: skip
 
@@ -145,6 +165,7 @@ class SourcesSink(Sink):
         self._pending: list[SourcesBlock] = []
         self._pending_slots = 0
         self._every = snapshot_every(config.horizon)
+        self._lanes = lane_offsets(self.M)
         self._snapped = 0
         self._last: tuple[int, np.ndarray] | None = None
         log_sources_static(recording, self.base, config)
@@ -191,7 +212,7 @@ class SourcesSink(Sink):
                 self._column(f"sources/{m}/oracle_aoi", t, s.oracle_aoi)
             if "regret" not in absent:
                 self._column(f"sources/{m}/regret", t, s.regret)
-            self._column(f"occupancy/{m}", t, s.arm + 1.0)
+            self._column(f"occupancy/{m}", t, s.arm + 1.0 + self._lanes[m - 1])
         arms = np.stack([s.arm for s in block.sources])  # (M, n)
         clash = np.zeros(arms.shape, dtype=bool)
         for s_i, s in enumerate(block.sources):
@@ -210,8 +231,16 @@ class SourcesSink(Sink):
 
     def _bars(self, t: np.ndarray, means: np.ndarray) -> None:
         """Each source's means at the slots ``t`` (``means``: M x len(t) x K)."""
-        descriptor = rr.BarChart.descriptor_values()
         times = [rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(t, dtype=np.int64))]
+        if self.K > BARS_UP_TO:  # one sources x arms heatmap a slot
+            table = np.nan_to_num(np.moveaxis(means, 0, 1))  # (len(t), M, K)
+            self.recording.send_columns(
+                f"{self.base}/means", indexes=times,
+                columns=[rr.ComponentColumn(rr.Tensor.descriptor_data(), tensor_batch(table))],
+            )  # fmt: skip
+            self._snapped = int(t[-1])
+            return
+        descriptor = rr.BarChart.descriptor_values()
         for m in range(self.M):
             self.recording.send_columns(
                 f"{self.base}/means/{m + 1}", indexes=times,
