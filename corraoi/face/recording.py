@@ -523,15 +523,15 @@ def record(
     arguments.path_or_flag(rrd, name="rrd", what="the Rerun recording's path")
     arguments.flag(force, name="force")
     arguments.optional(arguments.flag, score, name="score")
-    sources = arguments.integer(sources, name="sources", lo=1, kind=ConfigError, floats=False)
     arguments.optional(arguments.text, viewer, name="viewer",
                        expected="a running Rerun viewer's URL (rerun+http://HOST:PORT/proxy)")
     arguments.objects(sinks, name="sinks", has=SINK_METHODS, what="a corraoi.recorder.sink.Sink")
     arguments.optional(arguments.callback, on_block, name="on_block")
     arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
-    arguments.integer(sources, name="sources", lo=1, hi=inst.K, kind=ConfigError,
-                      why=f"at most the {inst.K} arms of instance {inst.name}")  # fmt: skip
+    sources = arguments.integer(sources, name="sources", lo=1, hi=inst.K, kind=ConfigError,
+                                floats=False,
+                                why=f"at most the {inst.K} arms of instance {inst.name}")
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)
