@@ -198,15 +198,21 @@ def test_diff_pairs_the_sources(recorded, tmp_path):
     assert "source 2: a=" in report.message()
     other = corraoi.diff(a, b)
     assert not other.identical and other["x"].source is None  # x is the slot's, shared
-    assert ("regret source 2", a.summary.regret_by_source[1], b.summary.regret_by_source[1],
-            b.summary.regret_by_source[1] - a.summary.regret_by_source[1]) in other.finals()
+    assert (
+        "regret source 2",
+        a.summary.regret_by_source[1],
+        b.summary.regret_by_source[1],
+        b.summary.regret_by_source[1] - a.summary.regret_by_source[1],
+    ) in other.finals()
 
 
 def test_compare_and_replay_of_a_multi_source_log(recorded, tmp_path):
     a, b = recorded
     got = corraoi.compare([a, b])
-    assert [r.summary.regret_by_source for r in got.runs] == [a.summary.regret_by_source,
-                                                               b.summary.regret_by_source]
+    assert [r.summary.regret_by_source for r in got.runs] == [
+        a.summary.regret_by_source,
+        b.summary.regret_by_source,
+    ]
     res = CliRunner().invoke(main, ["compare", str(a.path), str(b.path), "-o",
                                     str(tmp_path / "cmp.rrd")])  # fmt: skip
     assert res.exit_code == 0, res.output
@@ -215,9 +221,7 @@ def test_compare_and_replay_of_a_multi_source_log(recorded, tmp_path):
     assert played.slots == 1200 and (tmp_path / "a.rrd").stat().st_size > 0
 
 
-def test_the_recording_of_several_sources_draws_each_source_and_the_collisions(
-    recorded, tmp_path
-):
+def test_the_recording_of_several_sources_draws_each_source_and_the_collisions(recorded, tmp_path):
     a, _ = recorded
     ref = sources_run(load_instance("I1"), 1, 1200, 3)
     corraoi.replay(a, rrd=tmp_path / "a.rrd")
@@ -286,4 +290,5 @@ def test_record_sources_on_the_command_line(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     log = open_log(tmp_path / "r.mcap")
     assert log.config.sources == 2 and log.read_all().equals(
-        sources_run(load_instance("I1"), 0, 300, 2))
+        sources_run(load_instance("I1"), 0, 300, 2)
+    )

@@ -197,8 +197,8 @@ class _FieldState:
             if self.first is None and n:
                 self.first = int(a[0].t[0])
             return
-        pairs = [(x, y) for x, y in zip(a, b) if getattr(x, self.name) is not None
-                 and getattr(y, self.name) is not None]  # fmt: skip
+        pairs = [(x, y) for x, y in zip(a, b, strict=False) if getattr(x, self.name) is not None
+                 and getattr(y, self.name) is not None]  # fmt: skip  (the sources both have)
         if not pairs:
             return
         same = np.stack([self._same(x.column(self.name), y.column(self.name), atol)

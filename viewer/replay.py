@@ -64,8 +64,11 @@ def replay(
     )
     config = run.config
     # the "why this arm" view when the log has scores (a log written before them has none)
-    blueprint = (sources_blueprint(config.label, config) if config.sources > 1
-                 else one_run_blueprint(config.label, config, why="score" not in run.absent))
+    blueprint = (
+        sources_blueprint(config.label, config)
+        if config.sources > 1
+        else one_run_blueprint(config.label, config, why="score" not in run.absent)
+    )
     out = RrdOutput(
         config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite,
         discard_on_abort=True, blueprint=blueprint,

@@ -132,7 +132,6 @@ class SummaryAccumulator:
             settled_at=None if best is None else settled,
         )
 
-
     def _several(self, last: SourcesBlock) -> RunSummary:
         """The figures of a run of several sources (see :class:`RunSummary`)."""
         each = None if "regret" in self.absent else tuple(

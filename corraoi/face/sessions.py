@@ -30,8 +30,9 @@ def run_configs(instance: str | os.PathLike[str], policies: Sequence[str], param
                 sources: int = 1) -> list[Any]:  # fmt: skip
     """The runs ``corraoi record`` is given: the instance, the policies (words, with the
     command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon,
-    channel and number of sources (``--sources``, 1..K), as ``RunConfig`` values. Raises :class:`~corraoi.errors.InstanceError`,
-    :class:`~corraoi.errors.PolicyError` or :class:`~corraoi.errors.ConfigError`."""
+    channel and number of sources (``--sources``, 1..K), as ``RunConfig`` values. Raises
+    :class:`~corraoi.errors.InstanceError`, :class:`~corraoi.errors.PolicyError` or
+    :class:`~corraoi.errors.ConfigError`."""
     from corraoi import arguments
     from corraoi.engine.block import RunConfig
     from corraoi.errors import ConfigError

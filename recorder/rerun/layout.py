@@ -414,9 +414,7 @@ class SourcesViews:
         )  # fmt: skip
 
     def _names(self) -> list[str]:
-        from .sources import source_name
-
-        return [source_name(m) for m in range(1, self.config.sources + 1)]
+        return [style.source_name(m) for m in range(1, self.config.sources + 1)]
 
     def _legend(self, *entries: str) -> list[str]:
         """A legend of up to LEGEND_SOURCES sources (beyond, the views would be all legend:
@@ -451,10 +449,8 @@ class SourcesViews:
         ]
 
     def means(self, px: float) -> rrb.View:
-        from .sources import BARS_UP_TO
-
         M, K = self.config.sources, self.config.K
-        if K > BARS_UP_TO:  # a heatmap: rows the sources, columns the arms
+        if K > style.SOURCE_BARS_UP_TO:  # a heatmap: rows the sources, columns the arms
             title = (f"mean {style.MEAN_UNIT} at the cursor: rows sources 1..{M}, columns "
                      f"arms 1..{K}, dark 0 .. bright 1")  # fmt: skip
             return rrb.TensorView(

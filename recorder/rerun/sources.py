@@ -2,7 +2,8 @@
 
 A run of M >= 2 sources sharing the channels is drawn apart from a single source's
 (:class:`~corraoi.recorder.rerun.sink.RerunSink`, which stays as it is): each source has its
-colour (:func:`source_color`); its entities, under ``runs/<label>`` (timeline ``slot``):
+colour (:func:`corraoi.recorder.style.source_color`); its entities, under ``runs/<label>``
+(timeline ``slot``):
 
 =========================  ==============================================================
 ``sources/<m>/aoi``        source m's age after the slot (line, its colour)
@@ -15,7 +16,7 @@ colour (:func:`source_color`); its entities, under ``runs/<label>`` (timeline ``
 ``occupancy/collided``     the channel at the slots where sources collided on it (red
                            crosses over the points)
 ``x``                      the hidden state X_t (points)
-``means/<m>``              up to :data:`BARS_UP_TO` arms: source m's empirical means of
+``means/<m>``              up to ``style.SOURCE_BARS_UP_TO`` arms: source m's empirical means of
                            every arm at slot 1, every
                            :func:`~corraoi.recorder.rerun.names.snapshot_every`-th slot and
                            the last (a bar chart, its bars beside the other sources')
@@ -54,20 +55,8 @@ TOTAL_COLOR: style.RGB = style.ORACLE_COLOR
 WIDTH_TOTAL = 3.0
 #: Share of a unit on the arm axis the bars of all the sources of an arm take together.
 GROUP_WIDTH = 0.8
-#: The most arms whose means are drawn as bars, each source's beside the others' (beyond,
-#: a heatmap of sources x arms).
-BARS_UP_TO = 16
 #: Share of a channel's row the sources' points spread over in the channel view.
 LANES = 0.6
-
-
-def source_color(m: int) -> style.RGB:
-    """Colour of source ``m`` (from 1): each of up to eight sources its own."""
-    return style.ARM_COLORS[(m - 1) % len(style.ARM_COLORS)]
-
-
-def source_name(m: int) -> str:
-    return f"source {m}"
 
 
 def bar_offsets(M: int) -> np.ndarray:
@@ -105,20 +94,22 @@ def log_sources_static(rec: rr.RecordingStream, base: str, config: RunConfig) ->
     arm = np.arange(1, K + 1, dtype=np.float64)
     width = GROUP_WIDTH / (M + 1)
     for m in range(1, M + 1):
-        rgb, name = source_color(m), source_name(m)
+        rgb, name = style.source_color(m), style.source_name(m)
         line(f"sources/{m}/aoi", rgb, f"{name} {style.AOI_UNIT}", style.WIDTH_MAIN)
         points(f"sources/{m}/oracle_aoi", style.ORACLE_COLOR, f"{name}'s oracle",
                shape.Circle, style.MARKER_ORACLE)  # fmt: skip
         line(f"sources/{m}/regret", rgb, name, style.WIDTH_SECONDARY * 1.5)
         points(f"occupancy/{m}", rgb, name, shape.Circle, MARKER_OCCUPANCY)
-        if K <= BARS_UP_TO:
+        if K <= style.SOURCE_BARS_UP_TO:
             bars(rec, f"{base}/means/{m}", rgb, arm + bar_offsets(M)[m - 1], width=width)
     points("occupancy/collided", COLLISION_COLOR, COLLISION_NAME, shape.Cross, MARKER_COLLISION)
     points("x", style.STATE_COLOR, style.STATE_NAME, shape.Square, style.MARKER_STATE)
     theory = config.theory
-    if K > BARS_UP_TO:
+    if K > style.SOURCE_BARS_UP_TO:
         static("means", rr.Tensor.columns(value_range=[[0.0, 1.0]]))
-    if theory is not None and K <= BARS_UP_TO:  # the true means right of the sources' bars
+    if (
+        theory is not None and K <= style.SOURCE_BARS_UP_TO
+    ):  # the true means right of the sources' bars
         bars(rec, f"{base}/true_means", style.BAR_TRUE_COLOR, arm + bar_offsets(M)[M],
              values=np.asarray(theory.mu, dtype=np.float64), width=width)  # fmt: skip
     static("about", rr.TextDocument.columns(text=[sources_markdown(config)],
@@ -129,7 +120,9 @@ def sources_markdown(config: RunConfig) -> str:
     """The run card of a run of several sources: a single source's, and what the views of
     several show."""
     M = config.sources
-    colours = ", ".join(f"{source_name(m)} {_hex(source_color(m))}" for m in range(1, M + 1))
+    colours = ", ".join(
+        f"{style.source_name(m)} {_hex(style.source_color(m))}" for m in range(1, M + 1)
+    )
     return (
         about_markdown(config)
         + f"\n\n**{M} sources** share the channels (colours: {colours}). Two sources on one "
@@ -139,7 +132,8 @@ def sources_markdown(config: RunConfig) -> str:
 
 
 def _hex(rgb: style.RGB) -> str:
-    return "#%02x%02x%02x" % tuple(rgb)
+    r, g, b = rgb
+    return f"#{r:02x}{g:02x}{b:02x}"
 
 
 class SourcesSink(Sink):
@@ -232,7 +226,7 @@ class SourcesSink(Sink):
     def _bars(self, t: np.ndarray, means: np.ndarray) -> None:
         """Each source's means at the slots ``t`` (``means``: M x len(t) x K)."""
         times = [rr.TimeColumn(TIMELINE, sequence=np.ascontiguousarray(t, dtype=np.int64))]
-        if self.K > BARS_UP_TO:  # one sources x arms heatmap a slot
+        if self.K > style.SOURCE_BARS_UP_TO:  # one sources x arms heatmap a slot
             table = np.nan_to_num(np.moveaxis(means, 0, 1))  # (len(t), M, K)
             self.recording.send_columns(
                 f"{self.base}/means", indexes=times,
@@ -273,6 +267,5 @@ __all__ = [
     "SourcesSink",
     "bar_offsets",
     "log_sources_static",
-    "source_color",
     "sources_markdown",
 ]

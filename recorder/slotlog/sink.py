@@ -36,11 +36,11 @@ from corraoi.recorder.vocab import (
     RUN_METADATA,
     SCHEMA_ENCODING,
     library_name,
+    slot_topic,
 )
 from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
 from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
-from corraoi.recorder.vocab import slot_topic
 
 from .chunks import ChunkWriter
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, sources_end_metadata
