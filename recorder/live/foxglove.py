@@ -235,6 +235,8 @@ class FoxgloveServer:
     def stop(self) -> None:
         if not self._stopped:
             self._stopped = True
+            if any(self.published.values()):
+                self.front.settle()  # what the server queued reaches its clients first
             self._server.stop()  # closes its connections (through the front) properly
             self.front.close()
 
