@@ -530,6 +530,11 @@ def record(
     if not force and viewer is None and not sinks and up_to_date(plan):
         return Run(plan.mcap, rrd=plan.rrd)
     refuse([plan], force=force, hint="force=True")
+    if plan.rrd is not None or viewer is not None:
+        from corraoi.extras import require_package
+
+        # one line before anything is written, not an import error after the log began
+        require_package("rerun", "corraoi.record's Rerun recording (rrd=False: none)")
     outlets = Outlets(viewer_url=viewer, overwrite=force, sinks=tuple(sinks))
     each = None if on_block is None else (lambda _plan, block: on_block(block))
     (done,) = record_plans([plan], outlets, on_block=each, should_stop=should_stop)
