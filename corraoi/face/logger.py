@@ -115,7 +115,7 @@ class Logger:
         source: str = "",
         version: str = "",
         overwrite: bool = False,
-        sinks: Sequence[Sink] = (),
+        sinks: Sequence[Sink[SlotBlock]] = (),
     ) -> None:
         from corraoi import arguments
         from corraoi.files.partial import check_target
@@ -196,7 +196,7 @@ class Logger:
         self.config: RunConfig | None = None
         self._stack: ExitStack | None = None
         self._log: McapSink | None = None
-        self._every: list[Sink] = []
+        self._every: list[Sink[SlotBlock]] = []
         #: slots written so far (to the sinks and pending)
         self.t = 0
         self._given: tuple[bool, ...] | None = None  # (x, *GIVEN_FIELDS) given?

@@ -218,6 +218,7 @@ class Sweep(SweepData):
         set_workers(1)  # one run has nothing to spread over threads
         for p in todo:
             d = p.drill
+            assert d is not None  # each plan is a drill's
             if say is not None:
                 say(f"recording {safe_text(p.mcap)} ({safe_text(d.config.instance_name)} "
                     f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "

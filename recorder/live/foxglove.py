@@ -245,7 +245,7 @@ class FoxgloveServer:
         self.stop()
 
 
-class FoxgloveSlotSink(Sink):
+class FoxgloveSlotSink(Sink[SlotBlock]):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
     The messages are :class:`corraoi.recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
@@ -323,7 +323,7 @@ def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
     }
 
 
-class FoxgloveSweepSink(Sink):
+class FoxgloveSweepSink(Sink[dict[str, Any]]):
     """Streams sweep points to ``/corraoi/sweep`` as each checkpoint finishes:
     ``write(point)`` with a JSON-able dict (one message; ``log_time`` its ``t`` seconds
     when it has one), ``close()``."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -25,7 +25,7 @@ def first_line(exc: BaseException) -> str:
     return text.splitlines()[0]
 
 
-class RrdOutput(Sink):
+class RrdOutput(Sink[NoReturn]):  # a file or viewer: RerunSink writes, nothing is written here
     """Where one run's Rerun recording goes: an ``.rrd`` file and/or a viewer (gRPC URL).
 
     The file is written as ``<path>.partial`` (with the default blueprint embedded) and

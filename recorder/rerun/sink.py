@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
@@ -36,6 +36,9 @@ from .names import (
 from .output import RrdOutput, first_line
 from .static import log_focus, log_static, log_why_focus, log_why_static, tensor_batch
 
+if TYPE_CHECKING:
+    from corraoi.policies import RGB
+
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
 #: slots cost 3.0 us a slot, 5,000 1.2 us, 20,000 1.0 us. A viewer then sees the data in
@@ -43,7 +46,7 @@ from .static import log_focus, log_static, log_why_focus, log_why_static, tensor
 BATCH = 8192
 
 
-class RerunSink(Sink):
+class RerunSink(Sink[SlotBlock]):
     """Send one run's SlotBlocks to ``recording`` under ``runs/<label>``.
 
     ``with RerunSink(recording, label, config) as sink: sink.write(block)``. The static
@@ -60,7 +63,7 @@ class RerunSink(Sink):
         *,
         flush_timeout: float = 30.0,
         batch: int = BATCH,
-        color: style.RGB | None = None,
+        color: RGB | None = None,
     ) -> None:
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch}")

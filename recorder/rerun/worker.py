@@ -33,12 +33,15 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import check_target
 from corraoi.forked import ForkedWorker, can_fork
 from corraoi.recorder.sink import RunRecording, made_again
+
+if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -70,7 +73,7 @@ class RerunWorker:
 
     def open(
         self,
-        config: Any,
+        config: RunConfig,
         *,
         rrd_path: str | os.PathLike[str] | None = None,
         viewer_url: str | None = None,
@@ -151,7 +154,7 @@ class RemoteRecording(RunRecording):
             except WriteError as exc:
                 self._lost = exc
 
-    def _write(self, block: Any) -> None:
+    def _write(self, block: SlotBlock) -> None:
         if self.closed:
             raise ValueError("RemoteRecording: write() after close()")
         self._send(("write", block))
