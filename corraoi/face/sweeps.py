@@ -16,7 +16,7 @@ import shutil
 import tempfile
 import weakref
 from collections.abc import Callable, Mapping, Sequence
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -349,7 +349,7 @@ def split_words(values: Sequence[str]) -> list[str]:
     return split_list(values)
 
 
-def kept_code(folder: str | os.PathLike[str]) -> Any:
+def kept_code(folder: str | os.PathLike[str]) -> AbstractContextManager[list[str]]:
     """A context in which the plug-ins of the sweep in ``folder`` load from its kept copies
     (``--resume --kept-code``), entered before the grid is built."""
     from corraoi.experiments.kept_code import use_kept_code

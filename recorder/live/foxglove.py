@@ -34,7 +34,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
@@ -43,6 +43,9 @@ from corraoi.recorder.slotlog.encode import BlockEncoder, run_metadata, schema_b
 from corraoi.recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
+
+if TYPE_CHECKING:
+    from corraoi.recorder.slotlog.reader import RunLog
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -352,7 +355,7 @@ class FoxgloveSweepSink(Sink[dict[str, Any]]):
 
 def stream_log(
     server: FoxgloveServer,
-    log: Any,
+    log: RunLog,
     *,
     start: int = 1,
     pace: float | None = None,

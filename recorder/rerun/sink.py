@@ -17,8 +17,9 @@ with reproducible settings) and owns where it goes;
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
@@ -208,7 +209,9 @@ class RerunSink(Sink[SlotBlock]):
             self._send_why(block, t, column)
         self.slots += n
 
-    def _send_why(self, block: SlotBlock, t: np.ndarray, column: Any) -> None:
+    def _send_why(
+        self, block: SlotBlock, t: np.ndarray, column: Callable[[str, np.ndarray, np.ndarray], None]
+    ) -> None:
         """The "why this arm" entities of a block that has scores: every arm's score (up to
         LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
         where the score chose it, the forced slots, the override's threshold."""

@@ -41,6 +41,9 @@ from corraoi.forked import ForkedWorker, can_fork
 from corraoi.recorder.sink import RunRecording, made_again
 
 if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.process import BaseProcess
+
     from corraoi.engine.block import RunConfig, SlotBlock
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
@@ -61,7 +64,7 @@ class RerunWorker:
         self._busy: RemoteRecording | None = None
 
     @property
-    def process(self) -> Any:
+    def process(self) -> BaseProcess:
         """The worker's process (``pid``, ``is_alive()``, ``join()``)."""
         return self._worker.proc
 
@@ -194,7 +197,7 @@ def _left(path: Path | None) -> str:
     return f"; the incomplete file is left as {partial_path(path)}"
 
 
-def serve(before_import: Callable[[], None] | None, conn: Any) -> None:
+def serve(before_import: Callable[[], None] | None, conn: Connection) -> None:
     """The worker's loop: import Rerun, then carry out the parent's messages."""
     if before_import is not None:
         before_import()
@@ -203,7 +206,7 @@ def serve(before_import: Callable[[], None] | None, conn: Any) -> None:
     rec: LocalRecording | None = None
     failure: BaseException | None = None  # what went wrong since "open"
 
-    def reply(value: Any) -> None:
+    def reply(value: object) -> None:
         try:
             conn.send(value)
         except (pickle.PicklingError, TypeError, AttributeError):
