@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from corraoi.experiments.grid import Grid
     from corraoi.experiments.sweeps import SweepOutcome
     from corraoi.model.instance import Instance
+    from corraoi.policies.spec import PolicySpec
 
     from .runs import Run
     from .viewing import Shown
@@ -116,9 +117,10 @@ class Sweep(SweepData):
             return self._record(which, specs, labels, cell, path, rrd, force, kept_code,
                                 allow_changed_code)  # fmt: skip
 
-    def _record(self, which: int | str, specs: list[Any], labels: list[str], cell: str | None,
-                path: str | os.PathLike[str] | None, rrd: str | os.PathLike[str] | bool | None,
-                force: bool, kept_code: bool, allow_changed_code: bool) -> Run:  # fmt: skip
+    def _record(self, which: int | str, specs: list[PolicySpec], labels: list[str],
+                cell: str | None, path: str | os.PathLike[str] | None,
+                rrd: str | os.PathLike[str] | bool | None, force: bool, kept_code: bool,
+                allow_changed_code: bool) -> Run:  # fmt: skip
         from corraoi.experiments.drill import choose, row_verdict
         from corraoi.experiments.folder import PYTHON_WORDS
 
