@@ -98,10 +98,11 @@ STRICT_MODULES = [
 ]  # fmt: skip
 
 
-def _mypy(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+def _mypy(tmp_path: Path, cache: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """mypy on the tree of links in ``tmp_path``, with its own cache (other options)."""
     return subprocess.run(
         [_tool("mypy"), "--config-file", str(ROOT / "pyproject.toml"),
-         "--cache-dir", str(ROOT / ".mypy_cache" / "strict"), *args],
+         "--cache-dir", str(ROOT / ".mypy_cache" / cache), *args],
         cwd=tmp_path, capture_output=True, text=True,
     )  # fmt: skip
 
@@ -111,8 +112,9 @@ def test_mypy_strict_on_the_main_road(tmp_path: Path):
     modules = [arg for name in STRICT_MODULES for arg in ("-m", name)]
     # untyped third-party calls: IPython.display.display (the notebook viewer's only call into
     # IPython) and mcap's Writer (flush, finish: the sweep log's MCAP writer)
-    res = _mypy(tmp_path, "--strict", "--follow-imports=silent", "--untyped-calls-exclude=IPython",
-                "--untyped-calls-exclude=mcap", *modules)  # fmt: skip
+    res = _mypy(tmp_path, "strict", "--strict", "--follow-imports=silent",
+                "--untyped-calls-exclude=IPython", "--untyped-calls-exclude=mcap",
+                *modules)  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
 
 
@@ -154,7 +156,7 @@ def test_the_main_road_is_typed(tmp_path: Path):
     """Each line of the probe after the definition passes a wrong value along the road."""
     tree = installed_tree(tmp_path)
     (tree / "_road.py").write_text(MAIN_ROAD_PROBE)
-    res = _mypy(tmp_path, "--follow-imports=silent", str(tree / "_road.py"))
+    res = _mypy(tmp_path, "road", "--follow-imports=silent", str(tree / "_road.py"))
     lines = MAIN_ROAD_PROBE.splitlines()
     first = lines.index("def probe(config: RunConfig, block: SlotBlock, worker: RerunWorker, "
                         "point: SweepPoint,") + 3  # fmt: skip
