@@ -18,6 +18,9 @@ from typing import TYPE_CHECKING, Any
 from corraoi.errors import OutputError
 
 if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.experiments.drill import Drill
+
     from .live import FoxgloveChoice, ViewerChoice
     from .recording import Plan, Recorded
     from .views import ProgressBar
@@ -26,7 +29,7 @@ if TYPE_CHECKING:
 def run_configs(instance: str | os.PathLike[str], policies: Sequence[str], params: Sequence[str],
                 *, c: float | None, beta: float | None, channel: str | None, seed: int,
                 horizon: int, score: bool | None,
-                warn: Callable[[str], None] | None = None) -> list[Any]:  # fmt: skip
+                warn: Callable[[str], None] | None = None) -> list[RunConfig]:  # fmt: skip
     """The runs ``corraoi record`` is given: the instance, the policies (words, with the
     command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon and
     channel, as ``RunConfig`` values. Raises :class:`~corraoi.errors.InstanceError`,
@@ -57,7 +60,7 @@ def runs_from_sweep(
     allow_changed_code: bool = False,
     hold: Callable[[AbstractContextManager[Any]], Any],
     warn: Callable[[str], None] | None = None,
-) -> list[Any]:
+) -> list[Drill]:
     """The runs ``--from folder`` names (``run`` of each cell, ``cells`` only), as drills
     (``.config``, ``.folder``, ``.cell``, ``.run``, ``.choice``). ``policies``: the words of
     ``--policy`` when it was given (the sweep's labels select its cells, any other word adds a
@@ -87,11 +90,11 @@ def runs_from_sweep(
 
 
 def plan_runs(
-    configs: Sequence[Any],
+    configs: Sequence[RunConfig],
     output: str | None,
     rrd: str | None,
     no_rrd: bool,
-    drills: Sequence[Any] | None,
+    drills: Sequence[Drill] | None,
     *,
     force: bool,
     live_option: str | None,
@@ -235,7 +238,7 @@ def record_runs(
         total = sum(p.config.horizon for p in plans)
         with Stop() as stop, _bar(progress, total) as bar:
 
-            def on_block(plan: Plan, block: Any) -> None:
+            def on_block(plan: Plan, block: SlotBlock) -> None:
                 if bar is not None:
                     bar.update(len(block), note=f"{plan.config.label} slot {int(block.t[-1])}")
 

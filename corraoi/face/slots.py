@@ -4,13 +4,17 @@ recorded run is fed. A CPU run comes from the engine; a run of a GPU sweep
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 from corraoi.engine.simulation import simulate_run
 
+if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
 
-def slots_of(config: Any) -> Any:
+
+def slots_of(config: RunConfig) -> Iterator[SlotBlock]:
     """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
     (``config.streams``) the GPU kernel's own, captured slot by slot."""
     if config.streams == "cpu":
