@@ -37,8 +37,13 @@ from corraoi.recorder.sink import RunRecording, Sink
 from corraoi.recorder.slotlog.sink import McapSink
 
 if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.summary import RunSummary
+    from corraoi.experiments.drill import Drill
     from corraoi.model.instance import Instance
+    from corraoi.recorder.rerun.worker import RerunWorker
 
+    from .live import FoxgloveChoice
     from .resolve import PolicyLike
     from .runs import Run
 
@@ -61,16 +66,16 @@ class RecordOutcome:
 
 
 def record_run(
-    config: Any,
+    config: RunConfig,
     mcap: str | os.PathLike[str],
     *,
     rrd: str | os.PathLike[str] | None = None,
     viewer_url: str | None = None,
     overwrite: bool = False,
-    on_block: Callable[[Any], None] | None = None,
+    on_block: Callable[[SlotBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
-    rerun: Any = None,
-    sinks: Sequence[Sink] = (),
+    rerun: RerunWorker | None = None,
+    sinks: Sequence[Sink[SlotBlock]] = (),
     expect: Sequence[tuple[int, float]] = (),
     notes: Sequence[str] = (),
 ) -> RecordOutcome:
@@ -113,7 +118,7 @@ def record_run(
                 stack.enter_context(recording)
             log = stack.enter_context(McapSink(mcap, config, overwrite=overwrite,
                                                provenance=provenance))  # fmt: skip
-            every: list[Sink] = [log]
+            every: list[Sink[SlotBlock]] = [log]
             if recording is not None:
                 every.append(recording)
             every += [stack.enter_context(s) for s in sinks]
@@ -139,7 +144,7 @@ def record_run(
     return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
 
 
-def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> RecordOutcome:
+def record_drill(drill: Drill, mcap: str | os.PathLike[str], **kwargs: Any) -> RecordOutcome:
     """:func:`record_run` of a run chosen from a sweep (a
     :class:`corraoi.experiments.drill.Drill`): it
     must give the sweep's regret again, and its log carries the drill's notes."""
@@ -153,14 +158,14 @@ def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> Rec
 class Plan:
     """One run to record: its configuration (a ``RunConfig``) and its files."""
 
-    config: Any  # RunConfig
+    config: RunConfig
     mcap: Path
     rrd: Path | None
     #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
-    drill: Any = None
+    drill: Drill | None = None
 
 
-def _expand(template: str, config: Any, drill: Any = None) -> Path:
+def _expand(template: str, config: RunConfig, drill: Drill | None = None) -> Path:
     """The path ``template`` names for ``config``. The names filled in are data (from an
     instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
     climb out of one (``../``) or carry control codes into the file name."""
@@ -185,11 +190,11 @@ def _rrd_beside(mcap: Path) -> Path:
 
 
 def plan_files(
-    configs: Sequence[Any],
+    configs: Sequence[RunConfig],
     out: str | os.PathLike[str] | None = None,
     rrd: str | os.PathLike[str] | None = None,
     no_rrd: bool = False,
-    drills: Sequence[Any] | None = None,
+    drills: Sequence[Drill] | None = None,
 ) -> list[Plan]:
     """The files of each run: ``out`` (default ``runs/{label}.mcap``, a run of a sweep
     ``runs/{from}.mcap``) and ``rrd`` (default: beside the log, none with ``no_rrd``), their
@@ -331,9 +336,9 @@ class Outlets:
 
     viewer_url: str | None = None
     overwrite: bool = False
-    live: Any = None
-    rerun: Any = None
-    sinks: tuple[Sink, ...] = ()
+    live: FoxgloveChoice | None = None
+    rerun: RerunWorker | None = None
+    sinks: tuple[Sink[SlotBlock], ...] = ()
 
 
 @dataclass
@@ -351,7 +356,8 @@ class Recorded:
     rrd: Path | None = None
     compile_s: float = 0.0
     viewer_problem: str | None = None
-    summary: Any = None  # corraoi.engine.summary.RunSummary, measured as the blocks went by
+    #: the run's summary, measured as the blocks went by
+    summary: RunSummary | None = None
 
 
 def prepare_kernels(plans: Sequence[Plan]) -> None:
@@ -374,7 +380,7 @@ def record_plans(
     plans: Sequence[Plan],
     outlets: Outlets = Outlets(),
     *,
-    on_block: Callable[[Plan, Any], None] | None = None,
+    on_block: Callable[[Plan, SlotBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> list[Recorded]:
     """Record every plan in turn (module docstring). ``on_block(plan, block)`` after each
@@ -400,7 +406,7 @@ def _record_one(
     plan: Plan,
     result: Recorded,
     outlets: Outlets,
-    on_block: Callable[[Plan, Any], None] | None,
+    on_block: Callable[[Plan, SlotBlock], None] | None,
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
@@ -414,7 +420,7 @@ def _record_one(
     # with --pace, the Foxglove sink's write is what slows the run
     fox = outlets.live.sink(config, stopping) if outlets.live is not None else None
 
-    def each(block: Any) -> None:
+    def each(block: SlotBlock) -> None:
         summary.update(block)
         result.slots = int(block.t[-1])
         if isinstance(block, SourcesBlock):  # several sources: the run's regret, the sum
@@ -470,8 +476,8 @@ def record(
     rrd: str | os.PathLike[str] | bool | None = None,
     force: bool = False,
     viewer: str | None = None,
-    sinks: Sequence[Sink] = (),
-    on_block: Callable[[Any], None] | None = None,
+    sinks: Sequence[Sink[SlotBlock]] = (),
+    on_block: Callable[[SlotBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     score: bool | None = None,
     sources: int = 1,
@@ -543,6 +549,11 @@ def record(
     if not force and viewer is None and not sinks and up_to_date(plan):
         return Run(plan.mcap, rrd=plan.rrd)
     refuse([plan], force=force, hint="force=True")
+    if plan.rrd is not None or viewer is not None:
+        from corraoi.extras import require_package
+
+        # one line before anything is written, not an import error after the log began
+        require_package("rerun", "corraoi.record's Rerun recording (rrd=False: none)")
     outlets = Outlets(viewer_url=viewer, overwrite=force, sinks=tuple(sinks))
     each = None if on_block is None else (lambda _plan, block: on_block(block))
     (done,) = record_plans([plan], outlets, on_block=each, should_stop=should_stop)

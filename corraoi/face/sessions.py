@@ -18,6 +18,9 @@ from typing import TYPE_CHECKING, Any
 from corraoi.errors import OutputError
 
 if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.experiments.drill import Drill
+
     from .live import FoxgloveChoice, ViewerChoice
     from .recording import Plan, Recorded
     from .views import ProgressBar
@@ -27,7 +30,7 @@ def run_configs(instance: str | os.PathLike[str], policies: Sequence[str], param
                 *, c: float | None, beta: float | None, channel: str | None, seed: int,
                 horizon: int, score: bool | None,
                 warn: Callable[[str], None] | None = None,
-                sources: int = 1) -> list[Any]:  # fmt: skip
+                sources: int = 1) -> list[RunConfig]:  # fmt: skip
     """The runs ``corraoi record`` is given: the instance, the policies (words, with the
     command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon,
     channel and number of sources (``--sources``, 1..K), as ``RunConfig`` values. Raises
@@ -64,7 +67,7 @@ def runs_from_sweep(
     allow_changed_code: bool = False,
     hold: Callable[[AbstractContextManager[Any]], Any],
     warn: Callable[[str], None] | None = None,
-) -> list[Any]:
+) -> list[Drill]:
     """The runs ``--from folder`` names (``run`` of each cell, ``cells`` only), as drills
     (``.config``, ``.folder``, ``.cell``, ``.run``, ``.choice``). ``policies``: the words of
     ``--policy`` when it was given (the sweep's labels select its cells, any other word adds a
@@ -94,11 +97,11 @@ def runs_from_sweep(
 
 
 def plan_runs(
-    configs: Sequence[Any],
+    configs: Sequence[RunConfig],
     output: str | None,
     rrd: str | None,
     no_rrd: bool,
-    drills: Sequence[Any] | None,
+    drills: Sequence[Drill] | None,
     *,
     force: bool,
     live_option: str | None,
@@ -242,7 +245,7 @@ def record_runs(
         total = sum(p.config.horizon for p in plans)
         with Stop() as stop, _bar(progress, total) as bar:
 
-            def on_block(plan: Plan, block: Any) -> None:
+            def on_block(plan: Plan, block: SlotBlock) -> None:
                 if bar is not None:
                     bar.update(len(block), note=f"{plan.config.label} slot {int(block.t[-1])}")
 

@@ -5,14 +5,18 @@ from the GPU kernel's own streams, captured slot by slot."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 from corraoi.engine.block import SourcesBlock
 from corraoi.engine.simulation import simulate_run
 
+if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig, SlotBlock
 
-def slots_of(config: Any) -> Any:
+
+def slots_of(config: RunConfig) -> Iterator[SlotBlock]:
     """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
     (``config.streams``) the GPU kernel's own, captured slot by slot. A run of several
     sources (``config.sources`` > 1) gives SourcesBlocks."""

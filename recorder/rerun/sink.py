@@ -17,8 +17,9 @@ with reproducible settings) and owns where it goes;
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
@@ -36,6 +37,9 @@ from .names import (
 from .output import RrdOutput, first_line
 from .static import log_focus, log_static, log_why_focus, log_why_static, tensor_batch
 
+if TYPE_CHECKING:
+    from corraoi.policies import RGB
+
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
 #: slots cost 3.0 us a slot, 5,000 1.2 us, 20,000 1.0 us. A viewer then sees the data in
@@ -43,7 +47,7 @@ from .static import log_focus, log_static, log_why_focus, log_why_static, tensor
 BATCH = 8192
 
 
-class RerunSink(Sink):
+class RerunSink(Sink[SlotBlock]):
     """Send one run's SlotBlocks to ``recording`` under ``runs/<label>``.
 
     ``with RerunSink(recording, label, config) as sink: sink.write(block)``. The static
@@ -60,7 +64,7 @@ class RerunSink(Sink):
         *,
         flush_timeout: float = 30.0,
         batch: int = BATCH,
-        color: style.RGB | None = None,
+        color: RGB | None = None,
     ) -> None:
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch}")
@@ -205,7 +209,9 @@ class RerunSink(Sink):
             self._send_why(block, t, column)
         self.slots += n
 
-    def _send_why(self, block: SlotBlock, t: np.ndarray, column: Any) -> None:
+    def _send_why(
+        self, block: SlotBlock, t: np.ndarray, column: Callable[[str, np.ndarray, np.ndarray], None]
+    ) -> None:
         """The "why this arm" entities of a block that has scores: every arm's score (up to
         LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
         where the score chose it, the forced slots, the override's threshold."""

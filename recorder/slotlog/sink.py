@@ -66,7 +66,7 @@ def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
     return same
 
 
-class McapSink(Sink):
+class McapSink(Sink[SlotBlock]):
     """Write one run's slots to ``path`` (an MCAP file), block by block.
 
     ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
