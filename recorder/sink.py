@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Generic, TypeVar
 if TYPE_CHECKING:
     from typing_extensions import Self
 
-    from corraoi.engine.block import SlotBlock
+    from corraoi.engine.block import RunBlock
 
 #: What a sink is handed: a run's slot block, or a sweep's point.
 Item = TypeVar("Item", contravariant=True)
@@ -63,7 +63,7 @@ class Sink(Generic[Item]):
             self.abort()
 
 
-class RunRecording(Sink["SlotBlock"]):
+class RunRecording(Sink["RunBlock"]):
     """One run's Rerun recording (an ``.rrd`` file and/or a viewer), whoever writes it:
     this process (:class:`corraoi.recorder.rerun.sink.LocalRecording`) or a forked worker
     (:class:`corraoi.recorder.rerun.worker.RemoteRecording`). ``record_run`` hands either the run's
@@ -89,11 +89,11 @@ class RunRecording(Sink["SlotBlock"]):
     #: the WriteError close() raised on a normal exit (the file left at ``.partial``)
     error: Exception | None = None
 
-    def write(self, block: SlotBlock, /) -> None:
+    def write(self, block: RunBlock, /) -> None:
         self._write(block)
         self.written = True
 
-    def _write(self, block: SlotBlock) -> None:
+    def _write(self, block: RunBlock) -> None:
         raise NotImplementedError
 
     def close(self) -> Path | None:

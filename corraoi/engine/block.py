@@ -346,6 +346,10 @@ class SourcesBlock:
         )
 
 
+#: What a run's sinks are handed: a single source's slots, or a run of several sources'.
+RunBlock = SlotBlock | SourcesBlock
+
+
 def absent_fill(block: Columns, name: str) -> np.ndarray:
     """``block``'s column ``name``, or where it lacks the field the column a table needs:
     NaN for numbers, False for flags (extra fields: None, as objects)."""

@@ -37,7 +37,7 @@ from corraoi.recorder.sink import RunRecording, Sink
 from corraoi.recorder.slotlog.sink import McapSink
 
 if TYPE_CHECKING:
-    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.block import RunBlock, RunConfig, SlotBlock
     from corraoi.engine.summary import RunSummary
     from corraoi.experiments.drill import Drill
     from corraoi.model.instance import Instance
@@ -72,7 +72,7 @@ def record_run(
     rrd: str | os.PathLike[str] | None = None,
     viewer_url: str | None = None,
     overwrite: bool = False,
-    on_block: Callable[[SlotBlock], None] | None = None,
+    on_block: Callable[[RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     rerun: RerunWorker | None = None,
     sinks: Sequence[Sink[SlotBlock]] = (),
@@ -87,13 +87,22 @@ def record_run(
     ``rerun``, a :class:`corraoi.recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
     its process (the same file), else it is written in this one. ``sinks``: further
     :class:`~corraoi.recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
-    block after those two, closed with the run, or aborted when it fails.
+    block after those two, closed with the run, or aborted when it fails (a run of several
+    sources goes to its log and recording only: it refuses ``sinks``).
 
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
     the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
     finished as failed with that line. ``notes`` go into the log's provenance."""
+    from corraoi.engine.block import SlotBlock
+
     from .slots import slots_of
 
+    if config.sources > 1 and sinks:
+        raise ConfigError(
+            f"{config.label}: a run of {config.sources} sources is recorded to its log and "
+            "Rerun recording only; expected no further sinks (Foxglove live, your own), "
+            "which take a single source's slots"
+        )
     if expect:  # a drill-down's check (the module is not imported by a plain record)
         from corraoi.experiments.drill import row_mismatch
     slots = 0
@@ -118,15 +127,19 @@ def record_run(
                 stack.enter_context(recording)
             log = stack.enter_context(McapSink(mcap, config, overwrite=overwrite,
                                                provenance=provenance))  # fmt: skip
-            every: list[Sink[SlotBlock]] = [log]
+            every: list[Sink[RunBlock]] = [log]
             if recording is not None:
                 every.append(recording)
-            every += [stack.enter_context(s) for s in sinks]
+            others = [stack.enter_context(s) for s in sinks]
             for block in slots_of(config):  # the engine's, or a GPU sweep's own run
                 for sink in every:
                     sink.write(block)
+                if isinstance(block, SlotBlock):  # (a run of several sources has no others)
+                    for other in others:
+                        other.write(block)
                 slots = int(block.t[-1])
-                mismatch = row_mismatch(expect, block) if expect else None
+                mismatch = (row_mismatch(expect, block)
+                            if expect and isinstance(block, SlotBlock) else None)  # fmt: skip
                 if mismatch is not None:  # after the block is in the log: it shows it
                     raise SweepMismatch(f"{config.label}: {mismatch}; the log is left as "
                                         f"{log.partial_path}, marked failed")  # fmt: skip
@@ -380,7 +393,7 @@ def record_plans(
     plans: Sequence[Plan],
     outlets: Outlets = Outlets(),
     *,
-    on_block: Callable[[Plan, SlotBlock], None] | None = None,
+    on_block: Callable[[Plan, RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> list[Recorded]:
     """Record every plan in turn (module docstring). ``on_block(plan, block)`` after each
@@ -406,7 +419,7 @@ def _record_one(
     plan: Plan,
     result: Recorded,
     outlets: Outlets,
-    on_block: Callable[[Plan, SlotBlock], None] | None,
+    on_block: Callable[[Plan, RunBlock], None] | None,
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
@@ -420,7 +433,7 @@ def _record_one(
     # with --pace, the Foxglove sink's write is what slows the run
     fox = outlets.live.sink(config, stopping) if outlets.live is not None else None
 
-    def each(block: SlotBlock) -> None:
+    def each(block: RunBlock) -> None:
         summary.update(block)
         result.slots = int(block.t[-1])
         if isinstance(block, SourcesBlock):  # several sources: the run's regret, the sum
@@ -477,7 +490,7 @@ def record(
     force: bool = False,
     viewer: str | None = None,
     sinks: Sequence[Sink[SlotBlock]] = (),
-    on_block: Callable[[SlotBlock], None] | None = None,
+    on_block: Callable[[RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     score: bool | None = None,
     sources: int = 1,

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from corraoi.errors import OutputError
 
 if TYPE_CHECKING:
-    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.block import RunBlock, RunConfig
     from corraoi.experiments.drill import Drill
 
     from .live import FoxgloveChoice, ViewerChoice
@@ -245,7 +245,7 @@ def record_runs(
         total = sum(p.config.horizon for p in plans)
         with Stop() as stop, _bar(progress, total) as bar:
 
-            def on_block(plan: Plan, block: SlotBlock) -> None:
+            def on_block(plan: Plan, block: RunBlock) -> None:
                 if bar is not None:
                     bar.update(len(block), note=f"{plan.config.label} slot {int(block.t[-1])}")
 

@@ -13,10 +13,10 @@ from corraoi.engine.block import SourcesBlock
 from corraoi.engine.simulation import simulate_run
 
 if TYPE_CHECKING:
-    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.block import RunBlock, RunConfig
 
 
-def slots_of(config: RunConfig) -> Iterator[SlotBlock]:
+def slots_of(config: RunConfig) -> Iterator[RunBlock]:
     """The slot blocks of one run: the CPU engine's, or for a run of a GPU sweep
     (``config.streams``) the GPU kernel's own, captured slot by slot. A run of several
     sources (``config.sources`` > 1) gives SourcesBlocks."""
@@ -25,8 +25,9 @@ def slots_of(config: RunConfig) -> Iterator[SlotBlock]:
             simulate_run_sources,
         )
 
-        many = simulate_run_sources(config.model, config.policy, config.seed, config.horizon,
-                                    config.sources, channel=config.channel)  # fmt: skip
+        many: Iterator[SourcesBlock] = simulate_run_sources(
+            config.model, config.policy, config.seed, config.horizon, config.sources,
+            channel=config.channel)  # fmt: skip
         if not config.score:
             return (SourcesBlock(tuple(replace(s, score=None, forced=None) for s in b.sources))
                     for b in many)  # fmt: skip

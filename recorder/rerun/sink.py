@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import rerun as rr
 
-from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.block import RunBlock, RunConfig, SlotBlock, SourcesBlock
 from corraoi.recorder import style
 from corraoi.recorder.sink import RunRecording, Sink
 
@@ -35,6 +35,7 @@ from .names import (
     snapshot_every,
 )
 from .output import RrdOutput, first_line
+from .sources import SourcesSink
 from .static import log_focus, log_static, log_why_focus, log_why_static, tensor_batch
 
 if TYPE_CHECKING:
@@ -348,12 +349,10 @@ class RerunSink(Sink[SlotBlock]):
 
 
 def run_sink(recording: rr.RecordingStream, label: str, config: RunConfig, *,
-             color: style.RGB | None = None) -> RerunSink | Any:  # fmt: skip
+             color: RGB | None = None) -> RerunSink | SourcesSink:  # fmt: skip
     """The sink of one run: a :class:`RerunSink`, or for a run of several sources a
     :class:`corraoi.recorder.rerun.sources.SourcesSink` (the same interface)."""
     if config.sources > 1:
-        from .sources import SourcesSink
-
         return SourcesSink(recording, label, config, color=color)
     return RerunSink(recording, label, config, color=color)
 
@@ -376,8 +375,16 @@ class LocalRecording(RunRecording):
         self.path = self.output.path
         self.sink = run_sink(self.output.recording, config.label, config)
 
-    def _write(self, block: SlotBlock) -> None:
-        self.sink.write(block)
+    def _write(self, block: RunBlock) -> None:
+        if isinstance(self.sink, SourcesSink):
+            if not isinstance(block, SourcesBlock):
+                raise ValueError(f"{self.sink.label}: a single source's block for a run of "
+                                 f"{self.sink.M} sources")  # fmt: skip
+            self.sink.write(block)
+        elif isinstance(block, SlotBlock):
+            self.sink.write(block)
+        else:
+            raise ValueError(f"{self.sink.label}: a block of {block.M} sources for a run of one")
 
     def close(self) -> Path | None:
         """Send what the sink holds, then :meth:`RrdOutput.close` (which flushes, once)."""

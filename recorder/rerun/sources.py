@@ -32,10 +32,13 @@ colour (:func:`corraoi.recorder.style.source_color`); its entities, under ``runs
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import rerun as rr
 
 from corraoi.engine.block import RunConfig, SlotBlock, SourcesBlock
+from corraoi.policies import RGB
 from corraoi.recorder import style
 from corraoi.recorder.sink import Sink
 
@@ -46,12 +49,12 @@ from .static import about_markdown, bars, tensor_batch
 #: Slots gathered before they are sent (as RerunSink's BATCH).
 BATCH = 8192
 #: The collisions' markers: red crosses, over the sources' points.
-COLLISION_COLOR: style.RGB = style.FAILURE_COLOR
+COLLISION_COLOR: RGB = style.FAILURE_COLOR
 COLLISION_NAME = "collision"
 MARKER_COLLISION = 6.0
 MARKER_OCCUPANCY = 3.5
 #: The run's regret (the sum over the sources): near-black, thicker than a source's.
-TOTAL_COLOR: style.RGB = style.ORACLE_COLOR
+TOTAL_COLOR: RGB = style.ORACLE_COLOR
 WIDTH_TOTAL = 3.0
 #: Share of a unit on the arm axis the bars of all the sources of an arm take together.
 GROUP_WIDTH = 0.8
@@ -79,14 +82,14 @@ def log_sources_static(rec: rr.RecordingStream, base: str, config: RunConfig) ->
     M, K = config.sources, config.K
     shape = rr.components.MarkerShape
 
-    def static(path: str, columns: object, count: int = 1) -> None:
-        rec.send_columns(f"{base}/{path}", indexes=[],
-                         columns=columns.partition([count]))  # type: ignore[attr-defined]  # fmt: skip
+    def static(path: str, columns: Any, count: int = 1) -> None:
+        rec.send_columns(f"{base}/{path}", indexes=[], columns=columns.partition([count]))
 
-    def line(path: str, rgb: style.RGB, name: str, width: float) -> None:
+    def line(path: str, rgb: RGB, name: str, width: float) -> None:
         static(path, rr.SeriesLines.columns(colors=[rgb], widths=[width], names=[name]))
 
-    def points(path: str, rgb: style.RGB, name: str, marker: object, size: float) -> None:
+    def points(path: str, rgb: RGB, name: str, marker: rr.components.MarkerShape,
+               size: float) -> None:  # fmt: skip
         static(path, rr.SeriesPoints.columns(colors=[rgb], names=[name], markers=[marker],
                                              marker_sizes=[size]))  # fmt: skip
 
@@ -131,18 +134,18 @@ def sources_markdown(config: RunConfig) -> str:
     )
 
 
-def _hex(rgb: style.RGB) -> str:
+def _hex(rgb: RGB) -> str:
     r, g, b = rgb
     return f"#{r:02x}{g:02x}{b:02x}"
 
 
-class SourcesSink(Sink):
+class SourcesSink(Sink[SourcesBlock]):
     """Send the :class:`SourcesBlock` s of one run of several sources to ``recording`` under
     ``runs/<label>`` (the interface of :class:`~corraoi.recorder.rerun.sink.RerunSink`)."""
 
     def __init__(self, recording: rr.RecordingStream, label: str, config: RunConfig, *,
                  flush_timeout: float = 30.0, batch: int = BATCH,
-                 color: style.RGB | None = None) -> None:  # fmt: skip
+                 color: RGB | None = None) -> None:  # fmt: skip
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch}")
         self.recording = recording

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.process import BaseProcess
 
-    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.block import RunBlock, RunConfig
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -157,7 +157,7 @@ class RemoteRecording(RunRecording):
             except WriteError as exc:
                 self._lost = exc
 
-    def _write(self, block: SlotBlock) -> None:
+    def _write(self, block: RunBlock) -> None:
         if self.closed:
             raise ValueError("RemoteRecording: write() after close()")
         self._send(("write", block))

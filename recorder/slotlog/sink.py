@@ -22,7 +22,7 @@ from typing import BinaryIO
 import numpy as np
 from mcap.records import Channel, Schema
 
-from corraoi.engine.block import RunConfig, SlotBlock, SourcesBlock
+from corraoi.engine.block import RunBlock, RunConfig, SlotBlock, SourcesBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
@@ -66,7 +66,7 @@ def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
     return same
 
 
-class McapSink(Sink[SlotBlock]):
+class McapSink(Sink[RunBlock]):
     """Write one run's slots to ``path`` (an MCAP file), block by block.
 
     ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
@@ -140,7 +140,7 @@ class McapSink(Sink[SlotBlock]):
 
     # ------------------------------------------------------------------ writing
 
-    def write(self, block: SlotBlock | SourcesBlock) -> None:
+    def write(self, block: RunBlock) -> None:
         """Append the block's slots; they must follow the slots written so far. A run of
         several sources is written from :class:`SourcesBlock` s, one message per slot and
         source, the sources of a slot in order, each on its source's channel."""
@@ -273,7 +273,7 @@ class McapSink(Sink[SlotBlock]):
                 END_METADATA,
                 sources_end_metadata(slots=self.slots, horizon=horizon, last=last,
                                      error=error, complete=complete)
-                if isinstance(last, SourcesBlock) or self.config.sources > 1
+                if isinstance(last, SourcesBlock)
                 else end_metadata(slots=self.slots, horizon=horizon, last=last,
                                   error=error, complete=complete),
             )  # fmt: skip
