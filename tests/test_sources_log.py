@@ -292,3 +292,19 @@ def test_record_sources_on_the_command_line(tmp_path, monkeypatch):
     assert log.config.sources == 2 and log.read_all().equals(
         sources_run(load_instance("I1"), 0, 300, 2)
     )
+
+
+def test_recover_keeps_every_source_of_a_log_cut_short(tmp_path, three):
+    path = tmp_path / "cut.mcap"
+    sink = McapSink(path, _config(3, T), fsync=False)
+    sink.write(three.slice(0, 2300))
+    sink.abort()  # the writer stops without finishing: the .partial stays, no footer
+    cut = open_log(tmp_path / "cut.mcap.partial")
+    assert (cut.status, cut.n_slots) == ("truncated", 2300)
+    done = corraoi.recover(tmp_path / "cut.mcap.partial", out=tmp_path / "fixed.mcap")
+    fixed = open_log(done.path)
+    assert (fixed.status, fixed.n_slots, fixed.sources) == ("interrupted", 2300, 3)
+    assert fixed.read_all().equals(three.slice(0, 2300))
+    regrets = [int(s.regret[2299]) for s in three.sources]
+    assert json.loads(fixed.end["regret_by_source"]) == regrets
+    assert int(fixed.end["regret"]) == sum(regrets)

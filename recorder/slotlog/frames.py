@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from corraoi.engine.block import FIELDS, SlotBlock, SourcesBlock, absent_column, absent_fill
-from corraoi.engine.slot_record import BY_NAME, NAMES, SLOT_RECORD
+from corraoi.engine.slot_record import BY_NAME, SLOT_RECORD, record_for
 from corraoi.errors import UsageError
 
 from .reader import RunLog, open_log
@@ -42,22 +42,26 @@ if TYPE_CHECKING:
 BATCH_SLOTS = 65_536
 
 
+#: Every field a single source's run may hold (not ``collided``, a field of several sources):
+#: the default fields of :func:`slot_columns`.
+SINGLE_SOURCE = tuple(f.name for f in record_for(1))
 #: The column of the table of a run of several sources that numbers the source (from 1).
 SOURCE_COLUMN = ("source", "int64")
 
 
 def slot_columns(
     K: int,
-    fields: Sequence[str] = NAMES,
+    fields: Sequence[str] = SINGLE_SOURCE,
     extra: Mapping[str, np.ndarray] | None = None,
     *,
     sources: bool = False,
 ) -> list[tuple[str, str]]:
     """(name, dtype) of every column of the slots table of a run with K arms that logs
-    ``fields`` (by default every field of the slot record), in order: one per field, or
+    ``fields`` (by default every field a single source's run may hold), in order: one per field, or
     one per arm numbered from 1 (``mu_hat_1 .. mu_hat_K``); then the columns of the fields
     a newer corraoi wrote (``extra``: a block's, as read). ``sources``: the table of a run
-    of several sources, with :data:`SOURCE_COLUMN` after ``t``."""
+    of several sources, with :data:`SOURCE_COLUMN` after ``t`` (pass its fields: those of
+    ``record_for(M)``, ``collided`` among them)."""
     cols = [c for f in SLOT_RECORD if f.name in fields for c in f.table_columns(K)]
     if sources:
         cols.insert(1 if cols and cols[0][0] == "t" else 0, SOURCE_COLUMN)
@@ -71,7 +75,7 @@ def slot_columns(
 
 def arrow_schema(
     K: int,
-    fields: Sequence[str] = NAMES,
+    fields: Sequence[str] = SINGLE_SOURCE,
     extra: Mapping[str, np.ndarray] | None = None,
     *,
     sources: bool = False,
@@ -285,5 +289,6 @@ __all__ = [
     "block_columns",
     "slot_columns",
     "sources_batch",
+    "SINGLE_SOURCE",
     "SOURCE_COLUMN",
 ]
