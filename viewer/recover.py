@@ -139,19 +139,19 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
+    from corraoi.engine.block import SourcesBlock
     from corraoi.errors import LogError
     from corraoi.recorder.slotlog.decode import decode_messages
-    from corraoi.engine.block import SourcesBlock
     from corraoi.recorder.slotlog.encode import end_metadata as make_end
     from corraoi.recorder.slotlog.encode import sources_end_metadata
     from corraoi.recorder.vocab import (
         MCAP_INDEX_TYPES,
         MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
         NS_PER_SLOT,
+        slot_topic,
     )
     from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
     from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-    from corraoi.recorder.vocab import slot_topic
     from corraoi.recorder.walk import Walker
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
