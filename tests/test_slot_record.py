@@ -354,4 +354,5 @@ def test_every_declared_rerun_entity_is_one_the_recording_has():
     # the fields a run may lack are the why/ ones and those of several sources (collided)
     several = {f.name for f in SLOT_RECORD if f.sources_only}
     assert several == {"collided"}
-    assert {f.name for f in SLOT_RECORD if f.entity.startswith("why/")} == set(NONE_FIELDS) - several
+    why = {f.name for f in SLOT_RECORD if f.entity.startswith("why/")}
+    assert why == set(NONE_FIELDS) - several
