@@ -9,6 +9,7 @@ tested is what the log and the views do with a run of several sources, not its e
 from __future__ import annotations
 
 import json
+import subprocess
 from dataclasses import replace
 
 import numpy as np
@@ -28,7 +29,7 @@ from corraoi.recorder.slotlog.reader import open_log
 from corraoi.recorder.slotlog.sink import McapSink
 from corraoi.recorder.vocab import SLOT_TOPIC, slot_topic
 
-from .rrd_util import read_rrd, strict_rerun  # noqa: F401 (autouse: Rerun fails loudly)
+from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: F401 (autouse: Rerun fails loudly)
 from .sources_fake import install, sources_run
 
 T = 2500
@@ -308,3 +309,12 @@ def test_recover_keeps_every_source_of_a_log_cut_short(tmp_path, three):
     regrets = [int(s.regret[2299]) for s in three.sources]
     assert json.loads(fixed.end["regret_by_source"]) == regrets
     assert int(fixed.end["regret"]) == sum(regrets)
+
+
+def test_the_recording_of_several_sources_is_the_same_recorded_or_replayed(tmp_path, monkeypatch):
+    install(monkeypatch)
+    run = corraoi.record("ucb", "I1", seed=3, horizon=1500, sources=2, path=tmp_path / "r.mcap")
+    corraoi.replay(run, rrd=tmp_path / "again.rrd")
+    same = subprocess.run([RERUN, "rrd", "compare", str(run.rrd), str(tmp_path / "again.rrd")],
+                          capture_output=True, text=True)  # fmt: skip
+    assert same.returncode == 0, same.stdout + same.stderr
