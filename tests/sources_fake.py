@@ -19,10 +19,22 @@ import numpy as np
 
 from corraoi.engine.block import SlotBlock, SourcesBlock
 from corraoi.engine.simulation import simulate_run
+from corraoi.errors import CorraoiError
 from corraoi.policies import make_policy
 
 #: the single-source policies the hand-made sources play, source by source
 POLICIES = ("ucb", "ts", "cucb", "cts", "ucb", "ts", "cucb", "cts")
+
+
+def policy_name() -> str:
+    """A policy a run of several sources may name: a multi-source form once the engine has
+    them (issue 43: a single-source policy with sources > 1 is then refused), else ``ucb``.
+    The hand-made run plays :data:`POLICIES` whatever it names."""
+    try:
+        make_policy("rhorand-ucb")
+    except CorraoiError:
+        return "ucb"
+    return "rhorand-ucb"
 
 
 def sources_run(instance, seed: int, horizon: int, sources: int) -> SourcesBlock:

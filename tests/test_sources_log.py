@@ -30,9 +30,11 @@ from corraoi.recorder.slotlog.sink import McapSink
 from corraoi.recorder.vocab import SLOT_TOPIC, slot_topic
 
 from .rrd_util import RERUN, read_rrd, strict_rerun  # noqa: F401 (autouse: Rerun fails loudly)
-from .sources_fake import install, sources_run
+from .sources_fake import install, policy_name, sources_run
 
 T = 2500
+#: the policy the runs name (what they play is sources_fake's)
+POLICY = policy_name()
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +43,8 @@ def three() -> SourcesBlock:
 
 
 def _config(M: int = 3, horizon: int = T, **kw) -> RunConfig:
-    return RunConfig(load_instance("I1"), make_policy("ucb"), 1, horizon, sources=M, **kw)
+    policy = make_policy(POLICY if M > 1 else "ucb")
+    return RunConfig(load_instance("I1"), policy, 1, horizon, sources=M, **kw)
 
 
 def _write(path, block: SourcesBlock, step: int = 700, M: int = 3):
@@ -129,9 +132,9 @@ def recorded(tmp_path, monkeypatch):
     """corraoi.record(sources=3) of the hand-made runs, seeds 1 and 2 (the same call the
     command line makes)."""
     install(monkeypatch)
-    a = corraoi.record("ucb", "I1", seed=1, horizon=1200, sources=3, path=tmp_path / "a.mcap",
+    a = corraoi.record(POLICY, "I1", seed=1, horizon=1200, sources=3, path=tmp_path / "a.mcap",
                        rrd=False)  # fmt: skip
-    b = corraoi.record("ucb", "I1", seed=2, horizon=1200, sources=3, path=tmp_path / "b.mcap",
+    b = corraoi.record(POLICY, "I1", seed=2, horizon=1200, sources=3, path=tmp_path / "b.mcap",
                        rrd=False)  # fmt: skip
     return a, b
 
@@ -139,7 +142,7 @@ def recorded(tmp_path, monkeypatch):
 def test_record_sources_writes_the_run_and_its_summary(recorded):
     a, _ = recorded
     ref = sources_run(load_instance("I1"), 1, 1200, 3)
-    assert a.label == "ucb-I1-m3-s1" and a.log.config.sources == 3
+    assert a.label == f"{POLICY}-I1-m3-s1" and a.log.config.sources == 3
     assert open_log(a.path).read_all().equals(ref)
     s = a.summary  # measured while recording
     assert s.regret_by_source == tuple(int(b.regret[-1]) for b in ref.sources)
@@ -227,7 +230,7 @@ def test_the_recording_of_several_sources_draws_each_source_and_the_collisions(r
     ref = sources_run(load_instance("I1"), 1, 1200, 3)
     corraoi.replay(a, rrd=tmp_path / "a.rrd")
     got = read_rrd(tmp_path / "a.rrd")
-    base = "/runs/ucb-I1-m3-s1"
+    base = f"/runs/{POLICY}-I1-m3-s1"
 
     def values(path):
         slots, vals = got[f"{base}/{path}"]
@@ -261,7 +264,7 @@ def test_the_recording_of_several_sources_draws_each_source_and_the_collisions(r
 )
 def test_bad_sources_on_the_face_are_one_typed_error(value, error, words, tmp_path):
     with pytest.raises(error) as info:
-        corraoi.record("ucb", "I1", horizon=50, sources=value, path=tmp_path / "x.mcap")
+        corraoi.record(POLICY, "I1", horizon=50, sources=value, path=tmp_path / "x.mcap")
     assert words in str(info.value) and "\n" not in str(info.value)
     assert not list(tmp_path.iterdir())  # nothing written
 
@@ -276,7 +279,7 @@ def test_bad_sources_on_the_face_are_one_typed_error(value, error, words, tmp_pa
     ],
 )
 def test_bad_sources_on_the_command_line_are_one_line(value, words, tmp_path):
-    res = CliRunner().invoke(main, ["record", "-p", "ucb", "-T", "50", "--sources", value,
+    res = CliRunner().invoke(main, ["record", "-p", POLICY, "-T", "50", "--sources", value,
                                     "-o", str(tmp_path / "x.mcap")])  # fmt: skip
     assert res.exit_code != 0 and "Traceback" not in res.output
     err = res.stderr.strip()
@@ -286,7 +289,7 @@ def test_bad_sources_on_the_command_line_are_one_line(value, words, tmp_path):
 
 def test_record_sources_on_the_command_line(tmp_path, monkeypatch):
     install(monkeypatch)
-    res = CliRunner().invoke(main, ["record", "-p", "ucb", "-T", "300", "--sources", "2",
+    res = CliRunner().invoke(main, ["record", "-p", POLICY, "-T", "300", "--sources", "2",
                                     "-o", str(tmp_path / "r.mcap"), "--no-rrd"])  # fmt: skip
     assert res.exit_code == 0, res.output
     log = open_log(tmp_path / "r.mcap")
@@ -313,7 +316,7 @@ def test_recover_keeps_every_source_of_a_log_cut_short(tmp_path, three):
 
 def test_the_recording_of_several_sources_is_the_same_recorded_or_replayed(tmp_path, monkeypatch):
     install(monkeypatch)
-    run = corraoi.record("ucb", "I1", seed=3, horizon=1500, sources=2, path=tmp_path / "r.mcap")
+    run = corraoi.record(POLICY, "I1", seed=3, horizon=1500, sources=2, path=tmp_path / "r.mcap")
     corraoi.replay(run, rrd=tmp_path / "again.rrd")
     same = subprocess.run([RERUN, "rrd", "compare", str(run.rrd), str(tmp_path / "again.rrd")],
                           capture_output=True, text=True)  # fmt: skip
