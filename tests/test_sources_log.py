@@ -321,3 +321,24 @@ def test_the_recording_of_several_sources_is_the_same_recorded_or_replayed(tmp_p
     same = subprocess.run([RERUN, "rrd", "compare", str(run.rrd), str(tmp_path / "again.rrd")],
                           capture_output=True, text=True)  # fmt: skip
     assert same.returncode == 0, same.stdout + same.stderr
+
+
+def test_record_with_the_engine_of_several_sources(tmp_path):
+    """`corraoi record -p rhorand-cucb --sources 3 -i I1` (issue 43's "done when"), once the
+    engine of several sources is in: its log holds three sources whose collisions are what
+    their arms say, and a recording."""
+    pytest.importorskip("corraoi.engine.sources")
+    args = ["-p", "rhorand-cucb", "--sources", "3", "-i", "I1", "-T", "2000"]
+    res = CliRunner().invoke(main, ["record", *args, "-o", str(tmp_path / "r.mcap")])
+    assert res.exit_code == 0, res.output
+    log = open_log(tmp_path / "r.mcap")
+    got = log.read_all()
+    assert isinstance(got, SourcesBlock) and got.M == 3 and len(got) == 2000
+    arms = np.stack([s.arm for s in got.sources])
+    for m, s in enumerate(got.sources):
+        others = np.delete(arms, m, axis=0)
+        assert np.array_equal(s.collided, (others == s.arm).any(axis=0))
+        assert not (s.success & s.collided).any()
+    run = corraoi.load(tmp_path / "r.mcap")
+    assert run.summary.regret == sum(run.summary.regret_by_source)
+    assert (tmp_path / "r.rrd").stat().st_size > 0
