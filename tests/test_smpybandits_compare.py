@@ -1,0 +1,111 @@
+"""benchmarks/compare_smpybandits.py: the instance it builds, what it counts from a run's slots,
+and its SMPyBandits side run small (skipped without Python 3.8, or when SMPyBandits'
+environment is not cached and cannot be built, e.g. without network)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "compare_smpybandits.py"
+
+
+def _script() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("compare_smpybandits", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_bernoulli_instance_has_the_arms_outcome_vectors_as_states():
+    cmp = _script()
+    inst = cmp.bernoulli_instance((0.1, 0.5, 0.8))
+    assert inst.Y.shape == (3, 8)
+    assert inst.Y[:, 5].tolist() == [1, 0, 1]  # state 5 = 0b101: channels 1 and 3 deliver
+    assert inst.p[5] == pytest.approx(0.1 * 0.5 * 0.8)
+    assert inst.p[0] == pytest.approx(0.9 * 0.5 * 0.2)
+    assert inst.mu.tolist() == pytest.approx([0.1, 0.5, 0.8])
+    full = cmp.bernoulli_instance()
+    assert full.Y.shape == (9, 512)
+    assert full.mu.tolist() == pytest.approx([0.1 * k for k in range(1, 10)])
+
+
+def test_totals_count_colliding_sources_and_the_reward_regret_by_hand():
+    """Three slots, M = 2, means (0.2, 0.5, 0.9): best sum 1.4 a slot, 4.2 in all.
+    Slot 1: both on channel 3 (collide; channel 3 was on). Slot 2: channels 3 and 2, only 3
+    delivers. Slot 3: channels 3 and 1, both deliver."""
+    cmp = _script()
+    mu = np.array([0.2, 0.5, 0.9])
+    arm = np.array([[2, 2], [2, 1], [2, 0]])
+    collided = np.array([[1, 1], [0, 0], [0, 0]])
+    success = np.array([[0, 0], [1, 0], [1, 1]])
+    got = cmp.totals(arm, collided, success, mu, 2)
+    assert got["collisions"] == 2  # one per colliding source, as SMPyBandits counts them
+    assert got["regret"] == pytest.approx(4.2 - (0.9 + 0.5 + 0.9 + 0.2))
+    assert got["regret_realized"] == pytest.approx(4.2 - 3)
+
+
+def test_the_agreement_rule_is_within_196_standard_errors():
+    cmp = _script()
+    a = np.array([10.0, 12.0, 14.0])  # mean 12, SE 2/sqrt(3)
+    z, ok = cmp.compare(a, a + 1.0)
+    assert z == pytest.approx(1.0 / np.hypot(2 / np.sqrt(3), 2 / np.sqrt(3)))
+    assert ok
+    z, ok = cmp.compare(a, a + 4.0)
+    assert z == pytest.approx(4.0 / np.hypot(2 / np.sqrt(3), 2 / np.sqrt(3))) and not ok
+
+
+@pytest.mark.slow
+def test_the_smpybandits_side_runs_and_its_numbers_are_sane(tmp_path: Path):
+    cmp = _script()
+    if cmp.find_python38(None) is None:
+        pytest.skip("no Python 3.8 here: SMPyBandits 0.9.7 needs it")
+    cached = (cmp.default_venv() / "corraoi-pins.txt").exists()
+    runs, T, M = 4, 500, cmp.SOURCES
+    out = tmp_path / "smpy.json"
+    argv = ["--runs", str(runs), "--horizon", str(T), "--smpybandits-only", "--json", str(out)]
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), *argv], capture_output=True, text=True, timeout=900
+    )
+    if done.returncode == cmp.NO_VENV and not cached:
+        pytest.skip(f"SMPyBandits' environment could not be built: {done.stdout.strip()}")
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "rhoRand " in done.stdout and "MCTopM " in done.stdout
+    data = json.loads(out.read_text())
+    assert data["corraoi"] is None
+    means = np.array(data["means"])
+    best = T * np.sort(means)[-M:].sum()  # 2.4 T
+    mth_best = np.sort(means)[-M]  # 0.7
+    for name in ("rhoRand", "MCTopM"):
+        v = {q: np.array(x) for q, x in data["smpybandits"][name].items()}
+        assert all(x.size == runs for x in v.values())
+        assert np.all((v["collisions"] >= 0) & (v["collisions"] <= M * T))
+        # a slot with c colliding sources leaves at most M - c clean picks: it loses at least
+        # the c smallest of the M best means, so the regret is at least 0.7 per collision
+        assert np.all(v["regret"] >= mth_best * v["collisions"] - 1e-9)
+        assert np.all(v["regret"] <= best)
+        # learning: well under uniform random play's regret (2.4 - 3 * 0.5 * (8/9)^2 = 1.215 T)
+        assert v["regret"].mean() < 1.1 * T
+        # deliveries given the clean picks are Bernoulli: within 6 sd of their expectation
+        assert np.all(np.abs(v["regret_realized"] - v["regret"]) <= 6 * np.sqrt(M * T / 4))
+
+
+def test_without_python38_it_says_so_in_one_line_and_exits_non_zero():
+    cmp = _script()
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--python", "/bin/false", "--runs", "2"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == cmp.NO_PYTHON
+    assert done.stdout.strip().splitlines() == [done.stdout.strip()]
+    assert done.stdout.startswith("no Python 3.8 found")
