@@ -23,7 +23,7 @@ pinned versions below, the first time (pip, network), and runs SMPyBandits there
 process. The corraoi side runs in this interpreter.
 
     python benchmarks/compare_smpybandits.py [--runs 200] [--horizon 10000] [--seed 1]
-        [--python PATH] [--venv DIR] [--smpybandits-only] [--json FILE]
+        [--jobs N] [--python PATH] [--venv DIR] [--smpybandits-only] [--json FILE]
 
 Exit status: 0 done; 4 no Python 3.8; 5 the SMPyBandits environment could not be built.
 """
@@ -76,7 +76,7 @@ means = np.asarray(env.means, dtype=float)
 M, T = args["sources"], args["horizon"]
 best = T * np.sort(means)[-M:].sum()
 for name in args["policies"]:
-    for run in range(args["runs"]):
+    for run in args["runs"]:
         policy = getattr(MP, name)(M, env.nbArms, UCB)
         with contextlib.redirect_stdout(sys.stderr):
             r = delayed_play(env, policy.children, T, onlyUniqUserGetsReward,
@@ -157,24 +157,32 @@ def ensure_venv(python: str, venv: Path) -> Path:
 
 
 def smpybandits_side(
-    exe: Path, runs: int, horizon: int, seed: int
+    exe: Path, runs: int, horizon: int, seed: int, jobs: int = 1
 ) -> dict[str, dict[str, np.ndarray]]:
-    """Per SMPyBandits policy, each quantity's per-run values."""
-    args = {
-        "means": list(MEANS),
-        "sources": SOURCES,
-        "horizon": horizon,
-        "runs": runs,
-        "seed": seed,
-        "policies": [name for name, _ in POLICIES],
-    }
-    proc = subprocess.run(
-        [str(exe), "-c", WORKER, json.dumps(args)], capture_output=True, text=True
-    )
-    if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise RuntimeError(f"SMPyBandits failed (exit {proc.returncode}): {last}")
-    rows = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+    """Per SMPyBandits policy, each quantity's per-run values (run i with seed ``seed + i``),
+    the runs shared among ``jobs`` child processes."""
+    procs = []
+    for part in np.array_split(np.arange(runs), max(1, min(jobs, runs))):
+        args = {
+            "means": list(MEANS),
+            "sources": SOURCES,
+            "horizon": horizon,
+            "runs": part.tolist(),
+            "seed": seed,
+            "policies": [name for name, _ in POLICIES],
+        }
+        cmd = [str(exe), "-c", WORKER, json.dumps(args)]
+        procs.append(
+            subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        )
+    rows = []
+    for proc in procs:
+        out, err = proc.communicate()
+        if proc.returncode != 0:
+            last = (err.strip().splitlines() or ["no message"])[-1]
+            raise RuntimeError(f"SMPyBandits failed (exit {proc.returncode}): {last}")
+        rows += [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    rows.sort(key=lambda r: r["run"])
     return {
         name: {
             q: np.array([r[q] for r in rows if r["policy"] == name], dtype=float)
@@ -307,6 +315,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--venv", type=Path, help="SMPyBandits' environment (default: in corraoi's cache)"
     )
+    ap.add_argument("--jobs", type=int, default=1, help="SMPyBandits' runs in JOBS processes")
     ap.add_argument("--smpybandits-only", action="store_true", help="skip the corraoi side")
     ap.add_argument("--json", type=Path, help="also write the per-run values here")
     args = ap.parse_args(argv)
@@ -321,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
         return NO_PYTHON
     try:
         exe = ensure_venv(python, args.venv or default_venv())
-        smpy = smpybandits_side(exe, args.runs, args.horizon, args.seed)
+        smpy = smpybandits_side(exe, args.runs, args.horizon, args.seed, args.jobs)
     except RuntimeError as exc:
         print(exc)
         return NO_VENV
