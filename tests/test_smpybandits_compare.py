@@ -109,3 +109,58 @@ def test_without_python38_it_says_so_in_one_line_and_exits_non_zero():
     assert done.returncode == cmp.NO_PYTHON
     assert done.stdout.strip().splitlines() == [done.stdout.strip()]
     assert done.stdout.startswith("no Python 3.8 found")
+
+
+def test_without_the_multi_source_engine_the_corraoi_side_says_so(capsys):
+    cmp = _script()
+    try:
+        importlib.import_module("corraoi.engine.sources")
+    except ImportError:
+        pass
+    else:
+        pytest.skip("corraoi.engine.sources is installed")
+    assert cmp.corraoi_side(2, 10) is None
+    assert capsys.readouterr().out.strip() == (
+        "corraoi's multi-source engine (corraoi.engine.sources) is not installed: "
+        "reporting the SMPyBandits side only"
+    )
+
+
+def test_the_corraoi_side_and_the_table_from_an_engine_s_slot_columns(monkeypatch):
+    """The one engine call the corraoi side makes, answered by a module whose sources sit on
+    the three best channels from slot 1 (never collide) except that in run 2 all three
+    share channel 9 in slot 1: its rows, and the table's agreement column."""
+    cmp = _script()
+    seen = []
+
+    class Run:
+        def __init__(self, seed: int, T: int):
+            self.arm = np.tile([8, 7, 6], (T, 1))
+            self.collided = np.zeros((T, 3), dtype=bool)
+            if seed == 2:
+                self.arm[0] = 8
+                self.collided[0] = True
+            self.success = ~self.collided
+
+    def simulate_runs(instance, policy, seeds, horizon, *, sources):
+        seen.append((instance.Y.shape, policy, list(seeds), horizon, sources))
+        return [Run(s, horizon) for s in seeds]
+
+    fake = ModuleType("corraoi.engine.sources")
+    fake.simulate_runs = simulate_runs  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "corraoi.engine.sources", fake)
+    ours = cmp.corraoi_side(3, 5, seed=1)
+    assert seen == [
+        ((9, 512), "rhorand-ucb", [1, 2, 3], 5, 3),
+        ((9, 512), "mctopm-ucb", [1, 2, 3], 5, 3),
+    ]
+    for name in ("rhorand-ucb", "mctopm-ucb"):
+        assert ours[name]["collisions"].tolist() == [0, 3, 0]
+        # run 2 loses channels 8 and 7 in slot 1 (0.8 + 0.7) and channel 9's clean pick (0.9)
+        assert ours[name]["regret"].tolist() == pytest.approx([0, 2.4, 0])
+    same = {n: ours[c] for n, c in cmp.POLICIES}
+    lines = cmp.table(same, ours, 3, 5).splitlines()
+    assert [ln.split()[0] for ln in lines[3:]] == ["rhoRand", "rhorand-ucb", "MCTopM", "mctopm-ucb"]
+    assert lines[4].endswith("+0.00, +0.00  yes")
+    far = {n: {q: v + 10.0 for q, v in ours[c].items()} for n, c in cmp.POLICIES}
+    assert cmp.table(far, ours, 3, 5).splitlines()[4].endswith("NO")
