@@ -18,9 +18,10 @@ The two sides agree on a quantity when the difference of the means is within 1.9
 errors of that difference (SE = sqrt(SE_1^2 + SE_2^2), each SE = sample std / sqrt(runs)).
 
 SMPyBandits needs Python 3.8 and old numpy/scipy: the script builds its own virtual
-environment under corraoi's cache folder (``$CORRAOI_CACHE_DIR/smpybandits-0.9.7``) with the
-pinned versions below, the first time (pip, network), and runs SMPyBandits there in a child
-process. The corraoi side runs in this interpreter.
+environment in ``smpybandits-0.9.7/`` of corraoi's cache folder (``$CORRAOI_CACHE_DIR``,
+else ``~/.cache/corraoi``) or ``--venv``, with the pinned versions below, the first time
+(pip, network), and runs SMPyBandits there in child processes. The corraoi side runs in
+this interpreter.
 
     python benchmarks/compare_smpybandits.py [--runs 200] [--horizon 10000] [--seed 1]
         [--jobs N] [--python PATH] [--venv DIR] [--smpybandits-only] [--json FILE]
@@ -137,6 +138,10 @@ def ensure_venv(python: str, venv: Path) -> Path:
     want = "\n".join(PINS) + "\n"
     if exe.exists() and stamp.exists() and stamp.read_text() == want:
         return exe
+    if venv.exists() and any(venv.iterdir()) and not (venv / "pyvenv.cfg").exists():
+        raise RuntimeError(
+            f"{venv} is not empty and not a virtual environment: give another --venv"
+        )
     shutil.rmtree(venv, ignore_errors=True)
     venv.parent.mkdir(parents=True, exist_ok=True)
     for cmd in (
@@ -147,7 +152,8 @@ def ensure_venv(python: str, venv: Path) -> Path:
         out = subprocess.run(cmd, capture_output=True, text=True)
         if out.returncode != 0:
             shutil.rmtree(venv, ignore_errors=True)
-            last = (out.stderr.strip().splitlines() or ["no message"])[-1]
+            said = out.stderr.strip().splitlines() or ["no message"]
+            last = ([ln for ln in said if ln.startswith("ERROR")] or said)[-1]
             raise RuntimeError(
                 f"cannot build SMPyBandits' environment in {venv}: "
                 f"{' '.join(cmd[:3])} ... failed: {last}"
