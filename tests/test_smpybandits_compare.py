@@ -164,3 +164,19 @@ def test_the_corraoi_side_and_the_table_from_an_engine_s_slot_columns(monkeypatc
     assert lines[4].endswith("+0.00, +0.00  yes")
     far = {n: {q: v + 10.0 for q, v in ours[c].items()} for n, c in cmp.POLICIES}
     assert cmp.table(far, ours, 3, 5).splitlines()[4].endswith("NO")
+
+
+def test_a_venv_folder_that_is_not_a_virtual_environment_is_left_alone(tmp_path: Path):
+    cmp = _script()
+    if cmp.find_python38(None) is None:
+        pytest.skip("no Python 3.8 here: SMPyBandits 0.9.7 needs it")
+    (tmp_path / "notes.txt").write_text("mine")
+    argv = ["--venv", str(tmp_path), "--runs", "2", "--horizon", "10", "--smpybandits-only"]
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), *argv], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == cmp.NO_VENV
+    assert done.stdout.strip() == (
+        f"{tmp_path} is not empty and not a virtual environment: give another --venv"
+    )
+    assert (tmp_path / "notes.txt").read_text() == "mine"
