@@ -51,7 +51,7 @@ BATCH = 8192
 #: The collisions' markers: red crosses, over the sources' points.
 COLLISION_COLOR: RGB = style.FAILURE_COLOR
 COLLISION_NAME = "collision"
-MARKER_COLLISION = 6.0
+MARKER_COLLISION = 8.0
 MARKER_OCCUPANCY = 3.5
 #: The run's regret (the sum over the sources): near-black, thicker than a source's.
 TOTAL_COLOR: RGB = style.ORACLE_COLOR
