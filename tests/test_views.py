@@ -9,6 +9,7 @@ sees is checked in a browser by tests/test_e2e_web.py.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -328,6 +329,33 @@ def test_bars_hold_the_values_of_their_slots_and_lines_the_arms_that_matter(tmp_
             most = int(np.argmax(ref.pulls[i])) == k and top[1] > top[0]
             small = ref.candidates[i, k] and ref.candidates[i].sum() <= style.FOCUS_MAX
             assert most or small
+
+
+@pytest.mark.parametrize("K", [4, 16])
+def test_the_chosen_dots_mark_what_the_score_lines_do_not_show(tmp_path, K):
+    """Up to LINES_UP_TO arms every arm's score is a line, and where the score chose the arm
+    the arm played is the top one: why/chosen holds only the slots where the arm played was
+    below the top score (a plug-in that does not maximise its scores; here arms moved by
+    hand). Beyond, only the arms that matter are lines: why/chosen holds the played arm's
+    score wherever it has one."""
+    inst = instance_of(K)
+    config = RunConfig(inst, make_policy("ucb"), 1, 3000)
+    ref = SlotBlock.concat(list(simulate_run(inst, config.policy, 1, 3000)))
+    score = ref.score.astype(np.float64)
+    rows = np.arange(len(ref))
+    below = np.isfinite(score).all(axis=1) & (rows % 97 == 5)  # play the lowest score there
+    arm = np.where(below, np.argmin(np.where(np.isfinite(score), score, np.inf), axis=1),
+                   ref.arm)  # fmt: skip
+    block = dataclasses.replace(ref, arm=arm)
+    with RrdOutput(config, rrd_path=tmp_path / "a.rrd") as out:
+        with RerunSink(out.recording, config.label, config) as sink:
+            sink.write(block)
+    slots, values = read_rrd(tmp_path / "a.rrd")[f"/{run_path(config.label)}/why/chosen"]
+    chosen = score[rows, arm]
+    want = below if K <= style.LINES_UP_TO else np.isfinite(chosen)
+    assert 20 < want.sum() < len(ref)
+    assert np.array_equal(slots, ref.t[want])
+    assert np.array_equal([v[0] for v in values], chosen[want])
 
 
 def test_true_means_are_dots_that_alternate_where_means_are_equal(tmp_path):

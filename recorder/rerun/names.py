@@ -20,7 +20,9 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``about``           the run card: configuration, arms and what the views show (markdown)
 ``why/score/<k>``   up to LINES_UP_TO arms: arm k's score (what the policy maximised) at
                     the slots it had a finite one (in the candidate set, a slot scored)
-``why/chosen``      the score of the arm played, at the slots the score chose it (points)
+``why/chosen``      the score of the arm played (points): up to LINES_UP_TO arms only at the
+                    slots it was below the top score (elsewhere the top line is the arm
+                    played), beyond at the slots the score chose it
 ``why/forced``      the arm played, at the slots it was not chosen by the score (points)
 ``why/threshold``   the AoI-aware rule's threshold 1 / max mu_hat (line, in the AoI view)
 ==================  =====================================================================

@@ -208,7 +208,8 @@ class RerunSink(Sink):
     def _send_why(self, block: SlotBlock, t: np.ndarray, column: Any) -> None:
         """The "why this arm" entities of a block that has scores: every arm's score (up to
         LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
-        where the score chose it, the forced slots, the override's threshold."""
+        (up to LINES_UP_TO arms only where it was below the top score; beyond, wherever it
+        has one), the forced slots, the override's threshold."""
         assert block.score is not None
         f64 = np.float64
         # only finite scores are sent: an arm's line skips the slots it has none (NaN is
@@ -225,6 +226,10 @@ class RerunSink(Sink):
             column(f"why/focus/{k + 1}", t[keep], np.ascontiguousarray(score[keep, k]))
         chosen = score[np.arange(len(t)), block.arm]
         ok = np.isfinite(chosen)
+        if self._lines:  # every arm's line is drawn, and where the score chose the arm it
+            # is the top line: a dot only where the arm played was below the top (the
+            # override chose it), not a row a slot (0.1-0.15 us a slot at K = 4)
+            ok &= chosen < np.fmax.reduce(score, axis=1)
         column("why/chosen", t[ok], np.ascontiguousarray(chosen[ok]))
         if block.forced is not None:
             forced = np.asarray(block.forced, dtype=bool)

@@ -185,7 +185,8 @@ def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color:
         bars(rec, f"{base}/why/bars/score", st.BAR_IN_SET_COLOR, arm,
              width=2 * BAR_WIDTH)  # fmt: skip
         bars(rec, f"{base}/why/bars/chosen", color, arm, width=max(2 * BAR_WIDTH, K / 64))
-    points("why/chosen", color, st.CHOSEN_NAME, shape.Circle, st.MARKER_CHOSEN)
+    chosen = st.CHOSEN_BELOW_NAME if st.lines_for(K) else st.CHOSEN_NAME
+    points("why/chosen", color, chosen, shape.Circle, st.MARKER_CHOSEN)
     points("why/forced", st.FORCED_COLOR, st.FORCED_NAME, shape.Asterisk, st.MARKER_FORCED)
     if threshold:
         static("why/threshold", rr.SeriesLines.columns(
