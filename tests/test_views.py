@@ -156,7 +156,7 @@ def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
     if K <= style.LINES_UP_TO:  # a line per arm, its true mean dotted in its colour
         assert "BarChart" not in kinds
         assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls",
-                "$origin/why/score/**"} <= contents  # fmt: skip
+                "$origin/why/score"} <= contents  # fmt: skip
     else:  # bars at the cursor, strips, the arms that matter as lines
         assert kinds.count("BarChart") == 3  # means, pulls, scores
         assert {"$origin/why/bars/**", "$origin/why/focus/**"} <= contents
@@ -356,6 +356,21 @@ def test_the_chosen_dots_mark_what_the_score_lines_do_not_show(tmp_path, K):
     assert 20 < want.sum() < len(ref)
     assert np.array_equal(slots, ref.t[want])
     assert np.array_equal([v[0] for v in values], chosen[want])
+
+
+@pytest.mark.parametrize("policy", ["cucb", "ucb"])
+def test_the_scores_are_one_entity_of_K_series(tmp_path, policy):
+    """Up to LINES_UP_TO arms why/score holds every arm's score, a row a slot scored; an arm
+    without a finite score there (outside CUCB's candidate set) is -inf, no point (NaN
+    would make two equal recordings differ under `rerun rrd compare`)."""
+    path, config, ref, _ = run(tmp_path, instance_of(4), policy, horizon=2000)
+    slots, values = read_rrd(path)[f"/{run_path(config.label)}/why/score"]
+    score = ref.score.astype(np.float64)
+    fin = np.isfinite(score)
+    rows = fin.any(axis=1)
+    assert rows.sum() > 1000 and np.array_equal(slots, ref.t[rows])
+    assert np.array_equal(np.array(values), np.where(fin, score, -np.inf)[rows])
+    assert (policy == "cucb") == bool((~fin[rows]).any())  # CUCB leaves arms out
 
 
 def test_true_means_are_dots_that_alternate_where_means_are_equal(tmp_path):

@@ -234,7 +234,7 @@ class RunViews:
         line where the score chose it: its dot marks only the slots it was below the top."""
         w = self.tw.window
         if self.lines:
-            contents, legend = ["$origin/why/score/**", "$origin/why/chosen"], self.arm_legends
+            contents, legend = ["$origin/why/score", "$origin/why/chosen"], self.arm_legends
             chosen = style.CHOSEN_BELOW_NAME
             title = self._title(
                 px, f"why this arm: score {style.SCORE_UNIT} per arm (lines; the top one "

@@ -176,10 +176,10 @@ def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color:
         static(path, rr.SeriesPoints.columns(colors=[rgb], names=[name], markers=[marker],
                                              marker_sizes=[size]))  # fmt: skip
 
-    if st.lines_for(K):
-        for k in range(K):
-            static(f"why/score/{k + 1}", rr.SeriesLines.columns(
-                colors=[st.arm_color(k)], names=[names[k]], widths=[st.WIDTH_ARM]))  # fmt: skip
+    if st.lines_for(K):  # one entity, a series per arm (as mu_hat)
+        static("why/score", rr.SeriesLines.columns(
+            colors=[st.arm_color(k) for k in range(K)], names=names,
+            widths=[st.WIDTH_ARM] * K), K)  # fmt: skip
     else:
         arm = np.arange(1, K + 1, dtype=np.float64)
         bars(rec, f"{base}/why/bars/score", st.BAR_IN_SET_COLOR, arm,
