@@ -90,6 +90,7 @@ SWEEP_MESSAGE_KEYS = (
     "pull_share",
 )
 
+
 def mcap_index_types(attachments: bool) -> IndexType:
     """The summary indexes every MCAP file we write carries: chunk, message and metadata
     indexes, and the attachment index in a file that holds ``attachments`` (plug-in

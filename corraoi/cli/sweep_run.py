@@ -41,11 +41,10 @@ def run_grid(
     """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
     from corraoi.face.sweeps import run_with_progress
 
-    return interrupted_or(
-        run_with_progress(grid, out=out, scheduler=scheduler, resume=resume, force=force,
-                          workers=workers, warn=warn, progress=progress,
-                          before_folder=keep_pandas_out, label=label)  # fmt: skip
-    )
+    done = run_with_progress(grid, out=out, scheduler=scheduler, resume=resume, force=force,
+                             workers=workers, warn=warn, progress=progress,
+                             before_folder=keep_pandas_out, label=label)  # fmt: skip
+    return interrupted_or(done)
 
 
 def interrupted_or(done: Any) -> Any:
