@@ -161,5 +161,5 @@ def test_record_and_sweep_call_the_face_once(tmp_path, monkeypatch):
         calls.clear()
         done = CliRunner().invoke(main, args)
         assert done.exit_code == 0, (args, done.output)
-        made[" ".join(args[:3])] = list(calls)
+        made[" ".join(a for a in args if str(tmp_path) not in a)] = list(calls)
     assert {k: len(v) for k, v in made.items()} == dict.fromkeys(made, 1), made
