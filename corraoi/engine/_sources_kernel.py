@@ -17,8 +17,10 @@ per-(run, source) state: each source its own counts, ages, policy state and poli
 from the run's latent stream exactly as the single-source kernel draws it.
 
 Per slot and source (docs/model.md, "Many sources"): the source's empirical means, its
-forced arm, candidate set, AoI-aware override and scores exactly as a single-source run of
-the base policy computes them; then the rule picks the channel:
+forced arm, candidate set, AoI-aware override and scores as a single-source run of the base
+policy computes them (but for the correlated candidate set's target: the M-th best mean of
+S_t, the M best of S_t kept; ``candidate_set``'s ``depth``); then the rule picks the
+channel:
 
 - ``RULE_RHORAND`` (rhoRand): the source's rank r (uniform in 1..M at the start, drawn again
   uniformly after each collision) picks the r-th best arm: the candidates by score, then the
