@@ -14,6 +14,7 @@ from corraoi.engine.sources import (
     SourcesSimulation,
     oracle_channels,
     simulate_run_sources,
+    simulate_runs,
     simulate_sources,
     source_blocks,
 )
@@ -230,3 +231,18 @@ def test_a_run_of_several_sources_has_the_single_runs_path_and_the_fields_of_its
             assert (np.sort(arms, axis=0)[1:] != np.sort(arms, axis=0)[:-1]).all()
     solo = next(source_blocks(inst, make_policy("rhorand-ts"), 5, 400, 1, block=400))[0]
     assert solo.collided is None  # a single source's record has no collided field
+
+
+def test_many_runs_slot_columns_are_each_seeds_recorded_run():
+    inst = load_instance("I1")
+    runs = list(simulate_runs(inst, "mctopm-ucb", [4, 9], 300, sources=2))
+    assert [r.seed for r in runs] == [4, 9]
+    for r in runs:
+        blk = SourcesBlock.concat(list(simulate_run_sources(inst, make_policy("mctopm-ucb"),
+                                                            r.seed, 300, 2)))  # fmt: skip
+        assert r.arm.shape == r.collided.shape == r.success.shape == (300, 2)
+        for m, s in enumerate(blk.sources):
+            assert np.array_equal(r.arm[:, m], s.arm)
+            assert np.array_equal(r.collided[:, m], s.collided)
+            assert np.array_equal(r.success[:, m], s.success)
+    assert not np.array_equal(runs[0].arm, runs[1].arm)
