@@ -93,15 +93,20 @@ def test_one_source_of_every_rhorand_form_is_its_base_policy(base):
 
 
 def test_the_collision_rule_and_the_oracle_on_hand_checked_slots():
-    # two channels always ON: each source's oracle age is 1 on every slot; UCB forces arm 1
-    # then arm 2 on every source, so both sources collide on slots 1 and 2 (nobody delivers)
+    # two channels always ON: each source's oracle age is 1 on every slot. UCB's first
+    # round: each source plays both channels once, in an order of its own; where the two
+    # orders agree they collide on both slots (ages 2, 3: regret 1 + 2), else neither
     inst = Instance("on", np.array([1.0]), np.array([[1], [1]]))
-    blk = next(simulate_run_sources(inst, make_policy("rhorand-ucb"), 0, 200, 2, block=200))
-    s1, s2 = blk.sources
-    for s in (s1, s2):
-        assert s.arm[:2].tolist() == [0, 1] and s.collided[:2].all()
-        assert s.aoi[:2].tolist() == [2, 3] and s.regret[1] == (2 - 1) + (3 - 1)
-        assert (s.oracle_aoi == 1).all() and not s.success[:2].any()
+    for seed in range(6):
+        blk = next(simulate_run_sources(inst, make_policy("rhorand-ucb"), seed, 200, 2,
+                                        block=200))  # fmt: skip
+        s1, s2 = blk.sources
+        same = s1.arm[0] == s2.arm[0]
+        for s in (s1, s2):
+            assert sorted(s.arm[:2].tolist()) == [0, 1] and (s.oracle_aoi == 1).all()
+            assert s.collided[:2].tolist() == [same, same]
+            assert s.aoi[:2].tolist() == ([2, 3] if same else [1, 1])
+            assert s.regret[1] == (3 if same else 0)
     both = s1.arm == s2.arm
     for s in (s1, s2):
         assert np.array_equal(s.collided, both)

@@ -34,8 +34,10 @@ channel:
 - ``RULE_CENTRAL`` (the coordinated baseline): sources pick in order, each the base
   policy's choice among the channels the sources before it left free, so no one collides.
 
-A forced arm (UCB's first round) is played as it is, except by the coordinated baseline
-when a source before took it: then the least-pulled free channel (ties at random). Then the
+A forced arm is played as it is, but for a first pull (UCB's round of every arm), which
+among several sources is a uniform arm never pulled (as SMPyBandits' +inf indices tied at
+random), and but for the coordinated baseline when a source before took it: then the
+least-pulled free channel (ties at random). Then the
 collisions: a source delivers iff its channel is ON (Y[k, X_t] = 1) and no other source
 picked it. Every source learns its channel's state (collision sensing: its counts add
 Y[k, X_t], delivered or not); its age counts deliveries only.
@@ -321,6 +323,12 @@ def advance(
                         err[r, 1] = FAULT_ARM
                         err[r, 2] = forced
                     forced = -1
+                if M > 1 and forced >= 0 and npull[forced] == 0:
+                    # a first pull (UCB's round of every arm): among several sources, a
+                    # uniform arm never pulled, as +inf indices tied at random would give
+                    for k in range(K):
+                        pick[k] = npull[k] == 0
+                    forced = uniform_in(pick, pst, K)
                 if correlated and forced < 0:
                     candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass,
                                   has1, has2, pst, M)  # fmt: skip
