@@ -132,6 +132,97 @@ def draw_state(cdf_rows, kind, trace, lst, xprev, t):
     return lo
 
 
+@njit(inline="always", cache=True)
+def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has1, has2, pst,
+                  depth):  # fmt: skip
+    """The correlated candidate set A_t + {k_emp} of one run (or source) at slot ``t`` into
+    ``cand`` (``in_s`` and ``fail`` are scratch); returns k_emp. Shared by the single-source
+    kernel (``depth`` 1) and the kernel of many sources (:mod:`corraoi.engine._sources_kernel`),
+    whose sources look for the M best arms (``depth`` M): the target is then the M-th best
+    empirical mean of S_t and the M best of S_t are candidates too."""
+    W = comb.shape[2]
+    # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
+    for k in range(K):
+        in_s[k] = npull[k] * K >= t - 1
+    kemp = argmax_random(muhat, in_s, pst, K)
+    target = muhat[kemp]
+    if depth > 1:  # the depth-th best mean of S_t (its lowest when S_t holds fewer arms)
+        n = 0
+        for k in range(K):
+            n += in_s[k]
+        d = min(depth, n) - 1
+        for a in range(K):
+            if d <= 0:
+                break
+            if not in_s[a]:
+                continue
+            gt = 0
+            ge = 0
+            for k in range(K):
+                gt += in_s[k] & (muhat[k] > muhat[a])
+                ge += in_s[k] & (muhat[k] >= muhat[a])
+            if gt <= d < ge:
+                target = muhat[a]
+                break
+    # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
+    # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
+    # pseudo-rewards (pclass). Few arms: test each pair (K^2 cheap tests); many
+    # arms: the arms failing for l are a union of precomputed bitsets (K^2 / 64).
+    if K <= SMALL_K:
+        for k in range(K):
+            ok = True
+            for l in range(K):
+                if not in_s[l] or npull[l] == 0:
+                    continue
+                c = pclass[k, l]
+                if c == 0:
+                    ok = target <= 0.0
+                elif c == 1:
+                    ok = (npull[l] - nsucc[l]) / npull[l] >= target
+                elif c == 2:
+                    ok = muhat[l] >= target
+                if not ok:
+                    break
+            cand[k] = ok
+    else:
+        for w in range(W):
+            fail[w] = np.uint64(0)
+        drop0 = 1 if target > 0.0 else 0
+        for l in range(K):
+            if not in_s[l] or npull[l] == 0:
+                continue
+            code = drop0
+            if has1[l] and (npull[l] - nsucc[l]) / npull[l] < target:
+                code |= 2
+            if has2[l] and muhat[l] < target:  # muhat[l] = S_l / n_l
+                code |= 4
+            if code != 0:
+                for w in range(W):
+                    fail[w] |= comb[l, code, w]
+        for k in range(K):
+            cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
+    cand[kemp] = True
+    if depth > 1:
+        for k in range(K):
+            if in_s[k] and muhat[k] >= target:
+                cand[k] = True
+    return kemp
+
+
+@njit(inline="always", cache=True)
+def removers(comb, has1, has2):
+    """Which pulled arms can remove candidates through their failure rate (``has1``) or their
+    success rate (``has2``) at all (``comb``: :func:`candidate_set`'s bitsets)."""
+    for l in range(comb.shape[0]):
+        has1[l] = False
+        has2[l] = False
+        for w in range(comb.shape[2]):
+            if comb[l, 2, w] != np.uint64(0):
+                has1[l] = True
+            if comb[l, 4, w] != np.uint64(0):
+                has2[l] = True
+
+
 @njit(cache=True)
 def draw_states(cdf_rows, kind, trace, lat, xprev, t0, nslots, out):
     """``out[r, j]``: the hidden state of slot t0 + j + 1 of run r (the plain-Python tier's
@@ -198,14 +289,7 @@ def advance(
     # which pulled arms can remove candidates through their failure or success rate at all
     has1 = np.empty(K, dtype=np.bool_)  # np.zeros would become a parfor in the sweep kernel
     has2 = np.empty(K, dtype=np.bool_)
-    for l in range(K):
-        has1[l] = False
-        has2[l] = False
-        for w in range(W):
-            if comb[l, 2, w] != np.uint64(0):
-                has1[l] = True
-            if comb[l, 4, w] != np.uint64(0):
-                has2[l] = True
+    removers(comb, has1, has2)
     for r in range(R):
         lst = lat[r]
         pst = pol[r]
@@ -250,49 +334,8 @@ def advance(
                     f_value = forced
                 forced = -1
             if correlated and forced < 0:
-                # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
-                for k in range(K):
-                    in_s[k] = npull[k] * K >= t - 1
-                kemp = argmax_random(muhat, in_s, pst, K)
-                target = muhat[kemp]
-                # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
-                # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
-                # pseudo-rewards (pclass). Few arms: test each pair (K^2 cheap tests); many
-                # arms: the arms failing for l are a union of precomputed bitsets (K^2 / 64).
-                if K <= SMALL_K:
-                    for k in range(K):
-                        ok = True
-                        for l in range(K):
-                            if not in_s[l] or npull[l] == 0:
-                                continue
-                            c = pclass[k, l]
-                            if c == 0:
-                                ok = target <= 0.0
-                            elif c == 1:
-                                ok = (npull[l] - nsucc[l]) / npull[l] >= target
-                            elif c == 2:
-                                ok = muhat[l] >= target
-                            if not ok:
-                                break
-                        cand[k] = ok
-                else:
-                    for w in range(W):
-                        fail[w] = np.uint64(0)
-                    drop0 = 1 if target > 0.0 else 0
-                    for l in range(K):
-                        if not in_s[l] or npull[l] == 0:
-                            continue
-                        code = drop0
-                        if has1[l] and (npull[l] - nsucc[l]) / npull[l] < target:
-                            code |= 2
-                        if has2[l] and muhat[l] < target:  # muhat[l] = S_l / n_l
-                            code |= 4
-                        if code != 0:
-                            for w in range(W):
-                                fail[w] |= comb[l, code, w]
-                    for k in range(K):
-                        cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
-                cand[kemp] = True
+                candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has1,
+                              has2, pst, 1)  # fmt: skip
             override = aware and maxmu > 0.0 and age * maxmu > 1.0
             if override or forced < 0:
                 # one argmax for both (each inlined site costs compile time): the override

@@ -18,7 +18,7 @@ from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, default_channel
 from corraoi.model.instance import Instance
 from corraoi.model.theory import InstanceTheory, analyse
-from corraoi.policies.spec import PolicySpec
+from corraoi.policies.spec import PolicySpec, check_sources
 
 from .slot_record import BY_NAME, NAMES, REQUIRED
 
@@ -95,6 +95,7 @@ class RunConfig:
                 f"sources {self.sources!r}: expected an integer from 1 to the number of "
                 f"arms, {self.K}"
             )
+        check_sources(self.policy, self.sources)
 
     @property
     def K(self) -> int:

@@ -41,7 +41,7 @@ from .variants import AOI_PREFIX
 
 # The built-in families, in the order `corraoi policies` lists them (the paper's twelve first):
 # importing one registers its classes.
-from corraoi.policies import paper, forced_exploration, drifting  # noqa: E402, F401, I001  isort: skip
+from corraoi.policies import paper, forced_exploration, drifting, multi_source  # noqa: E402, F401, I001  isort: skip
 
 __all__ = [
     "AOI_PREFIX",

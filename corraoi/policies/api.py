@@ -204,6 +204,10 @@ class CompiledPolicy(PolicyBase):
     correlated: ClassVar[bool] = False
     #: The AoI-aware override: play argmax mu_hat when the age exceeds 1 / max mu_hat.
     aoi_aware: ClassVar[bool] = False
+    #: The rule that shares the channels among several sources (docs/model.md, "Many
+    #: sources"): "rhorand", "mctopm" or "centralized"; "" for a single-source policy.
+    #: Its hooks are the base policy's, run once per source.
+    multi_source: ClassVar[str] = ""
 
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:

@@ -102,9 +102,12 @@ def register(cls: P) -> P:
     return cls
 
 
-def builtins() -> dict[str, type[PolicyBase]]:
-    """Every built-in policy by name: the paper's twelve first, in their table order."""
-    return {n: c for n, c in TABLE.items() if c.__module__.startswith(_BUILTIN_MODULE)}
+def builtins(*, multi: bool = False) -> dict[str, type[PolicyBase]]:
+    """Every built-in single-source policy by name: the paper's twelve first, in their table
+    order; with ``multi``, their multi-source forms too (``rhorand-ucb``, ...: a run of one
+    source of them is the base policy's run)."""
+    return {n: c for n, c in TABLE.items() if c.__module__.startswith(_BUILTIN_MODULE)
+            and (multi or not getattr(c, "multi_source", ""))}  # fmt: skip
 
 
 def registered() -> dict[str, type[PolicyBase]]:
@@ -135,7 +138,8 @@ def available() -> list[Available]:
     """Registered policies (built-ins first), then entry-point plug-ins (a broken one listed
     with its error)."""
     out = [
-        Available(n, "built-in" if n in builtins() else f"registered by {cls.__module__}", cls)
+        Available(n, "built-in" if n in builtins(multi=True)
+                  else f"registered by {cls.__module__}", cls)  # fmt: skip
         for n, cls in TABLE.items()
     ]
     for ep in _entry_points():

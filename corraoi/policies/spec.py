@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import CodeChanged, PolicyError
+from corraoi.errors import CodeChanged, ConfigError, PolicyError
 
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
 from .registry import (
@@ -90,7 +90,7 @@ class PolicySpec:
             raise PolicyError(f"policy {data['name']}: params must map names to numbers")
         plugin = data.get("plugin")
         if plugin is None:  # a built-in: its display colour and label from this registry
-            known = builtins().get(data["name"])
+            known = builtins(multi=True).get(data["name"])
             return cls(name=data["name"], params={k: float(v) for k, v in params.items()},
                        version=__version__, label=known.label if known else "",
                        color=known.color if known else None)  # fmt: skip
@@ -131,7 +131,7 @@ class PolicySpec:
         :class:`~corraoi.errors.CodeChanged` when its source is not the one this spec names
         (a run never goes under another code's hash)."""
         if self.builtin:
-            cls = builtins().get(self.name)
+            cls = builtins(multi=True).get(self.name)
             if cls is None:
                 raise PolicyError(f"policy {self.name}: not a built-in of corraoi {__version__}")
             return cls
@@ -160,6 +160,38 @@ class PolicySpec:
     def param_vector(self, cls: type[PolicyBase]) -> np.ndarray:
         """The parameters in the class's declared order (what compiled hooks receive)."""
         return np.array([float(self.params[p]) for p in cls.params], dtype=np.float64)
+
+
+def multi_source_forms(name: str) -> list[str]:
+    """The built-in multi-source forms of the policy ``name`` (``rhorand-ucb``, ... for
+    ``ucb``; none for most)."""
+    return [n for n, cls in builtins(multi=True).items()
+            if getattr(cls, "multi_source", "") and n == f"{cls.multi_source}-{name}"]  # type: ignore[attr-defined]  # fmt: skip
+
+
+def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None = None) -> None:
+    """A ConfigError (one line naming its multi-source forms) when a single-source policy is
+    given several sources. A multi-source form takes any number (one source is its base
+    policy); ``cls`` is the resolved class, else a built-in's is looked up (a plug-in's is
+    checked when it runs) and a loop logged by ``corraoi.Logger`` is not checked."""
+    if sources == 1 or spec.tier == "external":
+        return
+    if cls is None:
+        if not spec.builtin:
+            return
+        cls = builtins(multi=True).get(spec.name)
+        if cls is None:
+            return
+    if getattr(cls, "multi_source", ""):
+        return
+    forms = multi_source_forms(spec.name)
+    rules = sorted({getattr(c, "multi_source", "") for c in builtins(multi=True).values()} - {""})
+    bases = sorted({n.split("-", 1)[1] for n, c in builtins(multi=True).items()
+                    if getattr(c, "multi_source", "")}, key=len)  # fmt: skip
+    hint = (f"use one of its multi-source forms: {', '.join(forms)}" if forms else
+            f"it has no multi-source form ({'-, '.join(rules)}-<policy> exist for "
+            f"{', '.join(bases)})")  # fmt: skip
+    raise ConfigError(f"policy {spec.name} is single-source; with sources {sources} {hint}")
 
 
 def make_policy(token: str, **params: float | None) -> PolicySpec:
@@ -203,7 +235,7 @@ def parse_policy_names(values: Iterable[str]) -> list[str]:
                 continue
             expanded = paper_names() if token.lower() == "all" else [token]
             for n in expanded:
-                key = n.lower() if n.lower() in builtins() else n
+                key = n.lower() if n.lower() in builtins(multi=True) else n
                 resolve(key)
                 if key not in names:
                     names.append(key)
