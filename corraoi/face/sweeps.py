@@ -448,6 +448,13 @@ def paper_grid(*, runs: int, horizon: int, seed: int, backend: str = "cpu") -> G
     return grid_of(runs=runs, horizon=horizon, seed=seed, backend=backend)
 
 
+def decentralized_grid(*, runs: int, horizon: int, seed: int, backend: str = "cpu") -> Grid:
+    """``corraoi reproduce decentralized``'s grid (docs/decentralized.md)."""
+    from corraoi.experiments.sweeps import decentralized_grid as grid_of
+
+    return grid_of(runs=runs, horizon=horizon, seed=seed, backend=backend)
+
+
 def write_paper_summary(out: Path, summaries: Sequence[dict[str, Any]], *, runs: int,
                         horizon: int, seed: int) -> list[str]:  # fmt: skip
     """``corraoi reproduce``'s ``out/summary.md``: the ranked table of each instance's sweep
@@ -687,7 +694,7 @@ def sweep(
 
 
 __all__ = [
-    "Sweep", "check_grid", "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes",
+    "Sweep", "check_grid", "decentralized_grid", "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes",
     "kept_code", "paper_grid", "record_each_from", "run_grid", "settle_backend", "split_words",
     "sweep", "write_paper_summary", "wrote_line",
 ]  # fmt: skip
