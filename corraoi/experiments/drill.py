@@ -74,12 +74,15 @@ class Drill:
 
 
 def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
-    """Where the regret of ``block`` (a SlotBlock) differs from the sweep's row ``expect``
-    ((checkpoint, regret) pairs): a one-line account of the first difference, or None."""
+    """Where the regret of ``block`` (a SlotBlock, or a SourcesBlock: its regret summed over
+    its sources, as the sweep's row is) differs from the sweep's row ``expect`` ((checkpoint,
+    regret) pairs): a one-line account of the first difference, or None."""
     first, last = int(block.t[0]), int(block.t[-1])
+    parts = getattr(block, "sources", None)
+    regret = block.regret if parts is None else sum(s.regret for s in parts)
     for t, want in expect:
         if first <= t <= last:
-            got = float(block.regret[t - first])
+            got = float(regret[t - first])
             if got != want:
                 return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
                         f"says {want:g}: the engine or the code changed since the sweep")
