@@ -69,9 +69,9 @@ def reproduce(
 
     out = output if output is not None else Path(which)
     if which == "decentralized":
-        from corraoi.experiments.sweeps import DECENTRALIZED_RUNS
+        from corraoi.face.decentralized import RUNS
 
-        _decentralized(out, runs if runs is not None else DECENTRALIZED_RUNS, horizon, seed,
+        _decentralized(out, runs if runs is not None else RUNS, horizon, seed,
                        workers, force, backend, as_json)  # fmt: skip
         return
     runs = runs if runs is not None else 200

@@ -137,8 +137,7 @@ def sweep(
       corraoi sweep -p rhorand-ucb,mctopm-ucb --sources 1,2,3,4 -n 50 -o many
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from corraoi.experiments.grid import parse_sources
-    from corraoi.face.sweeps import check_grid, grid_from_options, grid_notes
+    from corraoi.face.sweeps import check_grid, grid_from_options, grid_notes, sources_words
     from corraoi.face.sweeps import kept_code as kept_copies
 
     out = output
@@ -161,7 +160,7 @@ def sweep(
         "channel": channel,
         "baseline": baseline,
         "backend": backend,
-        "sources": parse_sources(sources),
+        "sources": sources_words(sources),
     }
     grid = grid_from_options(experiment, options, params=param, scalars={"c": c, "beta": beta},
                              warn=warn)  # fmt: skip

@@ -1,5 +1,6 @@
 """``corraoi reproduce decentralized``: the files beside its sweep folder's own -- the figure of
-the regret at T against the number of sources M, a line per policy (``regret-vs-sources.png``),
+the regret at T against the number of sources M, a panel per rule and a line per base policy
+(``regret-vs-sources.png``),
 and ``decentralized.md``: the table of regret against M and the ordering measured.
 
 The experiment is ours (docs/decentralized.md): the body of Prasad, Jain and Moharir's paper
@@ -18,10 +19,13 @@ from corraoi.experiments.summary import summary_markdown
 from corraoi.experiments.sweeps import (
     DECENTRALIZED_BASES,
     DECENTRALIZED_RULES,
+    DECENTRALIZED_RUNS,
     regret_by_sources,
 )
 from corraoi.files.partial import PartialFile
 
+#: The runs per cell unless told (a minute or two on two cores, the kernels compiled).
+RUNS = DECENTRALIZED_RUNS
 #: The figure's file name in the output folder.
 FIGURE = "regret-vs-sources.png"
 #: The table of regret against M and the orderings (the sweep keeps its own summary.md).
@@ -81,31 +85,37 @@ def write_decentralized(out: Path, summary: dict[str, Any], grid: Grid, *, runs:
 
 
 def draw_regret_vs_sources(table: dict[str, dict[int, Any]], out: Path, *, title: str) -> None:
-    """The figure: regret at T against M, a line per policy (a colour per base policy, a
-    line style per rule), 95% error bars. ImportError without matplotlib."""
+    """The figure: regret at T against M, a panel per rule (each with its own scale: a
+    decentralized rule's worst case dwarfs the others), a line per base policy in the
+    same colour in every panel, 95% error bars. ImportError without matplotlib."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 5), dpi=150, layout="constrained")
+    rules = [r for r in DECENTRALIZED_RULES if any(n.startswith(f"{r}-") for n in table)]
+    fig = Figure(figsize=(4 * len(rules), 4.2), dpi=150, layout="constrained")
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
+    axes = fig.subplots(1, len(rules), squeeze=False)[0]
     colours = {b: f"C{i}" for i, b in enumerate(DECENTRALIZED_BASES)}
-    styles = dict(zip(DECENTRALIZED_RULES, ("-", "--", ":"), strict=True))
-    for name, points in table.items():
-        rule, _, base = name.partition("-")
-        ms = sorted(points)
-        means = [points[m][0] for m in ms]
-        halves = [points[m][1] or 0.0 for m in ms]
-        ax.errorbar(ms, means, yerr=halves, label=name, color=colours.get(base),
-                    linestyle=styles.get(rule, "-"), marker="o", markersize=3, capsize=2)
-    ax.set_xlabel("sources M")
-    ax.set_ylabel("AoI regret at T (slots)")
-    ax.set_xticks(sorted({m for p in table.values() for m in p}))
-    ax.set_title(title, fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=3)
+    counts = sorted({m for p in table.values() for m in p})
+    for ax, rule in zip(axes, rules, strict=True):
+        for name, points in table.items():
+            base = name.removeprefix(f"{rule}-")
+            if base == name:
+                continue
+            ms = sorted(points)
+            ax.errorbar(ms, [points[m][0] for m in ms], yerr=[points[m][1] or 0.0 for m in ms],
+                        label=base, color=colours.get(base), marker="o", markersize=3,
+                        capsize=2)  # fmt: skip
+        ax.axhline(0, color="0.6", linewidth=0.6)
+        ax.set_title(rule, fontsize=9)
+        ax.set_xlabel("sources M")
+        ax.set_xticks(counts)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("AoI regret at T (slots)")
+    fig.suptitle(title, fontsize=9)
     with PartialFile(out, overwrite=True, what="figure") as target:
         fig.savefig(target.file, format="png")
 
 
-__all__ = ["FIGURE", "SUMMARY", "draw_regret_vs_sources", "ordering", "write_decentralized"]
+__all__ = ["FIGURE", "RUNS", "SUMMARY", "draw_regret_vs_sources", "ordering", "write_decentralized"]

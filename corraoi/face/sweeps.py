@@ -348,6 +348,14 @@ def split_words(values: Sequence[str]) -> list[str]:
     return split_list(values)
 
 
+def sources_words(values: Sequence[str]) -> list[int] | None:
+    """``--sources M[,M...]`` as integers (None: none given); a word that is not an integer
+    is a :class:`~corraoi.errors.ConfigError` naming it."""
+    from corraoi.experiments.grid import parse_sources
+
+    return parse_sources(values)
+
+
 def kept_code(folder: str | os.PathLike[str]) -> Any:
     """A context in which the plug-ins of the sweep in ``folder`` load from its kept copies
     (``--resume --kept-code``), entered before the grid is built."""
@@ -695,6 +703,7 @@ def sweep(
 
 __all__ = [
     "Sweep", "check_grid", "decentralized_grid", "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes",
-    "kept_code", "paper_grid", "record_each_from", "run_grid", "settle_backend", "split_words",
+    "kept_code", "paper_grid", "record_each_from", "run_grid", "settle_backend", "sources_words",
+    "split_words",
     "sweep", "write_paper_summary", "wrote_line",
 ]  # fmt: skip
