@@ -104,7 +104,7 @@ def _run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None) -> 
         pulls_sum[i] = snap.pulls.sum(axis=0)
 
     cls = cfg.policy.resolve()
-    if cfg.sources > 1 or getattr(cls, "multi_source", ""):
+    if cfg.sources > 1 or getattr(cls, "multi_source", None):
         return _run_sources_chunk(task, cfg, channel, stops, on_slots)
     if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
         from corraoi.engine.kernels import kernel_for

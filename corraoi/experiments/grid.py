@@ -85,7 +85,7 @@ class Cell:
     def many(self) -> bool:
         """Whether the cell runs in the engine of many sources: several sources, or a
         multi-source policy (one source of it is its base policy, run for run)."""
-        return self.sources > 1 or bool(getattr(self.policy.resolve(), "multi_source", ""))
+        return self.sources > 1 or bool(getattr(self.policy.resolve(), "multi_source", None))
 
     @property
     def key(self) -> str:

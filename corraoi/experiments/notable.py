@@ -2,12 +2,12 @@
 
 Per cell: the run with the largest final regret (``worst``), the smallest (``best``) and the
 median (the lower median: with 200 runs the 100th smallest); for a cell of several sources
-also the run with the most collisions (``most-collisions``: a collision storm). Per pair of cells that share an
-instance, horizon and channel (their run ``i`` is one hidden path, seed ``seed + i``): the run
-with the widest paired difference ``regret(a) - regret(b)`` in either direction. With a
-baseline the pairs are every cell against it; without one every pair while a group has at
-most :data:`MAX_PAIRED_CELLS` cells (a parameter grid of hundreds of cells would name tens of
-thousands of pairs: give it a baseline).
+also the run with the most collisions (``most-collisions``: a collision storm). Per pair of
+cells that share an instance, horizon and channel (their run ``i`` is one hidden path, seed
+``seed + i``): the run with the widest paired difference ``regret(a) - regret(b)`` in either
+direction. With a baseline the pairs are every cell against it; without one every pair while
+a group has at most :data:`MAX_PAIRED_CELLS` cells (a parameter grid of hundreds of cells
+would name tens of thousands of pairs: give it a baseline).
 
 Ties go to the lowest run index, so the choice does not depend on the chunking or on the
 order chunks finished in. Nothing here holds more than the finals (one number per run).

@@ -702,8 +702,8 @@ def sweep(
 
 
 __all__ = [
-    "Sweep", "check_grid", "decentralized_grid", "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes",
-    "kept_code", "paper_grid", "record_each_from", "run_grid", "settle_backend", "sources_words",
-    "split_words",
-    "sweep", "write_paper_summary", "wrote_line",
+    "Sweep", "check_grid", "decentralized_grid", "device_name", "draw_sweep_figure",
+    "grid_from_options", "grid_notes", "kept_code", "paper_grid", "record_each_from", "run_grid",
+    "settle_backend", "sources_words", "split_words", "sweep", "write_paper_summary",
+    "wrote_line",
 ]  # fmt: skip
