@@ -411,7 +411,9 @@ class CellRuns:
             regret, estimator = Moments.of(self.regret), Moments.of(self.estimator)
         # a source-slot per source and slot: the shares of M sources sum to 1 too
         share = pulls / (n * self.cell.sources * t.astype(np.float64))[:, None]
-        return sweep_points(self.label, t, regret, estimator, share)
+        hits = Moments.of(self.collisions.astype(np.float64)) if (
+            self.collisions is not None and self.agg is None) else None  # fmt: skip
+        return sweep_points(self.label, t, regret, estimator, share, hits)
 
     def paired_curve(self, base: CellRuns) -> dict[str, list[Any]] | None:
         """Mean and 95% CI of regret(this) - regret(base), run by run, at each checkpoint:

@@ -363,6 +363,9 @@ class SweepData:
             )
             for k in range(c.pull_share.shape[1]):
                 part[f"pull_share_{k + 1}"] = c.pull_share[:, k]
+            if c.collisions_mean is not None:  # a cell of several sources
+                part["collisions_mean"] = c.collisions_mean
+                part["collisions_ci95"] = c.collisions_ci95
             parts.append(part)
         return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
