@@ -94,6 +94,35 @@ def test_summary_labels_collisions_and_the_collision_storm(folders: tuple[Path, 
     assert "Most collisions" in (many / "summary.md").read_text()
 
 
+def test_the_sweep_log_holds_the_collisions_of_several_sources_only(
+    folders: tuple[Path, Path],
+) -> None:
+    from corraoi.recorder.sweeplog.read import read_sweep
+
+    many, single = folders
+    summary = json.loads((many / "summary.json").read_text())
+    log = read_sweep(many / "sweep.mcap")
+    assert log.config["sources"] == [1, 2, 3]
+    assert log.curves["rhorand-ucb(M=1)"].collisions_mean is None
+    for m in (2, 3):
+        curve = log.curves[f"rhorand-ucb(M={m})"]
+        assert curve.collisions_mean is not None and curve.t[-1] == T
+        assert curve.collisions_mean[-1] == summary["policies"][f"rhorand-ucb(M={m})"][
+            "collisions_mean"]
+        assert np.all(np.diff(curve.collisions_mean) >= 0)  # counted up to t
+    curves = corraoi.load(many).curves
+    assert curves[curves["policy"] == "rhorand-ucb(M=3)"]["collisions_mean"].iloc[-1] > 0
+    plain = read_sweep(single / "sweep.mcap")
+    assert "sources" not in plain.config and plain.curves["ucb"].collisions_mean is None
+    assert "collisions_mean" not in corraoi.load(single).curves.columns
+    from mcap.reader import make_reader
+
+    for folder, declared in ((single, False), (many, True)):  # its schema declares them
+        with open(folder / "sweep.mcap", "rb") as f:
+            schemas = make_reader(f).get_summary().schemas.values()  # type: ignore[union-attr]
+            assert any(b"collisions_mean" in sc.data for sc in schemas) is declared
+
+
 def test_a_drilled_run_of_several_sources_gives_the_sweeps_row_again(
     folders: tuple[Path, Path],
 ) -> None:
