@@ -11,12 +11,13 @@ from corraoi.engine.block import RunConfig, SlotBlock, SourcesBlock
 from corraoi.engine.simulation import Simulation, simulate_run
 from corraoi.engine.slot_record import SHARED, record_for
 from corraoi.engine.sources import (
+    SourcesSimulation,
     oracle_channels,
     simulate_run_sources,
     simulate_sources,
     source_blocks,
 )
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, PolicyError, PolicyRuntimeError
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import builtins, make_policy, parse_policy_names
 
@@ -174,3 +175,37 @@ def test_the_multi_source_forms_are_registered_but_not_single_source_builtins():
     assert spec.builtin and spec.resolve().multi_source == "mctopm"
     assert spec.resolve().aoi_aware and spec.resolve().correlated
     assert "centralized-ts" not in parse_policy_names(["all"])
+
+
+PLUGIN = """
+from corraoi.policies import CompiledPolicy, Param
+
+
+class ManyFar(CompiledPolicy):
+    name = "many-far"
+    multi_source = "rhorand"
+    params = {"at": Param(7.0, "slot from which forced returns arm 10^6", low=1.0)}
+    forced = "bad_compiled:far_forced"
+    score = "corraoi.policies.hooks:score_none"
+
+
+class Bogus(CompiledPolicy):
+    name = "bogus-rule"
+    multi_source = "round-robin"
+    score = "corraoi.policies.hooks:score_none"
+"""
+
+
+def test_a_multi_source_plugin_runs_and_its_arm_out_of_range_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(PLUGINS))
+    (tmp_path / "many.py").write_text(PLUGIN)
+    spec = make_policy(f"{tmp_path / 'many.py'}:ManyFar", at=40)
+    sim = SourcesSimulation(load_instance("I2"), spec, [3, 4], 300, 3)
+    assert sim.advance(39) is not None  # a plug-in declaring a rule runs with 3 sources
+    with pytest.raises(PolicyRuntimeError, match=r"^policy many-far, slot 40: its forced hook "
+                       r"returned arm 1000000 for run 0 \(seed 3\); expected 0\.\.3"):  # fmt: skip
+        sim.advance(10)
+    bogus = make_policy(f"{tmp_path / 'many.py'}:Bogus")
+    with pytest.raises(PolicyError, match=r"^policy bogus-rule: multi_source 'round-robin'; "
+                       "expected one of rhorand, mctopm, centralized"):  # fmt: skip
+        simulate_sources(load_instance("I2"), bogus, [1], 10, 2)

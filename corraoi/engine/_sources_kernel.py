@@ -17,8 +17,10 @@ per-(run, source) state: each source its own counts, ages, policy state and poli
 from the run's latent stream exactly as the single-source kernel draws it.
 
 Per slot and source (docs/model.md, "Many sources"): the source's empirical means, its
-forced arm, candidate set, AoI-aware override and scores exactly as a single-source run of
-the base policy computes them; then the rule picks the channel:
+forced arm, candidate set, AoI-aware override and scores as a single-source run of the base
+policy computes them (but for the correlated candidate set's target: the M-th best mean of
+S_t, the M best of S_t kept; ``candidate_set``'s ``depth``); then the rule picks the
+channel:
 
 - ``RULE_RHORAND`` (rhoRand): the source's rank r (uniform in 1..M at the start, drawn again
   uniformly after each collision) picks the r-th best arm: the candidates by score, then the
@@ -56,7 +58,7 @@ from corraoi.engine._kernel import (
 from corraoi.policies.hooks import forced_none as _forced  # HOOKS
 from corraoi.policies.hooks import score_none as _score  # HOOKS
 from corraoi.policies.hooks import update_none as _update  # HOOKS
-from corraoi.rng import argmax_random, integer
+from corraoi.rng import argmax_random, integer, uniform
 
 _forced = inlined(_forced)
 _score = inlined(_score)
@@ -107,42 +109,71 @@ def uniform_in(mask, pst, K):
 
 
 @njit(inline="always", cache=True)
-def split(mask, allowed, tier1, tier2, K):
-    """tier1: the allowed arms of ``mask`` (ranked by score); tier2: the other allowed arms
-    (ranked by empirical mean). Returns the size of tier1."""
+def free_best(vals, mask, muhat, allowed, pst, K, tier1, tier2):
+    """The best allowed arm: of ``mask`` by ``vals``, else of the others by ``muhat``; ties
+    uniformly at random. With every arm allowed it is ``argmax_random`` itself (the
+    single-source kernel's draws)."""
     n1 = 0
     for k in range(K):
         tier1[k] = mask[k] and allowed[k]
         tier2[k] = allowed[k] and not mask[k]
         if tier1[k]:
             n1 += 1
-    return n1
+    if n1 > 0:
+        return argmax_random(vals, tier1, pst, K)
+    return argmax_random(muhat, tier2, pst, K)
 
 
 @njit(inline="always", cache=True)
-def ranked(vals, mask, muhat, allowed, r, pst, K, tier1, tier2, pick, top):
-    """The arm of rank ``r`` (0-based) among the allowed arms: those of ``mask`` by ``vals``,
-    then the others by ``muhat``; ties uniformly at random. Rank 0 over a non-empty tier1 is
-    ``argmax_random`` itself (the single-source kernel's draws)."""
-    n1 = split(mask, allowed, tier1, tier2, K)
+def equal_at(values, tier, v, pst, K):
+    """A uniform arm of ``tier`` whose value is ``v`` (reservoir: a draw per extra tie)."""
+    best = -1
+    ties = 0
+    for k in range(K):
+        if tier[k] and values[k] == v:
+            ties += 1
+            if ties == 1 or uniform(pst) * ties < 1.0:
+                best = k
+    return best
+
+
+@njit(inline="always", cache=True)
+def rank_pick(vals, mask, n1, muhat, r, pst, K, tier2, top):
+    """rhoRand's pick: the arm of rank ``r`` (0-based) in the source's order, the ``n1`` arms
+    of ``mask`` by ``vals``, then the others by ``muhat``; ties uniformly at random (rank 0
+    is ``argmax_random`` itself: the single-source kernel's draws)."""
     if r < n1:
         if r == 0:
-            return argmax_random(vals, tier1, pst, K)
-        v = nth_value(vals, tier1, r, top, K)
-        for k in range(K):
-            pick[k] = tier1[k] and vals[k] == v
-        return uniform_in(pick, pst, K)
-    r -= n1
-    n2 = 0
+            return argmax_random(vals, mask, pst, K)
+        # the value of rank r: that of an arm with at most r above it and more than r at or
+        # above it (branch-free counts, which the compiler vectorizes)
+        for a in range(K):
+            if not mask[a]:
+                continue
+            va = vals[a]
+            gt = 0
+            ge = 0
+            for k in range(K):
+                gt += mask[k] & (vals[k] > va)
+                ge += mask[k] & (vals[k] >= va)
+            if gt <= r < ge:
+                return equal_at(vals, mask, va, pst, K)
+        return equal_at(vals, mask, nth_value(vals, mask, r, top, K), pst, K)
     for k in range(K):
-        if tier2[k]:
-            n2 += 1
-    if r >= n2:
-        r = n2 - 1
-    v = nth_value(muhat, tier2, r, top, K)
-    for k in range(K):
-        pick[k] = tier2[k] and muhat[k] == v
-    return uniform_in(pick, pst, K)
+        tier2[k] = not mask[k]
+    r = min(r - n1, K - n1 - 1)
+    return equal_at(muhat, tier2, nth_value(muhat, tier2, r, top, K), pst, K)
+
+
+@njit(inline="always", cache=True)
+def above(vals, mask, muhat, a, k):
+    """Arm ``k`` ranks above arm ``a`` in the source's order (the candidates by score, then
+    the others by mean; ties by lowest index)."""
+    if mask[k] != mask[a]:
+        return mask[k]
+    va = vals[a] if mask[a] else muhat[a]
+    vk = vals[k] if mask[k] else muhat[k]
+    return vk > va or (vk == va and k < a)
 
 
 @njit(inline="always", cache=True)
@@ -180,17 +211,6 @@ def best_m(vals, mask, muhat, M, K, out, tier1, tier2, top):
     take_top(vals, tier1, min(M, n1), out, top, K)
     if M > n1:
         take_top(muhat, tier2, min(M - n1, K - n1), out, top, K)
-
-
-@njit(inline="always", cache=True)
-def not_above(vals, mask, muhat, arm, worst, K):
-    """``worst``: the arms whose index is not above ``arm``'s (candidates rank above the
-    others; within a tier by score, or by mean)."""
-    for k in range(K):
-        if mask[arm]:
-            worst[k] = (not mask[k]) or vals[k] <= vals[arm]
-        else:
-            worst[k] = (not mask[k]) and muhat[k] <= muhat[arm]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", pipeline_class=NoAliasCompiler)  # KERNEL
@@ -261,9 +281,9 @@ def advance(
         top = np.empty(K)
         fail = np.empty(W, dtype=np.uint64)
         arms = np.empty(M, dtype=np.int64)
-        taken = np.zeros(K, dtype=np.int64)
-        mbest = np.zeros((M, K), dtype=np.bool_)
-        byscore = np.zeros(M, dtype=np.bool_)
+        taken = np.empty(K, dtype=np.int64)  # np.zeros would become a parfor (the sweep
+        mbest = np.empty(K, dtype=np.bool_)  # kernel's decorator): each is set before use
+        byscore = np.empty(M, dtype=np.bool_)
         xp = xprev[r]
         for j in range(nslots):
             t = t0 + j + 1
@@ -298,7 +318,7 @@ def advance(
                     forced = -1
                 if correlated and forced < 0:
                     candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass,
-                                  has1, has2, pst)  # fmt: skip
+                                  has1, has2, pst, M)  # fmt: skip
                 override = aware and maxmu > 0.0 and aoi[r, m] * maxmu > 1.0
                 scored = False
                 if override or forced < 0:
@@ -319,25 +339,73 @@ def advance(
                             err[r, 0] = t
                             err[r, 1] = FAULT_NAN
                             err[r, 2] = nan
+                    full = override or not correlated  # every arm in mask
                     if rule == RULE_RHORAND:
-                        arm = ranked(vals, mask, muhat, allowed, rank[r, m], pst, K, tier1,
-                                     tier2, pick, top)  # fmt: skip
-                    elif rule == RULE_CENTRAL:
-                        arm = ranked(vals, mask, muhat, allowed, 0, pst, K, tier1, tier2, pick,
-                                     top)  # fmt: skip
-                    else:  # MCTopM
-                        best_m(vals, mask, muhat, M, K, mbest[m], tier1, tier2, top)
-                        chosen = rank[r, m]
-                        if chosen < 0:
-                            chosen = argmax_random(vals, mask, pst, K)
-                        elif not mbest[m, chosen]:
-                            seated[r, m] = False
+                        n1 = K
+                        if not full:
+                            n1 = 0
                             for k in range(K):
-                                pick[k] = mbest[m, k] and worst[r, m, k]
-                            chosen = uniform_in(pick, pst, K)
-                            if chosen < 0:
-                                chosen = uniform_in(mbest[m], pst, K)
-                        not_above(vals, mask, muhat, chosen, worst[r, m], K)
+                                n1 += mask[k]
+                        rk = rank[r, m]
+                        arm = -1
+                        if 0 < rk < n1 and j > 0:
+                            # the arm it played last slot, if it is the only one of rank
+                            # rk now (what rank_pick would take, with no draw): one pass
+                            a = arms[m]
+                            if mask[a]:
+                                gt = 0
+                                eq = 0
+                                va = vals[a]
+                                for k in range(K):
+                                    if mask[k]:
+                                        if vals[k] > va:
+                                            gt += 1
+                                        elif vals[k] == va:
+                                            eq += 1
+                                if gt == rk and eq == 1:
+                                    arm = a
+                        if arm < 0:
+                            arm = rank_pick(vals, mask, n1, muhat, rk, pst, K, tier2, top)
+                    elif rule == RULE_CENTRAL:
+                        arm = free_best(vals, mask, muhat, allowed, pst, K, tier1, tier2)
+                    else:  # MCTopM
+                        chosen = rank[r, m]
+                        moved = True
+                        if chosen == -1:  # its first choice: the base policy's
+                            chosen = argmax_random(vals, mask, pst, K)
+                        elif chosen == -2:  # it collided unseated: any of its M best
+                            best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
+                            chosen = uniform_in(mbest, pst, K)
+                        else:  # is its chosen arm still among its M best?
+                            nbetter = 0
+                            if full:  # by score alone
+                                va = vals[chosen]
+                                for k in range(K):
+                                    up = vals[k] > va or (vals[k] == va and k < chosen)
+                                    if up:
+                                        nbetter += 1
+                                    pick[k] = not up
+                            else:
+                                for k in range(K):
+                                    up = above(vals, mask, muhat, chosen, k)
+                                    if up:
+                                        nbetter += 1
+                                    pick[k] = not up
+                            if nbetter < M:  # it stays; pick: the arms not above it
+                                moved = False
+                                for k in range(K):
+                                    worst[r, m, k] = pick[k]
+                            else:  # it left them: one of them not above it last time
+                                seated[r, m] = False
+                                best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
+                                for k in range(K):
+                                    pick[k] = mbest[k] and worst[r, m, k]
+                                chosen = uniform_in(pick, pst, K)
+                                if chosen < 0:
+                                    chosen = uniform_in(mbest, pst, K)
+                        if moved:  # the arms not above the new choice, for its next move
+                            for k in range(K):
+                                worst[r, m, k] = not above(vals, mask, muhat, chosen, k)
                         rank[r, m] = chosen
                         arm = chosen
                     byscore[m] = True
@@ -379,7 +447,7 @@ def advance(
                     if rule == RULE_RHORAND and M > 1:
                         rank[r, m] = integer(pol[r, m], M)
                     elif rule == RULE_MCTOPM and not seated[r, m]:
-                        rank[r, m] = uniform_in(mbest[m], pol[r, m], K) if byscore[m] else -1
+                        rank[r, m] = -2 if byscore[m] else -1  # moves at its next choice
                 elif rule == RULE_MCTOPM and byscore[m]:
                     seated[r, m] = True
                 age = 1 if sensed == 1 and not hit else aoi[r, m] + 1

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError
+from corraoi.errors import ConfigError, PolicyError
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
@@ -139,7 +139,11 @@ class SourcesSimulation:
         self.problem, self.policy, self.seeds, self.horizon = pb, policy, seed_arr, pb.horizon
         self.M, self.t = M, 0
         self.cls: Any = pb.cls
-        self.rule = RULES[getattr(pb.cls, "multi_source", "")]
+        rule = getattr(pb.cls, "multi_source", "")
+        if rule not in RULES:
+            raise PolicyError(f"policy {policy.name}: multi_source {rule!r}; expected one of "
+                              "rhorand, mctopm, centralized (or none)")  # fmt: skip
+        self.rule = RULES[rule]
         self.oracle = oracle_channels(pb.theory.mu, M)
         #: each source's oracle channel mean (the estimator's mu*)
         self.oracle_mu = np.asarray(pb.theory.mu, dtype=np.float64)[self.oracle]
