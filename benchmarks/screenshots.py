@@ -10,7 +10,10 @@ Makes (each from a fresh recording, seeds fixed):
   64 and 256 arms (benchmarks/alternate.py's), 10,000 slots; every run with ``--score``
   (its "why this arm" view; beyond 64 arms the score is off by default);
 * ``compare-screenshot.png``: ``compare`` of ucb, ts and cts-gauss on I1, seed 2, 1,500 slots;
-* ``sweep.png``: the sweep recording of ``sweep -i I1 -p ucb,cucb,cts -n 100 -T 10000``.
+* ``sweep.png``: the sweep recording of ``sweep -i I1 -p ucb,cucb,cts -n 100 -T 10000``;
+* asked by name only (``--only sources-m3-k4``; not in the defaults until the engine of
+  several sources lands, issue 43): ``sources-mM-kK.png``, ``record -p rhorand-ucb
+  --sources M`` on I1 (K = 4) or the random instance of K arms, 10,000 slots.
 
 Needs Debian's ``chromium``; the browser and the viewers run on 127.0.0.1 and are stopped
 at the end. Run from the checkout: it imports ``tests/browser.py``.
@@ -52,6 +55,16 @@ def corraoi(*args: str, cwd: Path) -> None:
 
 def recording(name: str, work: Path) -> Path:
     """Record what screenshot ``name`` shows; the .rrd to open."""
+    if name.startswith("sources-m"):  # sources-m3-k4: a run of several sources
+        many, arms = (int(v[1:]) for v in name.removeprefix("sources-").split("-"))
+        instance = "I1"
+        if arms != 4:
+            instance = str(work / f"R{arms}.json")
+            Path(instance).write_text(json.dumps(instance_for(arms).to_dict()))
+        corraoi("record", "-i", instance, "-p", "rhorand-ucb", "--sources", str(many), "-T",
+                "10000", "-s", "1", "-o", f"{name}.mcap", "--rrd", f"{name}.rrd", "--force",
+                cwd=work)  # fmt: skip
+        return work / f"{name}.rrd"
     if name.startswith("run-k"):
         arms = int(name.removeprefix("run-k"))
         instance = "I1"

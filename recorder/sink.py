@@ -10,10 +10,15 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 if TYPE_CHECKING:
     from typing_extensions import Self
+
+    from corraoi.engine.block import RunBlock
+
+#: What a sink is handed: a run's slot block, or a sweep's point.
+Item = TypeVar("Item", contravariant=True)
 
 
 def made_again(part: Path) -> bool:
@@ -23,8 +28,9 @@ def made_again(part: Path) -> bool:
     return True
 
 
-class Sink:
-    """The context-manager protocol of every writer in ``recorder``.
+class Sink(Generic[Item]):
+    """The context-manager protocol of every writer in ``recorder``: a ``Sink[SlotBlock]``
+    takes a run's blocks, a ``Sink[SweepPoint]`` a sweep's points.
 
     Leaving the ``with`` block normally calls :meth:`close` (the file is finished and moved
     into place); leaving it through an exception calls :meth:`abort` (the file is finished
@@ -32,14 +38,14 @@ class Sink:
     Writers that treat Ctrl-C differently override ``__exit__``.
     """
 
-    def write(self, *args: Any, **kwargs: Any) -> Any:
+    def write(self, item: Item, /) -> object:
         """Take the next item: a block of slots, or a sweep's point."""
         raise NotImplementedError
 
-    def close(self) -> Any:
+    def close(self) -> object:
         raise NotImplementedError
 
-    def abort(self) -> Any:
+    def abort(self) -> object:
         return self.close()
 
     def __enter__(self) -> Self:
@@ -57,7 +63,7 @@ class Sink:
             self.abort()
 
 
-class RunRecording(Sink):
+class RunRecording(Sink["RunBlock"]):
     """One run's Rerun recording (an ``.rrd`` file and/or a viewer), whoever writes it:
     this process (:class:`corraoi.recorder.rerun.sink.LocalRecording`) or a forked worker
     (:class:`corraoi.recorder.rerun.worker.RemoteRecording`). ``record_run`` hands either the run's
@@ -83,14 +89,17 @@ class RunRecording(Sink):
     #: the WriteError close() raised on a normal exit (the file left at ``.partial``)
     error: Exception | None = None
 
-    def write(self, block: Any) -> None:
+    def write(self, block: RunBlock, /) -> None:
         self._write(block)
         self.written = True
 
-    def _write(self, block: Any) -> None:
+    def _write(self, block: RunBlock) -> None:
         raise NotImplementedError
 
-    def abort(self, *, discard: bool | None = None) -> Any:
+    def close(self) -> Path | None:
+        raise NotImplementedError
+
+    def abort(self, *, discard: bool | None = None) -> Path | None:
         raise NotImplementedError
 
     def __exit__(

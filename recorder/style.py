@@ -206,6 +206,23 @@ def focus_color(i: int) -> RGB:
     return ARM_COLORS[i % len(ARM_COLORS)]
 
 
+def source_color(m: int) -> RGB:
+    """Colour of source ``m`` (from 1) of a run of several sources: each of up to eight
+    sources its own (the arms' palette, :data:`ARM_COLORS`; no red, which marks the
+    collisions)."""
+    return ARM_COLORS[(m - 1) % len(ARM_COLORS)]
+
+
+def source_name(m: int) -> str:
+    """Source ``m``'s name in legends and titles."""
+    return f"source {m}"
+
+
+#: The most arms whose means a run of several sources draws as bars, each source's beside
+#: the others' (beyond: a heatmap of sources x arms).
+SOURCE_BARS_UP_TO = 16
+
+
 def darker(rgb: Sequence[int], amount: float = 0.5) -> RGB:
     """``rgb`` mixed with black (``amount`` = 0: unchanged, 1: black)."""
     r, g, b = (round(c * (1 - amount)) for c in rgb)
@@ -291,6 +308,7 @@ __all__ = [
     "ORACLE_COLOR",
     "POLICY_COLORS",
     "REGRET_UNIT",
+    "SOURCE_BARS_UP_TO",
     "arm_color",
     "arm_label",
     "arm_legend",
@@ -307,6 +325,8 @@ __all__ = [
     "run_colors",
     "spec_color",
     "shorten",
+    "source_color",
+    "source_name",
     "spec_label",
     "numbered",
 ]

@@ -47,12 +47,21 @@ SLOT_FORMAT_NAME = "corraoi.slot-log"
 #: The newest version of the slot-log format this code reads and writes: a run is written
 #: as version 1 (built-in policy, i.i.d. channel), 2 (a plug-in policy or a Markov/trace
 #: channel) or 3 (a loop logged by ``corraoi.Logger``: its messages may lack any field the
-#: slot record says may be absent, its run may have no instance), ``RunConfig.format_version``.
-SLOT_FORMAT_VERSION = 3
+#: slot record says may be absent, its run may have no instance) or 4 (a run of several
+#: sources: one channel per source, :func:`slot_topic`), ``RunConfig.format_version``.
+SLOT_FORMAT_VERSION = 4
 #: The first version whose logs may lack a column every block carries (``SlotBlock.absent``).
 LACKING_FORMAT_VERSION = 3
 SLOT_TOPIC = "/corraoi/slot"
 SLOT_SCHEMA_NAME = "corraoi.SlotEvent"
+
+
+def slot_topic(source: int, sources: int) -> str:
+    """The topic of source ``source`` (from 1) of a run of ``sources`` sources: the slot
+    topic for a single source, ``/corraoi/slot/<source>`` for each of several."""
+    return SLOT_TOPIC if sources == 1 else f"{SLOT_TOPIC}/{source}"
+
+
 #: Metadata record written when a slot log is opened: the run configuration.
 RUN_METADATA = "corraoi.run"
 #: Metadata record written when a slot log is finished: how the run ended.
@@ -127,4 +136,5 @@ __all__ = [
     "SWEEP_SOURCES_KEYS",
     "SWEEP_TOPIC",
     "library_name",
+    "slot_topic",
 ]

@@ -152,6 +152,9 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ),  # fmt: skip
     ("record", {"force": "yes"}, ArgumentTypeError, "force 'yes': expected True or False"),
     ("record", {"score": "on"}, ArgumentTypeError, "score 'on': expected True or False"),
+    ("record", {"sources": 2.5}, ConfigTypeError, "sources 2.5: not an integer"),
+    ("record", {"sources": 0}, ConfigValueError, "sources 0: out of range, expected 1..4 (at"),
+    ("record", {"sources": 5}, ConfigValueError, "expected 1..4 (at most the 4 arms of instance"),
     ("record", {"viewer": 9876}, ArgumentTypeError, "viewer 9876: expected a running Rerun"),
     ("record", {"sinks": "x"}, ArgumentTypeError, "sinks 'x': expected a list or tuple"),
     (

@@ -581,3 +581,46 @@ def test_without_the_sdk_foxglove_names_the_extra(tmp_path, monkeypatch):
     assert done.exit_code == 1
     assert 'pip install "corraoi[foxglove]"' in done.output
     assert not (tmp_path / "runs").exists() and not Path("runs").exists()
+
+
+def test_the_front_settles_before_the_server_stops_until_its_queue_has_gone_out():
+    # the server of a run that just ended still sends its queue: stopping it then dropped
+    # the client's last slots; settle() waits while bytes flow (and no longer than its limit)
+    from corraoi.recorder.live.front import SubprotocolFront
+
+    backend = socket.create_server(("127.0.0.1", 0))
+    streaming = threading.Event()
+
+    def serve() -> None:
+        conn, _ = backend.accept()
+        while b"\r\n\r\n" not in conn.recv(8192):
+            pass
+        conn.sendall(b"HTTP/1.1 101 Switching Protocols\r\n\r\n")
+        streaming.set()
+        for _ in range(30):  # 0.6 s of a queue going out
+            conn.sendall(b"x" * 1000)
+            time.sleep(0.02)
+        done.append(time.monotonic())
+        time.sleep(1.0)
+        conn.close()
+
+    done: list[float] = []
+    threading.Thread(target=serve, daemon=True).start()
+    front = SubprotocolFront("127.0.0.1", 0, backend.getsockname()[1])
+    try:
+        front.settle(limit=0.5)  # no client: at once
+        client = socket.create_connection(("127.0.0.1", front.port))
+        client.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        threading.Thread(target=lambda: [None for _ in iter(lambda: client.recv(65536), b"")],
+                         daemon=True).start()  # fmt: skip
+        assert streaming.wait(10)
+        time.sleep(0.05)
+        front.settle(quiet=0.2, limit=10.0)
+        assert done and time.monotonic() >= done[0] + 0.15  # the whole queue went out first
+        start = time.monotonic()
+        front.settle(quiet=0.2, limit=10.0)  # nothing flows now: no second wait
+        assert time.monotonic() - start < 0.1
+        client.close()
+    finally:
+        front.close()
+        backend.close()

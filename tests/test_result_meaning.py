@@ -269,3 +269,27 @@ def test_without_rerun_sdk_each_command_that_needs_it_is_one_line(tmp_path: Path
     # refused before the sweep ran, before the run was recorded
     assert not (tmp_path / "sw").exists() and not list(tmp_path.glob("r.*"))
     assert not (tmp_path / "u.rrd").exists() and not (tmp_path / "c.rrd").exists()
+
+
+NO_RERUN_FACE = """
+import sys
+sys.modules["rerun"] = None  # a machine without rerun-sdk
+import corraoi
+from corraoi.errors import MissingExtraError
+try:
+    corraoi.record("ucb", horizon=100, path="r.mcap")
+except MissingExtraError as exc:
+    print("refused:", exc)
+print(corraoi.record("ucb", horizon=100, path="n.mcap", rrd=False).log.n_slots)
+"""
+
+
+def test_without_rerun_sdk_the_python_record_is_one_typed_error_before_any_file(tmp_path: Path):
+    res = subprocess.run([sys.executable, "-c", NO_RERUN_FACE], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    refused, horizon = res.stdout.strip().splitlines()
+    assert refused.startswith("refused: rerun-sdk is not installed (no module rerun): ")
+    assert "corraoi.record's Rerun recording (rrd=False: none)" in refused
+    assert horizon == "100"  # without a recording it records
+    assert not list(tmp_path.glob("r.*")) and (tmp_path / "n.mcap").exists()

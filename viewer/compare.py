@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from corraoi.engine.block import SourcesBlock
 from corraoi.engine.summary import RunSummary, SummaryAccumulator
 from corraoi.policies import RGB
 from corraoi.recorder.style import REGRET_UNIT, run_colors, spec_color
@@ -152,6 +153,7 @@ def compare_blueprint(
         LEGEND,
         VIEWER_PX,
         RunViews,
+        SourcesViews,
         fit,
         legend_room,
         time_windows,
@@ -165,6 +167,12 @@ def compare_blueprint(
     px = VIEWER_PX / len(runs)
     columns = []
     for r in runs:
+        if r.config.sources > 1:  # several sources: who played which channel, each one's age
+            s = SourcesViews(r.label, r.config, tw, prefix=r.label)
+            columns.append(rrb.Vertical(
+                s.occupancy(px), rrb.Grid(*s.ages(px / 2), grid_columns=2), s.means(px),
+                row_shares=[1.5, 2, 1.2], name=r.label))  # fmt: skip
+            continue
         v = RunViews(r.label, r.config, tw, prefix=r.label, aoi_y=aoi_y, arms=arms)
         # tab titles share the column's width: short ones
         tabs: list[rrb.View]
@@ -252,7 +260,7 @@ def compare(
     import rerun as rr
 
     from corraoi.recorder.rerun.output import RrdOutput
-    from corraoi.recorder.rerun.sink import RerunSink
+    from corraoi.recorder.rerun.sink import run_sink
 
     with RrdOutput(
         runs[0].config,
@@ -267,7 +275,7 @@ def compare(
     ) as out:
         sinks = []
         for r in runs:
-            sinks.append(RerunSink(out.recording, r.label, r.config, color=r.color))
+            sinks.append(run_sink(out.recording, r.label, r.config, color=r.color))
         accs = [SummaryAccumulator(r.config) for r in runs]
         opened = [r.log for r in runs]
 
@@ -276,7 +284,8 @@ def compare(
         for i, b in read_ahead(every):  # the next blocks are read while these are sent
             sinks[i].write(b)
             accs[i].update(b)
-            aoi_max = max(aoi_max, float(b.aoi.max()), float(b.oracle_aoi.max()))
+            for part in b.sources if isinstance(b, SourcesBlock) else (b,):
+                aoi_max = max(aoi_max, float(part.aoi.max()), float(part.oracle_aoi.max()))
             if on_block is not None:
                 on_block(len(b))
         for r, sink, acc in zip(runs, sinks, accs, strict=True):

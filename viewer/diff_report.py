@@ -40,7 +40,10 @@ class FieldDiff:
     ``first_slot`` is the first slot t where they differ (``None``: never), ``a_value`` and
     ``b_value`` the values there (arms and states numbered from 1), ``slots_differing`` how
     many of the ``compared`` common slots differ. ``comparable`` is False when the field
-    cannot be compared (per-arm fields of runs with different numbers of arms).
+    cannot be compared (per-arm fields of runs with different numbers of arms). Runs of
+    several sources are compared source by source (source m of a with source m of b): a
+    slot differs where any pair differs, and ``source`` is the source (from 1) of the
+    first difference (None for single-source runs).
     """
 
     field: str
@@ -50,6 +53,7 @@ class FieldDiff:
     a_value: Any = None
     b_value: Any = None
     comparable: bool = True
+    source: int | None = None
 
     @property
     def identical(self) -> bool:
@@ -65,6 +69,7 @@ class FieldDiff:
             "first_slot": self.first_slot,
             "a": self.a_value,
             "b": self.b_value,
+            **({} if self.source is None else {"source": self.source}),
         }
 
 
@@ -170,6 +175,14 @@ class DiffReport:
             ("regret", a.regret, b.regret, _minus(b.regret, a.regret)),
             ("estimator", a.estimator, b.estimator, _minus(b.estimator, a.estimator)),
         ]
+        ea, eb = a.regret_by_source or (), b.regret_by_source or ()
+        for m in range(max(len(ea), len(eb))):  # runs of several sources: each one's regret
+            ra = ea[m] if m < len(ea) else None
+            rb = eb[m] if m < len(eb) else None
+            rows.append((f"regret source {m + 1}", ra, rb, _minus(rb, ra)))
+        if ea or eb:
+            rows.append(("collisions", a.collisions, b.collisions,
+                         _minus(b.collisions, a.collisions)))  # fmt: skip
         K = max(len(a.pulls), len(b.pulls))
         for k in range(K):
             pa = a.pulls[k] if k < len(a.pulls) else None
@@ -214,6 +227,8 @@ class DiffReport:
             first = "-" if f.first_slot is None else str(f.first_slot)
             count = f"{f.slots_differing} of {f.compared}"
             where = "" if f.first_slot is None else f"a={_fmt(f.a_value)} b={_fmt(f.b_value)}"
+            if f.source is not None and f.first_slot is not None:
+                where = f"source {f.source}: {where}"
             lines.append(f"  {name:<12} {first:>10} {count:>18}  {where}".rstrip())
         lines.append("final figures:")
         lines.append(f"  {'':<22} {'a':>12} {'b':>12} {'b - a':>12}")

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.engine.block import SlotBlock
-from corraoi.engine.slot_record import BY_NAME, NAMES, PER_ARM
+from corraoi.engine.block import SlotBlock, SourcesBlock
+from corraoi.engine.slot_record import BY_NAME, NAMES, PER_ARM, SHARED
 from corraoi.engine.slot_record import FLOAT_FIELDS as _FLOATS
 from corraoi.engine.summary import SummaryAccumulator
 from corraoi.errors import UsageError
@@ -102,6 +102,12 @@ def diff(
     ]
     if missing:
         warnings.append(f"only one of the runs logs {', '.join(missing)}: not compared")
+    Ma, Mb = la.config.sources, lb.config.sources
+    if Ma != Mb:
+        warnings.append(
+            f"the runs have different numbers of sources ({Ma} and {Mb}): sources "
+            f"1..{min(Ma, Mb)} are compared, source by source"
+        )
     state = {
         n: _FieldState(n, comparable=(n not in PER_ARM or Ka == Kb) and n not in missing)
         for n in names
@@ -147,8 +153,13 @@ class _FieldState:
         self.first: int | None = None
         self.a_value: Any = None
         self.b_value: Any = None
+        self.source: int | None = None
 
-    def update(self, a: SlotBlock, b: SlotBlock, atol: float) -> None:
+    def update(self, a: SlotBlock | SourcesBlock, b: SlotBlock | SourcesBlock,
+               atol: float) -> None:  # fmt: skip
+        if isinstance(a, SourcesBlock) or isinstance(b, SourcesBlock):
+            self._update_sources(_sources(a), _sources(b), atol)
+            return
         n = len(a)
         self.compared += n
         if not self.comparable:
@@ -175,6 +186,44 @@ class _FieldState:
             self.a_value = _person(self.name, ca[i])
             self.b_value = _person(self.name, cb[i])
 
+    def _update_sources(self, a: tuple[SlotBlock, ...], b: tuple[SlotBlock, ...],
+                        atol: float) -> None:  # fmt: skip
+        """Runs of several sources: source m of a against source m of b (as many as both
+        have); a slot differs where any pair does, the first difference names its source."""
+        n = len(a[0])
+        self.compared += n
+        if not self.comparable:
+            self.differing += n
+            if self.first is None and n:
+                self.first = int(a[0].t[0])
+            return
+        pairs = [(x, y) for x, y in zip(a, b, strict=False) if getattr(x, self.name) is not None
+                 and getattr(y, self.name) is not None]  # fmt: skip  (the sources both have)
+        if not pairs:
+            return
+        same = np.stack([self._same(x.column(self.name), y.column(self.name), atol)
+                         for x, y in pairs])  # fmt: skip
+        bad = np.flatnonzero(~same.all(axis=0))
+        if not bad.size:
+            return
+        self.differing += int(bad.size)
+        if self.first is None:
+            i = int(bad[0])
+            m = int(np.argmin(same[:, i]))
+            x, y = pairs[m]
+            self.first = int(x.t[i])
+            self.source = None if self.name in SHARED else m + 1
+            self.a_value = _person(self.name, x.column(self.name)[i])
+            self.b_value = _person(self.name, y.column(self.name)[i])
+
+    def _same(self, ca: np.ndarray, cb: np.ndarray, atol: float) -> np.ndarray:
+        """Per slot: the two columns agree (a float field within ``atol``)."""
+        if self.name in FLOAT_FIELDS:
+            same = np.isclose(ca, cb, rtol=0.0, atol=atol, equal_nan=True)
+        else:
+            same = ca == cb
+        return same.all(axis=1) if same.ndim > 1 else same
+
     def result(self) -> FieldDiff:
         return FieldDiff(
             field=self.name,
@@ -184,6 +233,7 @@ class _FieldState:
             a_value=self.a_value,
             b_value=self.b_value,
             comparable=self.comparable,
+            source=self.source,
         )
 
 
@@ -199,8 +249,13 @@ def _person(name: str, value: np.ndarray | np.generic) -> Any:
     return None if item != item else item
 
 
-def _head(b: SlotBlock, n: int) -> SlotBlock:
+def _head(b: SlotBlock | SourcesBlock, n: int) -> SlotBlock | SourcesBlock:
     return b.slice(0, n)
+
+
+def _sources(b: SlotBlock | SourcesBlock) -> tuple[SlotBlock, ...]:
+    """The block of each source (a single source's block: itself)."""
+    return b.sources if isinstance(b, SourcesBlock) else (b,)
 
 
 def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:

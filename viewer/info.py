@@ -97,6 +97,8 @@ def info_text(info: dict[str, Any]) -> str:
     lines += [
         f"  {'hidden states':<22} {chan}",
         f"  {'seed':<22} {cfg['seed']}",
+        *([f"  {'sources':<22} {cfg['sources']} sharing the channels"]
+          if cfg.get("sources", 1) > 1 else []),
         f"  {'horizon':<22} {horizon_text(cfg['horizon'])}",
         f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
         *([f"  {'fields absent':<22} {', '.join(info['absent'])}"] if info.get("absent") else []),
@@ -155,8 +157,13 @@ def summary_rows(s: dict[str, Any] | RunSummary) -> list[tuple[str, str]]:
     def opt(v: Any, fmt: str = "{}") -> str:
         return "-" if v is None else fmt.format(v)
 
+    several = []  # a run of several sources: each one's regret, and the collisions
+    if d.get("regret_by_source") is not None:
+        several = [("regret per source", " ".join(str(v) for v in d["regret_by_source"])),
+                   ("collisions", opt(d.get("collisions")))]  # fmt: skip
     return [
-        ("pathwise regret", opt(d["regret"])),
+        ("pathwise regret", opt(d["regret"]) + (" (all sources)" if several else "")),
+        *several,
         ("paper's estimator", opt(d["estimator"], "{:.6g}")),
         ("pulls per arm", " ".join(str(v) for v in d["pulls"])),
         ("best arm", opt(d["best_arm"])),

@@ -139,20 +139,27 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
+    from corraoi.engine.block import SourcesBlock
     from corraoi.errors import LogError
     from corraoi.recorder.slotlog.decode import decode_messages
     from corraoi.recorder.slotlog.encode import end_metadata as make_end
+    from corraoi.recorder.slotlog.encode import sources_end_metadata
     from corraoi.recorder.vocab import (
         MCAP_INDEX_TYPES,
         MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
         NS_PER_SLOT,
+        slot_topic,
     )
     from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
     from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
-    from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
     from corraoi.recorder.walk import Walker
 
     src, cfg, n_slots = log.path, log.config, log.n_slots
+    M = cfg.sources  # a run of several sources: a slot channel per source
+    topics = {slot_topic(m, M): m for m in range(1, M + 1)}
+    #: each slot channel's source (from 1), and the last payload of each source
+    slot_channels: dict[int, int] = {}
+    last_payloads: dict[int, bytes] = {}
     try:
         every = max(int(log.metadata.get("flush_every", FLUSH_EVERY)), 1)
     except ValueError:
@@ -167,10 +174,8 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     )  # fmt: skip
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
-    slot_channels: set[int] = set()
     started = False
     written = 0
-    last_payload: bytes | None = None
     for rec in Walker(fin, src, stop_at=complete).mcap_records():
         if rec is None:  # the data end: the summary is the writer's to make
             break
@@ -196,8 +201,8 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
                     schema_id=schemas.get(rec.schema_id, 0),
                     metadata=dict(rec.metadata),
                 )
-                if rec.topic == TOPIC:
-                    slot_channels.add(rec.id)
+                if rec.topic in topics:
+                    slot_channels[rec.id] = topics[rec.topic]
         elif isinstance(rec, Message):
             if rec.channel_id not in channels:
                 continue
@@ -210,19 +215,24 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
                 rec.sequence,
             )  # fmt: skip
             if is_slot:
-                written += 1
-                last_payload = rec.data
-                if t % every == 0:
+                m = slot_channels[rec.channel_id]
+                written += m == M  # a slot is written with its last source's message
+                last_payloads[m] = rec.data
+                if t % every == 0 and m == M:
                     writer.flush()
     if not started:
         raise LogError(f"{src}: no MCAP header record")
     if written != n_slots:
         raise LogError(f"{src}: found {written} slot messages where the reader found {n_slots}")
-    last = None
-    if last_payload is not None:
-        K, n = cfg.K, cfg.n_states
-        last = decode_messages([last_payload], K, n, where=str(src))
-    end: dict[str, Any] = make_end(slots=n_slots, horizon=cfg.horizon, last=last)
+    K, n = cfg.K, cfg.n_states
+    lasts = [decode_messages([last_payloads[m]], K, n, where=str(src))
+             for m in range(1, M + 1) if m in last_payloads]  # fmt: skip
+    end: dict[str, Any]
+    if M > 1:
+        many = SourcesBlock(tuple(lasts)) if len(lasts) == M else None
+        end = sources_end_metadata(slots=n_slots, horizon=cfg.horizon, last=many)
+    else:
+        end = make_end(slots=n_slots, horizon=cfg.horizon, last=lasts[0] if lasts else None)
     end["recovered_from"] = f"{src.name} ({log.status}, {n_slots} slots)"
     writer.add_metadata(END_METADATA, end)
     writer.finish()

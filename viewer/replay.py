@@ -55,22 +55,26 @@ def replay(
     default only when sending to a viewer, which cannot take data back; a file is
     discarded instead if a damaged chunk turns up on the way.
     """
-    from corraoi.recorder.rerun.layout import one_run_blueprint
+    from corraoi.recorder.rerun.layout import one_run_blueprint, sources_blueprint
     from corraoi.recorder.rerun.output import RrdOutput
-    from corraoi.recorder.rerun.sink import RerunSink
+    from corraoi.recorder.rerun.sink import run_sink
 
     run = require_slots(
         as_log(log, verify=viewer_url is not None if verify is None else verify), "replay"
     )
     config = run.config
     # the "why this arm" view when the log has scores (a log written before them has none)
-    blueprint = one_run_blueprint(config.label, config, why="score" not in run.absent)
+    blueprint = (
+        sources_blueprint(config.label, config)
+        if config.sources > 1
+        else one_run_blueprint(config.label, config, why="score" not in run.absent)
+    )
     out = RrdOutput(
         config, rrd_path=rrd_path, viewer_url=viewer_url, overwrite=overwrite,
         discard_on_abort=True, blueprint=blueprint,
     )  # fmt: skip
     try:
-        sink = RerunSink(out.recording, out.label, config)
+        sink = run_sink(out.recording, out.label, config)
         for b in read_ahead(run.blocks(block)):
             sink.write(b)
             if on_block is not None:

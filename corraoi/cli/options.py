@@ -139,6 +139,9 @@ RUNS = Bounded(1, limits.MAX_RUNS)
 WORKERS = Bounded(1, limits.MAX_WORKERS)
 CHECKPOINTS = Bounded(2, limits.MAX_CHECKPOINTS)
 PORT = Bounded(limits.MIN_PORT, limits.MAX_PORT, "a TCP port")
+#: Sources: at most the most arms an instance may have (corraoi.model.instance.MAX_ARMS, not
+#: imported here: it brings numpy); the instance's own K is checked where it is known.
+SOURCES = Bounded(1, 4096, "at most the instance's arms")
 
 
 def horizon_option(default: int) -> Callable[[F], F]:
@@ -150,6 +153,17 @@ def horizon_option(default: int) -> Callable[[F], F]:
         show_default=True,
         help=f"Number of slots T (at most {limits.MAX_HORIZON:,}).",
     )
+
+
+def sources_option(func: F) -> F:
+    return click.option(
+        "--sources",
+        type=SOURCES,
+        default=1,
+        show_default=True,
+        help="Number of sources M sharing the channels (1..K): each picks a channel a slot; "
+        "two on one channel collide and neither delivers (docs/model.md).",
+    )(func)
 
 
 def seed_option(func: F) -> F:

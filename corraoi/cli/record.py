@@ -30,6 +30,7 @@ from .options import (
     param_options,
     policy_option,
     seed_option,
+    sources_option,
 )
 from .reading import progress
 from .record_loop import report
@@ -77,6 +78,7 @@ from .record_plan import from_sweep, say_where_from
 @click.option("--score/--no-score", default=None,
               help="Log what the policy maximised at every slot (score, forced) [default: "
                    "up to 64 arms].")  # fmt: skip
+@sources_option
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 @handle_errors
 def record(
@@ -100,6 +102,7 @@ def record(
     pace: float | None,
     backend: str | None,
     score: bool | None,
+    sources: int,
     as_json: bool,
     from_: str | None,
     run: str | None,
@@ -148,7 +151,8 @@ def record(
             raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
                              "--from SWEEP")  # fmt: skip
         configs = run_configs(instance, policy, param, c=c, beta=beta, channel=channel,
-                              seed=seed, horizon=horizon, score=score, warn=warn)  # fmt: skip
+                              seed=seed, horizon=horizon, score=score, warn=warn,
+                              sources=sources)  # fmt: skip
 
     def fresh_line(p: Any) -> None:
         click.echo(

@@ -26,7 +26,7 @@ def report(session: Session, *, as_json: bool) -> None:
                     "label": r.plan.config.label,
                     "policy": r.plan.config.policy.name,
                     "params": r.plan.config.policy.params,
-                    "instance": r.plan.config.instance.name,
+                    "instance": r.plan.config.instance_name,
                     "seed": r.plan.config.seed,
                     "horizon": r.plan.config.horizon,
                     "slots": r.slots,
@@ -54,7 +54,7 @@ def report(session: Session, *, as_json: bool) -> None:
         done = "" if r.slots == c.horizon else " (interrupted)"
         click.echo(
             f"{safe_text(c.policy.name)}{f' ({params})' if params else ''} on "
-            f"{safe_text(c.instance.name)}, seed "
+            f"{safe_text(c.instance_name)}, seed "
             f"{c.seed}: {r.slots} of {c.horizon} slots{done} in {r.wall:.2f} s "
             f"({rate:,.0f} slots/s{compiled})"
         )

@@ -143,8 +143,11 @@ class RunConfig:
         i.i.d. channel (readable by every corraoi), 2 when the log names a plug-in or a
         non-i.i.d. channel (older readers refuse it instead of misreading it), 3 for a loop
         logged by ``corraoi.Logger`` (policy tier ``external``), whose messages may lack any
-        field of the slot record that may be absent."""
+        field of the slot record that may be absent, 4 for a run of several sources (a
+        channel per source: an older reader refuses it instead of reading one source)."""
         assert self.channel is not None
+        if self.sources > 1:
+            return 4
         if self.policy.tier == "external":
             return 3
         return 1 if self.policy.builtin and self.channel.iid and self.streams == "cpu" else 2
@@ -342,6 +345,10 @@ class SourcesBlock:
         return self.M == other.M and all(
             a.equals(b) for a, b in zip(self.sources, other.sources, strict=True)
         )
+
+
+#: What a run's sinks are handed: a single source's slots, or a run of several sources'.
+RunBlock = SlotBlock | SourcesBlock
 
 
 def absent_fill(block: Columns, name: str) -> np.ndarray:

@@ -10,7 +10,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from corraoi.model.bounds import Bound
     from corraoi.model.instance import Instance
+    from corraoi.model.markov import Mixing
+    from corraoi.model.theory import InstanceTheory as Theory
 
 
 def say_compiles(say: Callable[[str], None]) -> None:
@@ -29,9 +32,9 @@ class InstanceTheory:
     ``chain`` (the mixing of a Markov instance's states; None for i.i.d. states)."""
 
     instance: Instance
-    theory: Any
-    bounds: dict[str, Any]
-    chain: Any
+    theory: Theory
+    bounds: dict[str, Bound]
+    chain: Mixing | None
     horizon: int
 
 
@@ -58,7 +61,7 @@ def instance_theory(spec: str | os.PathLike[str], *, horizon: int = 10_000,
     return InstanceTheory(inst, theory, bounds, chain, horizon)
 
 
-def builtin_instances() -> list[tuple[Instance, Any]]:
+def builtin_instances() -> list[tuple[Instance, Theory]]:
     """Every built-in instance with its theory, in order."""
     from corraoi.model.instance import BUILTINS, load_instance
     from corraoi.model.theory import analyse

@@ -10,11 +10,16 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi.errors import UsageError
+
+if TYPE_CHECKING:
+    from corraoi.engine.block import RunConfig
+    from corraoi.recorder.live.foxglove import Address, FoxgloveServer, FoxgloveSlotSink
+    from corraoi.recorder.live.viewers import WebViewer
 
 
 def to_stderr(line: str) -> None:
@@ -39,7 +44,7 @@ class ViewerChoice:
         self.spawn, self.connect, self.serve_web = spawn, connect, serve_web
         self.web_port = web_port
         self.url: str | None = None
-        self.web: Any = None
+        self.web: WebViewer | None = None
         #: Why the viewer could not be reached (``start(tolerant=True)`` only).
         self.problem: str | None = None
         if connect is not None:
@@ -121,17 +126,19 @@ class FoxgloveChoice:
         if pace is not None and address is None:
             raise UsageError("--pace: only with --foxglove")
         self.pace, self.several = pace, several
-        self.server: Any = None
-        self.sinks: dict[str, Any] = {}
+        self.server: FoxgloveServer | None = None
+        self.sinks: dict[str, FoxgloveSlotSink] = {}
         self.problem: str | None = None
-        self.address: Any = None
+        self.address: Address | None = None
         if address is not None:
             from corraoi.recorder.live.foxglove import parse_address, require_foxglove
 
             self.address = parse_address(address)  # a bad value: one line, exit 2
             require_foxglove()  # no extra: name it before anything runs
 
-    def start(self, configs: list[Any], *, tolerant: bool = False) -> Any:
+    def start(
+        self, configs: Sequence[RunConfig], *, tolerant: bool = False
+    ) -> FoxgloveServer | None:
         """Start the server with a channel per run of ``configs`` and say where it is; with
         ``tolerant`` a server that cannot start is one error line (kept in :attr:`problem`)
         and None. The channels exist before the URL is printed: the SDK (0.30) may refuse a
@@ -155,7 +162,7 @@ class FoxgloveChoice:
         self.say(self.server.hint(paced=self.pace is not None))
         return self.server
 
-    def sink(self, config: Any, stop: Callable[[], bool]) -> Any:
+    def sink(self, config: RunConfig, stop: Callable[[], bool]) -> FoxgloveSlotSink | None:
         """A slot sink for one run (None without a server)."""
         sink = self.sinks.get(config.label) if self.server is not None else None
         if sink is not None:

@@ -37,6 +37,7 @@ from corraoi.recorder.slotlog.sink import McapSink
 from corraoi.recorder.vocab import SLOT_FLUSH_EVERY
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
     from typing_extensions import Self
 
     from corraoi.model.instance import Instance
@@ -115,7 +116,7 @@ class Logger:
         source: str = "",
         version: str = "",
         overwrite: bool = False,
-        sinks: Sequence[Sink] = (),
+        sinks: Sequence[Sink[SlotBlock]] = (),
     ) -> None:
         from corraoi import arguments
         from corraoi.files.partial import check_target
@@ -196,7 +197,7 @@ class Logger:
         self.config: RunConfig | None = None
         self._stack: ExitStack | None = None
         self._log: McapSink | None = None
-        self._every: list[Sink] = []
+        self._every: list[Sink[SlotBlock]] = []
         #: slots written so far (to the sinks and pending)
         self.t = 0
         self._given: tuple[bool, ...] | None = None  # (x, *GIVEN_FIELDS) given?
@@ -465,7 +466,7 @@ class Logger:
             cols[f] = absent_column(f, B, K)
         return SlotBlock(**cols, absent=self._absent)
 
-    def _block(self, arm: Any, success: Any, **fields: Any) -> SlotBlock:
+    def _block(self, arm: ArrayLike, success: ArrayLike, **fields: ArrayLike | None) -> SlotBlock:
         """Check a block's arrays (one SlotError naming the argument and the slot) and
         compute its slots."""
         first = self.t + 1
@@ -556,7 +557,7 @@ class Logger:
         )
 
     @staticmethod
-    def _bad_t(t: Any, n: int) -> None:
+    def _bad_t(t: object, n: int) -> None:
         word = "goes backwards" if isinstance(t, int) and t < n else "skips slots"
         if not isinstance(t, int) or isinstance(t, bool):
             raise SlotError(f"slot {n}: t {t!r}: expected the slot number {n}")
@@ -572,7 +573,7 @@ class Logger:
             raise SlotError(f"slot {n}: {name} {value!r}: expected an integer") from None
 
     @staticmethod
-    def _boolean(value: Any, name: str, n: int) -> bool:
+    def _boolean(value: object, name: str, n: int) -> bool:
         if isinstance(value, (bool, np.bool_)):
             return bool(value)
         raise SlotError(f"slot {n}: {name} {value!r}: expected a bool (True or False)")
@@ -589,7 +590,7 @@ class Logger:
             raise SlotError(f"slot {n}: mu_hat {row}: expected {self.K} numbers in [0, 1]")
         return row
 
-    def _candidate_row(self, value: Any, n: int) -> np.ndarray:
+    def _candidate_row(self, value: ArrayLike, n: int) -> np.ndarray:
         arr = np.asarray(value)
         if arr.dtype == bool and arr.shape == (self.K,):
             return arr
@@ -628,7 +629,7 @@ def _ages(success: np.ndarray, before: int) -> np.ndarray:
     return np.where(last >= 0, idx - last + 1, before + idx + 1)
 
 
-def _array(value: Any, name: str, first: int, ndim: int = 1) -> np.ndarray:
+def _array(value: ArrayLike, name: str, first: int, ndim: int = 1) -> np.ndarray:
     arr = np.asarray(value)
     if arr.ndim != ndim or arr.dtype == object:
         shape = "one entry per slot" if ndim == 1 else "one row of K per slot"

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import (
+    ConfigError,
     OutputError,
     PolicyError,
     PolicyRuntimeError,
@@ -36,8 +37,13 @@ from corraoi.recorder.sink import RunRecording, Sink
 from corraoi.recorder.slotlog.sink import McapSink
 
 if TYPE_CHECKING:
+    from corraoi.engine.block import RunBlock, RunConfig, SlotBlock
+    from corraoi.engine.summary import RunSummary
+    from corraoi.experiments.drill import Drill
     from corraoi.model.instance import Instance
+    from corraoi.recorder.rerun.worker import RerunWorker
 
+    from .live import FoxgloveChoice
     from .resolve import PolicyLike
     from .runs import Run
 
@@ -60,16 +66,16 @@ class RecordOutcome:
 
 
 def record_run(
-    config: Any,
+    config: RunConfig,
     mcap: str | os.PathLike[str],
     *,
     rrd: str | os.PathLike[str] | None = None,
     viewer_url: str | None = None,
     overwrite: bool = False,
-    on_block: Callable[[Any], None] | None = None,
+    on_block: Callable[[RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
-    rerun: Any = None,
-    sinks: Sequence[Sink] = (),
+    rerun: RerunWorker | None = None,
+    sinks: Sequence[Sink[SlotBlock]] = (),
     expect: Sequence[tuple[int, float]] = (),
     notes: Sequence[str] = (),
 ) -> RecordOutcome:
@@ -81,13 +87,22 @@ def record_run(
     ``rerun``, a :class:`corraoi.recorder.rerun.worker.RerunWorker`, writes the Rerun recording in
     its process (the same file), else it is written in this one. ``sinks``: further
     :class:`~corraoi.recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
-    block after those two, closed with the run, or aborted when it fails.
+    block after those two, closed with the run, or aborted when it fails (a run of several
+    sources goes to its log and recording only: it refuses ``sinks``).
 
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
     the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
     finished as failed with that line. ``notes`` go into the log's provenance."""
+    from corraoi.engine.block import SlotBlock
+
     from .slots import slots_of
 
+    if config.sources > 1 and sinks:
+        raise ConfigError(
+            f"{config.label}: a run of {config.sources} sources is recorded to its log and "
+            "Rerun recording only; expected no further sinks (Foxglove live, your own), "
+            "which take a single source's slots"
+        )
     if expect:  # a drill-down's check (the module is not imported by a plain record)
         from corraoi.experiments.drill import row_mismatch
     slots = 0
@@ -112,15 +127,19 @@ def record_run(
                 stack.enter_context(recording)
             log = stack.enter_context(McapSink(mcap, config, overwrite=overwrite,
                                                provenance=provenance))  # fmt: skip
-            every: list[Sink] = [log]
+            every: list[Sink[RunBlock]] = [log]
             if recording is not None:
                 every.append(recording)
-            every += [stack.enter_context(s) for s in sinks]
+            others = [stack.enter_context(s) for s in sinks]
             for block in slots_of(config):  # the engine's, or a GPU sweep's own run
                 for sink in every:
                     sink.write(block)
+                if isinstance(block, SlotBlock):  # (a run of several sources has no others)
+                    for other in others:
+                        other.write(block)
                 slots = int(block.t[-1])
-                mismatch = row_mismatch(expect, block) if expect else None
+                mismatch = (row_mismatch(expect, block)
+                            if expect and isinstance(block, SlotBlock) else None)  # fmt: skip
                 if mismatch is not None:  # after the block is in the log: it shows it
                     raise SweepMismatch(f"{config.label}: {mismatch}; the log is left as "
                                         f"{log.partial_path}, marked failed")  # fmt: skip
@@ -138,7 +157,7 @@ def record_run(
     return RecordOutcome(log.path if log.finished else log.partial_path, rrd_path, slots, problem)
 
 
-def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> RecordOutcome:
+def record_drill(drill: Drill, mcap: str | os.PathLike[str], **kwargs: Any) -> RecordOutcome:
     """:func:`record_run` of a run chosen from a sweep (a
     :class:`corraoi.experiments.drill.Drill`): it
     must give the sweep's regret again, and its log carries the drill's notes."""
@@ -152,14 +171,14 @@ def record_drill(drill: Any, mcap: str | os.PathLike[str], **kwargs: Any) -> Rec
 class Plan:
     """One run to record: its configuration (a ``RunConfig``) and its files."""
 
-    config: Any  # RunConfig
+    config: RunConfig
     mcap: Path
     rrd: Path | None
     #: where it came from (a corraoi.experiments.drill.Drill, --from): what it must give again
-    drill: Any = None
+    drill: Drill | None = None
 
 
-def _expand(template: str, config: Any, drill: Any = None) -> Path:
+def _expand(template: str, config: RunConfig, drill: Drill | None = None) -> Path:
     """The path ``template`` names for ``config``. The names filled in are data (from an
     instance file or a plug-in): each goes through ``safe_name``, so none can add a folder,
     climb out of one (``../``) or carry control codes into the file name."""
@@ -184,11 +203,11 @@ def _rrd_beside(mcap: Path) -> Path:
 
 
 def plan_files(
-    configs: Sequence[Any],
+    configs: Sequence[RunConfig],
     out: str | os.PathLike[str] | None = None,
     rrd: str | os.PathLike[str] | None = None,
     no_rrd: bool = False,
-    drills: Sequence[Any] | None = None,
+    drills: Sequence[Drill] | None = None,
 ) -> list[Plan]:
     """The files of each run: ``out`` (default ``runs/{label}.mcap``, a run of a sweep
     ``runs/{from}.mcap``) and ``rrd`` (default: beside the log, none with ``no_rrd``), their
@@ -330,9 +349,9 @@ class Outlets:
 
     viewer_url: str | None = None
     overwrite: bool = False
-    live: Any = None
-    rerun: Any = None
-    sinks: tuple[Sink, ...] = ()
+    live: FoxgloveChoice | None = None
+    rerun: RerunWorker | None = None
+    sinks: tuple[Sink[SlotBlock], ...] = ()
 
 
 @dataclass
@@ -350,7 +369,8 @@ class Recorded:
     rrd: Path | None = None
     compile_s: float = 0.0
     viewer_problem: str | None = None
-    summary: Any = None  # corraoi.engine.summary.RunSummary, measured as the blocks went by
+    #: the run's summary, measured as the blocks went by
+    summary: RunSummary | None = None
 
 
 def prepare_kernels(plans: Sequence[Plan]) -> None:
@@ -373,7 +393,7 @@ def record_plans(
     plans: Sequence[Plan],
     outlets: Outlets = Outlets(),
     *,
-    on_block: Callable[[Plan, Any], None] | None = None,
+    on_block: Callable[[Plan, RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> list[Recorded]:
     """Record every plan in turn (module docstring). ``on_block(plan, block)`` after each
@@ -399,10 +419,11 @@ def _record_one(
     plan: Plan,
     result: Recorded,
     outlets: Outlets,
-    on_block: Callable[[Plan, Any], None] | None,
+    on_block: Callable[[Plan, RunBlock], None] | None,
     should_stop: Callable[[], bool] | None,
 ) -> None:
     from corraoi.engine import kernels
+    from corraoi.engine.block import SourcesBlock
     from corraoi.engine.summary import SummaryAccumulator
     from corraoi.files.partial import partial_path
 
@@ -412,12 +433,16 @@ def _record_one(
     # with --pace, the Foxglove sink's write is what slows the run
     fox = outlets.live.sink(config, stopping) if outlets.live is not None else None
 
-    def each(block: Any) -> None:
+    def each(block: RunBlock) -> None:
         summary.update(block)
         result.slots = int(block.t[-1])
-        result.regret = int(block.regret[-1])
-        result.estimator = float(block.estimator[-1])
-        result.pulls = [int(v) for v in block.pulls[-1]]
+        if isinstance(block, SourcesBlock):  # several sources: the run's regret, the sum
+            result.regret = sum(int(s.regret[-1]) for s in block.sources)
+            result.pulls = [int(v) for v in sum(s.pulls[-1] for s in block.sources)]
+        else:
+            result.regret = int(block.regret[-1])
+            result.estimator = float(block.estimator[-1])
+            result.pulls = [int(v) for v in block.pulls[-1]]
         if on_block is not None:
             on_block(plan, block)
 
@@ -464,10 +489,11 @@ def record(
     rrd: str | os.PathLike[str] | bool | None = None,
     force: bool = False,
     viewer: str | None = None,
-    sinks: Sequence[Sink] = (),
-    on_block: Callable[[Any], None] | None = None,
+    sinks: Sequence[Sink[SlotBlock]] = (),
+    on_block: Callable[[RunBlock], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     score: bool | None = None,
+    sources: int = 1,
 ) -> Run:
     """Simulate one run and record every slot, as ``corraoi record`` does with the same
     arguments (the same bytes in the log); returns the recorded :class:`corraoi.Run`.
@@ -491,7 +517,9 @@ def record(
     ``on_block(block)`` after every block of slots; ``should_stop()`` ends the run at its
     next block, the files finished with the slots so far (Ctrl-C does the same).
     ``score``: log what the policy maximised at every slot (``score``, ``forced``; by
-    default up to 64 arms).
+    default up to 64 arms). ``sources``: the number of sources M sharing the channels
+    (1..K; a run of several sources logs each source's slots and its collisions,
+    docs/model.md "Many sources").
 
     Raises :class:`~corraoi.errors.PolicyError`, :class:`~corraoi.errors.InstanceError`,
     :class:`~corraoi.errors.ConfigError` (bad input, before anything runs),
@@ -520,16 +548,25 @@ def record(
     arguments.optional(arguments.callback, on_block, name="on_block")
     arguments.optional(arguments.callback, should_stop, name="should_stop")
     inst = resolve.instance(instance)
+    sources = arguments.integer(sources, name="sources", lo=1, hi=inst.K, kind=ConfigError,
+                                floats=False,
+                                why=f"at most the {inst.K} arms of instance {inst.name}")
     (spec,) = resolve.policies(policy, params)
     chan = resolve.channel(channel, inst)
     chan.check(inst, horizon)
-    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score)
+    config = RunConfig(inst, spec, int(seed), int(horizon), channel=chan, score=score,
+                       sources=sources)  # fmt: skip
     if rrd is True:
         rrd = None
     (plan,) = plan_files([config], path, None if rrd is False else rrd, no_rrd=rrd is False)
     if not force and viewer is None and not sinks and up_to_date(plan):
         return Run(plan.mcap, rrd=plan.rrd)
     refuse([plan], force=force, hint="force=True")
+    if plan.rrd is not None or viewer is not None:
+        from corraoi.extras import require_package
+
+        # one line before anything is written, not an import error after the log began
+        require_package("rerun", "corraoi.record's Rerun recording (rrd=False: none)")
     outlets = Outlets(viewer_url=viewer, overwrite=force, sinks=tuple(sinks))
     each = None if on_block is None else (lambda _plan, block: on_block(block))
     (done,) = record_plans([plan], outlets, on_block=each, should_stop=should_stop)

@@ -70,7 +70,7 @@ def instance(value: str | os.PathLike[str] | Instance, what: str = "instance") -
     return inst
 
 
-def _word(value: Any, what: str = "policy") -> tuple[str, dict[str, float]]:
+def _word(value: object, what: str = "policy") -> tuple[str, dict[str, float]]:
     """The ``--policy`` word of one policy-like value, and the parameters an instance of a
     plain-Python policy carries as attributes."""
     if isinstance(value, str):
@@ -92,7 +92,7 @@ def _word(value: Any, what: str = "policy") -> tuple[str, dict[str, float]]:
     return policy_name(cls), given
 
 
-def _listed(policy: PolicyLike | Sequence[PolicyLike], what: str = "policy") -> list[Any]:
+def _listed(policy: PolicyLike | Sequence[PolicyLike], what: str = "policy") -> list[PolicyLike]:
     if isinstance(policy, (str, type, PolicyBase)):
         return [policy]
     if not isinstance(policy, Sequence) or isinstance(policy, (bytes, bytearray)):

@@ -18,6 +18,9 @@ from typing import TYPE_CHECKING, Any
 from corraoi.errors import OutputError
 
 if TYPE_CHECKING:
+    from corraoi.engine.block import RunBlock, RunConfig
+    from corraoi.experiments.drill import Drill
+
     from .live import FoxgloveChoice, ViewerChoice
     from .recording import Plan, Recorded
     from .views import ProgressBar
@@ -26,22 +29,29 @@ if TYPE_CHECKING:
 def run_configs(instance: str | os.PathLike[str], policies: Sequence[str], params: Sequence[str],
                 *, c: float | None, beta: float | None, channel: str | None, seed: int,
                 horizon: int, score: bool | None,
-                warn: Callable[[str], None] | None = None) -> list[Any]:  # fmt: skip
+                warn: Callable[[str], None] | None = None,
+                sources: int = 1) -> list[RunConfig]:  # fmt: skip
     """The runs ``corraoi record`` is given: the instance, the policies (words, with the
-    command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon and
-    channel, as ``RunConfig`` values. Raises :class:`~corraoi.errors.InstanceError`,
-    :class:`~corraoi.errors.PolicyError` or :class:`~corraoi.errors.ConfigError`."""
+    command line's ``--param NAME=VALUE`` words, ``c`` and ``beta``) on one seed, horizon,
+    channel and number of sources (``--sources``, 1..K), as ``RunConfig`` values. Raises
+    :class:`~corraoi.errors.InstanceError`, :class:`~corraoi.errors.PolicyError` or
+    :class:`~corraoi.errors.ConfigError`."""
+    from corraoi import arguments
     from corraoi.engine.block import RunConfig
+    from corraoi.errors import ConfigError
     from corraoi.model.instance import load_instance
     from corraoi.policies import make_policies, parse_param_assignments
 
     from .resolve import channel as resolve_channel
 
     inst = load_instance(instance)
+    arguments.integer(sources, name="--sources", lo=1, hi=inst.K, kind=ConfigError,
+                      why=f"at most the {inst.K} arms of instance {inst.name}")  # fmt: skip
     specs = make_policies(policies, parse_param_assignments(params), c=c, beta=beta, warn=warn)
     chan = resolve_channel(channel, inst)
     chan.check(inst, horizon)
-    return [RunConfig(inst, spec, seed, horizon, channel=chan, score=score) for spec in specs]
+    return [RunConfig(inst, spec, seed, horizon, channel=chan, score=score, sources=sources)
+            for spec in specs]  # fmt: skip
 
 
 def runs_from_sweep(
@@ -57,7 +67,7 @@ def runs_from_sweep(
     allow_changed_code: bool = False,
     hold: Callable[[AbstractContextManager[Any]], Any],
     warn: Callable[[str], None] | None = None,
-) -> list[Any]:
+) -> list[Drill]:
     """The runs ``--from folder`` names (``run`` of each cell, ``cells`` only), as drills
     (``.config``, ``.folder``, ``.cell``, ``.run``, ``.choice``). ``policies``: the words of
     ``--policy`` when it was given (the sweep's labels select its cells, any other word adds a
@@ -87,11 +97,11 @@ def runs_from_sweep(
 
 
 def plan_runs(
-    configs: Sequence[Any],
+    configs: Sequence[RunConfig],
     output: str | None,
     rrd: str | None,
     no_rrd: bool,
-    drills: Sequence[Any] | None,
+    drills: Sequence[Drill] | None,
     *,
     force: bool,
     live_option: str | None,
@@ -235,7 +245,7 @@ def record_runs(
         total = sum(p.config.horizon for p in plans)
         with Stop() as stop, _bar(progress, total) as bar:
 
-            def on_block(plan: Plan, block: Any) -> None:
+            def on_block(plan: Plan, block: RunBlock) -> None:
                 if bar is not None:
                     bar.update(len(block), note=f"{plan.config.label} slot {int(block.t[-1])}")
 

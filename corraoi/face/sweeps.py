@@ -16,7 +16,7 @@ import shutil
 import tempfile
 import weakref
 from collections.abc import Callable, Mapping, Sequence
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from corraoi.experiments.grid import Grid
     from corraoi.experiments.sweeps import SweepOutcome
     from corraoi.model.instance import Instance
+    from corraoi.policies.spec import PolicySpec
 
     from .runs import Run
     from .viewing import Shown
@@ -116,9 +117,10 @@ class Sweep(SweepData):
             return self._record(which, specs, labels, cell, path, rrd, force, kept_code,
                                 allow_changed_code)  # fmt: skip
 
-    def _record(self, which: int | str, specs: list[Any], labels: list[str], cell: str | None,
-                path: str | os.PathLike[str] | None, rrd: str | os.PathLike[str] | bool | None,
-                force: bool, kept_code: bool, allow_changed_code: bool) -> Run:  # fmt: skip
+    def _record(self, which: int | str, specs: list[PolicySpec], labels: list[str],
+                cell: str | None, path: str | os.PathLike[str] | None,
+                rrd: str | os.PathLike[str] | bool | None, force: bool, kept_code: bool,
+                allow_changed_code: bool) -> Run:  # fmt: skip
         from corraoi.experiments.drill import choose, row_verdict
         from corraoi.experiments.folder import PYTHON_WORDS
 
@@ -218,6 +220,7 @@ class Sweep(SweepData):
         set_workers(1)  # one run has nothing to spread over threads
         for p in todo:
             d = p.drill
+            assert d is not None  # each plan is a drill's
             if say is not None:
                 say(f"recording {safe_text(p.mcap)} ({safe_text(d.config.instance_name)} "
                     f"{safe_text(d.cell or d.config.label)}, run {d.run}, seed "
@@ -356,7 +359,7 @@ def sources_words(values: Sequence[str]) -> list[int] | None:
     return parse_sources(values)
 
 
-def kept_code(folder: str | os.PathLike[str]) -> Any:
+def kept_code(folder: str | os.PathLike[str]) -> AbstractContextManager[list[str]]:
     """A context in which the plug-ins of the sweep in ``folder`` load from its kept copies
     (``--resume --kept-code``), entered before the grid is built."""
     from corraoi.experiments.kept_code import use_kept_code

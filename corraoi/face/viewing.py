@@ -20,10 +20,13 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi import arguments
 from corraoi.errors import LogError, UsageError, ViewerError
+
+if TYPE_CHECKING:
+    from corraoi.recorder.live.viewers import WebViewer
 
 #: The first bytes of every Rerun recording file (0.41: ``RRF2``).
 RRD_MAGIC = b"RRF2"
@@ -40,7 +43,7 @@ class Shown:
     Python exits)."""
 
     def __init__(self, kind: str, recordings: list[Path], *, url: str | None = None,
-                 widget: Any = None, server: Any = None,
+                 widget: Any = None, server: WebViewer | None = None,
                  process: subprocess.Popen[bytes] | None = None) -> None:  # fmt: skip
         self.kind, self.recordings, self.url, self.widget = kind, recordings, url, widget
         self._server, self._process = server, process

@@ -247,6 +247,7 @@ def replay_foxglove(log: Path, live: FoxgloveChoice, *, start: int = 1,
         raise UsageError(f"--start {start}: {log} holds slots 1..{run.n_slots}, "
                          "expected a slot there")  # fmt: skip
     server = live.start([run.config])
+    assert server is not None  # --foxglove was given, and a server that cannot start raises
     try:
         with _bar(progress, run.n_slots - start + 1, "replay") as bar:
             last = stream_log(server, run, start=start,

@@ -34,7 +34,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi.engine.block import RunConfig, SlotBlock
 from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
@@ -43,6 +43,9 @@ from corraoi.recorder.slotlog.encode import BlockEncoder, run_metadata, schema_b
 from corraoi.recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
+
+if TYPE_CHECKING:
+    from corraoi.recorder.slotlog.reader import RunLog
 
 #: What to install for ``--foxglove``.
 EXTRA = 'pip install "corraoi[foxglove]"'
@@ -235,6 +238,8 @@ class FoxgloveServer:
     def stop(self) -> None:
         if not self._stopped:
             self._stopped = True
+            if any(self.published.values()):
+                self.front.settle()  # what the server queued reaches its clients first
             self._server.stop()  # closes its connections (through the front) properly
             self.front.close()
 
@@ -245,7 +250,7 @@ class FoxgloveServer:
         self.stop()
 
 
-class FoxgloveSlotSink(Sink):
+class FoxgloveSlotSink(Sink[SlotBlock]):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
     The messages are :class:`corraoi.recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
@@ -323,7 +328,7 @@ def _run_schema(meta: dict[str, str]) -> dict[str, Any]:
     }
 
 
-class FoxgloveSweepSink(Sink):
+class FoxgloveSweepSink(Sink[dict[str, Any]]):
     """Streams sweep points to ``/corraoi/sweep`` as each checkpoint finishes:
     ``write(point)`` with a JSON-able dict (one message; ``log_time`` its ``t`` seconds
     when it has one), ``close()``."""
@@ -352,7 +357,7 @@ class FoxgloveSweepSink(Sink):
 
 def stream_log(
     server: FoxgloveServer,
-    log: Any,
+    log: RunLog,
     *,
     start: int = 1,
     pace: float | None = None,

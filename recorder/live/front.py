@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import socket
 import threading
+import time
 from collections.abc import Callable
 from functools import partial
 
@@ -36,6 +37,10 @@ LEGACY_PROTOCOL = "foxglove.websocket.v1"
 MAX_HEAD = 64 << 10
 #: Bytes copied at a time.
 CHUNK = 256 << 10
+#: ``settle``: the server's queue counts as sent once nothing has flowed for QUIET s, and
+#: the front waits at most SETTLE_LIMIT s for that.
+QUIET = 0.2
+SETTLE_LIMIT = 2.0
 
 
 def offered(head: bytes) -> list[str]:
@@ -101,6 +106,8 @@ class SubprotocolFront:
         self._closed = False
         #: handshakes the front renamed (``foxglove.websocket.v1`` clients), for the tests
         self.renamed = 0
+        #: when bytes last went through (time.monotonic)
+        self.last_flow = time.monotonic()
         self._thread = threading.Thread(target=self._accept, name="foxglove-front", daemon=True)
         self._thread.start()
 
@@ -165,6 +172,7 @@ class SubprotocolFront:
                 if not n:
                     break
                 sink.sendall(view[:n])
+                self.last_flow = time.monotonic()
             sink.shutdown(socket.SHUT_WR)
         except OSError:  # reset, or closed by close(): end both
             self._close(source)
@@ -184,6 +192,20 @@ class SubprotocolFront:
         except OSError:
             pass
         sock.close()
+
+    def settle(self, quiet: float = QUIET, limit: float = SETTLE_LIMIT) -> None:
+        """Wait, while a client is connected, until nothing has gone through for ``quiet``
+        s (at most ``limit`` s): what the server had queued for its clients has then
+        reached them. Stopping the SDK's server drops what its queues still hold: a client
+        of a run that just ended missed its last slots."""
+        end = time.monotonic() + limit
+        while True:
+            with self._lock:
+                connected = bool(self._open)
+            now = time.monotonic()
+            if not connected or now - self.last_flow >= quiet or now >= end:
+                return
+            time.sleep(min(quiet - (now - self.last_flow), end - now, 0.05))
 
     def close(self) -> None:
         """Stop listening and end every connection (safe twice)."""

@@ -386,16 +386,138 @@ def one_run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW,
     )
 
 
+#: The most sources the views of a run of several sources give a legend.
+LEGEND_SOURCES = 4
+
+
+@dataclass(frozen=True)
+class SourcesViews:
+    """The views of a run of several sources (:mod:`corraoi.recorder.rerun.sources`), each
+    made for a panel ``px`` pixels wide: ``prefix`` before each title (compare's columns)."""
+
+    label: str
+    config: RunConfig
+    tw: TimeWindows
+    prefix: str = ""
+
+    def _series(self, name: str, contents: list[str], px: float, *, windowed: bool,
+                y: tuple[float, float] | None = None,
+                legend: Sequence[str] = ()) -> rrb.TimeSeriesView:  # fmt: skip
+        tw, room = self.tw, legend_room(legend, px)
+        return rrb.TimeSeriesView(
+            origin=run_path(self.label), contents=contents,
+            name=fit(f"{self.prefix}: {name}" if self.prefix else name, px),
+            axis_x=tw.window_axis(room) if windowed else tw.whole_axis(room),
+            axis_y=rrb.ScalarAxis(range=y, zoom_lock=True) if y else None,
+            time_ranges=[tw.window_query if windowed else tw.whole_query],
+            plot_legend=LEGEND if legend else NO_LEGEND,
+        )  # fmt: skip
+
+    def _names(self) -> list[str]:
+        return [style.source_name(m) for m in range(1, self.config.sources + 1)]
+
+    def _legend(self, *entries: str) -> list[str]:
+        """A legend of up to LEGEND_SOURCES sources (beyond, the views would be all legend:
+        the colours are named in the run card and the titles)."""
+        return list(entries) if self.config.sources <= LEGEND_SOURCES else []
+
+    def regret(self, px: float) -> rrb.TimeSeriesView:
+        return self._series(
+            f"AoI regret {style.REGRET_UNIT}: all sources (black) and each source",
+            ["$origin/regret", *(f"$origin/sources/{m}/regret"
+                                 for m in range(1, self.config.sources + 1))],
+            px, windowed=False,
+            legend=self._legend("all sources", *self._names()),
+        )  # fmt: skip
+
+    def occupancy(self, px: float) -> rrb.TimeSeriesView:
+        K, w = self.config.K, self.tw.window
+        return self._series(
+            f"channel played (1..{K}) by each source, collisions: red crosses, last {w} slots",
+            ["$origin/occupancy/**"], px, windowed=True, y=(0.5, K + 0.5),
+            legend=self._legend(*self._names(), "collision"),
+        )  # fmt: skip
+
+    def ages(self, px: float) -> list[rrb.TimeSeriesView]:
+        """A view per source (each ``px`` wide): its age against its oracle's."""
+        w = self.tw.window
+        return [
+            self._series(f"source {m}: AoI {style.AOI_UNIT} (line), its oracle (dots), last {w}",
+                         [f"$origin/sources/{m}/aoi", f"$origin/sources/{m}/oracle_aoi"],
+                         px, windowed=True)  # fmt: skip
+            for m in range(1, self.config.sources + 1)
+        ]
+
+    def means(self, px: float) -> rrb.View:
+        M, K = self.config.sources, self.config.K
+        if K > style.SOURCE_BARS_UP_TO:  # a heatmap: rows the sources, columns the arms
+            title = (f"mean {style.MEAN_UNIT} at the cursor: rows sources 1..{M}, columns "
+                     f"arms 1..{K}, dark 0 .. bright 1")  # fmt: skip
+            return rrb.TensorView(
+                origin=f"{run_path(self.label)}/means",
+                name=fit(f"{self.prefix}: {title}" if self.prefix else title, px),
+                view_fit="fill",
+            )
+        title = (f"mean {style.MEAN_UNIT} per arm at the cursor: each source's bar in its "
+                 "colour, then the true mean (dark grey)")  # fmt: skip
+        return rrb.BarChartView(
+            origin=run_path(self.label), contents=["$origin/true_means", "$origin/means/**"],
+            name=fit(f"{self.prefix}: {title}" if self.prefix else title, px),
+            plot_legend=NO_LEGEND,
+        )  # fmt: skip
+
+
+def sources_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
+    """The default layout of a run of several sources (:mod:`corraoi.recorder.rerun.sources`).
+
+    Top: the regret of the run (the sum, near-black) and of each source (its colour), whole
+    run, beside the channel occupancy (y: channel, a point per source and slot in the
+    source's colour, red crosses where sources collided), the last ``window`` slots. Middle:
+    a panel per source, its age against its oracle's (last ``window`` slots), in a grid of
+    up to four columns. Bottom: each source's empirical means at the cursor (the sources'
+    bars side by side over each arm, then the true mean's), and the run card.
+    """
+    M = config.sources
+    v = SourcesViews(label, config, time_windows(window, config.horizon))
+    W = VIEWER_PX
+    columns = min(M, 4)
+    root = rrb.Vertical(
+        rrb.Horizontal(v.regret(W * 0.4), v.occupancy(W * 0.6), column_shares=[2, 3]),
+        rrb.Grid(*v.ages(W / columns), grid_columns=columns),
+        rrb.Horizontal(v.means(W * 0.8),
+                       rrb.TextDocumentView(origin=f"{run_path(label)}/about", name="run"),
+                       column_shares=[4, 1]),  # fmt: skip
+        row_shares=[3.0, 2.0 if M <= columns else 3.0, 2.5],
+    )
+    return rrb.Blueprint(
+        root,
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="hidden"),
+    )
+
+
+def run_blueprint(label: str, config: RunConfig, *, window: int = WINDOW) -> rrb.Blueprint:
+    """The default layout of a run: :func:`one_run_blueprint`, or for a run of several
+    sources :func:`sources_blueprint`."""
+    if config.sources > 1:
+        return sources_blueprint(label, config, window=window)
+    return one_run_blueprint(label, config, window=window)
+
+
 __all__ = [
     "VIEWER_PX",
     "WINDOW",
     "RunViews",
+    "SourcesViews",
     "TimeWindows",
     "first_fit",
     "fit",
     "legend_room",
     "names_in_title",
     "one_run_blueprint",
+    "run_blueprint",
+    "sources_blueprint",
     "time_windows",
     "title_chars",
 ]

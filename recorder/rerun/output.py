@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import NoReturn
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -15,7 +15,7 @@ from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.recorder.sink import Sink, made_again
 
-from .layout import one_run_blueprint
+from .layout import run_blueprint
 from .names import new_recording
 
 
@@ -25,7 +25,7 @@ def first_line(exc: BaseException) -> str:
     return text.splitlines()[0]
 
 
-class RrdOutput(Sink):
+class RrdOutput(Sink[NoReturn]):  # a file or viewer: RerunSink writes, nothing is written here
     """Where one run's Rerun recording goes: an ``.rrd`` file and/or a viewer (gRPC URL).
 
     The file is written as ``<path>.partial`` (with the default blueprint embedded) and
@@ -68,7 +68,7 @@ class RrdOutput(Sink):
         self.finished = False
         self._out: PartialFile | None = None
         self._final_blueprint: rrb.Blueprint | None = None
-        sinks: list[Any] = []
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
         if rrd_path is not None:
             # create (or truncate) the .partial file here, so that an unwritable place is
             # one clear error now rather than a log line from Rerun's writer thread later;
@@ -81,7 +81,7 @@ class RrdOutput(Sink):
         if viewer_url is not None:
             sinks.append(rr.GrpcSink(viewer_url))
         self.recording = new_recording(config, recording_id=recording_id, name=name)
-        first = None if blueprint_at_end else blueprint or one_run_blueprint(self.label, config)
+        first = None if blueprint_at_end else blueprint or run_blueprint(self.label, config)
         try:
             self.recording.set_sinks(*sinks, default_blueprint=first)
         except (OSError, RuntimeError, ValueError) as exc:
@@ -144,7 +144,7 @@ class RrdOutput(Sink):
         return self._out.leave()
 
 
-def finish_recording(recording: Any, timeout: float = 30.0) -> str | None:
+def finish_recording(recording: rr.RecordingStream, timeout: float = 30.0) -> str | None:
     """Flush and disconnect a recording; returns the problem Rerun reported, if any (its
     file writer stopped by a full disk, say), instead of raising it."""
     problem = None

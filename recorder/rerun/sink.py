@@ -17,13 +17,14 @@ with reproducible settings) and owns where it goes;
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
 
-from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.block import RunBlock, RunConfig, SlotBlock, SourcesBlock
 from corraoi.recorder import style
 from corraoi.recorder.sink import RunRecording, Sink
 
@@ -34,7 +35,11 @@ from .names import (
     snapshot_every,
 )
 from .output import RrdOutput, first_line
+from .sources import SourcesSink
 from .static import log_focus, log_static, log_why_focus, log_why_static, tensor_batch
+
+if TYPE_CHECKING:
+    from corraoi.policies import RGB
 
 #: Slots a RerunSink gathers before it sends them. One ``send_columns`` per entity has a
 #: fixed cost: on this machine (benchmarks/bench_record.py, 200,000 slots) batches of 1,000
@@ -43,7 +48,7 @@ from .static import log_focus, log_static, log_why_focus, log_why_static, tensor
 BATCH = 8192
 
 
-class RerunSink(Sink):
+class RerunSink(Sink[SlotBlock]):
     """Send one run's SlotBlocks to ``recording`` under ``runs/<label>``.
 
     ``with RerunSink(recording, label, config) as sink: sink.write(block)``. The static
@@ -60,7 +65,7 @@ class RerunSink(Sink):
         *,
         flush_timeout: float = 30.0,
         batch: int = BATCH,
-        color: style.RGB | None = None,
+        color: RGB | None = None,
     ) -> None:
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch}")
@@ -205,7 +210,9 @@ class RerunSink(Sink):
             self._send_why(block, t, column)
         self.slots += n
 
-    def _send_why(self, block: SlotBlock, t: np.ndarray, column: Any) -> None:
+    def _send_why(
+        self, block: SlotBlock, t: np.ndarray, column: Callable[[str, np.ndarray, np.ndarray], None]
+    ) -> None:
         """The "why this arm" entities of a block that has scores: every arm's score (up to
         LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
         where the score chose it, the forced slots, the override's threshold."""
@@ -341,6 +348,15 @@ class RerunSink(Sink):
         return self.problem
 
 
+def run_sink(recording: rr.RecordingStream, label: str, config: RunConfig, *,
+             color: RGB | None = None) -> RerunSink | SourcesSink:  # fmt: skip
+    """The sink of one run: a :class:`RerunSink`, or for a run of several sources a
+    :class:`corraoi.recorder.rerun.sources.SourcesSink` (the same interface)."""
+    if config.sources > 1:
+        return SourcesSink(recording, label, config, color=color)
+    return RerunSink(recording, label, config, color=color)
+
+
 class LocalRecording(RunRecording):
     """One run's recording written in this process: an :class:`RrdOutput` (the file and/or
     viewer) fed by a :class:`RerunSink` (:class:`~corraoi.recorder.sink.RunRecording`'s meaning).
@@ -357,10 +373,18 @@ class LocalRecording(RunRecording):
         self.output = RrdOutput(config, rrd_path=rrd_path, viewer_url=viewer_url,
                                 overwrite=overwrite)  # fmt: skip
         self.path = self.output.path
-        self.sink = RerunSink(self.output.recording, config.label, config)
+        self.sink = run_sink(self.output.recording, config.label, config)
 
-    def _write(self, block: SlotBlock) -> None:
-        self.sink.write(block)
+    def _write(self, block: RunBlock) -> None:
+        if isinstance(self.sink, SourcesSink):
+            if not isinstance(block, SourcesBlock):
+                raise ValueError(f"{self.sink.label}: a single source's block for a run of "
+                                 f"{self.sink.M} sources")  # fmt: skip
+            self.sink.write(block)
+        elif isinstance(block, SlotBlock):
+            self.sink.write(block)
+        else:
+            raise ValueError(f"{self.sink.label}: a block of {block.M} sources for a run of one")
 
     def close(self) -> Path | None:
         """Send what the sink holds, then :meth:`RrdOutput.close` (which flushes, once)."""
@@ -376,4 +400,5 @@ __all__ = [
     "BATCH",
     "LocalRecording",
     "RerunSink",
+    "run_sink",
 ]

@@ -272,7 +272,8 @@ def bars(
 
 
 def tensor_batch(values: np.ndarray) -> rr.components.TensorDataBatch:
-    """Rows of ``values`` (N x K) as N one-dimensional tensors, built as one Arrow array.
+    """Rows of ``values`` (N x K) as N one-dimensional tensors, built as one Arrow array
+    (N x M x K: N two-dimensional M x K tensors).
 
     rerun-sdk 0.41 turns a list of arrays into one 2-D tensor ("Tensors do not support
     batches"), so a column of bar charts for ``send_columns`` is assembled here, in the
@@ -281,13 +282,15 @@ def tensor_batch(values: np.ndarray) -> rr.components.TensorDataBatch:
     import pyarrow as pa
 
     v = np.ascontiguousarray(values, dtype=np.float64)
-    n, k = v.shape
+    n, *dims = v.shape
+    k = int(np.prod(dims))
     typ = rr.components.TensorDataBatch._ARROW_DATATYPE
     shape_f, names_f, buffer_f = (typ.field(i) for i in range(3))
     union = buffer_f.type
     f64 = union.type_codes.index(11)  # the F64 member
-    shape = pa.ListArray.from_arrays(pa.array(np.arange(n + 1, dtype=np.int32)),
-                                     pa.array(np.full(n, k, np.uint64)), type=shape_f.type)
+    shape = pa.ListArray.from_arrays(pa.array(np.arange(n + 1, dtype=np.int32) * len(dims)),
+                                     pa.array(np.tile(np.asarray(dims, np.uint64), n)),
+                                     type=shape_f.type)  # fmt: skip
     children = [pa.array([], type=union.field(i).type) for i in range(union.num_fields)]
     children[f64] = pa.ListArray.from_arrays(
         pa.array(np.arange(n + 1, dtype=np.int32) * k), pa.array(v.reshape(-1)),

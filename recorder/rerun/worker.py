@@ -33,12 +33,18 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from corraoi.errors import ViewerError, WriteError
 from corraoi.files.partial import check_target
 from corraoi.forked import ForkedWorker, can_fork
 from corraoi.recorder.sink import RunRecording, made_again
+
+if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.process import BaseProcess
+
+    from corraoi.engine.block import RunBlock, RunConfig
 
 #: seconds the parent waits for the worker's answer to close or abort: Rerun's own flush
 #: timeout (30 s; on a full disk its flush waits for it now and then) and some to spare. A
@@ -58,7 +64,7 @@ class RerunWorker:
         self._busy: RemoteRecording | None = None
 
     @property
-    def process(self) -> Any:
+    def process(self) -> BaseProcess:
         """The worker's process (``pid``, ``is_alive()``, ``join()``)."""
         return self._worker.proc
 
@@ -70,7 +76,7 @@ class RerunWorker:
 
     def open(
         self,
-        config: Any,
+        config: RunConfig,
         *,
         rrd_path: str | os.PathLike[str] | None = None,
         viewer_url: str | None = None,
@@ -151,7 +157,7 @@ class RemoteRecording(RunRecording):
             except WriteError as exc:
                 self._lost = exc
 
-    def _write(self, block: Any) -> None:
+    def _write(self, block: RunBlock) -> None:
         if self.closed:
             raise ValueError("RemoteRecording: write() after close()")
         self._send(("write", block))
@@ -191,7 +197,7 @@ def _left(path: Path | None) -> str:
     return f"; the incomplete file is left as {partial_path(path)}"
 
 
-def serve(before_import: Callable[[], None] | None, conn: Any) -> None:
+def serve(before_import: Callable[[], None] | None, conn: Connection) -> None:
     """The worker's loop: import Rerun, then carry out the parent's messages."""
     if before_import is not None:
         before_import()
@@ -200,7 +206,7 @@ def serve(before_import: Callable[[], None] | None, conn: Any) -> None:
     rec: LocalRecording | None = None
     failure: BaseException | None = None  # what went wrong since "open"
 
-    def reply(value: Any) -> None:
+    def reply(value: object) -> None:
         try:
             conn.send(value)
         except (pickle.PicklingError, TypeError, AttributeError):

@@ -64,7 +64,9 @@ ZSTD_LEVEL = 1
 
 
 class ChunkWriter:
-    """Writes ``stream`` as an MCAP file with one schema and one channel (id 1).
+    """Writes ``stream`` as an MCAP file with one schema and one channel (id 1), or with
+    ``more_channels`` several (a run of several sources: a channel per source, sharing the
+    schema; each message then names its channel).
 
     The calls of ``mcap.writer.Writer`` it replaces: ``start()``, ``add_metadata()``,
     ``add_messages()`` (a batch of ``add_message``), ``flush()`` to close the open chunk,
@@ -78,6 +80,7 @@ class ChunkWriter:
         *,
         schema: Schema,
         channel: Channel,
+        more_channels: Sequence[Channel] = (),
         library: str,
         profile: str = "",
         zstd_level: int = ZSTD_LEVEL,
@@ -87,6 +90,8 @@ class ChunkWriter:
         self._profile = profile
         self._schema = schema
         self._channel = channel
+        self._channels = (channel, *more_channels)
+        self._counts = dict.fromkeys((c.id for c in self._channels), 0)
         self._offset = 0
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
@@ -99,6 +104,7 @@ class ChunkWriter:
         self._open: list[bytes] = []
         self._open_times: list[np.ndarray] = []
         self._open_seqs: list[np.ndarray] = []
+        self._open_channels: list[np.ndarray] = []
 
     def _write(self, data: bytes) -> None:
         self._stream.write(data)
@@ -132,16 +138,24 @@ class ChunkWriter:
         self._write(record)
 
     def add_messages(
-        self, log_times: np.ndarray, sequences: np.ndarray, messages: Sequence[bytes]
+        self,
+        log_times: np.ndarray,
+        sequences: np.ndarray,
+        messages: Sequence[bytes],
+        channels: np.ndarray | None = None,
     ) -> None:
         """Add ``messages[i]`` at ``log_times[i]`` (= publish time) to the open chunk, in
-        time order. Nothing is written until :meth:`flush` (or :meth:`finish`)."""
+        time order, on channel ``channels[i]`` (None: the first channel). Nothing is
+        written until :meth:`flush` (or :meth:`finish`)."""
         if len(messages) != len(log_times) or len(messages) != len(sequences):
             raise ValueError("add_messages: times, sequences and messages differ in length")
         if len(messages):
             self._open.extend(messages)
             self._open_times.append(np.asarray(log_times, dtype=np.uint64))
             self._open_seqs.append(np.asarray(sequences, dtype=np.uint64))
+            if channels is None:
+                channels = np.full(len(messages), self._channel.id, dtype=np.uint16)
+            self._open_channels.append(np.asarray(channels, dtype=np.uint16))
 
     def flush(self) -> None:
         """Write the open chunk (if it holds a message) and hand everything to the OS, as
@@ -150,11 +164,16 @@ class ChunkWriter:
             messages, self._open = self._open, []
             times, self._open_times = np.concatenate(self._open_times), []
             seqs, self._open_seqs = np.concatenate(self._open_seqs), []
-            self._write_chunk(times, seqs, messages)
+            chans, self._open_channels = np.concatenate(self._open_channels), []
+            self._write_chunk(times, seqs, messages, chans)
         self._stream.flush()
 
     def _write_chunk(
-        self, log_times: np.ndarray, sequences: np.ndarray, messages: Sequence[bytes]
+        self,
+        log_times: np.ndarray,
+        sequences: np.ndarray,
+        messages: Sequence[bytes],
+        channels: np.ndarray,
     ) -> None:
         n = len(messages)
         if n == 0:
@@ -163,13 +182,14 @@ class ChunkWriter:
         if not self._chunk_indexes:  # the first chunk carries the schema and the channel
             b = RecordBuilder()
             self._schema.write(b)
-            self._channel.write(b)
+            for c in self._channels:
+                c.write(b)
             prefix = b.end()
         lengths = np.fromiter(map(len, messages), dtype=np.uint64, count=n)
         head = np.empty(n, dtype=_MESSAGE_HEADER)
         head["op"] = Opcode.MESSAGE
         head["len"] = lengths + _MESSAGE_FIXED
-        head["ch"] = self._channel.id
+        head["ch"] = channels
         head["seq"] = sequences
         head["log"] = log_times
         head["pub"] = log_times
@@ -178,11 +198,10 @@ class ChunkWriter:
         parts[0::2] = head.view(f"V{size}").tolist()  # one bytes object per header
         parts[1::2] = messages
         records = prefix + b"".join(parts)
-        index = np.empty(n, dtype=_INDEX_ENTRY)
-        index["log"] = log_times
-        index["offset"][0] = len(prefix)
-        np.cumsum(lengths[:-1] + size, out=index["offset"][1:])
-        index["offset"][1:] += len(prefix)
+        offsets = np.empty(n, dtype=np.uint64)
+        offsets[0] = len(prefix)
+        np.cumsum(lengths[:-1] + size, out=offsets[1:])
+        offsets[1:] += len(prefix)
 
         start, end = int(log_times[0]), int(log_times[-1])
         compressed = self._zstd.compress(records)
@@ -196,22 +215,35 @@ class ChunkWriter:
             uncompressed_size=len(records),
         ).write(b)
         chunk = b.end()
-        body = index.tobytes()
-        message_index = (
-            int(Opcode.MESSAGE_INDEX).to_bytes(1, "little")
-            + (6 + len(body)).to_bytes(8, "little")
-            + self._channel.id.to_bytes(2, "little")
-            + len(body).to_bytes(4, "little")
-            + body
-        )
+        # one message index per channel that has messages in the chunk, in channel order
         chunk_start = self._offset
+        index_offsets: dict[int, int] = {}
+        message_index = b""
+        for c in self._channels:
+            mine = channels == c.id
+            count = int(np.count_nonzero(mine)) if len(self._channels) > 1 else n
+            if not count:
+                continue
+            index = np.empty(count, dtype=_INDEX_ENTRY)
+            index["log"] = log_times if count == n else log_times[mine]
+            index["offset"] = offsets if count == n else offsets[mine]
+            body = index.tobytes()
+            index_offsets[c.id] = chunk_start + len(chunk) + len(message_index)
+            message_index += (
+                int(Opcode.MESSAGE_INDEX).to_bytes(1, "little")
+                + (6 + len(body)).to_bytes(8, "little")
+                + c.id.to_bytes(2, "little")
+                + len(body).to_bytes(4, "little")
+                + body
+            )
+            self._counts[c.id] += count
         self._chunk_indexes.append(
             ChunkIndex(
                 message_start_time=start,
                 message_end_time=end,
                 chunk_start_offset=chunk_start,
                 chunk_length=len(chunk),
-                message_index_offsets={self._channel.id: chunk_start + len(chunk)},
+                message_index_offsets=index_offsets,
                 message_index_length=len(message_index),
                 compression="zstd",
                 compressed_size=len(compressed),
@@ -253,16 +285,16 @@ class ChunkWriter:
         stats = Statistics(
             message_count=self._messages,
             schema_count=1,
-            channel_count=1,
+            channel_count=len(self._channels),
             attachment_count=len(self._attachment_indexes),
             metadata_count=len(self._metadata_indexes),
             chunk_count=len(self._chunk_indexes),
             message_start_time=self._start_time,
             message_end_time=self._end_time,
-            channel_message_counts={self._channel.id: self._messages} if self._messages else {},
+            channel_message_counts={k: v for k, v in self._counts.items() if v},
         )
         group(Opcode.SCHEMA, [self._schema])
-        group(Opcode.CHANNEL, [self._channel])
+        group(Opcode.CHANNEL, list(self._channels))
         group(Opcode.STATISTICS, [stats])
         group(Opcode.CHUNK_INDEX, self._chunk_indexes)
         group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)

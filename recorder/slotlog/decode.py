@@ -55,6 +55,8 @@ def empty_block(K: int) -> SlotBlock:
 #: Slot values are int64 in every array: a value beyond is refused by the reader.
 _I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
 _INT_FIELDS = ("t", "x", "arm", "aoi", "oracle_aoi", "regret")
+#: The flags a block holds as None when its run lacks them (``forced``, ``collided``).
+_NONE_FLAGS = tuple(f for f in NONE_FIELDS if BY_NAME[f].json == "boolean")
 
 
 def _shown(value: Any) -> str:
@@ -206,7 +208,7 @@ def decode_messages(
         # a bool hidden in a number column: numpy reads [1, true] as int64, so count them
         # (every known column now holds numbers, nulls or bools only; keys are fixed)
         bools = B * sum(f in cols for f in ("success", "override"))
-        bools += sum(v is not None for v in cols.get("forced", ()))
+        bools += sum(v is not None for f in _NONE_FLAGS for v in cols.get(f, ()))
         bools += sum(_count_bools(v) for f in unknown for v in cols[f])
         if joined.count(b"true") + joined.count(b"false") != bools:
             for f in (*_INT_FIELDS, "estimator", "mu_hat", "pulls", "candidates"):

@@ -29,7 +29,7 @@ from corraoi.recorder.vocab import SLOT_FORMAT_NAME as FORMAT_NAME
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 
 if TYPE_CHECKING:  # types only: corraoi.engine.block's import circle stays out of this module
-    from corraoi.engine.block import RunConfig, SlotBlock
+    from corraoi.engine.block import RunConfig, SlotBlock, SourcesBlock
 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
@@ -160,6 +160,29 @@ def end_metadata(
             out["estimator"] = repr(float(last.estimator[-1]))
         if "pulls" in held:
             out["pulls"] = json.dumps([int(v) for v in last.pulls[-1]])
+    return out
+
+
+def sources_end_metadata(
+    *,
+    slots: int,
+    horizon: int,
+    last: SourcesBlock | None,
+    error: str | None = None,
+    complete: bool | None = None,
+) -> dict[str, str]:
+    """The ``corraoi.end`` record of a run of several sources: as a single source's, with
+    ``regret`` the run's (the sum over the sources), ``regret_by_source`` each source's, and
+    ``pulls`` each source's pulls (a list per source); no ``estimator``."""
+    out = end_metadata(slots=slots, horizon=horizon, last=None, error=error, complete=complete)
+    if last is not None and len(last):
+        held = last.sources[0].fields()
+        if "regret" in held:
+            each = [int(s.regret[-1]) for s in last.sources]
+            out["regret"] = str(sum(each))
+            out["regret_by_source"] = json.dumps(each)
+        if "pulls" in held:
+            out["pulls"] = json.dumps([[int(v) for v in s.pulls[-1]] for s in last.sources])
     return out
 
 
@@ -335,4 +358,5 @@ __all__ = [
     "run_metadata",
     "schema_bytes",
     "slot_schema",
+    "sources_end_metadata",
 ]

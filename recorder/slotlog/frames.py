@@ -10,6 +10,10 @@ Columns (``docs/analysis.md`` documents them): one per field of the slot record
 (:mod:`corraoi.engine.slot_record`) that the log holds, in its order, a per-arm field
 spread over one column per arm (``mu_hat_1..K``, ``pulls_1..K``, ``cand_1..K``,
 ``score_1..K``); then any field a newer corraoi wrote, as read.
+
+A run of several sources is tidy: one row per slot and source (slot by slot, the sources
+of a slot in order), a ``source`` column numbered from 1 after ``t``, the slot's shared
+fields (``t``, ``x``) repeated on each of its rows.
 """
 
 from __future__ import annotations
@@ -24,8 +28,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from corraoi.engine.block import FIELDS, SlotBlock, absent_column, absent_fill
-from corraoi.engine.slot_record import BY_NAME, NAMES, SLOT_RECORD
+from corraoi.engine.block import FIELDS, SlotBlock, SourcesBlock, absent_column, absent_fill
+from corraoi.engine.slot_record import BY_NAME, SLOT_RECORD, record_for
 from corraoi.errors import UsageError
 
 from .reader import RunLog, open_log
@@ -38,14 +42,29 @@ if TYPE_CHECKING:
 BATCH_SLOTS = 65_536
 
 
+#: Every field a single source's run may hold (not ``collided``, a field of several sources):
+#: the default fields of :func:`slot_columns`.
+SINGLE_SOURCE = tuple(f.name for f in record_for(1))
+#: The column of the table of a run of several sources that numbers the source (from 1).
+SOURCE_COLUMN = ("source", "int64")
+
+
 def slot_columns(
-    K: int, fields: Sequence[str] = NAMES, extra: Mapping[str, np.ndarray] | None = None
+    K: int,
+    fields: Sequence[str] = SINGLE_SOURCE,
+    extra: Mapping[str, np.ndarray] | None = None,
+    *,
+    sources: bool = False,
 ) -> list[tuple[str, str]]:
     """(name, dtype) of every column of the slots table of a run with K arms that logs
-    ``fields`` (by default every field of the slot record), in order: one per field, or
+    ``fields`` (by default every field a single source's run may hold), in order: one per field, or
     one per arm numbered from 1 (``mu_hat_1 .. mu_hat_K``); then the columns of the fields
-    a newer corraoi wrote (``extra``: a block's, as read)."""
+    a newer corraoi wrote (``extra``: a block's, as read). ``sources``: the table of a run
+    of several sources, with :data:`SOURCE_COLUMN` after ``t`` (pass its fields: those of
+    ``record_for(M)``, ``collided`` among them)."""
     cols = [c for f in SLOT_RECORD if f.name in fields for c in f.table_columns(K)]
+    if sources:
+        cols.insert(1 if cols and cols[0][0] == "t" else 0, SOURCE_COLUMN)
     for name, value in (extra or {}).items():
         if value.ndim == 2:
             cols += [(f"{name}_{k}", str(value.dtype)) for k in range(1, value.shape[1] + 1)]
@@ -55,10 +74,14 @@ def slot_columns(
 
 
 def arrow_schema(
-    K: int, fields: Sequence[str] = NAMES, extra: Mapping[str, np.ndarray] | None = None
+    K: int,
+    fields: Sequence[str] = SINGLE_SOURCE,
+    extra: Mapping[str, np.ndarray] | None = None,
+    *,
+    sources: bool = False,
 ) -> pa.Schema:
     pa = _pyarrow()
-    columns = slot_columns(K, fields, extra)
+    columns = slot_columns(K, fields, extra, sources=sources)
     return pa.schema([(name, _arrow_type(pa, dtype)) for name, dtype in columns])
 
 
@@ -99,6 +122,20 @@ def block_batch(block: SlotBlock) -> pa.RecordBatch:
     K = block.mu_hat.shape[1]
     schema = arrow_schema(K, block.fields(), block.extra)
     cols = block_columns(block)
+    arrays = [pa.array(cols[name], type=schema.field(name).type) for name in schema.names]
+    return pa.RecordBatch.from_arrays(arrays, schema=schema)
+
+
+def sources_batch(block: SourcesBlock) -> pa.RecordBatch:
+    """One Arrow record batch of a run of several sources: one row per slot and source,
+    slot by slot, with the ``source`` column (numbered from 1)."""
+    pa = _pyarrow()
+    first = block.sources[0]
+    schema = arrow_schema(first.mu_hat.shape[1], first.fields(), first.extra, sources=True)
+    n, M = len(block), block.M
+    each = [block_columns(s) for s in block.sources]
+    cols = {name: np.stack([c[name] for c in each], axis=1).reshape(n * M) for name in each[0]}
+    cols[SOURCE_COLUMN[0]] = np.tile(np.arange(1, M + 1, dtype=np.int64), n)
     arrays = [pa.array(cols[name], type=schema.field(name).type) for name in schema.names]
     return pa.RecordBatch.from_arrays(arrays, schema=schema)
 
@@ -166,8 +203,9 @@ class RunData:
             }
         )
 
-    def blocks(self, block: int = BATCH_SLOTS) -> Iterator[SlotBlock]:
-        """The SlotBlocks of the loaded slots (the window, or every slot)."""
+    def blocks(self, block: int = BATCH_SLOTS) -> Iterator[Any]:
+        """The SlotBlocks of the loaded slots (the window, or every slot); SourcesBlocks for
+        a run of several sources."""
         if self.window is None:
             yield from self.log.blocks(block)
         else:
@@ -179,20 +217,23 @@ class RunData:
         lacks is filled (NaN, or False)."""
         _pyarrow()
         for b in self.blocks(batch):
+            parts = b.sources if isinstance(b, SourcesBlock) else (b,)
             if self._fields is None:
-                self._fields = (b.fields(), b.extra)
+                self._fields = (parts[0].fields(), parts[0].extra)
             fields, extra = self._fields
-            if b.fields() != fields or list(b.extra) != list(extra):
-                b = _conform(b, fields, extra)
-            yield block_batch(b)
+            parts = tuple(p if p.fields() == fields and list(p.extra) == list(extra)
+                          else _conform(p, fields, extra) for p in parts)  # fmt: skip
+            yield sources_batch(SourcesBlock(parts)) if len(parts) > 1 else block_batch(parts[0])
 
     def arrow_schema(self) -> pa.Schema:
         """The columns of the tables: those of the fields the log holds (its first block's;
         the required ones of an empty log)."""
         if self._fields is None:
             first = next(iter(self.blocks(1)), None)
+            if isinstance(first, SourcesBlock):
+                first = first.sources[0]
             self._fields = (first.fields(), first.extra) if first is not None else (FIELDS, {})
-        return arrow_schema(self.K, *self._fields)
+        return arrow_schema(self.K, *self._fields, sources=self.log.sources > 1)
 
     @cached_property
     def slots(self) -> pd.DataFrame:
@@ -247,4 +288,7 @@ __all__ = [
     "block_batch",
     "block_columns",
     "slot_columns",
+    "sources_batch",
+    "SINGLE_SOURCE",
+    "SOURCE_COLUMN",
 ]

@@ -1,4 +1,5 @@
-"""Read a corraoi MCAP log back into the SlotBlocks that were recorded.
+"""Read a corraoi MCAP log back into the SlotBlocks that were recorded (a run of several
+sources: :class:`~corraoi.engine.block.SourcesBlock` s, one SlotBlock per source's channel).
 
 ``open_log(path)`` checks the file and returns a :class:`RunLog`; ``RunLog.blocks()``
 streams the slots (memory bounded by one chunk plus one block). A log whose writer was
@@ -17,12 +18,13 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from mcap.records import Attachment, Header, Metadata
 
 from corraoi._version import __version__
-from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.block import RunConfig, SlotBlock, SourcesBlock
 from corraoi.engine.slot_record import OPTIONAL, record_for
 from corraoi.errors import CorraoiError, CorraoiWarning, LogError
 from corraoi.files.locks import lock_holder
@@ -37,6 +39,7 @@ from corraoi.recorder.vocab import (
     SLOT_SCHEMA_NAME,
     SLOT_TOPIC,
     SWEEP_METADATA,
+    slot_topic,
 )
 from corraoi.recorder.walk import (
     ChunkData,
@@ -79,6 +82,8 @@ class RunLog:
     #: (name, media type, bytes) of each file the log carries: each plug-in's source
     attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
     _channel_id: int = field(default=0, repr=False)
+    #: the channel of each source of a run of several sources (source m's is [m - 1])
+    _source_channels: tuple[int, ...] = field(default=(), repr=False)
     #: byte offset after the last complete chunk seen at open: blocks() stops there
     _data_end: int = field(default=0, repr=False)
     #: the unknown slot fields already named in a warning
@@ -100,6 +105,8 @@ class RunLog:
         field existed lacks it)."""
         if self._absent is None:
             first = next(iter(self._chunk_blocks()), None)
+            if isinstance(first, SourcesBlock):
+                first = first.sources[0]
             have = first.fields() if first is not None else ()
             mine = {f.name for f in record_for(self.config.sources)}
             self._absent = tuple(f for f in OPTIONAL if f not in have and f in mine)
@@ -137,32 +144,58 @@ class RunLog:
             f"{n}{of} slots, up to the last complete chunk"
         )
 
-    def blocks(self, block: int = 1000) -> Iterator[SlotBlock]:
-        """The recorded slots in blocks of ``block`` slots (the last one may be shorter)."""
+    @property
+    def sources(self) -> int:
+        """The number of sources of the run (1: its blocks are SlotBlocks, else
+        SourcesBlocks)."""
+        return self.config.sources
+
+    def blocks(self, block: int = 1000) -> Iterator[Any]:
+        """The recorded slots in blocks of ``block`` slots (the last one may be shorter):
+        SlotBlocks, or for a run of several sources SourcesBlocks."""
         if block < 1:
             raise ValueError(f"block must be >= 1, got {block}")
-        pending: list[SlotBlock] = []
+        pending: list[Any] = []
         have = 0
         for part in self._chunk_blocks():
             pending.append(part)
             have += len(part)
             while have >= block:
-                whole = pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
+                whole = pending[0] if len(pending) == 1 else type(part).concat(pending)
                 yield whole.slice(0, block)
                 rest = whole.slice(block, len(whole))
                 pending = [rest] if len(rest) else []
                 have = len(rest)
         if have:
-            yield pending[0] if len(pending) == 1 else SlotBlock.concat(pending)
+            yield pending[0] if len(pending) == 1 else type(pending[0]).concat(pending)
 
-    def read_all(self) -> SlotBlock:
-        """Every recorded slot in one block (memory grows with the log: prefer blocks())."""
+    def read_all(self) -> Any:
+        """Every recorded slot in one block (memory grows with the log: prefer blocks()):
+        a SlotBlock, or for a run of several sources a SourcesBlock."""
         parts = list(self.blocks(block=max(self.n_slots, 1)))
         if not parts:
-            return empty_block(self.config.K)
-        return parts[0] if len(parts) == 1 else SlotBlock.concat(parts)
+            empty = empty_block(self.config.K)
+            if self.sources > 1:
+                return SourcesBlock(tuple(empty for _ in range(self.sources)))
+            return empty
+        return parts[0] if len(parts) == 1 else type(parts[0]).concat(parts)
 
-    def window(self, first: int, last: int) -> Iterator[SlotBlock]:
+    def _decoded(self, chunk: ChunkData) -> Any:
+        """The slots of one chunk: a SlotBlock, or a SourcesBlock of a run of several
+        sources (each source's from its channel)."""
+        K, n = self.config.K, self.config.n_states
+        if self.sources == 1:
+            return self._noted(_decode(chunk, self._channel_id, self.path, K, n))
+        parts = tuple(self._noted(_decode(chunk, c, self.path, K, n))
+                      for c in self._source_channels)  # fmt: skip
+        if len({len(p) for p in parts}) != 1 or not all(
+            np.array_equal(p.t, parts[0].t) and np.array_equal(p.x, parts[0].x) for p in parts
+        ):
+            raise LogError(f"{self.path}: chunk at byte {chunk.offset}: the sources' slots "
+                           "differ (expected every source at every slot, with one x)")  # fmt: skip
+        return SourcesBlock(parts)
+
+    def window(self, first: int, last: int) -> Iterator[Any]:
         """The slots ``first..last`` (inclusive, 1-based t), one block per chunk read.
 
         Chunks whose time range lies outside the window are skipped without being
@@ -172,14 +205,13 @@ class RunLog:
         first, last = max(int(first), 1), min(int(last), self.n_slots)
         if first > last:
             return
-        K, n = self.config.K, self.config.n_states
         lo, hi = first * NS_PER_SLOT, last * NS_PER_SLOT
         expected = first
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
             for offset in chunk_offsets(f, walker, lo, hi):
                 chunk = walker.chunk_at(offset)
-                part = self._noted(_decode(chunk, self._channel_id, self.path, K, n))
+                part = self._decoded(chunk)
                 keep = (part.t >= first) & (part.t <= last)
                 if not keep.any():
                     continue
@@ -195,7 +227,7 @@ class RunLog:
         this one does not know (they are kept: ``SlotBlock.extra``, ``Run.slots``). Only a
         log of format version 3 (``corraoi.Logger``'s) may lack a column every block carries
         (``SlotBlock.absent``): in an older one that is damage."""
-        if part.absent and self.format_version < LACKING_FORMAT_VERSION and len(part):
+        if part.absent and self.format_version != LACKING_FORMAT_VERSION and len(part):
             raise LogError(
                 f"{self.path}: slot {int(part.t[0])} lacks {', '.join(part.absent)}, a required "
                 f"field of a log of format version {self.format_version} (only a log of "
@@ -213,8 +245,7 @@ class RunLog:
             )
         return part
 
-    def _chunk_blocks(self) -> Iterator[SlotBlock]:
-        K, n = self.config.K, self.config.n_states
+    def _chunk_blocks(self) -> Iterator[Any]:
         expected = 1
         with open_mcap(self.path) as f:
             walker = Walker(f, self.path, stop_at=self._data_end)
@@ -222,7 +253,7 @@ class RunLog:
                 if kind != "chunk":
                     continue
                 assert isinstance(item, ChunkData)
-                part = self._noted(_decode(item, self._channel_id, self.path, K, n))
+                part = self._decoded(item)
                 if not len(part):
                     continue
                 _follows(part, expected, self.path, item.offset)
@@ -274,6 +305,7 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         prov_md: dict[str, str] = {}
         attachments: list[tuple[str, str, bytes]] = []
         channel_id = 0
+        source_channels: tuple[int, ...] = ()
         n_chunks = 0
         n_slots = 0
         data_end = 0
@@ -314,14 +346,13 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
                 try:
                     if item.records is not None:
                         if not channel_id:
-                            channel_id = find_channel(
-                                item.records, p, item.offset, topic=SLOT_TOPIC,
-                                encoding=MESSAGE_ENCODING, schema=SLOT_SCHEMA_NAME,
-                            )  # fmt: skip
+                            source_channels = _source_channels(item, p, run_md)
+                            channel_id = source_channels[0] if source_channels else 0
                         t_ns = last_log_time(item.records, channel_id, p, item.offset)
                         last = (t_ns or 0) // NS_PER_SLOT
                         if salvage:
-                            expected = _validate_chunk(item, run_md, channel_id, p, expected)
+                            expected = _validate_chunk(item, run_md, source_channels, p,
+                                                       expected)  # fmt: skip
                     else:  # not verified: trust the chunk header (our chunks hold only slots)
                         last = item.end_time // NS_PER_SLOT
                 except LogError as exc:
@@ -350,6 +381,10 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
             raise not_a_run_log(p, library, sweep)
         if n_slots and not channel_id and verify:
             raise LogError(f"{p}: no {SLOT_TOPIC} channel with schema {SLOT_SCHEMA_NAME}")
+        if n_slots and verify and not all(source_channels):
+            m = source_channels.index(0) + 1
+            raise LogError(f"{p}: no {slot_topic(m, len(source_channels))} channel with schema "
+                           f"{SLOT_SCHEMA_NAME} (the channel of source {m})")  # fmt: skip
     config = _config(p, run_md)
     check_agrees(p, run_md, config)
     if n_slots > config.horizon:
@@ -386,6 +421,9 @@ def open_log(path: str | os.PathLike[str], *, verify: bool = True, salvage: bool
         provenance=prov_md,
         attachments=attachments,
         _channel_id=channel_id or 1,
+        _source_channels=source_channels
+        if all(source_channels) and len(source_channels) > 1
+        else tuple(range(1, config.sources + 1)),
         _data_end=data_end,
     )
 
@@ -408,18 +446,36 @@ def _config(p: Path, run_md: dict[str, str]) -> RunConfig:
                        f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
 
 
+def _source_channels(chunk: ChunkData, p: Path, run_md: dict[str, str]) -> tuple[int, ...]:
+    """The channel of each source (one for a single source) as the first chunk declares
+    them; 0 for a source whose channel it lacks."""
+    assert chunk.records is not None
+    try:
+        M = int(json.loads(run_md["config"]).get("sources", 1))
+    except (KeyError, TypeError, ValueError, AttributeError):
+        M = 1  # (an unusable config is refused by _config, with its own message)
+    return tuple(
+        find_channel(chunk.records, p, chunk.offset, topic=slot_topic(m, M),
+                     encoding=MESSAGE_ENCODING, schema=SLOT_SCHEMA_NAME)
+        for m in range(1, M + 1)
+    )  # fmt: skip
+
+
 def _validate_chunk(
     chunk: ChunkData,
     run_md: dict[str, str] | None,
-    channel_id: int,
+    channels: tuple[int, ...],
     p: Path,
     expected: int,
 ) -> int:
     """Decode and check one chunk's slots (salvage); returns the next slot expected."""
     assert chunk.records is not None and run_md is not None
     config = _config(p, run_md)
-    part = _decode(chunk, channel_id, p, config.K, config.n_states)
-    return _follows(part, expected, p, chunk.offset) if len(part) else expected
+    next_slot = expected
+    for c in channels:
+        part = _decode(chunk, c, p, config.K, config.n_states)
+        next_slot = _follows(part, expected, p, chunk.offset) if len(part) else expected
+    return next_slot
 
 
 def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int | None) -> SlotBlock:
@@ -429,7 +485,7 @@ def _decode(chunk: ChunkData, channel_id: int, p: Path, K: int, n: int | None) -
     return decode_messages(found, K, n, where=f"{p}: chunk at byte {chunk.offset}")
 
 
-def _follows(part: SlotBlock, expected: int, p: Path, offset: int) -> int:
+def _follows(part: SlotBlock | SourcesBlock, expected: int, p: Path, offset: int) -> int:
     """The slots of ``part`` must be ``expected``, ``expected + 1``, ...; the next one."""
     t = part.t
     if t[0] != expected or not np.array_equal(

@@ -1,4 +1,5 @@
-"""McapSink: streams slot blocks into an MCAP log, one JSON message per slot.
+"""McapSink: streams slot blocks into an MCAP log, one JSON message per slot (a run of
+several sources: one per slot and source, each source on its own channel).
 
 The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
 so a file at ``<path>`` is always complete. Every :data:`~corraoi.recorder.vocab.SLOT_FLUSH_EVERY`
@@ -21,7 +22,7 @@ from typing import BinaryIO
 import numpy as np
 from mcap.records import Channel, Schema
 
-from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.block import RunBlock, RunConfig, SlotBlock, SourcesBlock
 from corraoi.errors import ConfigError, CorraoiError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
@@ -35,14 +36,14 @@ from corraoi.recorder.vocab import (
     RUN_METADATA,
     SCHEMA_ENCODING,
     library_name,
+    slot_topic,
 )
 from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
 from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
-from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
 
 from .chunks import ChunkWriter
-from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes
+from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, sources_end_metadata
 
 
 def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
@@ -65,7 +66,7 @@ def same_run_partial(config: RunConfig) -> Callable[[Path], bool]:
     return same
 
 
-class McapSink(Sink):
+class McapSink(Sink[RunBlock]):
     """Write one run's slots to ``path`` (an MCAP file), block by block.
 
     ``with McapSink(path, config) as sink: sink.write(block) ...``. Leaving the ``with``
@@ -106,22 +107,24 @@ class McapSink(Sink):
         self.finished = False
         self._fsync = fsync
         self._torn = False
-        self._last: SlotBlock | None = None
+        self._last: SlotBlock | SourcesBlock | None = None
         self._encoder = BlockEncoder(config.K)
         self._file: BinaryIO = self._out.create().file
+        M = config.sources
+        version = {"format_version": run_metadata(config)["format_version"]}
+        channels = [
+            Channel(id=m, topic=slot_topic(m, M), message_encoding=MESSAGE_ENCODING,
+                    schema_id=1, metadata=version if M == 1 else {**version, "source": str(m)})
+            for m in range(1, M + 1)
+        ]  # fmt: skip
         try:
             self._writer = ChunkWriter(
                 self._file,
                 schema=Schema(
                     id=1, name=SCHEMA_NAME, encoding=SCHEMA_ENCODING, data=schema_bytes(config)
                 ),
-                channel=Channel(
-                    id=1,
-                    topic=TOPIC,
-                    message_encoding=MESSAGE_ENCODING,
-                    schema_id=1,
-                    metadata={"format_version": run_metadata(config)["format_version"]},
-                ),
+                channel=channels[0],
+                more_channels=channels[1:],
                 library=library_name(config.version),
             )
             self._writer.start()
@@ -137,14 +140,22 @@ class McapSink(Sink):
 
     # ------------------------------------------------------------------ writing
 
-    def write(self, block: SlotBlock) -> None:
-        """Append the block's slots; they must follow the slots written so far."""
+    def write(self, block: RunBlock) -> None:
+        """Append the block's slots; they must follow the slots written so far. A run of
+        several sources is written from :class:`SourcesBlock` s, one message per slot and
+        source, the sources of a slot in order, each on its source's channel."""
         if self.closed or self._torn:
             raise ValueError(f"{self.path}: write() after close() or a failed write")
         n = len(block)
         if n == 0:
             return
-        K = self.config.K
+        K, M = self.config.K, self.config.sources
+        if M > 1 or isinstance(block, SourcesBlock):
+            if not isinstance(block, SourcesBlock) or block.M != M:
+                got = block.M if isinstance(block, SourcesBlock) else 1
+                raise ValueError(f"block has {got} source(s), the run has {M}")
+            self._write_sources(block)
+            return
         if block.mu_hat.shape != (n, K):
             raise ValueError(f"block has {block.mu_hat.shape[1]} arms, the run has {K}")
         first = int(block.t[0])
@@ -172,6 +183,47 @@ class McapSink(Sink):
                 begin = end
             if begin < n:  # the rest stays in the open chunk
                 add(times[begin:], sequences[begin:], messages[begin:])
+        except OSError as exc:
+            raise self._write_error(exc) from None
+        self._torn = False
+        self.slots += n
+        self._last = block
+
+    def _write_sources(self, block: SourcesBlock) -> None:
+        """The messages of a run of several sources: slot by slot, source 1..M within a
+        slot (their log time the slot's), a chunk ending after each slot t with
+        t % flush_every == 0, as a single source's."""
+        n, M, K = len(block), block.M, self.config.K
+        for part in block.sources:
+            if part.mu_hat.shape != (n, K) or not np.array_equal(part.t, block.t):
+                raise ValueError(f"a source's block has other slots or arms than the run's {K}")
+        first = int(block.t[0])
+        if first != self.slots + 1 or int(block.t[-1]) != self.slots + n:
+            raise ValueError(
+                f"block covers slots {first}..{int(block.t[-1])}, expected to start at "
+                f"{self.slots + 1} with consecutive slots"
+            )
+        if self.slots + n > self.config.horizon:
+            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+        messages: list[bytes] = [b""] * (n * M)
+        for m, part in enumerate(block.sources):
+            messages[m::M] = self._encoder.encode(part)
+        t = np.repeat(block.t.astype(np.uint64), M)
+        times = t * np.uint64(NS_PER_SLOT)
+        sequences = t & np.uint64(0xFFFFFFFF)
+        channels = np.tile(np.arange(1, M + 1, dtype=np.uint16), n)
+        ends = ((np.flatnonzero(block.t % self.flush_every == 0) + 1) * M).tolist()
+        add, flush = self._writer.add_messages, self._writer.flush
+        self._torn = True
+        try:
+            begin = 0
+            for end in ends:
+                add(times[begin:end], sequences[begin:end], messages[begin:end],
+                    channels[begin:end])  # fmt: skip
+                flush()
+                begin = end
+            if begin < n * M:
+                add(times[begin:], sequences[begin:], messages[begin:], channels[begin:])
         except OSError as exc:
             raise self._write_error(exc) from None
         self._torn = False
@@ -216,10 +268,14 @@ class McapSink(Sink):
         self.closed = True
         try:
             self._writer.flush()
+            last, horizon = self._last, self.config.horizon
             self._writer.add_metadata(
                 END_METADATA,
-                end_metadata(slots=self.slots, horizon=self.config.horizon, last=self._last,
-                             error=error, complete=complete),
+                sources_end_metadata(slots=self.slots, horizon=horizon, last=last,
+                                     error=error, complete=complete)
+                if isinstance(last, SourcesBlock)
+                else end_metadata(slots=self.slots, horizon=horizon, last=last,
+                                  error=error, complete=complete),
             )  # fmt: skip
             self._writer.finish()
             self._file.flush()

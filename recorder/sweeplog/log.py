@@ -153,7 +153,7 @@ def sweep_metadata(
 # ---------------------------------------------------------------------------- writer
 
 
-class SweepMcapSink(Sink):
+class SweepMcapSink(Sink["SweepPoint"]):
     """Streams :class:`~corraoi.stats.SweepPoint` rows of a sweep into an MCAP
     file.
 

@@ -101,7 +101,7 @@ def open_sweep_recording(
     )
 
 
-class SweepRerunSink(Sink):
+class SweepRerunSink(Sink[SweepPoint]):
     """Streams :class:`~corraoi.stats.SweepPoint` rows into a Rerun recording.
 
     ``with SweepRerunSink(recording, config) as sink: sink.write(point)``. Points are
