@@ -239,3 +239,39 @@ def test_reproduce_decentralized_writes_the_figure_and_our_ordering(tmp_path: Pa
     order = line.removeprefix("- M = 2: ").split(" < ")
     means = [pols[f"{p}(M=2)"]["regret_mean"] for p in order]
     assert len(order) == 12 and means == sorted(means)
+
+
+def test_record_from_a_sweep_of_several_sources_records_its_collision_storm(
+    folders: tuple[Path, Path], tmp_path: Path
+) -> None:
+    import shutil
+
+    many, _ = folders
+    summary = json.loads((many / "summary.json").read_text())
+    storm = summary["notable"]["cells"]["rhorand-ucb(M=3)"]["most-collisions"]
+    out = _corraoi("record", "--from", many, "--run", "most-collisions", "--cell",
+                   "rhorand-ucb(M=3)", "--no-rrd", cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    (mcap,) = (tmp_path / "runs").glob("*.mcap")
+    from corraoi.recorder.slotlog.reader import open_log
+
+    assert corraoi.load(mcap).summary.regret == storm["regret"]
+    config = open_log(mcap).config
+    assert config.sources == 3 and config.seed == SEED + storm["run"]
+    # the recording is checked against the sweep's row: a row that differs stops it
+    bad = tmp_path / "bad"
+    shutil.copytree(many, bad)
+    start = 0 if storm["run"] < 5 else 5  # chunks of 5 runs
+    (part,) = [p for p in (bad / "parts").glob(f"*-{start:09d}-*.npz") if _holds_sources(p, 3)]
+    with np.load(part) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["regret"][storm["run"] - start] += 1.0
+    np.savez(part, **arrays)
+    out = _corraoi("record", "--from", bad, "--run", str(storm["run"]), "--cell",
+                   "rhorand-ucb(M=3)", "--no-rrd", "-o", "x.mcap", cwd=tmp_path)  # fmt: skip
+    assert out.returncode != 0 and "the sweep's row says" in out.stderr, out.stderr
+
+
+def _holds_sources(part: Path, sources: int) -> bool:
+    with np.load(part) as z:
+        return "regret_by_source" in z.files and z["regret_by_source"].shape[2] == sources
