@@ -275,3 +275,15 @@ def test_record_from_a_sweep_of_several_sources_records_its_collision_storm(
 def _holds_sources(part: Path, sources: int) -> bool:
     with np.load(part) as z:
         return "regret_by_source" in z.files and z["regret_by_source"].shape[2] == sources
+
+
+def test_the_python_face_sweeps_sources_too() -> None:
+    sw = corraoi.sweep("I1", "mctopm-ts", runs=3, horizon=300, sources=[2, 3], seed=SEED)
+    assert list(sw.summary["policies"]) == ["mctopm-ts(M=2)", "mctopm-ts(M=3)"]
+    totals = simulate_sources(_i1(), _spec("mctopm-ts"), range(SEED, SEED + 3), 300, 3)
+    assert sw.summary["policies"]["mctopm-ts(M=3)"]["regret_mean"] == pytest.approx(
+        totals.total_regret.mean())
+    with pytest.raises(ConfigError, match=r"sources\[0\] 2.5: not an integer"):
+        corraoi.sweep("I1", "mctopm-ts", runs=3, horizon=300, sources=[2.5])  # type: ignore[list-item]
+    with pytest.raises(ConfigError, match="policy ucb is single-source; with sources 2"):
+        corraoi.sweep("I1", "ucb", runs=3, horizon=300, sources=2)
