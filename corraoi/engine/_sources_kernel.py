@@ -145,24 +145,29 @@ def rank_pick(vals, mask, n1, muhat, r, pst, K, tier2, top):
     if r < n1:
         if r == 0:
             return argmax_random(vals, mask, pst, K)
-        # the value of rank r: that of an arm with at most r above it and more than r at or
-        # above it (branch-free counts, which the compiler vectorizes)
-        for a in range(K):
-            if not mask[a]:
-                continue
-            va = vals[a]
-            gt = 0
-            ge = 0
-            for k in range(K):
-                gt += mask[k] & (vals[k] > va)
-                ge += mask[k] & (vals[k] >= va)
-            if gt <= r < ge:
-                return equal_at(vals, mask, va, pst, K)
-        return equal_at(vals, mask, nth_value(vals, mask, r, top, K), pst, K)
+        return at_rank(vals, mask, r, pst, K, top)
     for k in range(K):
         tier2[k] = not mask[k]
-    r = min(r - n1, K - n1 - 1)
-    return equal_at(muhat, tier2, nth_value(muhat, tier2, r, top, K), pst, K)
+    return at_rank(muhat, tier2, min(r - n1, K - n1 - 1), pst, K, top)
+
+
+@njit(inline="always", cache=True)
+def at_rank(values, tier, r, pst, K, top):
+    """A uniform arm of ``tier`` whose value is the r-th largest there (0-based, counting
+    repeats): that of an arm with at most r above it and more than r at or above it, found
+    by branch-free counts (which the compiler vectorizes); ``nth_value`` for NaNs."""
+    for a in range(K):
+        if not tier[a]:
+            continue
+        va = values[a]
+        gt = 0
+        ge = 0
+        for k in range(K):
+            gt += tier[k] & (values[k] > va)
+            ge += tier[k] & (values[k] >= va)
+        if gt <= r < ge:
+            return equal_at(values, tier, va, pst, K)
+    return equal_at(values, tier, nth_value(values, tier, r, top, K), pst, K)
 
 
 @njit(inline="always", cache=True)
@@ -348,22 +353,22 @@ def advance(
                                 n1 += mask[k]
                         rk = rank[r, m]
                         arm = -1
-                        if 0 < rk < n1 and j > 0:
+                        if rk > 0 and j > 0 and mask[arms[m]] == (rk < n1):
                             # the arm it played last slot, if it is the only one of rank
                             # rk now (what rank_pick would take, with no draw): one pass
                             a = arms[m]
-                            if mask[a]:
-                                gt = 0
-                                eq = 0
-                                va = vals[a]
-                                for k in range(K):
-                                    if mask[k]:
-                                        if vals[k] > va:
-                                            gt += 1
-                                        elif vals[k] == va:
-                                            eq += 1
-                                if gt == rk and eq == 1:
-                                    arm = a
+                            inm = rk < n1
+                            want = rk if inm else min(rk - n1, K - n1 - 1)
+                            va = vals[a] if inm else muhat[a]
+                            gt = 0
+                            eq = 0
+                            for k in range(K):
+                                vk = vals[k] if inm else muhat[k]
+                                same = mask[k] == inm
+                                gt += same & (vk > va)
+                                eq += same & (vk == va)
+                            if gt == want and eq == 1:
+                                arm = a
                         if arm < 0:
                             arm = rank_pick(vals, mask, n1, muhat, rk, pst, K, tier2, top)
                     elif rule == RULE_CENTRAL:

@@ -210,8 +210,8 @@ class SourcesSimulation:
             if self._err[:, 0].any():
                 hit = np.flatnonzero(self._err[:, 0])
                 r = int(hit[np.argmin(self._err[hit, 0])])
-                t, what, value = (int(v) for v in self._err[r])
-                raise hook_fault(self.policy.name, t, what, value, K,
+                slot, what, value = (int(v) for v in self._err[r])
+                raise hook_fault(self.policy.name, slot, what, value, K,
                                  f"run {r} (seed {int(self.seeds[r])})")  # fmt: skip
             done += n
         t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)

@@ -63,7 +63,7 @@ def multi_form(base: type[CompiledPolicy], rule: str) -> type[CompiledPolicy]:
     return type(cls_name, (base,), attrs)
 
 
-FORMS = {f"{rule}-{b}": multi_form(POLICIES[b], rule) for rule in RULES for b in BASES}  # type: ignore[arg-type]
+FORMS = {f"{rule}-{b}": multi_form(POLICIES[b], rule) for rule in RULES for b in BASES}
 
 for _cls in FORMS.values():
     register(_cls)
