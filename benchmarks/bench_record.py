@@ -4,7 +4,9 @@ First the stages alone, each on data the previous stage made beforehand: the eng
 JSON encoding of the slot messages (``BlockEncoder``), MCAP framing and compression of
 those messages (``ChunkWriter``, one chunk per 1,000 slots), and the Rerun send
 (``RerunSink`` to an .rrd file, from ready blocks). Then the sinks as ``corraoi record``
-runs them, engine included: MCAP alone, Rerun alone, both. For reference, mcap's own
+runs them, engine included: MCAP alone, Rerun alone, both (McapSink encodes and frames a
+block at once, ``BlockEncoder.encode_framed`` and ``ChunkWriter.frame``, which a baseline
+checkout may lack: the stage rows time the per-message calls). For reference, mcap's own
 ``Writer`` writing the same pre-encoded messages one ``add_message`` at a time (the path
 McapSink used before it framed whole chunks). Then the peak memory (max RSS of a fresh
 process recording with both sinks) for T slots against 10 T.

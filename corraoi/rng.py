@@ -247,13 +247,23 @@ def argmax_random(vals, mask, st, K):
     Reservoir sampling: one uniform draw per extra tied arm, none without ties. Returns -1
     when no arm is in ``mask``.
     """
+    return argmax_random_nan(vals, mask, st, K)[0]
+
+
+@njit(inline="always", cache=True)
+def argmax_random_nan(vals, mask, st, K):
+    """:func:`argmax_random`, and the first ``k`` in ``mask`` whose ``vals[k]`` is NaN (K when
+    none), found in the same pass (the kernel notes a NaN score without a loop of its own)."""
     best = -1
     bestv = -np.inf
     ties = 0
+    nan = K
     for k in range(K):
         if not mask[k]:
             continue
         v = vals[k]
+        if v != v and nan == K:
+            nan = k
         if best < 0 or v > bestv:
             best = k
             bestv = v
@@ -262,7 +272,7 @@ def argmax_random(vals, mask, st, K):
             ties += 1
             if uniform(st) * ties < 1.0:
                 best = k
-    return best
+    return best, nan
 
 
 @njit(cache=True)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import re
 import unicodedata
+from collections.abc import Iterable
 from itertools import groupby
 
 #: Characters besides Unicode letters, marks and digits that a name may keep in a file name.
@@ -90,4 +91,16 @@ def _cut(s: str, limit: int) -> str:
     return s.encode()[:limit].decode(errors="ignore")
 
 
-__all__ = ["HASH_DIGITS", "MAX_NAME", "NAME_PUNCTUATION", "safe_name", "safe_text"]
+def split_list(values: Iterable[str]) -> list[str]:
+    """Comma lists and repeated options (``-i I1,I2 -i I3``), in order, without repeats or
+    empty items."""
+    out: list[str] = []
+    for value in values:
+        for part in str(value).split(","):
+            item = part.strip()
+            if item and item not in out:
+                out.append(item)
+    return out
+
+
+__all__ = ["HASH_DIGITS", "MAX_NAME", "NAME_PUNCTUATION", "safe_name", "safe_text", "split_list"]

@@ -109,6 +109,9 @@ STATE_NAME = "hidden state x"
 #: The "why this arm" view's series.
 SCORE_UNIT = "[score]"
 CHOSEN_NAME = "arm played: its score"
+#: up to LINES_UP_TO arms, where every arm's line is drawn: the arm played is the top line
+#: where the score chose it, and its dot marks only the slots it was below the top
+CHOSEN_BELOW_NAME = "arm played below the top score"
 FORCED_NAME = "forced (not by score)"
 THRESHOLD_NAME = f"override threshold 1/max mu_hat {AOI_UNIT}"
 FORCED_COLOR: RGB = (120, 120, 120)

@@ -10,17 +10,15 @@ own format.
 
 from __future__ import annotations
 
-from mcap.writer import IndexType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from mcap.writer import IndexType
 
 # ---------------------------------------------------------------------------- MCAP
 
 #: The bytes that open and close every MCAP file.
 MAGIC = b"\x89MCAP0\r\n"
-#: The summary indexes every MCAP file we write carries: chunk, message and metadata
-#: indexes, and the attachment index in a file that holds attachments (plug-in sources):
-#: the mcap writer would otherwise end every file with an empty attachment-index group.
-MCAP_INDEX_TYPES = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
-MCAP_INDEX_TYPES_WITH_ATTACHMENTS = MCAP_INDEX_TYPES | IndexType.ATTACHMENT
 #: Metadata record of both formats: the versions, the backend and the plug-in sources that
 #: made the file's numbers (corraoi.provenance.Provenance.metadata); each plug-in's source is
 #: an attachment named after its file, media type PLUGIN_MEDIA_TYPE.
@@ -107,11 +105,21 @@ SWEEP_MESSAGE_KEYS = (
     "collisions_ci95",
 )
 
+
+def mcap_index_types(attachments: bool) -> IndexType:
+    """The summary indexes every MCAP file we write carries: chunk, message and metadata
+    indexes, and the attachment index in a file that holds ``attachments`` (plug-in
+    sources): the mcap writer would otherwise end every file with an empty attachment-index
+    group. mcap is imported here, not with the vocabulary (a sweep's results need none)."""
+    from mcap.writer import IndexType
+
+    index = IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA
+    return index | IndexType.ATTACHMENT if attachments else index
+
+
 __all__ = [
     "MAGIC",
     "MAX_SLOT",
-    "MCAP_INDEX_TYPES",
-    "MCAP_INDEX_TYPES_WITH_ATTACHMENTS",
     "PLUGIN_MEDIA_TYPE",
     "PROVENANCE_METADATA",
     "MESSAGE_ENCODING",
@@ -136,5 +144,6 @@ __all__ = [
     "SWEEP_SOURCES_KEYS",
     "SWEEP_TOPIC",
     "library_name",
+    "mcap_index_types",
     "slot_topic",
 ]

@@ -64,6 +64,9 @@ class _Editing(BlockEncoder):
                 out[i] = self.edit(out[i])
         return out
 
+    def encode_framed(self, b, room):  # type: ignore[override]
+        return bytearray(b"".join(room + m for m in self.encode(b)))  # what McapSink asks
+
 
 def write_log(path: Path, edit=None, horizon: int = T) -> Path:
     config = _config(horizon)

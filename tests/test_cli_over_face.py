@@ -104,3 +104,62 @@ def test_what_the_log_commands_do_is_the_faces(tmp_path):
     assert corraoi.load(fixed.path).summary.regret == run.summary.regret
     table = corraoi.export(run, tmp_path / "t.csv")
     assert table.rows == 300 and (tmp_path / "t.csv").read_text().count("\n") == 301
+
+
+def _counting_face_calls(monkeypatch) -> list[str]:
+    """Every function of every face module wrapped: a call made from a command's module of
+    ``corraoi/cli`` is listed (not the group's set-up in ``corraoi/cli/__init__.py``, the
+    same for every command, nor the calls the face makes into itself)."""
+    import functools
+    import importlib
+    import inspect
+    import pkgutil
+    import sys
+
+    import corraoi.face
+
+    calls: list[str] = []
+
+    def counted(func, name):
+        @functools.wraps(func)
+        def wrapper(*args, **kwargs):
+            caller = sys._getframe(1).f_globals.get("__name__", "")
+            if caller.startswith("corraoi.cli."):
+                calls.append(name)
+            return func(*args, **kwargs)
+
+        return wrapper
+
+    for info in pkgutil.iter_modules(corraoi.face.__path__):
+        module = importlib.import_module(f"corraoi.face.{info.name}")
+        for name, value in list(vars(module).items()):
+            if inspect.isfunction(value) and value.__module__ == module.__name__:
+                monkeypatch.setattr(module, name, counted(value, f"{info.name}.{name}"))
+    return calls
+
+
+def test_record_and_sweep_call_the_face_once(tmp_path, monkeypatch):
+    """``record`` (given runs, runs up to date, runs ``--from`` a sweep) and ``sweep`` (a
+    table, a folder) each parse, make one call into the face, and print."""
+    from click.testing import CliRunner
+
+    from corraoi.cli import main
+
+    calls = _counting_face_calls(monkeypatch)
+    sweep = str(tmp_path / "sw")
+    log = str(tmp_path / "r.mcap")
+    commands = [
+        ["record", "-p", "ucb", "-T", "40", "--no-rrd", "-o", log],
+        ["record", "-p", "ucb", "-T", "40", "--no-rrd", "-o", log, "--json"],
+        ["sweep", "-p", "ucb,cucb", "-n", "3", "-T", "40", "--json"],
+        ["sweep", "-p", "ucb", "-n", "3", "-T", "40", "-o", sweep],
+        ["record", "--from", sweep, "--run", "worst", "--no-rrd", "-o",
+         str(tmp_path / "{from}.mcap")],
+    ]  # fmt: skip
+    made = {}
+    for args in commands:
+        calls.clear()
+        done = CliRunner().invoke(main, args)
+        assert done.exit_code == 0, (args, done.output)
+        made[" ".join(a for a in args if str(tmp_path) not in a)] = list(calls)
+    assert {k: len(v) for k, v in made.items()} == dict.fromkeys(made, 1), made

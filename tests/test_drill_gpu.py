@@ -190,6 +190,20 @@ def test_the_run_config_says_whose_streams(tmp_path: Path) -> None:
         RunConfig(I2, make_policy("cucb"), 5, 100, streams="tpu")
 
 
+@needs_cxx
+def test_a_captured_run_shows_why_unless_its_scores_are_left_out() -> None:
+    """RunConfig.scored holds for a GPU sweep's captured run (its views show why this arm),
+    and score=False leaves the captured scores out, as it does on the CPU."""
+    from corraoi.face.slots import slots_of
+
+    config = RunConfig(I2, make_policy("cucb"), 5, 300, streams="gpu-emulated")
+    assert config.scored
+    assert all(b.score is not None and b.forced is not None for b in slots_of(config))
+    off = RunConfig(I2, make_policy("cucb"), 5, 300, streams="gpu-emulated", score=False)
+    assert not off.scored
+    assert all(b.score is None and b.forced is None for b in slots_of(off))
+
+
 def _corraoi(*args: object, cwd: Path) -> subprocess.CompletedProcess[str]:
     env = {**__import__("os").environ, DEVICE_ENV: "emulate"}
     return subprocess.run([sys.executable, "-m", "corraoi", *map(str, args)], cwd=cwd, env=env,

@@ -15,7 +15,7 @@ from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, IndexType, Writer
 
 from corraoi.engine.block import SlotBlock
-from corraoi.recorder.slotlog.chunks import ZSTD_LEVEL, ChunkWriter
+from corraoi.recorder.slotlog.chunks import RECORD_ROOM, ZSTD_LEVEL, ChunkWriter
 from corraoi.recorder.slotlog.encode import BlockEncoder
 from corraoi.recorder.slotlog.reader import open_log
 from corraoi.recorder.slotlog.sink import McapSink
@@ -47,7 +47,10 @@ def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:
     return buf.getvalue()
 
 
-def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3) -> bytes:
+def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3,
+          framed: int = 0) -> bytes:  # fmt: skip
+    """ChunkWriter's file: a message an ``add_messages`` call, or (``framed`` > 0) that many
+    messages a ``frame`` call, added a message at a time (``add_framed`` of its slices)."""
     buf = io.BytesIO()
     w = ChunkWriter(
         buf,
@@ -60,8 +63,16 @@ def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3) ->
     )
     w.start()
     w.add_metadata("a", {"k": "v"})
-    for t, data in messages:  # one at a time, as mcap's writer is called
-        w.add_messages(np.array([t * NS_PER_SLOT], dtype=np.uint64), np.array([t]), [data])
+    for i, (t, data) in enumerate(messages):  # one at a time, as mcap's writer is called
+        if not framed:
+            w.add_messages(np.array([t * NS_PER_SLOT], dtype=np.uint64), np.array([t]), [data])
+        else:
+            if i % framed == 0:  # the next `framed` messages as one text, each after the room
+                batch = messages[i : i + framed]
+                ts = np.array([u for u, _ in batch], dtype=np.uint64)
+                text = bytearray(b"".join(RECORD_ROOM + d for _, d in batch))
+                frame = w.frame(ts * np.uint64(NS_PER_SLOT), ts, text)
+            w.add_framed(frame[i % framed : i % framed + 1])
         if t % every == 0:
             w.flush()
     w.flush()
@@ -80,6 +91,36 @@ def test_same_bytes_as_the_mcap_writer_without_its_empty_group(count):
     reader = make_reader(io.BytesIO(ours), validate_crcs=True)
     got = [(m.log_time, m.publish_time, m.sequence, m.data) for _, _, m in reader.iter_messages()]
     assert got == [(t * NS_PER_SLOT, t * NS_PER_SLOT, t, d) for t, d in messages]
+
+
+@pytest.mark.parametrize("framed", [1, 4, 13])
+def test_framed_messages_are_the_same_bytes(framed):
+    """Messages given as one text with room for their record headers (what McapSink gives,
+    BlockEncoder.encode_framed's) make the file add_messages makes, chunks ending inside a
+    framed batch or not."""
+    rng = np.random.default_rng(framed)
+    messages = [(t, b'{"v":%d}' % v * (1 + t % 3))
+                for t, v in enumerate(rng.integers(0, 10**6, 30).tolist(), start=1)]  # fmt: skip
+    assert _ours(messages, every=10, framed=framed) == _ours(messages, every=10)
+    assert _ours(messages, every=10, zstd_level=3, framed=framed) == _reference(messages, 10)
+    buf = io.BytesIO()
+    w = ChunkWriter(buf, schema=Schema(id=1, name="s", encoding="jsonschema", data=b"{}"),
+                    channel=Channel(id=1, topic="/x", message_encoding="json", schema_id=1,
+                                    metadata={}), library="corraoi/test")  # fmt: skip
+    with pytest.raises(ValueError, match="2 messages in the text, 3 times"):
+        w.frame(np.arange(3, dtype=np.uint64), np.arange(3), RECORD_ROOM + b"{}" + RECORD_ROOM)
+    with pytest.raises(ValueError, match="each after a RECORD_ROOM"):
+        w.frame(np.arange(1, dtype=np.uint64), np.arange(1), b"{}" + RECORD_ROOM)
+
+
+def test_the_framed_encoding_is_the_messages_each_after_the_room(make_config, engine):
+    """BlockEncoder.encode_framed: encode's messages, each after the room, in one buffer."""
+    config = make_config("aoi-aware-cucb", horizon=300)  # scores, flags, a threshold
+    block = SlotBlock.concat(engine(config))
+    enc = BlockEncoder(config.instance.K)
+    framed = bytes(enc.encode_framed(block, RECORD_ROOM))
+    assert framed == b"".join(RECORD_ROOM + m for m in enc.encode(block))
+    assert enc.encode_framed(block.slice(0, 0), RECORD_ROOM) == b""
 
 
 def _summary_groups(data: bytes) -> list[tuple[int, int]]:

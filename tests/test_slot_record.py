@@ -212,6 +212,9 @@ def _rewritten(tmp_path: Path, edit) -> Path:
         def encode(self, b):  # type: ignore[override]
             return [edit(json.loads(m)) for m in super().encode(b)]
 
+        def encode_framed(self, b, room):  # type: ignore[override]
+            return bytearray(b"".join(room + m for m in self.encode(b)))  # what McapSink asks
+
     path = tmp_path / "edited.mcap"
     with McapSink(path, config, fsync=False) as sink:
         sink._encoder = Editing(config.instance.K)

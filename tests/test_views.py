@@ -9,6 +9,7 @@ sees is checked in a browser by tests/test_e2e_web.py.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -155,7 +156,7 @@ def test_views_are_chosen_by_K_and_legends_stand_right_of_the_data(K):
     if K <= style.LINES_UP_TO:  # a line per arm, its true mean dotted in its colour
         assert "BarChart" not in kinds
         assert {"$origin/mu_hat", "$origin/true_means/**", "$origin/pulls",
-                "$origin/why/score/**"} <= contents  # fmt: skip
+                "$origin/why/score"} <= contents  # fmt: skip
     else:  # bars at the cursor, strips, the arms that matter as lines
         assert kinds.count("BarChart") == 3  # means, pulls, scores
         assert {"$origin/why/bars/**", "$origin/why/focus/**"} <= contents
@@ -328,6 +329,48 @@ def test_bars_hold_the_values_of_their_slots_and_lines_the_arms_that_matter(tmp_
             most = int(np.argmax(ref.pulls[i])) == k and top[1] > top[0]
             small = ref.candidates[i, k] and ref.candidates[i].sum() <= style.FOCUS_MAX
             assert most or small
+
+
+@pytest.mark.parametrize("K", [4, 16])
+def test_the_chosen_dots_mark_what_the_score_lines_do_not_show(tmp_path, K):
+    """Up to LINES_UP_TO arms every arm's score is a line, and where the score chose the arm
+    the arm played is the top one: why/chosen holds only the slots where the arm played was
+    below the top score (a plug-in that does not maximise its scores; here arms moved by
+    hand). Beyond, only the arms that matter are lines: why/chosen holds the played arm's
+    score wherever it has one."""
+    inst = instance_of(K)
+    config = RunConfig(inst, make_policy("ucb"), 1, 3000)
+    ref = SlotBlock.concat(list(simulate_run(inst, config.policy, 1, 3000)))
+    score = ref.score.astype(np.float64)
+    rows = np.arange(len(ref))
+    below = np.isfinite(score).all(axis=1) & (rows % 97 == 5)  # play the lowest score there
+    arm = np.where(below, np.argmin(np.where(np.isfinite(score), score, np.inf), axis=1),
+                   ref.arm)  # fmt: skip
+    block = dataclasses.replace(ref, arm=arm)
+    with RrdOutput(config, rrd_path=tmp_path / "a.rrd") as out:
+        with RerunSink(out.recording, config.label, config) as sink:
+            sink.write(block)
+    slots, values = read_rrd(tmp_path / "a.rrd")[f"/{run_path(config.label)}/why/chosen"]
+    chosen = score[rows, arm]
+    want = below if K <= style.LINES_UP_TO else np.isfinite(chosen)
+    assert 20 < want.sum() < len(ref)
+    assert np.array_equal(slots, ref.t[want])
+    assert np.array_equal([v[0] for v in values], chosen[want])
+
+
+@pytest.mark.parametrize("policy", ["cucb", "ucb"])
+def test_the_scores_are_one_entity_of_K_series(tmp_path, policy):
+    """Up to LINES_UP_TO arms why/score holds every arm's score, a row a slot scored; an arm
+    without a finite score there (outside CUCB's candidate set) is -inf, no point (NaN
+    would make two equal recordings differ under `rerun rrd compare`)."""
+    path, config, ref, _ = run(tmp_path, instance_of(4), policy, horizon=2000)
+    slots, values = read_rrd(path)[f"/{run_path(config.label)}/why/score"]
+    score = ref.score.astype(np.float64)
+    fin = np.isfinite(score)
+    rows = fin.any(axis=1)
+    assert rows.sum() > 1000 and np.array_equal(slots, ref.t[rows])
+    assert np.array_equal(np.array(values), np.where(fin, score, -np.inf)[rows])
+    assert (policy == "cucb") == bool((~fin[rows]).any())  # CUCB leaves arms out
 
 
 def test_true_means_are_dots_that_alternate_where_means_are_equal(tmp_path):

@@ -145,9 +145,8 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     from corraoi.recorder.slotlog.encode import end_metadata as make_end
     from corraoi.recorder.slotlog.encode import sources_end_metadata
     from corraoi.recorder.vocab import (
-        MCAP_INDEX_TYPES,
-        MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
         NS_PER_SLOT,
+        mcap_index_types,
         slot_topic,
     )
     from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
@@ -170,7 +169,7 @@ def _copy(log: RunLog, fin: BinaryIO, fout: BinaryIO) -> int:
     fin.seek(0)
     writer = Writer(
         fout, chunk_size=_CHUNK_BYTES, compression=CompressionType.ZSTD,
-        index_types=MCAP_INDEX_TYPES_WITH_ATTACHMENTS if log.attachments else MCAP_INDEX_TYPES,
+        index_types=mcap_index_types(bool(log.attachments)),
     )  # fmt: skip
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}

@@ -34,7 +34,7 @@ from .options import (
 )
 from .reading import progress
 from .record_loop import report
-from .record_plan import from_sweep, say_where_from
+from .record_plan import from_sweep_policies, say_where_from
 
 
 @click.command("record")
@@ -127,7 +127,7 @@ def record(
       corraoi record -p cucb --foxglove --pace 200   # live in Foxglove
       corraoi record --from sweeps/I2 --run worst -p cts   # a sweep's worst run
     """  # noqa: D301
-    from corraoi.face.sessions import plan_runs, record_runs, run_configs
+    from corraoi.face.sessions import record_from_options
 
     if backend == "gpu":
         raise ConfigError(
@@ -140,19 +140,15 @@ def record(
     live = foxglove_choice(foxglove, pace=pace)
     if no_rrd and rrd is not None:
         raise UsageError("--rrd and --no-rrd: choose one")
-    drills = None
+    policies: tuple[str, ...] | None = policy
     if from_ is not None:
-        which = run if run is not None else "worst"
-        drills = from_sweep(from_, which, cell, policy, param, c=c, beta=beta,
-                            kept_code=kept_code, allow_changed_code=allow_changed_code)
-        configs = [d.config for d in drills]
-    else:
-        if run is not None or cell or kept_code or allow_changed_code:
-            raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
-                             "--from SWEEP")  # fmt: skip
-        configs = run_configs(instance, policy, param, c=c, beta=beta, channel=channel,
-                              seed=seed, horizon=horizon, score=score, warn=warn,
-                              sources=sources)  # fmt: skip
+        if sources != 1:
+            raise UsageError(f"--sources {sources}: not with --from SWEEP (a sweep's run is "
+                             "recorded with the sources it was run with)")  # fmt: skip
+        policies = from_sweep_policies(policy)
+    elif run is not None or cell or kept_code or allow_changed_code:
+        raise UsageError(f"{from_only(run, cell, kept_code, allow_changed_code)}: only with "
+                         "--from SWEEP")  # fmt: skip
 
     def fresh_line(p: Any) -> None:
         click.echo(
@@ -163,23 +159,20 @@ def record(
             err=as_json,
         )
 
-    plans, fresh = plan_runs(
-        configs, output, rrd, no_rrd, drills, force=force,
-        live_option=_live_option(viewer, foxglove), again=bool(force or viewer.asked or foxglove),
-        on_planned=lambda _: say_where_from(drills) if drills else None, on_fresh=fresh_line,
+    session = record_from_options(
+        instance, policies, param, c=c, beta=beta, channel=channel, seed=seed, horizon=horizon,
+        score=score, sources=sources, output=output, rrd=rrd, no_rrd=no_rrd, force=force,
+        again=bool(force or viewer.asked or foxglove), sweep=from_,
+        run=run if run is not None else "worst", cells=cell, kept_code=kept_code,
+        allow_changed_code=allow_changed_code, hold=click.get_current_context().with_resource,
+        viewer=viewer, live=live, live_option=_live_option(viewer, foxglove), warn=warn,
+        on_planned=say_where_from if from_ is not None else None, on_fresh=fresh_line,
+        progress=progress, before_rerun=keep_pandas_out,
     )  # fmt: skip
-    live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
-    if not plans:
+    if not session.plans:
         if as_json:
-            click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in fresh]}))
+            click.echo(json.dumps({"runs": [], "up_to_date": [str(p.mcap) for p in session.fresh]}))
         return
-    if any(p.rrd for p in plans) or viewer.asked:
-        from corraoi.extras import require_package
-
-        # said here, not as a traceback of the process that would write the .rrd
-        require_package("rerun", "corraoi record's Rerun recording (--no-rrd: none)")
-    session = record_runs(plans, viewer=viewer, live=live, force=force, progress=progress,
-                          before_rerun=keep_pandas_out)  # fmt: skip
     viewer_failed = session.viewer_failed
     viewer_problem = session.viewer_problem
     if viewer_problem:

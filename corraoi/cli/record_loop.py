@@ -1,5 +1,5 @@
 """``corraoi record``'s report: the runs the face recorded
-(:func:`corraoi.face.sessions.record_runs`), printed (or their JSON) once they are done.
+(:func:`corraoi.face.sessions.record_from_options`), printed (or their JSON) once they are done.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""The runs ``corraoi record --from SWEEP`` records: chosen from a sweep folder
-(corraoi.experiments.drill), with what the sweep fixed refused as an option. Their files are
-planned by the face (:func:`corraoi.face.recording.plan_files`).
+"""``corraoi record --from SWEEP``'s options: what the sweep fixes refused as an option, and
+where each run comes from said. The runs are chosen from the sweep folder by the face
+(:func:`corraoi.face.sessions.record_from_options`).
 """
 
 from __future__ import annotations
@@ -12,26 +12,11 @@ import click
 from corraoi.errors import UsageError
 from corraoi.text import safe_text
 
-from .common import warn
 
-
-def from_sweep(
-    folder: str,
-    run: str,
-    cells: tuple[str, ...],
-    policy: tuple[str, ...],
-    param: tuple[str, ...],
-    *,
-    c: float | None,
-    beta: float | None,
-    kept_code: bool = False,
-    allow_changed_code: bool = False,
-) -> list[Any]:
-    """The runs ``--from`` names (:func:`corraoi.face.sessions.runs_from_sweep`); what the
-    sweep fixed cannot be given too."""
+def from_sweep_policies(policy: tuple[str, ...]) -> tuple[str, ...] | None:
+    """``--policy`` with ``--from``: its words when it was given (the sweep's labels select its
+    cells, any other word adds a policy), else None; what the sweep fixes cannot be given."""
     from click.core import ParameterSource
-
-    from corraoi.face.sessions import runs_from_sweep
 
     ctx = click.get_current_context()
     fixed = [("instance", "--instance"), ("horizon", "--horizon"), ("seed", "--seed"),
@@ -41,13 +26,12 @@ def from_sweep(
             raise UsageError(f"{option} and --from: the sweep fixes the {name} of its runs; "
                              "leave out " + option)  # fmt: skip
     given = ctx.get_parameter_source("policy") not in (ParameterSource.DEFAULT, None)
-    return runs_from_sweep(folder, run, cells, policy if given else None, param, c=c, beta=beta,
-                           kept_code=kept_code, allow_changed_code=allow_changed_code,
-                           hold=ctx.with_resource, warn=warn)  # fmt: skip
+    return policy if given else None
 
 
-def say_where_from(drills: list[Any]) -> None:
-    for d in drills:
+def say_where_from(plans: list[Any]) -> None:
+    """Where each run planned with ``--from`` comes from (one line each, on stderr)."""
+    for d in (p.drill for p in plans):
         what = "" if d.cell is not None else ", added"
         label = d.cell if d.cell is not None else d.config.policy.label
         click.echo(f"from {safe_text(d.folder)}: {safe_text(d.config.instance.name)} "
@@ -55,4 +39,4 @@ def say_where_from(drills: list[Any]) -> None:
                    err=True)  # fmt: skip
 
 
-__all__ = ["from_sweep", "say_where_from"]
+__all__ = ["from_sweep_policies", "say_where_from"]

@@ -2,7 +2,8 @@
 a
 Dask cluster, optionally into a resumable results folder.
 
-Running the grid is :mod:`corraoi.cli.sweep_run`'s, the printed tables
+The grid is built, checked and run by the face in one call
+(:func:`corraoi.face.sweeps.sweep_from_options`), the printed tables are
 :mod:`corraoi.cli.sweep_table`'s; ``corraoi reproduce`` (:mod:`corraoi.cli.reproduce`) and
 ``print_table`` stay importable from here.
 
@@ -18,8 +19,9 @@ import click
 
 from corraoi import limits
 from corraoi.errors import ConfigError
+from corraoi.text import split_list
 
-from .common import handle_errors, warn
+from .common import handle_errors, keep_pandas_out, warn
 from .options import (
     CHECKPOINTS,
     RUNS,
@@ -30,11 +32,9 @@ from .options import (
     policy_option,
     seed_option,
 )
-from .sweep_run import run_grid, settle_backend
+from .reading import progress
+from .sweep_run import interrupted_or
 from .sweep_table import print_table
-
-#: From this many run-slots (about a minute here) a sweep states its size before it starts.
-SAY_SIZE_FROM = 10**9
 
 #: What ``sweep -o DIR`` writes beside the group files (corraoi.experiments.sweeps).
 SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "summary.json",
@@ -137,20 +137,16 @@ def sweep(
       corraoi sweep -p rhorand-ucb,mctopm-ucb --sources 1,2,3,4 -n 50 -o many
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
-    from corraoi.face.sweeps import check_grid, grid_from_options, grid_notes, sources_words
-    from corraoi.face.sweeps import kept_code as kept_copies
+    from corraoi.face.sweeps import sweep_from_options
 
     out = output
     if resume and out is None:
         raise ConfigError("--resume needs -o DIR (the folder of the sweep to continue)")
-    if kept_code:
-        if not resume or out is None:
-            raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
-                              "of its plug-ins run)")  # fmt: skip
-        # while this command runs, before the grid is built: its plug-ins load from the copies
-        click.get_current_context().with_resource(kept_copies(out))
+    if kept_code and (not resume or out is None):
+        raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
+                          "of its plug-ins run)")  # fmt: skip
     options = {
-        "instances": _split(instance) or None,
+        "instances": split_list(instance) or None,
         "policies": list(policy) or None,
         "horizons": _horizons(horizon) or None,
         "runs": runs,
@@ -160,19 +156,16 @@ def sweep(
         "channel": channel,
         "baseline": baseline,
         "backend": backend,
-        "sources": sources_words(sources),
+        "sources": list(sources) or None,  # the words: checked by the face
     }
-    grid = grid_from_options(experiment, options, params=param, scalars={"c": c, "beta": beta},
-                             warn=warn)  # fmt: skip
-    grid = settle_backend(grid)
-    size = check_grid(grid, out, allow_huge=allow_huge)
-    run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
-    if run_slots >= SAY_SIZE_FROM:
-        click.echo(f"corraoi: sweep of {size}; the progress bar shows the time left", err=True)
-    for note in grid_notes(grid):
-        warn(note)
-    outcome = run_grid(grid, out=out, scheduler=scheduler, resume=resume, force=force,
-                   workers=workers, label="sweep")  # fmt: skip
+    done = sweep_from_options(
+        experiment, options, params=param, scalars={"c": c, "beta": beta}, out=out,
+        scheduler=scheduler, resume=resume, force=force, workers=workers, allow_huge=allow_huge,
+        kept=kept_code, hold=click.get_current_context().with_resource, warn=warn,
+        say=lambda line: click.echo(line, err=True), progress=progress,
+        before_folder=keep_pandas_out, label="sweep",
+    )  # fmt: skip
+    outcome = interrupted_or(done)
     if as_json:
         if len(outcome.summaries) == 1:
             click.echo(json.dumps(outcome.summaries[0], indent=2))
@@ -183,24 +176,16 @@ def sweep(
             if i:
                 click.echo("")
             print_table(summary, out)
-    if out is not None:
-        from corraoi.face.sweeps import wrote_line
-
-        click.echo(wrote_line(out, outcome), err=as_json)
+    if done.wrote is not None:
+        click.echo(done.wrote, err=as_json)
     wall = max((s["wall_s"] for s in outcome.summaries), default=0.0)
     click.echo(f"total wall time {wall:.2f} s", err=True)
 
 
 
-def _split(values: tuple[str, ...]) -> list[str]:
-    from corraoi.face.sweeps import split_words
-
-    return split_words(values)
-
-
 def _horizons(values: tuple[str, ...]) -> list[int]:
     out = []
-    for item in _split(values):
+    for item in split_list(values):
         try:
             h = int(item)
         except ValueError:
@@ -214,7 +199,6 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
 
 
 __all__ = [
-    "SAY_SIZE_FROM",
     "SWEEP_FILES",
     "sweep",
 ]

@@ -1,6 +1,6 @@
-"""Running a sweep's grid for ``corraoi sweep`` and ``corraoi reproduce`` through the face
-(:func:`corraoi.face.sweeps.run_grid`): the backend settled and said, a progress bar, and
-Ctrl-C saying what is saved.
+"""Running a sweep's grid for ``corraoi reproduce`` through the face
+(:func:`corraoi.face.sweeps.run_with_progress`): the backend settled and said, a progress bar,
+and Ctrl-C saying what is saved (:func:`interrupted_or`, ``corraoi sweep``'s too).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from .common import keep_pandas_out, warn
+from .reading import progress
 
 
 def settle_backend(grid: Any) -> Any:
@@ -38,31 +39,21 @@ def run_grid(
     label: str,
 ) -> Any:
     """Run the grid with a progress bar (slots in this process, chunks on a cluster)."""
-    from corraoi.face.sweeps import run_grid as run
-    from corraoi.progress import Progress
+    from corraoi.face.sweeps import run_with_progress
 
-    if out is not None and scheduler is None:
-        keep_pandas_out()  # results.parquet is written with pyarrow alone (0.4 s saved)
-    if scheduler is None:
-        total = sum(c.horizon for c in grid.cells) * grid.runs // grid.chunk_runs
-        bar = Progress(max(total, 1), label)
-    else:
-        bar = Progress(sum(-(-grid.runs // grid.chunk_runs) for _ in grid.cells),
-                       f"{label} (chunks)")  # fmt: skip
+    done = run_with_progress(grid, out=out, scheduler=scheduler, resume=resume, force=force,
+                             workers=workers, warn=warn, progress=progress,
+                             before_folder=keep_pandas_out, label=label)  # fmt: skip
+    return interrupted_or(done)
 
-    def on_chunk(done: int, total: int) -> None:
-        bar.update(1, note=f"{done}/{total} chunks")
 
-    try:
-        with bar:
-            return run(grid, out=out, scheduler=scheduler, resume=resume, force=force,
-                       workers=workers, warn=warn,
-                       on_slots=bar.update if scheduler is None else None,
-                       on_chunk=on_chunk if scheduler is not None else None)  # fmt: skip
-    except KeyboardInterrupt:
-        where = f"; finished chunks are saved in {out}: --resume continues" if out else ""
-        click.echo(f"corraoi: interrupted{where}", err=True)
+def interrupted_or(done: Any) -> Any:
+    """The outcome of a sweep the face ran (:class:`corraoi.face.sweeps.SweepRun`); one that
+    Ctrl-C stopped says what is saved and exits with status 130."""
+    if done.interrupted is not None:
+        click.echo(f"corraoi: {done.interrupted}", err=True)
         sys.exit(130)
+    return done.outcome
 
 
-__all__ = ["run_grid", "settle_backend"]
+__all__ = ["interrupted_or", "run_grid", "settle_backend"]

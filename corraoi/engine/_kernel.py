@@ -42,7 +42,7 @@ from numba.core.compiler import Compiler
 from corraoi.policies.hooks import forced_none as _forced  # HOOKS
 from corraoi.policies.hooks import score_none as _score  # HOOKS
 from corraoi.policies.hooks import update_none as _update  # HOOKS
-from corraoi.rng import argmax_random, uniform
+from corraoi.rng import argmax_random, argmax_random_nan, uniform
 
 #: Hook options under which inlining changes nothing a hook computes (numba's defaults).
 _PLAIN_OPTIONS = {"nopython": (True,), "boundscheck": (None, False), "nogil": (True, False)}
@@ -307,6 +307,10 @@ def advance(
         reg = regret[r]
         asum = aoisum[r]
         xp = xprev[r]
+        # a hook's fault: kept in locals while the slots run, written once after them
+        f_t = err[r, 0]
+        f_what = err[r, 1]
+        f_value = err[r, 2]
         si = 0
         nsnap = snap_t.shape[0]
         for j in range(nslots):
@@ -324,10 +328,10 @@ def advance(
                 cand[k] = True
             forced = _forced(t, K, npull, nsucc, params, ps, pst)
             if forced >= K:  # an arm out of range: noted (the engine ends the run at this
-                if err[r, 0] == 0:  # slot) and never played; the loop goes on unbranched
-                    err[r, 0] = t
-                    err[r, 1] = FAULT_ARM
-                    err[r, 2] = forced
+                if f_t == 0:  # slot) and never played; the loop goes on unbranched
+                    f_t = t
+                    f_what = FAULT_ARM
+                    f_value = forced
                 forced = -1
             if correlated and forced < 0:
                 candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has1,
@@ -345,15 +349,13 @@ def advance(
                 else:
                     _score(t, K, npull, nsucc, muhat, cand, vals, params, ps, pst, cache)
                     mask = cand
-                    nan = K
-                    for k in range(K):  # a NaN score on a candidate (+inf is a score)
-                        if cand[k] and vals[k] != vals[k] and k < nan:
-                            nan = k
-                    if nan < K and err[r, 0] == 0:  # noted: the engine ends the run here
-                        err[r, 0] = t
-                        err[r, 1] = FAULT_NAN
-                        err[r, 2] = nan
-                arm = argmax_random(vals, mask, pst, K)  # in range even over NaN scores
+                # in range even over NaN scores; a NaN score on a candidate is noted (the
+                # engine ends the run here), found by the argmax's own pass
+                arm, nan = argmax_random_nan(vals, mask, pst, K)
+                if nan < K and not override and f_t == 0:
+                    f_t = t
+                    f_what = FAULT_NAN
+                    f_value = nan
             else:
                 arm = forced
             # ---- outcome and ages
@@ -396,3 +398,6 @@ def advance(
         regret[r] = reg
         aoisum[r] = asum
         xprev[r] = xp
+        err[r, 0] = f_t
+        err[r, 1] = f_what
+        err[r, 2] = f_value

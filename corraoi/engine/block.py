@@ -154,9 +154,10 @@ class RunConfig:
 
     @property
     def scored(self) -> bool:
-        """Its blocks carry ``score`` and ``forced``: a compiled policy's run on the CPU
-        engine (a plain-Python policy's only when its ``select`` returns them)."""
-        return bool(self.score) and self.streams == "cpu" and self.policy.tier == "compiled"
+        """Its blocks carry ``score`` and ``forced``: a compiled policy's run, on the CPU
+        engine or captured from a GPU sweep's kernel (a plain-Python policy's only when its
+        ``select`` returns them)."""
+        return bool(self.score) and self.policy.tier == "compiled"
 
     @property
     def label(self) -> str:

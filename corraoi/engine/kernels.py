@@ -20,6 +20,7 @@ processes at once. Where the copies are kept, locked, checked and compiled:
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import sys
@@ -138,8 +139,10 @@ def kernel_source(policy: type[CompiledPolicy], *, record: bool,
     return name, header + text
 
 
+@functools.lru_cache(maxsize=64)
 def _sweep_variant(text: str) -> str:
-    """The template with the sweep kernel's decorator and without the recording path."""
+    """The template with the sweep kernel's decorator and without the recording path (kept
+    per text: a sweep asks for each policy's kernel twice a chunk)."""
     lines = text.split("\n")
     out: list[str] = []
     skipping = False

@@ -46,6 +46,7 @@ from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicySpec, make_policy, parse_policy_names, resolve
 from corraoi.policies.spec import assign_params, check_sources, param_key
+from corraoi.text import split_list
 
 #: Keys an experiment file may hold.
 FILE_KEYS = ("instances", "policies", "horizons", "runs", "seed", "chunk", "checkpoints",
@@ -234,17 +235,6 @@ class Grid:
             raise ConfigError(
                 f"{where}: not a corraoi grid ({type(exc).__name__}: {exc})"
             ) from None
-
-
-def split_list(values: Iterable[str]) -> list[str]:
-    """Comma lists and repeated options, in order, without repeats or empty items."""
-    out: list[str] = []
-    for value in values:
-        for part in str(value).split(","):
-            item = part.strip()
-            if item and item not in out:
-                out.append(item)
-    return out
 
 
 def parse_param_lists(items: Iterable[str]) -> dict[str, list[float]]:

@@ -23,10 +23,17 @@ from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicyBase, PolicySpec, make_policies, register
 from corraoi.policies.registry import policy_name
-from corraoi.recorder.slotlog.trace import states_of_log
+
+
+def _states_of_log(path: Any, instance: Instance, where: str) -> Any:
+    """:func:`corraoi.recorder.slotlog.trace.states_of_log`, imported when a trace is a log."""
+    from corraoi.recorder.slotlog.trace import states_of_log
+
+    return states_of_log(path, instance, where)
+
 
 #: Readers of trace files that are not text, by suffix: a corraoi slot log.
-TRACE_READERS: Mapping[str, TraceReader] = {".mcap": states_of_log}
+TRACE_READERS: Mapping[str, TraceReader] = {".mcap": _states_of_log}
 
 #: What ``policy`` may be: a word, a class, an instance of a class, or several of those.
 PolicyLike = str | type[PolicyBase] | PolicyBase

@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import signal
 from collections.abc import Callable, Sequence
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, field
 from types import FrameType
 from typing import TYPE_CHECKING, Any
@@ -178,13 +178,18 @@ class Session:
     stopped: str | None = None
     viewer_problem: str | None = None
     viewer_failed: bool = False
+    #: the runs planned to be recorded, and those left out as up to date (:func:`record`)
+    plans: list[Plan] = field(default_factory=list)
+    fresh: list[Plan] = field(default_factory=list)
 
     def verdicts(self) -> list[str]:
         """Per run recorded from a sweep with changed code: whether it still gives the sweep's
         row (one line each)."""
+        out: list[str] = []
+        if not any(r.plan.drill for r in self.results):
+            return out  # no run from a sweep: its module is not imported
         from corraoi.experiments.drill import row_verdict
 
-        out = []
         for r in self.results:
             verdict = row_verdict(r.plan.drill, r.slots, r.regret) if r.plan.drill else None
             if verdict is not None:
@@ -264,10 +269,77 @@ def record_runs(
     return Session(results, stop.signal, problem, failed)
 
 
+def record_from_options(
+    instance: str | os.PathLike[str],
+    policies: Sequence[str] | None,
+    params: Sequence[str],
+    *,
+    c: float | None,
+    beta: float | None,
+    channel: str | None,
+    seed: int,
+    horizon: int,
+    score: bool | None,
+    output: str | None,
+    rrd: str | None,
+    no_rrd: bool,
+    force: bool,
+    again: bool,
+    sources: int = 1,
+    sweep: str | None = None,
+    run: str = "worst",
+    cells: Sequence[str] = (),
+    kept_code: bool = False,
+    allow_changed_code: bool = False,
+    hold: Callable[[AbstractContextManager[Any]], Any] | None = None,
+    viewer: ViewerChoice | None = None,
+    live: FoxgloveChoice | None = None,
+    live_option: str | None = None,
+    warn: Callable[[str], None] | None = None,
+    on_planned: Callable[[list[Plan]], None] | None = None,
+    on_fresh: Callable[[Plan], None] | None = None,
+    progress: ProgressBar | None = None,
+    before_rerun: Callable[[], None] | None = None,
+) -> Session:
+    """``corraoi record`` from its parsed options: the runs (:func:`run_configs`, or with
+    ``sweep`` the folder's runs, :func:`runs_from_sweep`, ``policies`` None when ``--policy``
+    was not given), their files (:func:`plan_runs`: ``on_planned``, ``on_fresh``), then every
+    run not up to date recorded (:func:`record_runs`: ``progress``, the first signal finishing
+    the files). Returns the :class:`Session` (``.plans`` empty: nothing was to be recorded)."""
+    with ExitStack() as stack:  # the kept code in use while the runs record (hold: longer)
+        if sweep is not None:
+            drills = runs_from_sweep(sweep, run, cells, policies, params, c=c, beta=beta,
+                                     kept_code=kept_code, allow_changed_code=allow_changed_code,
+                                     hold=hold or stack.enter_context, warn=warn)  # fmt: skip
+            configs = [d.config for d in drills]
+        else:
+            drills = None
+            configs = run_configs(instance, policies or (), params, c=c, beta=beta,
+                                  channel=channel, seed=seed, horizon=horizon, score=score,
+                                  warn=warn, sources=sources)  # fmt: skip
+        plans, fresh = plan_runs(configs, output, rrd, no_rrd, drills, force=force,
+                                 live_option=live_option, again=again, on_planned=on_planned,
+                                 on_fresh=on_fresh)  # fmt: skip
+        if live is not None:
+            live.several = len(configs) > 1  # one topic per run: /corraoi/slot/<label>
+        if not plans:
+            return Session(fresh=fresh)
+        if any(p.rrd for p in plans) or (viewer is not None and viewer.asked):
+            from corraoi.extras import require_package
+
+            # said here, not as a traceback of the process that would write the .rrd
+            require_package("rerun", "corraoi record's Rerun recording (--no-rrd: none)")
+        session = record_runs(plans, viewer=viewer, live=live, force=force, progress=progress,
+                              before_rerun=before_rerun)  # fmt: skip
+    session.plans, session.fresh = list(plans), fresh
+    return session
+
+
 def _bar(progress: ProgressBar | None, total: int) -> AbstractContextManager[Any]:
     from contextlib import nullcontext
 
     return nullcontext() if progress is None else progress(total, "record")
 
 
-__all__ = ["Session", "Stop", "plan_runs", "record_runs", "run_configs", "runs_from_sweep"]
+__all__ = ["Session", "Stop", "plan_runs", "record_from_options", "record_runs", "run_configs",
+           "runs_from_sweep"]  # fmt: skip

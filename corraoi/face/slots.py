@@ -35,12 +35,14 @@ def slots_of(config: RunConfig) -> Iterator[RunBlock]:
     if config.streams == "cpu":
         blocks = simulate_run(config.model, config.policy, config.seed, config.horizon,
                               channel=config.channel)  # fmt: skip
-        if not config.score:  # the scores left out (RunConfig.score)
-            return (replace(b, score=None, forced=None) for b in blocks)
-        return blocks
-    from corraoi.gpu.device import device_of
-    from corraoi.gpu.runner import capture_run
+    else:
+        from corraoi.gpu.device import device_of
+        from corraoi.gpu.runner import capture_run
 
-    device = device_of("emulate" if config.streams == "gpu-emulated" else "cuda")
-    return capture_run(config.model, config.policy, seed=config.seed,
-                       horizon=config.horizon, channel=config.channel, device=device)  # fmt: skip
+        device = device_of("emulate" if config.streams == "gpu-emulated" else "cuda")
+        blocks = capture_run(config.model, config.policy, seed=config.seed,
+                             horizon=config.horizon, channel=config.channel,
+                             device=device)  # fmt: skip
+    if not config.score:  # the scores left out (RunConfig.score), on either engine
+        return (replace(b, score=None, forced=None) for b in blocks)
+    return blocks

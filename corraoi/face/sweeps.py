@@ -17,6 +17,7 @@ import tempfile
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager, ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -343,22 +344,6 @@ def record_each_from(folder: str | os.PathLike[str], run: str, *, cells: Sequenc
                                      warn=warn, words=CLI_WORDS)  # fmt: skip
 
 
-def split_words(values: Sequence[str]) -> list[str]:
-    """The command line's comma lists and repeated options (``-i I1,I2 -i I3``), in order,
-    without repeats or empty items."""
-    from corraoi.experiments.grid import split_list
-
-    return split_list(values)
-
-
-def sources_words(values: Sequence[str]) -> list[int] | None:
-    """``--sources M[,M...]`` as integers (None: none given); a word that is not an integer
-    is a :class:`~corraoi.errors.ConfigError` naming it."""
-    from corraoi.experiments.grid import parse_sources
-
-    return parse_sources(values)
-
-
 def kept_code(folder: str | os.PathLike[str]) -> AbstractContextManager[list[str]]:
     """A context in which the plug-ins of the sweep in ``folder`` load from its kept copies
     (``--resume --kept-code``), entered before the grid is built."""
@@ -392,6 +377,10 @@ def grid_from_options(
         if value is not None:
             given_params[key] = [value]
     chosen = dict(options)
+    if chosen.get("sources") is not None:  # --sources M[,M...]: integers, or one line
+        from corraoi.experiments.grid import parse_sources
+
+        chosen["sources"] = parse_sources(chosen["sources"])
     if chosen.get("seed") == 0 and "seed" in spec:
         chosen["seed"] = None  # the file's seed unless one is given
     spec.update({k: v for k, v in chosen.items() if v is not None})
@@ -587,6 +576,119 @@ def run_grid(
                          outputs=outputs, words=words)  # fmt: skip
 
 
+#: From this many run-slots (about a minute here) a sweep states its size before it starts.
+SAY_SIZE_FROM = 10**9
+
+
+@dataclass
+class SweepRun:
+    """What :func:`sweep_from_options` did: the grid run and its outcome (None when it was
+    interrupted), what it wrote (one line, with ``out``) and, when Ctrl-C stopped it, what
+    was kept (one line)."""
+
+    grid: Grid
+    outcome: SweepOutcome | None = None
+    wrote: str | None = None
+    interrupted: str | None = None
+
+
+def sweep_from_options(
+    experiment: str | os.PathLike[str] | None,
+    options: Mapping[str, Any],
+    *,
+    params: Sequence[str] = (),
+    scalars: Mapping[str, float | None] | None = None,
+    out: Path | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    force: bool = False,
+    workers: int | None = None,
+    allow_huge: bool = False,
+    kept: bool = False,
+    hold: Callable[[AbstractContextManager[Any]], Any] | None = None,
+    warn: Callable[[str], None] | None = None,
+    say: Callable[[str], None] | None = None,
+    progress: Callable[[int, str], Any] | None = None,
+    before_folder: Callable[[], None] | None = None,
+    label: str = "sweep",
+) -> SweepRun:
+    """``corraoi sweep`` from its parsed options: with ``kept`` the plug-ins of the sweep in
+    ``out`` loaded from its copies (:func:`kept_code`, held by ``hold``), the grid
+    (:func:`grid_from_options`), its backend settled (:func:`settle_backend`; ``say`` hears
+    the GPU's name), checked (:func:`check_grid`; ``say`` hears the size of a sweep of
+    :data:`SAY_SIZE_FROM` run-slots or more), the instances' notes (``warn``), then run
+    (:func:`run_grid`) with ``progress(total, label)`` as the bar; ``before_folder()`` runs
+    first when the folder is written in this process. Ctrl-C keeps the finished chunks and
+    is reported in :attr:`SweepRun.interrupted`."""
+    with ExitStack() as stack:
+        if kept and out is not None:
+            # while the sweep runs, before the grid is built: its plug-ins load from the copies
+            (hold or stack.enter_context)(kept_code(out))
+        grid = grid_from_options(experiment, options, params=params, scalars=scalars,
+                                 warn=warn)  # fmt: skip
+        grid = settle_backend(grid, warn=warn)
+        name = device_name(grid)
+        if name is not None and say is not None:
+            say(f"backend gpu: {name}")
+        size = check_grid(grid, out, allow_huge=allow_huge)
+        run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
+        if run_slots >= SAY_SIZE_FROM and say is not None:
+            say(f"corraoi: sweep of {size}; the progress bar shows the time left")
+        for note in grid_notes(grid):
+            if warn is not None:
+                warn(note)
+        done = run_with_progress(grid, out=out, scheduler=scheduler, resume=resume,
+                                 force=force, workers=workers, warn=warn, progress=progress,
+                                 before_folder=before_folder, label=label)  # fmt: skip
+    if done.outcome is not None and out is not None:
+        done.wrote = wrote_line(out, done.outcome)
+    return done
+
+
+def run_with_progress(
+    grid: Grid,
+    *,
+    out: Path | None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    force: bool = False,
+    workers: int | None = None,
+    warn: Callable[[str], None] | None = None,
+    progress: Callable[[int, str], Any] | None = None,
+    before_folder: Callable[[], None] | None = None,
+    label: str = "sweep",
+) -> SweepRun:
+    """Run ``grid`` (:func:`run_grid`) with ``progress(total, label)`` as the bar (slots in
+    this process, chunks on a cluster); Ctrl-C keeps the finished chunks and says so in
+    :attr:`SweepRun.interrupted`."""
+    from contextlib import nullcontext
+
+    if out is not None and scheduler is None and before_folder is not None:
+        before_folder()
+    if scheduler is None:
+        total = sum(c.horizon for c in grid.cells) * grid.runs // grid.chunk_runs
+        bar = progress(max(total, 1), label) if progress is not None else None
+    else:
+        bar = (progress(sum(-(-grid.runs // grid.chunk_runs) for _ in grid.cells),
+                        f"{label} (chunks)") if progress is not None else None)  # fmt: skip
+
+    def on_chunk(done: int, total: int) -> None:
+        if bar is not None:
+            bar.update(1, note=f"{done}/{total} chunks")
+
+    try:
+        with bar if bar is not None else nullcontext():
+            outcome = run_grid(grid, out=out, scheduler=scheduler, resume=resume, force=force,
+                               workers=workers, warn=warn,
+                               on_slots=bar.update if scheduler is None and bar is not None
+                               else None,
+                               on_chunk=on_chunk if scheduler is not None else None)  # fmt: skip
+    except KeyboardInterrupt:
+        where = f"; finished chunks are saved in {out}: --resume continues" if out else ""
+        return SweepRun(grid, interrupted=f"interrupted{where}")
+    return SweepRun(grid, outcome)
+
+
 def _listed(value: Any) -> list[Any]:
     if isinstance(value, (str, os.PathLike)) or not isinstance(value, Sequence):
         return [value]
@@ -712,8 +814,8 @@ def sweep(
 
 
 __all__ = [
-    "Sweep", "check_grid", "decentralized_grid", "device_name", "draw_sweep_figure",
-    "grid_from_options", "grid_notes", "kept_code", "paper_grid", "record_each_from", "run_grid",
-    "settle_backend", "sources_words", "split_words", "sweep", "write_paper_summary",
-    "wrote_line",
+    "SAY_SIZE_FROM", "Sweep", "SweepRun", "check_grid", "decentralized_grid", "device_name",
+    "draw_sweep_figure", "grid_from_options", "grid_notes", "kept_code", "paper_grid",
+    "record_each_from", "run_grid", "run_with_progress", "settle_backend", "sweep",
+    "sweep_from_options", "write_paper_summary", "wrote_line",
 ]  # fmt: skip

@@ -230,21 +230,29 @@ class RunViews:
     def why(self, px: float) -> rrb.TimeSeriesView:
         """Why the policy chose its arm: the score of every arm (what it maximised; up to
         LINES_UP_TO arms, else of the arms that matter) and of the arm played, over the
-        last slots before the cursor."""
+        last slots before the cursor. Up to LINES_UP_TO arms the arm played is the top
+        line where the score chose it: its dot marks only the slots it was below the top."""
         w = self.tw.window
         if self.lines:
-            contents, legend = ["$origin/why/score/**", "$origin/why/chosen"], self.arm_legends
+            contents, legend = ["$origin/why/score", "$origin/why/chosen"], self.arm_legends
+            chosen = style.CHOSEN_BELOW_NAME
+            title = self._title(
+                px, f"why this arm: score {style.SCORE_UNIT} per arm (lines; the top one "
+                f"played), dots: played below the top, last {w} slots",
+                f"why this arm: scores (top played), dots: played below, last {w}",
+                "why this arm: scores",
+            )  # fmt: skip
         else:
             contents = ["$origin/why/focus/**", "$origin/why/chosen"]
             legend = [self.arm_legends[k] for k in range(min(self.K, style.FOCUS_MAX))]
-        title = self._title(
-            px, f"why this arm: score {style.SCORE_UNIT} per arm (lines), the chosen one's "
-            f"(dots), last {w} slots",
-            f"why this arm: scores, the chosen one's: dots, last {w}",
-            "why this arm: scores",
-        )  # fmt: skip
-        return self._series(title, contents, px, windowed=True,
-                            legend=[*legend, style.CHOSEN_NAME])  # fmt: skip
+            chosen = style.CHOSEN_NAME
+            title = self._title(
+                px, f"why this arm: score {style.SCORE_UNIT} per arm (lines), the chosen "
+                f"one's (dots), last {w} slots",
+                f"why this arm: scores, the chosen one's: dots, last {w}",
+                "why this arm: scores",
+            )  # fmt: skip
+        return self._series(title, contents, px, windowed=True, legend=[*legend, chosen])
 
     def why_bars(self, px: float) -> rrb.BarChartView:
         """The scores at the cursor, the arm played's in the policy's colour (beyond

@@ -18,9 +18,12 @@ Entities (timeline ``slot``, a sequence; arms and states numbered from 1), under
 ``pulls``           pulls of every arm after the slot, K series
 ``candidates/<k>``  the value k at the slots where arm k was in the candidate set (points)
 ``about``           the run card: configuration, arms and what the views show (markdown)
-``why/score/<k>``   up to LINES_UP_TO arms: arm k's score (what the policy maximised) at
-                    the slots it had a finite one (in the candidate set, a slot scored)
-``why/chosen``      the score of the arm played, at the slots the score chose it (points)
+``why/score``       up to LINES_UP_TO arms: every arm's score (what the policy maximised),
+                    K series (as ``mu_hat``), at the slots scored; -inf (no point drawn)
+                    for an arm without a finite one there (outside the candidate set)
+``why/chosen``      the score of the arm played (points): up to LINES_UP_TO arms only at the
+                    slots it was below the top score (elsewhere the top line is the arm
+                    played), beyond at the slots the score chose it
 ``why/forced``      the arm played, at the slots it was not chosen by the score (points)
 ``why/threshold``   the AoI-aware rule's threshold 1 / max mu_hat (line, in the AoI view)
 ==================  =====================================================================
@@ -91,7 +94,7 @@ ENTITIES = (
     "about",
 )
 #: The "why this arm" entities, relative to :func:`run_path`: a run that logs scores has
-#: them (``why/score``, ``why/focus`` and ``why/bars`` hold children), the others none.
+#: them (``why/focus`` and ``why/bars`` hold children), the others none.
 WHY = (
     "why/score",
     "why/chosen",

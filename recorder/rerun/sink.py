@@ -215,23 +215,29 @@ class RerunSink(Sink[SlotBlock]):
     ) -> None:
         """The "why this arm" entities of a block that has scores: every arm's score (up to
         LINES_UP_TO arms; beyond, those of the arms that matter), the played arm's score
-        where the score chose it, the forced slots, the override's threshold."""
+        (up to LINES_UP_TO arms only where it was below the top score; beyond, wherever it
+        has one), the forced slots, the override's threshold."""
         assert block.score is not None
         f64 = np.float64
-        # only finite scores are sent: an arm's line skips the slots it has none (NaN is
-        # not sent at all: `rerun rrd compare` tells NaN from NaN)
+        # NaN is never sent: `rerun rrd compare` tells NaN from NaN, so two equal
+        # recordings would differ
         score = np.asarray(block.score, dtype=f64)
         fin = np.isfinite(score)
-        if self._lines:
-            for k in range(self.K):
-                column(
-                    f"why/score/{k + 1}", t[fin[:, k]], np.ascontiguousarray(score[fin[:, k], k])
-                )
-        for k, first in self.focus.items():
+        if self._lines:  # one entity of K series, a row a slot scored (not a row per arm
+            # and slot: 0.1 us a slot less at K = 4, a third fewer .rrd bytes for ucb); an
+            # arm without a finite score there is -inf, which draws no point (its line
+            # joins the points on either side, as it did across slots without a row)
+            rows = fin.any(axis=1)
+            column("why/score", t[rows], np.where(fin[rows], score[rows], -np.inf))
+        for k, first in self.focus.items():  # only the finite scores
             keep = (t >= first) & fin[:, k]
             column(f"why/focus/{k + 1}", t[keep], np.ascontiguousarray(score[keep, k]))
         chosen = score[np.arange(len(t)), block.arm]
         ok = np.isfinite(chosen)
+        if self._lines:  # every arm's line is drawn, and where the score chose the arm it
+            # is the top line: a dot only where the arm played was below the top (the
+            # override chose it), not a row a slot (0.1-0.15 us a slot at K = 4)
+            ok &= chosen < np.fmax.reduce(score, axis=1)
         column("why/chosen", t[ok], np.ascontiguousarray(chosen[ok]))
         if block.forced is not None:
             forced = np.asarray(block.forced, dtype=bool)

@@ -176,16 +176,17 @@ def log_why_static(rec: rr.RecordingStream, base: str, config: RunConfig, color:
         static(path, rr.SeriesPoints.columns(colors=[rgb], names=[name], markers=[marker],
                                              marker_sizes=[size]))  # fmt: skip
 
-    if st.lines_for(K):
-        for k in range(K):
-            static(f"why/score/{k + 1}", rr.SeriesLines.columns(
-                colors=[st.arm_color(k)], names=[names[k]], widths=[st.WIDTH_ARM]))  # fmt: skip
+    if st.lines_for(K):  # one entity, a series per arm (as mu_hat)
+        static("why/score", rr.SeriesLines.columns(
+            colors=[st.arm_color(k) for k in range(K)], names=names,
+            widths=[st.WIDTH_ARM] * K), K)  # fmt: skip
     else:
         arm = np.arange(1, K + 1, dtype=np.float64)
         bars(rec, f"{base}/why/bars/score", st.BAR_IN_SET_COLOR, arm,
              width=2 * BAR_WIDTH)  # fmt: skip
         bars(rec, f"{base}/why/bars/chosen", color, arm, width=max(2 * BAR_WIDTH, K / 64))
-    points("why/chosen", color, st.CHOSEN_NAME, shape.Circle, st.MARKER_CHOSEN)
+    chosen = st.CHOSEN_BELOW_NAME if st.lines_for(K) else st.CHOSEN_NAME
+    points("why/chosen", color, chosen, shape.Circle, st.MARKER_CHOSEN)
     points("why/forced", st.FORCED_COLOR, st.FORCED_NAME, shape.Asterisk, st.MARKER_FORCED)
     if threshold:
         static("why/threshold", rr.SeriesLines.columns(

@@ -193,7 +193,9 @@ class BlockEncoder:
     the decoder gets back the same float64 values); the messages are then put together by
     one ``bytes.join`` over the columns interleaved with the constant key texts, and split
     at a separator no JSON text of ours contains (a newline). That is about twice as fast
-    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py). A column of few
+    as formatting each slot with ``bytes %`` (benchmarks/bench_record.py). The slot log
+    takes them unsplit (:meth:`encode_framed`): each message after room for its MCAP
+    record header, which starts with that newline, so the writer finds them. A column of few
     distinct texts (flags, arm, state, candidate set) is a lookup: the key texts beside it
     and neighbouring lookups are folded into its texts, so the join has fewer parts.
     """
@@ -237,12 +239,26 @@ class BlockEncoder:
         return _rows(values, n) if f.per_arm else _items(values)
 
     def encode(self, b: SlotBlock) -> list[bytes]:
-        n = len(b)
-        if n == 0:
+        """The block's messages, one bytes object per slot."""
+        if len(b) == 0:
             return []
+        messages = self._join(b, b"", b"\n", b"").split(b"\n")
+        messages.pop()  # the empty text after the last newline (no copy of the whole text)
+        return messages
+
+    def encode_framed(self, b: SlotBlock, room: bytes) -> bytearray:
+        """The block's messages back to back in one buffer, each after ``room`` (where
+        :meth:`~corraoi.recorder.slotlog.chunks.ChunkWriter.frame` writes its record header):
+        no bytes object per message."""
+        return self._join(b, room, b"", bytearray()) if len(b) else bytearray()
+
+    def _join(self, b: SlotBlock, room: bytes, sep: bytes, into: Any) -> Any:
+        """The messages of ``b``, each after ``room`` and followed by ``sep``, joined by
+        ``into.join`` (bytes or a bytearray)."""
+        n = len(b)
         names = b.fields()
         keys = _keys(names)
-        end = b"]}\n" if _bracketed(BY_NAME[names[-1]]) else b"}\n"
+        end = (b"]}" if _bracketed(BY_NAME[names[-1]]) else b"}") + sep
         # the texts of a message in order: key, value, key, value, ..., end. A field of
         # few distinct texts (a flag, an arm, a state, a candidate set) takes the keys on
         # either side into its texts, and neighbours of that kind are one (their texts'
@@ -250,6 +266,7 @@ class BlockEncoder:
         folded: list[bytes | list[bytes] | _Lookup] = []
         segments = [s for key, f in zip(keys, names, strict=True)
                     for s in (key, self._column(BY_NAME[f], b.column(f), n))]  # fmt: skip
+        segments[0] = room + keys[0]
         for seg in (*segments, end):
             prev = folded[-1] if folded else None
             if isinstance(seg, bytes) and isinstance(prev, _Lookup):
@@ -275,9 +292,7 @@ class BlockEncoder:
                 parts[i::step] = table[seg.index].tolist()
             else:
                 parts[i::step] = [seg] * n if isinstance(seg, bytes) else seg
-        messages = b"".join(parts).split(b"\n")
-        messages.pop()  # the empty text after the last newline (no copy of the whole text)
-        return messages
+        return into.join(parts)
 
 
 def _candidate_rows(table: np.ndarray) -> list[bytes]:
@@ -310,7 +325,8 @@ def _bracketed(f: SlotField) -> bool:
 def _keys(names: tuple[str, ...]) -> tuple[bytes, ...]:
     """The text before each value of a message of these fields (``{"t":``, ``,"x":``, ...,
     ``],"pulls":[``); ``encode`` ends each message with "}\n" (or "]}\n") and splits at the
-    newlines (orjson escapes any newline inside a JSON string)."""
+    newlines (orjson escapes any newline inside a JSON string); ``encode_framed`` puts the
+    room for a record header, which starts with a newline, before each."""
     out = []
     for i, name in enumerate(names):
         before = b"]" if i and _bracketed(BY_NAME[names[i - 1]]) else b""

@@ -42,7 +42,7 @@ from corraoi.recorder.vocab import RUN_END_METADATA as END_METADATA
 from corraoi.recorder.vocab import SLOT_FLUSH_EVERY as FLUSH_EVERY
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 
-from .chunks import ChunkWriter
+from .chunks import RECORD_ROOM, ChunkWriter
 from .encode import BlockEncoder, end_metadata, run_metadata, schema_bytes, sources_end_metadata
 
 
@@ -166,23 +166,25 @@ class McapSink(Sink[RunBlock]):
             )
         if self.slots + n > self.config.horizon:
             raise ValueError(f"block goes past the horizon {self.config.horizon}")
-        messages = self._encoder.encode(block)
         t = block.t.astype(np.uint64)
         times = t * np.uint64(NS_PER_SLOT)  # no overflow: the horizon is at most MAX_SLOT
         sequences = t & np.uint64(0xFFFFFFFF)  # MCAP sequence is 32-bit: t modulo 2**32
+        # the messages framed as MCAP records at once, with no bytes object per message
+        framed = self._writer.frame(times, sequences,
+                                    self._encoder.encode_framed(block, RECORD_ROOM))  # fmt: skip
         # a chunk ends after every slot t with t % flush_every == 0, wherever the blocks
         # end: the file is the same for any block size
         ends = (np.flatnonzero(t % np.uint64(self.flush_every) == 0) + 1).tolist()
-        add, flush = self._writer.add_messages, self._writer.flush
+        add, flush = self._writer.add_framed, self._writer.flush
         self._torn = True  # until this block is fully handed to the writer
         try:
             begin = 0
             for end in ends:
-                add(times[begin:end], sequences[begin:end], messages[begin:end])
+                add(framed[begin:end])
                 flush()
                 begin = end
             if begin < n:  # the rest stays in the open chunk
-                add(times[begin:], sequences[begin:], messages[begin:])
+                add(framed[begin:])
         except OSError as exc:
             raise self._write_error(exc) from None
         self._torn = False

@@ -35,8 +35,6 @@ from corraoi.recorder.sink import Sink
 # Colours live in corraoi.recorder.style (one place for every view); re-exported for old imports.
 # The sweep log's names (corraoi.recorder.vocab)
 from corraoi.recorder.vocab import (
-    MCAP_INDEX_TYPES,
-    MCAP_INDEX_TYPES_WITH_ATTACHMENTS,
     MESSAGE_ENCODING,
     NS_PER_SLOT,
     PLUGIN_MEDIA_TYPE,
@@ -52,6 +50,7 @@ from corraoi.recorder.vocab import (
     SWEEP_SCHEMA_NAME,
     SWEEP_TOPIC,
     library_name,
+    mcap_index_types,
 )
 
 from .read import sweep_arms
@@ -194,7 +193,7 @@ class SweepMcapSink(Sink["SweepPoint"]):
         self._out = PartialFile(self.path, overwrite=overwrite, what="sweep log", sweep=True)
         self._stream: BinaryIO = self._out.create().file
         try:
-            index = MCAP_INDEX_TYPES_WITH_ATTACHMENTS if sources else MCAP_INDEX_TYPES
+            index = mcap_index_types(bool(sources))
             self._writer = Writer(self._stream, compression=CompressionType.ZSTD,
                                   index_types=index)  # fmt: skip
             library = library_name(str(config.get("version", __version__)))
