@@ -192,6 +192,17 @@ def test_bad_sources_get_one_line_and_write_nothing(
     assert not (tmp_path / "sw").exists()
 
 
+def test_the_sweep_table_names_the_collision_storm(tmp_path: Path) -> None:
+    out = _corraoi("sweep", "-i", "I1", "-p", "rhorand-ucb", "--sources", "1,3", "-n", "4",
+                   "-T", "400", "-o", "sw", cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "sw" / "summary.json").read_text())
+    e = summary["notable"]["cells"]["rhorand-ucb(M=3)"]["most-collisions"]
+    assert (f"most collisions: rhorand-ucb(M=3), {e['collisions']} at run {e['run']}"
+            in out.stdout), out.stdout
+    assert "--run worst|median|best|widest-gap|most-collisions|N" in out.stdout
+
+
 def test_the_experiment_files_sources_key(tmp_path: Path) -> None:
     from corraoi.experiments.grid import grid_from_file
 
