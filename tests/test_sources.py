@@ -14,6 +14,7 @@ from corraoi.engine.sources import (
     SourcesSimulation,
     oracle_channels,
     simulate_run_sources,
+    simulate_runs,
     simulate_sources,
     source_blocks,
 )
@@ -209,3 +210,39 @@ def test_a_multi_source_plugin_runs_and_its_arm_out_of_range_is_one_line(tmp_pat
     with pytest.raises(PolicyError, match=r"^policy bogus-rule: multi_source 'round-robin'; "
                        "expected one of rhorand, mctopm, centralized"):  # fmt: skip
         simulate_sources(load_instance("I2"), bogus, [1], 10, 2)
+
+
+def test_a_run_of_several_sources_has_the_single_runs_path_and_the_fields_of_its_record():
+    inst = load_instance("I2")
+    one = SlotBlock.concat(list(simulate_run(inst, make_policy("ts"), 5, 400)))
+    for name, aware in (("rhorand-ts", False), ("centralized-aoi-aware-cucb", True)):
+        blk = SourcesBlock.concat(list(simulate_run_sources(inst, make_policy(name), 5, 400, 3,
+                                                            block=150)))  # fmt: skip
+        assert blk.M == 3 and np.array_equal(blk.x, one.x)  # the seed's hidden path
+        for s in blk.sources:
+            assert s.fields() == tuple(f.name for f in record_for(3) if f.name in s.fields())
+            assert s.collided is not None and s.score is not None and s.forced is not None
+            assert (s.override_threshold is not None) == aware
+            assert np.array_equal(s.t, np.arange(1, 401)) and np.array_equal(s.x, blk.x)
+        # the run's arms per slot: one per source, each in range
+        arms = np.stack([s.arm for s in blk.sources])
+        assert ((arms >= 0) & (arms < inst.K)).all()
+        if name.startswith("centralized"):
+            assert (np.sort(arms, axis=0)[1:] != np.sort(arms, axis=0)[:-1]).all()
+    solo = next(source_blocks(inst, make_policy("rhorand-ts"), 5, 400, 1, block=400))[0]
+    assert solo.collided is None  # a single source's record has no collided field
+
+
+def test_many_runs_slot_columns_are_each_seeds_recorded_run():
+    inst = load_instance("I1")
+    runs = list(simulate_runs(inst, "mctopm-ucb", [4, 9], 300, sources=2))
+    assert [r.seed for r in runs] == [4, 9]
+    for r in runs:
+        blk = SourcesBlock.concat(list(simulate_run_sources(inst, make_policy("mctopm-ucb"),
+                                                            r.seed, 300, 2)))  # fmt: skip
+        assert r.arm.shape == r.collided.shape == r.success.shape == (300, 2)
+        for m, s in enumerate(blk.sources):
+            assert np.array_equal(r.arm[:, m], s.arm)
+            assert np.array_equal(r.collided[:, m], s.collided)
+            assert np.array_equal(r.success[:, m], s.success)
+    assert not np.array_equal(runs[0].arm, runs[1].arm)

@@ -27,7 +27,7 @@ from corraoi.errors import ConfigError, PolicyError
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
-from corraoi.policies.spec import PolicySpec, check_sources
+from corraoi.policies.spec import PolicySpec, check_sources, make_policy
 
 from . import threads
 from .block import SlotBlock, SourcesBlock
@@ -42,7 +42,9 @@ __all__ = [
     "SourcesSimulation",
     "SourcesTotals",
     "oracle_channels",
+    "RunColumns",
     "simulate_run_sources",
+    "simulate_runs",
     "simulate_sources",
     "source_blocks",
 ]
@@ -294,3 +296,32 @@ def simulate_sources(instance: Instance, policy: PolicySpec, seeds: Sequence[int
     sim.advance(horizon, record=False)
     return SourcesTotals(seeds=sim.seeds, regret=sim.regret, aoisum=sim.aoisum,
                          collisions=sim.collisions, pulls=sim.pulls)  # fmt: skip
+
+
+@dataclass
+class RunColumns:
+    """One run of M sources, slot by source: the channel each picked (0-based), whether it
+    collided and whether it delivered, each (T, M)."""
+
+    seed: int
+    arm: np.ndarray
+    collided: np.ndarray
+    success: np.ndarray
+
+
+def simulate_runs(instance: Instance, policy: PolicySpec | str, seeds: Sequence[int],
+                  horizon: int, *, sources: int, channel: Channel | None = None,
+                  block: int = 10_000) -> Iterator[RunColumns]:  # fmt: skip
+    """Each seed's run of ``sources`` sources, in order, as its slot columns ``arm``,
+    ``collided`` and ``success`` (what a comparison with another library counts: collisions
+    and rewards); ``policy`` a spec or a ``--policy`` word."""
+    spec = make_policy(policy) if isinstance(policy, str) else policy
+    for seed in check_seeds(seeds):
+        parts = list(source_blocks(instance, spec, int(seed), horizon, sources, block=block,
+                                   channel=channel))  # fmt: skip
+        cols = [SlotBlock.concat([p[m] for p in parts]) for m in range(sources)]
+        collided = [c.collided if c.collided is not None else np.zeros(len(c), bool)
+                    for c in cols]  # fmt: skip
+        yield RunColumns(seed=int(seed), arm=np.stack([c.arm for c in cols], axis=1),
+                         collided=np.stack(collided, axis=1),
+                         success=np.stack([c.success for c in cols], axis=1))  # fmt: skip
