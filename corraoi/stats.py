@@ -94,9 +94,13 @@ class SweepPoint:
     estimator_mean: float
     estimator_ci95: float | None
     pull_share: np.ndarray  # (K,) mean over runs of pulls_k / t
+    #: a cell of several sources: the mean over runs of the collisions up to t (summed over
+    #: the sources) and its half-width; None for one source
+    collisions_mean: float | None = None
+    collisions_ci95: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "policy": self.policy,
             "t": self.t,
             "regret_mean": self.regret_mean,
@@ -105,19 +109,28 @@ class SweepPoint:
             "estimator_ci95": self.estimator_ci95,
             "pull_share": [float(v) for v in self.pull_share],
         }
+        if self.collisions_mean is not None:
+            out["collisions_mean"] = self.collisions_mean
+            out["collisions_ci95"] = self.collisions_ci95
+        return out
 
 
 def sweep_points(
-    name: str, t: np.ndarray, regret: Moments, estimator: Moments, pull_share: np.ndarray
+    name: str, t: np.ndarray, regret: Moments, estimator: Moments, pull_share: np.ndarray,
+    collisions: Moments | None = None,
 ) -> list[SweepPoint]:
     """The :class:`SweepPoint` of each checkpoint ``t[i]`` from the moments of the runs' values
-    there (:meth:`Moments.of` of runs x checkpoints) and the mean shares ((checkpoints, K))."""
+    there (:meth:`Moments.of` of runs x checkpoints) and the mean shares ((checkpoints, K));
+    ``collisions``: those of a cell of several sources."""
     h, eh = regret.ci95(), estimator.ci95()
+    ch = collisions.ci95() if collisions is not None else None
     return [
         SweepPoint(
             policy=name, t=int(ts), regret_mean=float(regret.mean[i]),
             regret_ci95=finite(float(h[i])), estimator_mean=float(estimator.mean[i]),
             estimator_ci95=finite(float(eh[i])), pull_share=pull_share[i],
+            collisions_mean=float(collisions.mean[i]) if collisions is not None else None,
+            collisions_ci95=finite(float(ch[i])) if ch is not None else None,
         )  # fmt: skip
         for i, ts in enumerate(t)
     ]

@@ -86,8 +86,12 @@ SWEEP_END_METADATA = "corraoi.sweep.end"
 #: The open chunk of a sweep log is closed and handed to the OS once SWEEP_FLUSH_EVERY
 #: messages wait in it, so a killed writer loses fewer than SWEEP_FLUSH_EVERY points.
 SWEEP_FLUSH_EVERY = 32
-#: Keys a sweep message may lack: a half-width is absent with a single run.
-SWEEP_OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95")
+#: Keys a sweep message may lack: a half-width is absent with a single run; the collisions
+#: (mean over runs of a run's collisions up to t, summed over its sources, and its half-width)
+#: only a cell of several sources has, and only a log of such a sweep declares them.
+SWEEP_OPTIONAL_KEYS = ("regret_ci95", "estimator_ci95", "collisions_mean", "collisions_ci95")
+#: The keys only a sweep with a cell of several sources declares in its schema.
+SWEEP_SOURCES_KEYS = ("collisions_mean", "collisions_ci95")
 #: Sweep message keys in the order the writer writes them.
 SWEEP_MESSAGE_KEYS = (
     "policy",
@@ -97,6 +101,8 @@ SWEEP_MESSAGE_KEYS = (
     "estimator_mean",
     "estimator_ci95",
     "pull_share",
+    "collisions_mean",
+    "collisions_ci95",
 )
 
 
@@ -135,6 +141,7 @@ __all__ = [
     "SWEEP_METADATA",
     "SWEEP_OPTIONAL_KEYS",
     "SWEEP_SCHEMA_NAME",
+    "SWEEP_SOURCES_KEYS",
     "SWEEP_TOPIC",
     "library_name",
     "mcap_index_types",

@@ -194,6 +194,7 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("sweep", {"channel": ["iid"]}, ConfigTypeError, "channel ['iid']: expected iid, markov"),
     ("sweep", {"baseline": 3}, PolicyTypeError, "baseline 3: expected the name of one of"),
     ("sweep", {"chunk": 1.5}, ConfigTypeError, "chunk 1.5: not an integer"),
+    ("sweep", {"sources": 2.5}, ConfigTypeError, "sources 2.5: not an integer"),
     ("sweep", {"checkpoints": 1}, ConfigValueError, "checkpoints 1: out of range, expected 2.."),
     ("sweep", {"resume": 1}, ArgumentTypeError, "resume 1: expected True or False"),
     ("sweep", {"force": None}, ArgumentTypeError, "force None: expected True or False"),

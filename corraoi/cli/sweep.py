@@ -61,6 +61,10 @@ SWEEP_FILES = ("manifest.json", "results.parquet", "sweep.mcap", "sweep.rrd", "s
 @click.option("--c", "c", type=float, default=None, help="Shorthand for --param c=VALUE.")
 @click.option("--beta", type=float, default=None, help="Shorthand for --param beta=VALUE.")
 @channel_option
+@click.option("--sources", "sources", multiple=True, metavar="M[,M...]",
+              help="Sources sharing the channels, each value a cell (1 to the number of arms; "
+              "several need a multi-source policy such as rhorand-ucb, mctopm-cucb, "
+              "centralized-ts; docs/model.md) [default: 1].")  # fmt: skip
 @click.option("--workers", "-j", type=WORKERS, default=None,
               help="Threads for the in-process engine [default: every core].")  # fmt: skip
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT|local:N",
@@ -102,6 +106,7 @@ def sweep(
     c: float | None,
     beta: float | None,
     channel: str | None,
+    sources: tuple[str, ...],
     workers: int | None,
     scheduler: str | None,
     chunk: int | None,
@@ -129,6 +134,7 @@ def sweep(
       corraoi sweep experiment.toml -o grid --scheduler local:2
       corraoi sweep experiment.toml -o grid --resume        # after a crash, or to add runs
       corraoi sweep -p ucb,cucb -n 1000000 -T 10000 --backend gpu -o big
+      corraoi sweep -p rhorand-ucb,mctopm-ucb --sources 1,2,3,4 -n 50 -o many
       corraoi figure grid/I1/sweep.mcap -o i1.png --log-x
     """
     from corraoi.face.sweeps import sweep_from_options
@@ -150,6 +156,7 @@ def sweep(
         "channel": channel,
         "baseline": baseline,
         "backend": backend,
+        "sources": list(sources) or None,  # the words: checked by the face
     }
     done = sweep_from_options(
         experiment, options, params=param, scalars={"c": c, "beta": beta}, out=out,

@@ -60,9 +60,16 @@ def _print_notable(summary: dict[str, Any], folder: Path | None) -> None:
         a, b = (safe_text(n) for n in g["policies"])
         say(f"widest paired gap: {a} - {b} = {g['difference']:+g} at run {g['run']} "
             f"(seed {g['seed']})")  # fmt: skip
+    storms = [(n, c["most-collisions"]) for n, c in notable["cells"].items()
+              if isinstance(c.get("most-collisions"), dict)]  # cells of several sources
+    if storms:
+        name, e = max(storms, key=lambda s: s[1]["collisions"])
+        say(f"most collisions: {safe_text(name)}, {e['collisions']} at run {e['run']} "
+            f"(seed {e['seed']})")  # fmt: skip
     if folder is not None:
+        storm = "|most-collisions" if storms else ""
         say(f"record one slot by slot: corraoi record --from {safe_text(folder)} "
-            "--run worst|median|best|widest-gap|N [-p POLICY]")  # fmt: skip
+            f"--run worst|median|best|widest-gap{storm}|N [-p POLICY]")  # fmt: skip
 
 
 def _print_paired(summary: dict[str, Any]) -> None:

@@ -164,11 +164,16 @@ def settle(grid: Grid, backend: str | None, *, client: Any = None,
 
 
 def _gpu_problem(grid: Grid) -> str | None:
-    """Why the GPU backend cannot run ``grid`` here, or None when it can: a policy without
-    a GPU form, too many arms, or no device (CuPy missing, no CUDA device)."""
+    """Why the GPU backend cannot run ``grid`` here, or None when it can: a cell of several
+    sources, a policy without a GPU form, too many arms, or no device (CuPy missing, no CUDA
+    device)."""
     from corraoi.gpu import get_device
     from corraoi.gpu.runner import gpu_problem
 
+    many = next((c for c in grid.cells if c.sources > 1), None)
+    if many is not None:  # the CUDA kernel runs one source per run
+        return (f"{many.policy.name} with {many.sources} sources: the GPU backend runs one "
+                "source (several sources run on the CPU engine)")  # fmt: skip
     seen: set[tuple[str, int]] = set()
     for cell in grid.cells:
         key = (cell.policy.qualname, cell.instance.K)

@@ -104,6 +104,8 @@ def _run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None) -> 
         pulls_sum[i] = snap.pulls.sum(axis=0)
 
     cls = cfg.policy.resolve()
+    if cfg.sources > 1 or getattr(cls, "multi_source", None):
+        return _run_sources_chunk(task, cfg, channel, stops, on_slots)
     if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
         from corraoi.engine.kernels import kernel_for
 
@@ -120,6 +122,49 @@ def _run_chunk(task: dict[str, Any], on_slots: Callable[[int], None] | None) -> 
     )  # fmt: skip
 
 
+def _run_sources_chunk(task: dict[str, Any], cfg: Any, channel: Any, stops: Sequence[int],
+                       on_slots: Callable[[int], None] | None) -> ChunkResult:  # fmt: skip
+    """A chunk of a multi-source policy's cell in the engine of many sources (one source
+    included: its base policy's runs), advanced checkpoint by checkpoint: each run's regret
+    and estimator summed over its sources, its regret per source and its collisions."""
+    from corraoi.engine.sources import SourcesSimulation
+
+    inst: Instance = cfg.model
+    n = int(task["stop"]) - int(task["start"])
+    seed0 = int(task["seed"]) + int(task["start"])
+    sim = SourcesSimulation(inst, cfg.policy, range(seed0, seed0 + n), cfg.horizon,
+                            cfg.sources, channel=channel)  # fmt: skip
+    sim.kernel(False)  # compiled or loaded now: a chunk's wall_s is its runs
+    S, M = len(stops), cfg.sources
+    regret = np.empty((n, S))
+    estimator = np.empty((n, S))
+    by_source = np.empty((n, S, M))
+    collisions = np.empty((n, S), dtype=np.int64)
+    best_pulls = np.empty((n, S), dtype=np.int64)
+    pulls_sum = np.empty((S, inst.K), dtype=np.int64)
+    best = int(sim.oracle[0])
+    start = time.perf_counter()
+    for i, stop in enumerate(stops):
+        before = sim.t
+        sim.advance(stop - sim.t, record=False)
+        if on_slots is not None:
+            on_slots(stop - before)
+        by_source[:, i] = sim.regret
+        regret[:, i] = sim.regret.sum(axis=1)
+        # the paper's estimator per source, against its oracle channel's mean, summed
+        estimator[:, i] = (sim.aoisum - stop / sim.oracle_mu).sum(axis=1)
+        collisions[:, i] = sim.collisions.sum(axis=1)
+        best_pulls[:, i] = sim.pulls[:, :, best].sum(axis=1)
+        pulls_sum[i] = sim.pulls.sum(axis=(0, 1))
+    return ChunkResult(
+        chunk=Chunk(str(task["key"]), int(task["start"]), int(task["stop"])),
+        t=np.asarray(stops, dtype=np.int64), regret=regret, estimator=estimator,
+        best_pulls=best_pulls, pulls_sum=pulls_sum, wall_s=time.perf_counter() - start,
+        regret_by_source=by_source if M > 1 else None,
+        collisions=collisions if M > 1 else None,
+    )  # fmt: skip
+
+
 def prepare_kernels(cells: Sequence[Cell]) -> None:
     """Compile the sweep kernels the cells need and the cache lacks, concurrently."""
     from corraoi.engine.kernel_pool import prepare
@@ -128,6 +173,8 @@ def prepare_kernels(cells: Sequence[Cell]) -> None:
     classes = {}
     for cell in cells:
         cls = cell.policy.resolve()
+        if cell.many:  # the kernel of many sources compiles as its first chunk starts
+            continue
         if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
             classes[cls.name] = cls
     prepare(classes.values(), record=False)

@@ -74,12 +74,15 @@ class Drill:
 
 
 def row_mismatch(expect: Sequence[tuple[int, float]], block: Any) -> str | None:
-    """Where the regret of ``block`` (a SlotBlock) differs from the sweep's row ``expect``
-    ((checkpoint, regret) pairs): a one-line account of the first difference, or None."""
+    """Where the regret of ``block`` (a SlotBlock, or a SourcesBlock: its regret summed over
+    its sources, as the sweep's row is) differs from the sweep's row ``expect`` ((checkpoint,
+    regret) pairs): a one-line account of the first difference, or None."""
     first, last = int(block.t[0]), int(block.t[-1])
+    parts = getattr(block, "sources", None)
+    regret = block.regret if parts is None else sum(s.regret for s in parts)
     for t, want in expect:
         if first <= t <= last:
-            got = float(block.regret[t - first])
+            got = float(regret[t - first])
             if got != want:
                 return (f"the re-recorded run's regret at slot {t} is {got:g}, the sweep's row "
                         f"says {want:g}: the engine or the code changed since the sweep")
@@ -249,7 +252,7 @@ def choose(
         for spec in extra:
             for r in runs:
                 drills.append(_drill(root, grid, Cell(base.instance, spec, base.horizon,
-                                                      base.channel), None, r, what,
+                                                      base.channel, base.sources), None, r, what,
                                      streams, trace_readers=trace_readers))  # fmt: skip
     return drills
 
@@ -317,7 +320,13 @@ def _picks(
                               f"{root}")  # fmt: skip
         by_label = {labels[c.key]: c for c in group}
         return [(by_label[name], _run_of(gap, grid, root, words)) for name in gap["policies"]]
-    return [(c, _run_of(notable["cells"][labels[c.key]][what], grid, root, words))
+    if what == "most-collisions":
+        alone = [labels[c.key] for c in members if c.sources == 1]
+        if alone:
+            raise ConfigError(f"{words.run}most-collisions: {alone[0]} runs one source (no "
+                              f"collisions); name a cell of several sources with "
+                              f"{words.cell.strip()} or {words.policy.strip()}")  # fmt: skip
+    return [(c, _run_of(notable["cells"][labels[c.key]].get(what), grid, root, words))
             for c in members]  # fmt: skip
 
 
@@ -358,7 +367,9 @@ def _notable(
     base = [r.label for r in runs if r.cell.policy.name == grid.baseline]
     return notable_runs([r.label for r in runs], [r.regret[:, -1] for r in runs],
                         [r.cell.channel.to_dict() for r in runs], seed=grid.seed,
-                        baseline=base[0] if base else None)  # fmt: skip
+                        baseline=base[0] if base else None,
+                        collisions=[r.collisions[:, -1] if r.collisions is not None else None
+                                    for r in runs])  # fmt: skip
 
 
 def _streams(grid: Grid, warn: Any) -> str:
@@ -417,7 +428,7 @@ def _drill(root: Path, grid: Grid, cell: Cell, label: str | None, run: int,
         else:
             expect = expected_row(root, grid, cell, run)
     config = RunConfig(cell.instance, spec, grid.seed + run, cell.horizon, channel=channel,
-                       streams=streams)  # fmt: skip
+                       streams=streams, sources=cell.sources)  # fmt: skip
     choice = what if isinstance(what, str) else "run"
     return Drill(config, run, choice, label, root, expect, notes, row)
 

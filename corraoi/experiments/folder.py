@@ -128,10 +128,17 @@ class ChunkResult:
     pulls_sum: np.ndarray  # (S, K) int64 pulls per arm summed over the chunk's runs
     wall_s: float
     agg: DeviceAggregates | None = None
+    #: a cell of several sources: each run's regret per source (n, S, M) and its collisions
+    #: summed over its sources (n, S) (``regret`` is their sum); None for one source
+    regret_by_source: np.ndarray | None = None
+    collisions: np.ndarray | None = None
 
     def save(self, path: Path) -> None:
         """Write through the ``.partial`` protocol: a part exists only when complete."""
         extra = self.agg.arrays() if self.agg is not None else {}
+        if self.regret_by_source is not None and self.collisions is not None:
+            extra = {**extra, "regret_by_source": self.regret_by_source,
+                     "collisions": self.collisions}  # fmt: skip
         with PartialFile(path, overwrite=True, what="part file", sweep=True) as target:
             np.savez(
                 target.file, cell=np.array(self.chunk.cell), start=self.chunk.start,
@@ -152,6 +159,8 @@ class ChunkResult:
                     t=z["t"], regret=z["regret"], estimator=z["estimator"],
                     best_pulls=z["best_pulls"], pulls_sum=z["pulls_sum"],
                     wall_s=float(z["wall_s"]), agg=DeviceAggregates.from_arrays(z),
+                    regret_by_source=z["regret_by_source"] if "regret_by_source" in z else None,
+                    collisions=z["collisions"] if "collisions" in z else None,
                 )  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - zip, zlib, pickle, numpy: all "damaged"
             detail = " ".join(str(exc).split())[:200] or type(exc).__name__
@@ -171,6 +180,12 @@ class ChunkResult:
             if getattr(self, name).shape != (n, S):
                 raise DamagedPart(path, f"{name} has shape {getattr(self, name).shape}, "
                                         f"expected ({n}, {S})")  # fmt: skip
+        if (self.regret_by_source is None) != (self.collisions is None) or (
+            self.regret_by_source is not None and self.collisions is not None and (
+                self.regret_by_source.ndim != 3 or self.regret_by_source.shape[:2] != (n, S)
+                or self.collisions.shape != (n, S))
+        ):
+            raise DamagedPart(path, "its per-source regret or collisions do not match its runs")
         if self.pulls_sum.ndim != 2 or self.pulls_sum.shape[0] != S:
             raise DamagedPart(path, f"pulls_sum has shape {self.pulls_sum.shape}")
         if not (np.all(np.isfinite(self.regret)) and np.all(np.isfinite(self.estimator))):
@@ -322,6 +337,9 @@ def _check_against(part: ChunkResult, path: Path, cells: dict[str, Cell], grid: 
     if part.agg is None and int(part.t[-1]) != int(cell.horizon):
         raise DamagedPart(path, f"its last checkpoint is {int(part.t[-1])}, the horizon is "
                                 f"{cell.horizon}")  # fmt: skip
+    M = part.regret_by_source.shape[2] if part.regret_by_source is not None else 1
+    if M != cell.sources:
+        raise DamagedPart(path, f"it holds runs of {M} source(s), the cell {cell.sources}")
     if part.pulls_sum.shape[1] != cell.instance.K:
         raise DamagedPart(path, f"it has {part.pulls_sum.shape[1]} arms, the instance "
                                 f"{cell.instance.K}")  # fmt: skip
@@ -344,6 +362,8 @@ class CellRuns:
     pulls_sum: np.ndarray
     wall_s: float
     agg: DeviceAggregates | None = None
+    regret_by_source: np.ndarray | None = None  # (R, S, M): several sources only
+    collisions: np.ndarray | None = None  # (R, S)
 
     @classmethod
     def join(cls, cell: Cell, label: str, parts: Sequence[ChunkResult], runs: int) -> CellRuns:
@@ -370,6 +390,8 @@ class CellRuns:
             best_pulls=np.concatenate([p.best_pulls for p in parts])[:runs],
             pulls_sum=np.sum([p.pulls_sum for p in parts], axis=0),
             wall_s=float(sum(p.wall_s for p in parts)), agg=agg,
+            regret_by_source=_joined(parts, "regret_by_source", runs),
+            collisions=_joined(parts, "collisions", runs),
         )  # fmt: skip
 
     @property
@@ -387,8 +409,11 @@ class CellRuns:
         else:
             t, n, pulls = self.t, self.regret.shape[0], self.pulls_sum
             regret, estimator = Moments.of(self.regret), Moments.of(self.estimator)
-        share = pulls / (n * t.astype(np.float64))[:, None]
-        return sweep_points(self.label, t, regret, estimator, share)
+        # a source-slot per source and slot: the shares of M sources sum to 1 too
+        share = pulls / (n * self.cell.sources * t.astype(np.float64))[:, None]
+        hits = Moments.of(self.collisions.astype(np.float64)) if (
+            self.collisions is not None and self.agg is None) else None  # fmt: skip
+        return sweep_points(self.label, t, regret, estimator, share, hits)
 
     def paired_curve(self, base: CellRuns) -> dict[str, list[Any]] | None:
         """Mean and 95% CI of regret(this) - regret(base), run by run, at each checkpoint:
@@ -412,6 +437,17 @@ class CellRuns:
         return PolicyResult(
             policy=self.cell.policy, regret=self.regret[:, -1], estimator=self.estimator[:, -1],
             pulls=None, best_arm=best_arm, wall_s=self.wall_s, label=self.label,
-            best_pulls=self.best_pulls[:, -1], pulls_mean=self.pulls_sum[-1] / n,
-            horizon=int(self.t[-1]),
+            best_pulls=self.best_pulls[:, -1] / self.cell.sources,
+            pulls_mean=self.pulls_sum[-1] / n, horizon=int(self.t[-1]),
+            regret_by_source=(self.regret_by_source[:, -1] if self.regret_by_source is not None
+                              else None),
+            collisions=self.collisions[:, -1] if self.collisions is not None else None,
         )  # fmt: skip
+
+
+def _joined(parts: Sequence[ChunkResult], name: str, runs: int) -> np.ndarray | None:
+    """The parts' ``name`` arrays (per-source values) joined in run order, or None."""
+    arrays = [getattr(p, name) for p in parts]
+    if any(a is None for a in arrays):
+        return None
+    return np.concatenate(arrays)[:runs]

@@ -19,6 +19,8 @@ with the same keys::
     checkpoints = 200     # about this many checkpoint slots per curve
     channel = "iid"       # optional: iid, markov or trace:PATH
     baseline = "ucb"      # optional: paired differences against this policy
+    sources = [1, 2, 3]   # optional: sources sharing the channels, each a cell (multi-source
+                          # policies only, e.g. rhorand-ucb; docs/model.md, "Many sources")
 
     [params]              # each list is swept; a value goes to the policies declaring it
     c = [1.0, 2.0]
@@ -43,12 +45,12 @@ from corraoi.limits import check_horizon, check_seed
 from corraoi.model.channels import Channel, TraceReader, parse_channel
 from corraoi.model.instance import Instance, load_instance
 from corraoi.policies import PolicySpec, make_policy, parse_policy_names, resolve
-from corraoi.policies.spec import assign_params, param_key
+from corraoi.policies.spec import assign_params, check_sources, param_key
 from corraoi.text import split_list
 
 #: Keys an experiment file may hold.
 FILE_KEYS = ("instances", "policies", "horizons", "runs", "seed", "chunk", "checkpoints",
-             "channel", "baseline", "backend", "params")  # fmt: skip
+             "channel", "baseline", "backend", "sources", "params")  # fmt: skip
 #: Where a grid's cells can run (``backend``; docs/gpu.md).
 BACKENDS = ("cpu", "gpu", "auto")
 #: An experiment file larger than this is refused before it is read.
@@ -59,12 +61,14 @@ MAX_CELLS = 100_000
 
 @dataclass(frozen=True, eq=False)
 class Cell:
-    """One instance x policy (with its parameter values) x horizon x channel."""
+    """One instance x policy (with its parameter values) x horizon x channel x number of
+    sources sharing the channels (1: today's single source)."""
 
     instance: Instance
     policy: PolicySpec
     horizon: int
     channel: Channel = field(default_factory=Channel)
+    sources: int = 1
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -74,7 +78,15 @@ class Cell:
         }
         if not self.channel.iid:
             out["channel"] = self.channel.to_dict()
+        if self.sources != 1:  # a single source's cell (and its key) as before
+            out["sources"] = int(self.sources)
         return out
+
+    @property
+    def many(self) -> bool:
+        """Whether the cell runs in the engine of many sources: several sources, or a
+        multi-source policy (one source of it is its base policy, run for run)."""
+        return self.sources > 1 or bool(getattr(self.policy.resolve(), "multi_source", None))
 
     @property
     def key(self) -> str:
@@ -174,10 +186,15 @@ class Grid:
         the cell's key when two cells still read alike (one name from two files, say)."""
         out: dict[str, str] = {}
         for cells in self.groups().values():
-            counts = Counter(c.policy.name for c in cells)
+            # a policy's parameter values when it runs with several; the number of sources
+            # (M=3) when a cell of the group has several
+            counts = Counter((c.policy.name, c.sources) for c in cells)
+            shown_m = any(c.sources > 1 for c in cells)
             for c in cells:
                 ps, name = ",".join(f"{k}={v:g}" for k, v in c.policy.params.items()), c.policy.name
-                out[c.key] = f"{name}({ps})" if counts[name] > 1 else name
+                words = [ps] if counts[name, c.sources] > 1 else []
+                words += [f"M={c.sources}"] if shown_m else []
+                out[c.key] = f"{name}({','.join(words)})" if words else name
             alike = Counter(out[c.key] for c in cells)
             for c in cells:
                 if alike[out[c.key]] > 1:
@@ -205,7 +222,8 @@ class Grid:
             for d in data["cells"]:
                 cfg = RunConfig.from_dict({**d, "seed": 0})
                 assert cfg.channel is not None
-                cells.append(Cell(cfg.model, cfg.policy, cfg.horizon, cfg.channel))
+                cells.append(Cell(cfg.model, cfg.policy, cfg.horizon, cfg.channel,
+                                  cfg.sources))
             return cls(
                 cells=tuple(cells), runs=int(data["runs"]), seed=int(data["seed"]),
                 chunk=int(data.get("chunk", 0)), checkpoints=int(data.get("checkpoints", 200)),
@@ -252,9 +270,12 @@ def build_grid(
     trace_readers: Mapping[str, TraceReader] | None = None,
     baseline: str | None = None,
     backend: str = "cpu",
+    sources: Sequence[int] | None = None,
     warn: Callable[[str], None] | None = None,
 ) -> Grid:
-    """The grid of every instance x policy x parameter combination x horizon.
+    """The grid of every instance x policy x parameter combination x horizon x number of
+    sources (``sources``: each M in 1..K a cell; a single-source policy with M > 1 is
+    refused, one line naming its multi-source forms).
 
     Each parameter list goes to every policy that declares the parameter, or to one policy
     for ``POLICY.NAME`` (:func:`~corraoi.policies.spec.assign_params`; the product over the
@@ -279,14 +300,23 @@ def build_grid(
         declared = list(each[t])
         for combo in itertools.product(*(each[t][p] for p in declared)):
             specs.append(make_policy(t, **dict(zip(declared, combo, strict=True))))
+    counts = list(dict.fromkeys(check_sources_list(sources)))
+    for spec in specs:
+        for m in counts:
+            check_sources(spec, m, spec.resolve())
     cells = []
     for spec_text in instances:
         inst = load_instance(spec_text)
         chan = parse_channel(channel, inst, readers=trace_readers)
+        for m in counts:
+            if m > inst.K:
+                raise ConfigError(f"sources {m}: expected an integer from 1 to the number of "
+                                  f"arms of {inst.name}, {inst.K}")  # fmt: skip
         for h in horizons:
             chan.check(inst, int(h))
             for spec in specs:
-                cells.append(Cell(inst, spec, int(h), chan))
+                for m in counts:
+                    cells.append(Cell(inst, spec, int(h), chan, m))
     if baseline is not None and baseline not in {s.name for s in specs}:
         raise ConfigError(
             f"--baseline {baseline}: not one of the swept policies "
@@ -294,6 +324,35 @@ def build_grid(
         )
     return Grid(tuple(cells), runs=int(runs), seed=int(seed), chunk=int(chunk),
                 checkpoints=int(checkpoints), baseline=baseline, backend=backend)  # fmt: skip
+
+
+def check_sources_list(values: Sequence[Any] | None) -> list[int]:
+    """The numbers of sources of a grid (``--sources``, the file's ``sources``): integers
+    >= 1, else a ConfigError naming the value (None: one source)."""
+    if values is None:
+        return [1]
+    out = []
+    for v in values:
+        if type(v) is not int or v < 1:
+            raise ConfigError(f"sources {v!r}: expected an integer from 1 to the number of arms")
+        out.append(v)
+    if not out:
+        raise ConfigError("sources: no value given (expected integers from 1 to the number "
+                          "of arms)")  # fmt: skip
+    return out
+
+
+def parse_sources(words: Iterable[str]) -> list[int] | None:
+    """``--sources M[,M...]`` words as integers (None: none given), else a ConfigError naming
+    the word."""
+    out: list[int] = []
+    for word in split_list(words):
+        try:
+            out.append(int(word))
+        except ValueError:
+            raise ConfigError(f"--sources {word!r}: expected an integer from 1 to the number "
+                              "of arms (a comma list sweeps each)") from None  # fmt: skip
+    return out or None
 
 
 def read_experiment(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -359,6 +418,12 @@ def read_experiment(path: str | os.PathLike[str]) -> dict[str, Any]:
     out["seed"] = integer("seed", 0)
     out["chunk"] = integer("chunk", 0)
     out["checkpoints"] = integer("checkpoints", 200)
+    if "sources" in data:
+        m = data["sources"]
+        try:
+            out["sources"] = check_sources_list([m] if not isinstance(m, list) else m)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
     for key in ("channel", "baseline", "backend"):
         v = data.get(key)
         if v is not None and not isinstance(v, str):

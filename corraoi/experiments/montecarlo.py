@@ -36,6 +36,10 @@ class PolicyResult:
     best_pulls: np.ndarray | None = None  # (R,)
     pulls_mean: np.ndarray | None = None  # (K,)
     horizon: int = 0
+    #: several sources sharing the channels: each run's regret per source (R, M) and its
+    #: collisions summed over the sources (R,); ``regret`` is the total (None: one source)
+    regret_by_source: np.ndarray | None = None
+    collisions: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -51,7 +55,7 @@ class PolicyResult:
             assert self.best_pulls is not None and self.pulls_mean is not None
             share = float((self.best_pulls / self.horizon).mean())
             means = self.pulls_mean
-        return {
+        out: dict[str, Any] = {
             "regret_mean": float(m),
             "regret_ci95": finite(float(h)),
             "estimator_mean": float(em),
@@ -60,6 +64,13 @@ class PolicyResult:
             "pulls_mean": [float(v) for v in means],
             "wall_s": round(self.wall_s, 4),
         }
+        if self.regret_by_source is not None and self.collisions is not None:
+            cm, ch = mean_ci95(self.collisions)
+            out["sources"] = int(self.regret_by_source.shape[1])
+            out["regret_by_source_mean"] = [float(v) for v in self.regret_by_source.mean(axis=0)]
+            out["collisions_mean"] = float(cm)
+            out["collisions_ci95"] = finite(float(ch))
+        return out
 
 
 #: Called at each checkpoint with (policy, the runs' state there); T is always one.

@@ -1,12 +1,13 @@
 """The runs of a sweep worth watching, named from the per-run final regrets it already holds.
 
 Per cell: the run with the largest final regret (``worst``), the smallest (``best``) and the
-median (the lower median: with 200 runs the 100th smallest). Per pair of cells that share an
-instance, horizon and channel (their run ``i`` is one hidden path, seed ``seed + i``): the run
-with the widest paired difference ``regret(a) - regret(b)`` in either direction. With a
-baseline the pairs are every cell against it; without one every pair while a group has at
-most :data:`MAX_PAIRED_CELLS` cells (a parameter grid of hundreds of cells would name tens of
-thousands of pairs: give it a baseline).
+median (the lower median: with 200 runs the 100th smallest); for a cell of several sources
+also the run with the most collisions (``most-collisions``: a collision storm). Per pair of
+cells that share an instance, horizon and channel (their run ``i`` is one hidden path, seed
+``seed + i``): the run with the widest paired difference ``regret(a) - regret(b)`` in either
+direction. With a baseline the pairs are every cell against it; without one every pair while
+a group has at most :data:`MAX_PAIRED_CELLS` cells (a parameter grid of hundreds of cells
+would name tens of thousands of pairs: give it a baseline).
 
 Ties go to the lowest run index, so the choice does not depend on the chunking or on the
 order chunks finished in. Nothing here holds more than the finals (one number per run).
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 
 #: What ``--run`` accepts besides a run index.
-CHOICES = ("worst", "best", "median", "widest-gap")
+CHOICES = ("worst", "best", "median", "widest-gap", "most-collisions")
 
 #: Cells in a group above which pairs are named only against a baseline.
 MAX_PAIRED_CELLS = 24
@@ -30,16 +31,23 @@ def _entry(finals: np.ndarray, run: int, seed: int) -> dict[str, Any]:
     return {"run": int(run), "seed": int(seed + run), "regret": float(finals[run])}
 
 
-def cell_runs(finals: np.ndarray, seed: int) -> dict[str, dict[str, Any]]:
-    """worst, best and median run of one cell from its per-run final regrets (run order)."""
+def cell_runs(finals: np.ndarray, seed: int,
+              collisions: np.ndarray | None = None) -> dict[str, dict[str, Any]]:  # fmt: skip
+    """worst, best and median run of one cell from its per-run final regrets (run order);
+    with ``collisions`` (each run's, several sources) the run with the most of them too."""
     finals = np.asarray(finals, dtype=np.float64)
     k = (finals.size - 1) // 2
     median = np.partition(finals, k)[k]
-    return {
+    out = {
         "worst": _entry(finals, int(np.argmax(finals)), seed),
         "best": _entry(finals, int(np.argmin(finals)), seed),
         "median": _entry(finals, int(np.flatnonzero(finals == median)[0]), seed),
     }
+    if collisions is not None:
+        run = int(np.argmax(collisions))
+        out["most-collisions"] = {**_entry(finals, run, seed),
+                                  "collisions": int(collisions[run])}  # fmt: skip
+    return out
 
 
 def widest_gap(a: np.ndarray, b: np.ndarray, seed: int) -> dict[str, Any]:
@@ -57,11 +65,15 @@ def notable_runs(
     *,
     seed: int,
     baseline: str | None = None,
+    collisions: Sequence[np.ndarray | None] | None = None,
 ) -> dict[str, Any]:
     """The notable runs of one group: ``labels[i]``'s per-run finals are ``finals[i]``; cells
     whose ``paired_with`` values are equal share hidden paths (the channel). ``baseline`` is
-    the label pairs are taken against (when the group has it)."""
-    cells = {label: cell_runs(f, seed) for label, f in zip(labels, finals, strict=True)}
+    the label pairs are taken against (when the group has it); ``collisions[i]``: each run's
+    collisions of a cell of several sources (None for one source)."""
+    hits = list(collisions) if collisions is not None else [None] * len(labels)
+    cells = {label: cell_runs(f, seed, c)
+             for label, f, c in zip(labels, finals, hits, strict=True)}  # fmt: skip
     n = len(labels)
     if baseline is not None and baseline in labels:
         b = labels.index(baseline)

@@ -199,6 +199,12 @@ def notable_markdown(notable: dict[str, Any] | None, pairs: int = 5) -> list[str
         cols = [f"{c[k]['regret']:g} (run {c[k]['run']}, seed {c[k]['seed']})"
                 for k in ("worst", "median", "best")]  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cols) + " |")
+    storms = [(n, c["most-collisions"]) for n, c in notable["cells"].items()
+              if isinstance(c.get("most-collisions"), dict)]
+    if storms:
+        lines += ["", "Most collisions (several sources; `--run most-collisions`):", ""]
+        lines += [f"- {n}: {e['collisions']} collisions, regret {e['regret']:g} (run {e['run']}, "
+                  f"seed {e['seed']})" for n, e in storms]  # fmt: skip
     if notable["pairs"]:
         lines += ["", "Widest paired gaps, regret(a) - regret(b) on one run (same hidden "
                   "path):", ""]  # fmt: skip
@@ -246,4 +252,6 @@ def group_notable(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
     base = [c.label for c in cells if c.cell.policy.name == grid.baseline]
     return notable_runs([c.label for c in cells], [c.regret[:, -1] for c in cells],
                         [c.cell.channel.to_dict() for c in cells], seed=grid.seed,
-                        baseline=base[0] if base else None)  # fmt: skip
+                        baseline=base[0] if base else None,
+                        collisions=[c.collisions[:, -1] if c.collisions is not None else None
+                                    for c in cells])  # fmt: skip

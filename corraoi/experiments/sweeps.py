@@ -86,6 +86,42 @@ def paper_grid(
 #: The paper's simulation settings (section "Simulations"; 200 runs as its published code).
 PAPER_INSTANCES = ("I1", "I2")
 
+#: ``corraoi reproduce decentralized``: our experiment after Prasad, Jain and Moharir,
+#: "Decentralized Age-of-Information Bandits" (arXiv 2009.12961), whose body could not be
+#: read (docs/decentralized.md): the seed paper's I1 (K = 4), M = 1..4 sources, the
+#: decentralized rules (rhoRand, MCTopM) and the centralized baseline over UCB, CUCB, TS and
+#: CTS, T = 10,000.
+DECENTRALIZED_INSTANCE = "I1"
+DECENTRALIZED_RULES = ("rhorand", "mctopm", "centralized")
+DECENTRALIZED_BASES = ("ucb", "cucb", "ts", "cts")
+DECENTRALIZED_SOURCES = (1, 2, 3, 4)
+DECENTRALIZED_RUNS = 50
+
+
+def decentralized_grid(*, runs: int = DECENTRALIZED_RUNS, horizon: int = 10_000,
+                       seed: int = 0, backend: str = "cpu") -> Grid:  # fmt: skip
+    """The grid of ``corraoi reproduce decentralized`` (:data:`DECENTRALIZED_INSTANCE`, the
+    rules x bases, M in :data:`DECENTRALIZED_SOURCES`; one group: one folder)."""
+    from .grid import build_grid
+
+    policies = [f"{r}-{b}" for r in DECENTRALIZED_RULES for b in DECENTRALIZED_BASES]
+    return build_grid(instances=[DECENTRALIZED_INSTANCE], policies=policies,
+                      horizons=[horizon], runs=runs, seed=seed, backend=backend,
+                      sources=list(DECENTRALIZED_SOURCES))  # fmt: skip
+
+
+def regret_by_sources(summary: dict[str, Any], grid: Grid) -> dict[str, dict[int, Any]]:
+    """Per policy, the number of sources -> (mean regret at T, its 95% half-width), from a
+    group's ``summary`` (its labels are ``grid``'s): what the figure of regret against M
+    draws."""
+    labels = grid.labels()
+    out: dict[str, dict[int, Any]] = {}
+    for cell in grid.cells:
+        entry = summary["policies"][labels[cell.key]]
+        out.setdefault(cell.policy.name, {})[cell.sources] = (entry["regret_mean"],
+                                                              entry["regret_ci95"])  # fmt: skip
+    return out
+
 
 # ---------------------------------------------------------------------------- the folder
 

@@ -49,6 +49,8 @@ def group_config(grid: Grid, cells: Sequence[CellRuns]) -> dict[str, Any]:
         entry["name"] = c.label
         if c.cell.policy.color is not None or len(same[c.cell.policy.name]) > 1:
             entry["color"] = list(shade[id(c)])
+    if any(c.cell.sources > 1 for c in cells):  # each policy's number of sources, in order
+        config["sources"] = [int(c.cell.sources) for c in cells]
     return config
 
 

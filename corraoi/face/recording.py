@@ -138,8 +138,8 @@ def record_run(
                     for other in others:
                         other.write(block)
                 slots = int(block.t[-1])
-                mismatch = (row_mismatch(expect, block)
-                            if expect and isinstance(block, SlotBlock) else None)  # fmt: skip
+                # a run of several sources: its regret summed over them, as the sweep's row
+                mismatch = row_mismatch(expect, block) if expect else None
                 if mismatch is not None:  # after the block is in the log: it shows it
                     raise SweepMismatch(f"{config.label}: {mismatch}; the log is left as "
                                         f"{log.partial_path}, marked failed")  # fmt: skip

@@ -377,6 +377,10 @@ def grid_from_options(
         if value is not None:
             given_params[key] = [value]
     chosen = dict(options)
+    if chosen.get("sources") is not None:  # --sources M[,M...]: integers, or one line
+        from corraoi.experiments.grid import parse_sources
+
+        chosen["sources"] = parse_sources(chosen["sources"])
     if chosen.get("seed") == 0 and "seed" in spec:
         chosen["seed"] = None  # the file's seed unless one is given
     spec.update({k: v for k, v in chosen.items() if v is not None})
@@ -440,6 +444,13 @@ def device_name(grid: Grid) -> str | None:
 def paper_grid(*, runs: int, horizon: int, seed: int, backend: str = "cpu") -> Grid:
     """``corraoi reproduce``'s grid: the paper's instances and twelve policies."""
     from corraoi.experiments.sweeps import paper_grid as grid_of
+
+    return grid_of(runs=runs, horizon=horizon, seed=seed, backend=backend)
+
+
+def decentralized_grid(*, runs: int, horizon: int, seed: int, backend: str = "cpu") -> Grid:
+    """``corraoi reproduce decentralized``'s grid (docs/decentralized.md)."""
+    from corraoi.experiments.sweeps import decentralized_grid as grid_of
 
     return grid_of(runs=runs, horizon=horizon, seed=seed, backend=backend)
 
@@ -705,6 +716,7 @@ def sweep(
     workers: int | None = None,
     allow_huge: bool = False,
     on_slots: Callable[[int], None] | None = None,
+    sources: int | Sequence[int] = 1,
 ) -> Sweep:
     """Run every policy over the same paired seeds (runs ``seed .. seed + runs - 1``) on every
     instance and horizon, as ``corraoi sweep -o DIR`` does; returns the :class:`Sweep`.
@@ -722,7 +734,9 @@ def sweep(
     there. ``backend``: ``cpu``, ``gpu`` or ``auto``; ``scheduler``: ``local:N``,
     ``tcp://HOST:PORT`` or a Dask ``Client`` (policies defined in your own session run in this
     process only); ``workers``: the engine's threads here. ``allow_huge``: run a grid over
-    the size limit. ``on_slots(n)`` as runs advance.
+    the size limit. ``on_slots(n)`` as runs advance. ``sources``: the number of sources
+    sharing the channels, or a list of them (each a cell; several need a multi-source
+    policy, ``rhorand-ucb`` say: docs/decentralized.md).
 
     Raises the errors of :func:`corraoi.record` for bad input,
     :class:`~corraoi.errors.GpuUnavailable`, :class:`~corraoi.errors.ConfigError` (a grid too
@@ -767,6 +781,10 @@ def sweep(
     workers = arguments.optional(limits.check_int, workers, name="workers", lo=1,
                                  hi=limits.MAX_WORKERS, floats=True)  # fmt: skip
     arguments.optional(arguments.callback, on_slots, name="on_slots")
+    counts = [arguments.integer(m, name="sources" if not isinstance(sources, (list, tuple))
+                                else f"sources[{i}]", lo=1, kind=ConfigError, floats=False,
+                                why="at most the number of arms")
+              for i, m in enumerate(_listed(sources))]  # fmt: skip
     insts = [resolve.instance(i) for i in _listed(instances)]
     words, scoped = resolve.policy_words(policies, params, "policies")
     horizons = [int(h) for h in _listed(horizon)]
@@ -776,7 +794,7 @@ def sweep(
     grid = build_grid(instances=insts, policies=words, horizons=horizons, params=given,
                       runs=runs, seed=seed, chunk=chunk, checkpoints=checkpoints,
                       channel=channel, trace_readers=resolve.TRACE_READERS, baseline=baseline,
-                      backend=backend, warn=python_warn)  # fmt: skip
+                      backend=backend, sources=counts, warn=python_warn)  # fmt: skip
     grid = settle_backend(grid, warn=python_warn)
     temporary = out is None
     folder = Path(tempfile.mkdtemp(prefix="corraoi-sweep-")) if out is None else Path(out)
@@ -796,8 +814,8 @@ def sweep(
 
 
 __all__ = [
-    "SAY_SIZE_FROM", "Sweep", "SweepRun", "check_grid", "device_name", "draw_sweep_figure",
-    "grid_from_options", "grid_notes", "kept_code", "paper_grid", "record_each_from",
-    "run_grid", "run_with_progress", "settle_backend", "sweep", "sweep_from_options",
-    "write_paper_summary", "wrote_line",
+    "SAY_SIZE_FROM", "Sweep", "SweepRun", "check_grid", "decentralized_grid", "device_name",
+    "draw_sweep_figure", "grid_from_options", "grid_notes", "kept_code", "paper_grid",
+    "record_each_from", "run_grid", "run_with_progress", "settle_backend", "sweep",
+    "sweep_from_options", "write_paper_summary", "wrote_line",
 ]  # fmt: skip

@@ -7,6 +7,8 @@ Entities (timeline ``slot``, a sequence; arms numbered from 1):
   ``sweep/regret/<policy>/lo`` and ``.../hi``: the 95% confidence band (mean -/+ half-width;
   absent with a single run), thin lines in a lighter shade of the policy's colour;
 * ``sweep/estimator/<policy>``: the paper's estimator sum aoi - t / mu*;
+* ``sweep/collisions/<policy>``: a sweep with a cell of several sources: the mean
+  collisions up to t of each run, summed over its sources (a tab beside the estimator);
 * ``sweep/pulls/<policy>/<arm>``: mean share of pulls of that arm up to t; up to
   ``style.LINES_UP_TO`` arms each arm's line is thinner than the one before, so that
   shares that coincide show both colours (a thin line inside a wide one);
@@ -57,6 +59,11 @@ def regret_path(policy: str) -> str:
 
 def estimator_path(policy: str) -> str:
     return f"{ROOT}/estimator/{entity_part(policy)}"
+
+
+def collisions_path(policy: str) -> str:
+    """``sweep/collisions/<policy>``: the mean collisions of a cell of several sources."""
+    return f"{ROOT}/collisions/{entity_part(policy)}"
 
 
 def pulls_path(policy: str, arm: int | None = None) -> str:
@@ -160,6 +167,9 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
             plot_legend=legend,
             axis_x=axis,
         ),
+        *([rrb.TimeSeriesView(origin=f"{ROOT}/collisions", plot_legend=legend, axis_x=axis,
+                              name="collisions (mean over runs, summed over the sources)")]
+          if config.get("sources") else []),
         *([rrb.Grid(*(rrb.TimeSeriesView(origin=regret_path(p), axis_x=axis, plot_legend=legend,
                                          name=f"{p}: mean, worst, median, best run")
                       for p in notable), name="runs worth watching")] if notable else []),
@@ -210,6 +220,7 @@ __all__ = [
     "NOTABLE_KINDS",
     "ROOT",
     "SMALL_MULTIPLES_FROM",
+    "collisions_path",
     "entity_part",
     "estimator_path",
     "policy_names",

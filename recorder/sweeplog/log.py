@@ -63,9 +63,23 @@ if TYPE_CHECKING:
 # ---------------------------------------------------------------------------- format
 
 
-def sweep_schema(K: int) -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of one :data:`SWEEP_SCHEMA_NAME` message for K arms."""
+def sweep_schema(K: int, *, sources: bool = False) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of one :data:`SWEEP_SCHEMA_NAME` message for K arms;
+    ``sources``: a sweep with a cell of several sources, whose messages may hold the
+    collisions (:data:`SWEEP_SOURCES_KEYS`; a sweep of single sources declares none)."""
     half_width = {"type": "number", "minimum": 0}
+    extra = {
+        "collisions_mean": {
+            "type": "number", "minimum": 0,
+            "description": "a cell of several sources: mean over runs of the collisions in "
+            "slots 1..t, summed over the sources",
+        },
+        "collisions_ci95": {
+            **half_width,
+            "description": "half-width of the 95% confidence interval of collisions_mean; "
+            "absent with a single run",
+        },
+    } if sources else {}  # fmt: skip
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": f"urn:corraoi:sweep-point:v{SWEEP_FORMAT_VERSION}",
@@ -104,6 +118,7 @@ def sweep_schema(K: int) -> dict[str, Any]:
                 "minItems": K,
                 "maxItems": K,
             },
+            **extra,
         },
         "required": [k for k in SWEEP_MESSAGE_KEYS if k not in SWEEP_OPTIONAL_KEYS],
         "additionalProperties": False,
@@ -191,7 +206,8 @@ class SweepMcapSink(Sink["SweepPoint"]):
             schema_id = self._writer.register_schema(
                 name=SWEEP_SCHEMA_NAME,
                 encoding=SCHEMA_ENCODING,
-                data=json.dumps(sweep_schema(self.K), indent=1).encode(),
+                data=json.dumps(sweep_schema(self.K, sources=bool(config.get("sources"))),
+                                indent=1).encode(),  # fmt: skip
             )
             self._channel = self._writer.register_channel(
                 topic=SWEEP_TOPIC,
@@ -248,6 +264,8 @@ class SweepMcapSink(Sink["SweepPoint"]):
             "estimator_mean": float(point.estimator_mean),
             "estimator_ci95": _opt(point.estimator_ci95),
             "pull_share": share.tolist(),
+            "collisions_mean": _opt(point.collisions_mean),
+            "collisions_ci95": _opt(point.collisions_ci95),
         }
         # an undefined half-width is an absent key (version 1 wrote null)
         return orjson.dumps({k: v for k, v in message.items() if v is not None})

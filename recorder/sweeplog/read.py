@@ -55,6 +55,10 @@ class SweepCurve:
     estimator_mean: np.ndarray
     estimator_ci95: np.ndarray
     pull_share: np.ndarray  # (n, K), arm order (arm k + 1 in column k)
+    #: a cell of several sources: mean collisions up to t (summed over the sources) and the
+    #: half-width (NaN where undefined); None for a curve of one source
+    collisions_mean: np.ndarray | None = None
+    collisions_ci95: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -243,6 +247,7 @@ def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve
             values = [r[key] for r in rows]
         return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
 
+    many = any("collisions_mean" in r for r in rows)  # a cell of several sources
     try:
         t = np.array([r["t"] for r in rows], dtype=np.int64)
         curve = SweepCurve(
@@ -255,6 +260,8 @@ def _curve(p: Path, name: str, rows: list[dict[str, Any]], K: int) -> SweepCurve
             pull_share=np.array([r["pull_share"] for r in rows], dtype=np.float64).reshape(
                 len(rows), K
             ),
+            collisions_mean=column("collisions_mean") if many else None,
+            collisions_ci95=column("collisions_ci95") if many else None,
         )
     except KeyError as exc:
         raise SweepLogError(f"{p}: a sweep message of {name} lacks the field {exc}") from None

@@ -45,6 +45,7 @@ from corraoi.recorder.vocab import SWEEP_FLUSH_EVERY
 from corraoi.stats import SweepPoint
 
 from .layout import (
+    collisions_path,
     entity_part,
     estimator_path,
     policy_names,
@@ -131,6 +132,8 @@ class SweepRerunSink(Sink[SweepPoint]):
         self._buffer: list[SweepPoint] = []
         self._styled: set[str] = set()
         self._colors = config_colors(config)  # a policy's own colour, where it has one
+        #: a sweep with a cell of several sources: its collisions are drawn too
+        self._many = bool(config.get("sources"))
         self._closed = False
         self._owned: PartialFile | None = None
         recording.set_log_time_enabled(False)
@@ -187,7 +190,10 @@ class SweepRerunSink(Sink[SweepPoint]):
         def line(rgb: Any, line_width: float, label: str) -> Any:
             return rr.SeriesLines.columns(colors=[rgb], widths=[line_width], names=[label])
 
-        for path in (regret_path(name), estimator_path(name)):
+        paths = [regret_path(name), estimator_path(name)]
+        if self._many:  # the collisions of a sweep of several sources, policy by policy
+            paths.append(collisions_path(name))
+        for path in paths:
             parts: list[Any] = [line(color, width, name)]
             if aware:
                 parts.append(
@@ -264,6 +270,9 @@ class SweepRerunSink(Sink[SweepPoint]):
         send(f"{regret_path(name)}/lo", t[band], (mean - half)[band])
         send(f"{regret_path(name)}/hi", t[band], (mean + half)[band])
         send(estimator_path(name), t, est)
+        if points[0].collisions_mean is not None:  # a cell of several sources
+            hits = np.array([p.collisions_mean for p in points], dtype=np.float64)
+            send(collisions_path(name), t, hits)
         for k in range(self.K):
             send(pulls_path(name, k + 1), t, np.ascontiguousarray(share[:, k]))
         if not self._lines and t.size:

@@ -53,14 +53,27 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("estimator", "float64"),
     ("best_arm_pulls", "int64"),
 )
+#: The columns a sweep with a cell of several sources adds after :data:`COLUMNS` (a sweep of
+#: single sources writes none of them: its files as before): the cell's number of sources,
+#: the run's collisions up to t summed over its sources, and its regret per source (source
+#: 1 first; ``regret`` is their sum). A cell of one source: 1, 0 and [regret].
+SOURCE_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("sources", "int64"),
+    ("collisions", "int64"),
+    ("regret_by_source", "list<float64>"),
+)
 
 
-def results_schema(metadata: dict[str, str] | None = None) -> pa.Schema:
-    """The Arrow schema of ``results.parquet`` (with ``metadata`` as key-value metadata)."""
+def results_schema(metadata: dict[str, str] | None = None, *,
+                   sources: bool = False) -> pa.Schema:  # fmt: skip
+    """The Arrow schema of ``results.parquet`` (with ``metadata`` as key-value metadata);
+    ``sources``: with the :data:`SOURCE_COLUMNS` of a sweep of several sources."""
     import pyarrow as pa
 
-    types = {"string": pa.string(), "int64": pa.int64(), "float64": pa.float64()}
-    return pa.schema([(n, types[t]) for n, t in COLUMNS], metadata=metadata)
+    types = {"string": pa.string(), "int64": pa.int64(), "float64": pa.float64(),
+             "list<float64>": pa.list_(pa.float64())}  # fmt: skip
+    columns = COLUMNS + (SOURCE_COLUMNS if sources else ())
+    return pa.schema([(n, types[t]) for n, t in columns], metadata=metadata)
 
 
 def params_json(params: dict[str, float]) -> str:
@@ -92,7 +105,8 @@ def write_dataset(
     import pyarrow.parquet as pq
 
     out = PartialFile(path, overwrite=True, what="results", folder=True, sweep=True)
-    full = results_schema()
+    many = any(cell.sources > 1 for cell in grid.cells)
+    full = results_schema(sources=many)
     metadata = results_metadata({**grid.to_dict(), "version": __version__})
     metadata["provenance"] = json.dumps(provenance.to_dict(), sort_keys=True)
     schema = pa.schema([f for f in full if f.name != "instance"], metadata=metadata)
@@ -125,8 +139,28 @@ def write_dataset(
                         pa.array(estimator.T.reshape(-1)),
                         pa.array(best.T.reshape(-1).astype(np.int64)),
                     ]
+                    if many:
+                        cols += _source_columns(chunks, grid.runs, regret, n)
                     writer.write_table(pa.Table.from_arrays(cols, schema=schema))
     return out.path
+
+
+def _source_columns(chunks: list[Any], runs: int, regret: np.ndarray, n: int) -> list[Any]:
+    """The :data:`SOURCE_COLUMNS` of one cell's rows (checkpoint-major, as the others)."""
+    import pyarrow as pa
+
+    R, S = regret.shape
+    if chunks[0].regret_by_source is None:  # one source
+        M, by = 1, regret[:, :, None]
+        hits = np.zeros((R, S), dtype=np.int64)
+    else:
+        by = np.concatenate([p.regret_by_source for p in chunks])[:runs]
+        hits = np.concatenate([p.collisions for p in chunks])[:runs].astype(np.int64)
+        M = by.shape[2]
+    flat = by.transpose(1, 0, 2).reshape(-1)  # (S, R, M): a row's sources together
+    offsets = np.arange(0, n * M + 1, M, dtype=np.int32)
+    return [pa.array(np.full(n, M, dtype=np.int64)), pa.array(hits.T.reshape(-1)),
+            pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat))]  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- reading
@@ -193,7 +227,10 @@ def read_results_table(path: str | os.PathLike[str]) -> pa.Table:
     missing = [n for n in names if n not in table.column_names]
     if missing:
         raise ResultsError(f"{p}: the results lack the column(s) {', '.join(missing)}")
-    schema = results_schema()
+    many = all(n in table.column_names for n, _ in SOURCE_COLUMNS)  # several sources
+    if many:
+        names += [n for n, _ in SOURCE_COLUMNS]
+    schema = results_schema(sources=many)
     cols = [table.column(n).cast(schema.field(n).type) for n in names]
     return pa.Table.from_arrays(cols, schema=schema)
 
@@ -326,6 +363,9 @@ class SweepData:
             )
             for k in range(c.pull_share.shape[1]):
                 part[f"pull_share_{k + 1}"] = c.pull_share[:, k]
+            if c.collisions_mean is not None:  # a cell of several sources
+                part["collisions_mean"] = c.collisions_mean
+                part["collisions_ci95"] = c.collisions_ci95
             parts.append(part)
         return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
@@ -333,6 +373,7 @@ class SweepData:
 __all__ = [
     "COLUMNS",
     "FORMAT_NAME",
+    "SOURCE_COLUMNS",
     "FORMAT_VERSION",
     "RESULTS_FILE",
     "SweepData",
