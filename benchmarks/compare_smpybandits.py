@@ -228,21 +228,13 @@ def totals(
     }
 
 
-def corraoi_side(runs: int, horizon: int, seed: int = 1) -> dict[str, dict[str, np.ndarray]] | None:
-    """Per corraoi policy, each quantity's per-run values; None (and one line) when this
-    corraoi has no multi-source engine.
+def corraoi_side(runs: int, horizon: int, seed: int = 1) -> dict[str, dict[str, np.ndarray]]:
+    """Per corraoi policy, each quantity's per-run values.
 
     What it needs of the engine is one call: ``sources.simulate_runs(instance, policy, seeds,
     horizon, sources=M)`` yielding one run per seed, in order, with the slot columns ``arm``
     (0-based channel), ``collided`` and ``success``, each of shape (horizon, M)."""
-    try:
-        sources = importlib.import_module("corraoi.engine.sources")
-    except ImportError:
-        print(
-            "corraoi's multi-source engine (corraoi.engine.sources) is not installed: "
-            "reporting the SMPyBandits side only"
-        )
-        return None
+    sources = importlib.import_module("corraoi.engine.sources")
     inst = bernoulli_instance()
     mu = np.asarray(MEANS, dtype=float)
     seeds = list(range(seed, seed + runs))
@@ -312,6 +304,25 @@ def table(
     return "\n".join(lines)
 
 
+def saved_side(
+    path: Path, runs: int, horizon: int, seed: int
+) -> dict[str, dict[str, np.ndarray]] | None:
+    """SMPyBandits' side as an earlier ``--json`` wrote it, or None (and one line) when the
+    file is not one of the same runs."""
+    try:
+        data = json.loads(path.read_text())
+        same = (data["runs"], data["horizon"], data["seed"], tuple(data["means"]), data["sources"])
+        side = data["smpybandits"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"--smpybandits-json {path}: not a --json of this script ({exc})")
+        return None
+    if same != (runs, horizon, seed, MEANS, SOURCES):
+        print(f"--smpybandits-json {path}: runs, horizon, seed, means, sources {same}; expected "
+              f"{(runs, horizon, seed, MEANS, SOURCES)}")  # fmt: skip
+        return None
+    return {k: {q: np.asarray(v, dtype=float) for q, v in d.items()} for k, d in side.items()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=200)
@@ -324,22 +335,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="SMPyBandits' runs in JOBS processes")
     ap.add_argument("--smpybandits-only", action="store_true", help="skip the corraoi side")
     ap.add_argument("--json", type=Path, help="also write the per-run values here")
+    ap.add_argument(
+        "--smpybandits-json",
+        type=Path,
+        help="take SMPyBandits' side from an earlier --json of the same --runs, --horizon "
+        "and --seed (its 400 runs are 20 CPU minutes) instead of running it",
+    )
     args = ap.parse_args(argv)
     if args.runs < 2 or args.horizon < 1:
         ap.error(f"--runs must be >= 2 and --horizon >= 1, got {args.runs} and {args.horizon}")
-    python = find_python38(args.python)
-    if python is None:
-        print(
-            "no Python 3.8 found (python3.8 on PATH, ~/.pyenv/versions/3.8*, or --python): "
-            "SMPyBandits 0.9.7 needs it"
-        )
-        return NO_PYTHON
-    try:
-        exe = ensure_venv(python, args.venv or default_venv())
-        smpy = smpybandits_side(exe, args.runs, args.horizon, args.seed, args.jobs)
-    except RuntimeError as exc:
-        print(exc)
-        return NO_VENV
+    if args.smpybandits_json is not None:
+        smpy = saved_side(args.smpybandits_json, args.runs, args.horizon, args.seed)
+        if smpy is None:
+            return NO_VENV
+    else:
+        python = find_python38(args.python)
+        if python is None:
+            print(
+                "no Python 3.8 found (python3.8 on PATH, ~/.pyenv/versions/3.8*, or --python): "
+                "SMPyBandits 0.9.7 needs it"
+            )
+            return NO_PYTHON
+        try:
+            exe = ensure_venv(python, args.venv or default_venv())
+            smpy = smpybandits_side(exe, args.runs, args.horizon, args.seed, args.jobs)
+        except RuntimeError as exc:
+            print(exc)
+            return NO_VENV
     ours = None if args.smpybandits_only else corraoi_side(args.runs, args.horizon, args.seed)
     print(table(smpy, ours, args.runs, args.horizon))
     if args.json:

@@ -4,7 +4,6 @@ environment is not cached and cannot be built, e.g. without network)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -14,15 +13,13 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "compare_smpybandits.py"
+from .scripts import ROOT, load_script
+
+SCRIPT = ROOT / "benchmarks" / "compare_smpybandits.py"
 
 
 def _script() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("compare_smpybandits", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/compare_smpybandits.py")
 
 
 def test_the_bernoulli_instance_has_the_arms_outcome_vectors_as_states():
@@ -111,21 +108,6 @@ def test_without_python38_it_says_so_in_one_line_and_exits_non_zero():
     assert done.stdout.startswith("no Python 3.8 found")
 
 
-def test_without_the_multi_source_engine_the_corraoi_side_says_so(capsys):
-    cmp = _script()
-    try:
-        importlib.import_module("corraoi.engine.sources")
-    except ImportError:
-        pass
-    else:
-        pytest.skip("corraoi.engine.sources is installed")
-    assert cmp.corraoi_side(2, 10) is None
-    assert capsys.readouterr().out.strip() == (
-        "corraoi's multi-source engine (corraoi.engine.sources) is not installed: "
-        "reporting the SMPyBandits side only"
-    )
-
-
 def test_the_corraoi_side_and_the_table_from_an_engine_s_slot_columns(monkeypatch):
     """The one engine call the corraoi side makes, answered by a module whose sources sit on
     the three best channels from slot 1 (never collide) except that in run 2 all three
@@ -180,3 +162,34 @@ def test_a_venv_folder_that_is_not_a_virtual_environment_is_left_alone(tmp_path:
         f"{tmp_path} is not empty and not a virtual environment: give another --venv"
     )
     assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_a_saved_smpybandits_side_is_compared_with_corraoi_run_now(tmp_path: Path, capsys):
+    cmp = _script()
+    runs, horizon = 4, 400
+    ours = cmp.corraoi_side(runs, horizon, 1)
+    assert ours is not None and set(ours) == {name for _, name in cmp.POLICIES}
+    # a saved side equal to corraoi's own values agrees; one far off does not
+    saved = {"runs": runs, "horizon": horizon, "seed": 1, "means": list(cmp.MEANS),
+             "sources": cmp.SOURCES,
+             "smpybandits": {s: {q: v.tolist() for q, v in ours[c].items()}
+                             for s, c in cmp.POLICIES}}  # fmt: skip
+    path = tmp_path / "smpy.json"
+    path.write_text(json.dumps(saved))
+    capsys.readouterr()
+    assert cmp.main(["--runs", str(runs), "--horizon", str(horizon),
+                     "--smpybandits-json", str(path)]) == 0  # fmt: skip
+    rows = [r for r in capsys.readouterr().out.splitlines() if " corraoi " in r]
+    assert len(rows) == 2 and all(r.endswith("+0.00, +0.00  yes") for r in rows), rows
+    far = dict(saved)
+    far["smpybandits"] = {s: {q: (np.asarray(v) + 1e4).tolist() for q, v in d.items()}
+                          for s, d in saved["smpybandits"].items()}  # fmt: skip
+    path.write_text(json.dumps(far))
+    cmp.main(["--runs", str(runs), "--horizon", str(horizon), "--smpybandits-json", str(path)])
+    rows = [r for r in capsys.readouterr().out.splitlines() if " corraoi " in r]
+    assert len(rows) == 2 and all(r.endswith("NO") for r in rows), rows
+    # a file of other runs is one line and a non-zero status, nothing compared
+    assert cmp.main(["--runs", "5", "--horizon", str(horizon),
+                     "--smpybandits-json", str(path)]) == cmp.NO_VENV  # fmt: skip
+    (line,) = capsys.readouterr().out.strip().splitlines()
+    assert line.startswith(f"--smpybandits-json {path}: runs, horizon, seed, means, sources")
