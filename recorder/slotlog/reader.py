@@ -451,9 +451,9 @@ def _source_channels(chunk: ChunkData, p: Path, run_md: dict[str, str]) -> tuple
     them; 0 for a source whose channel it lacks."""
     assert chunk.records is not None
     try:
-        M = int(json.loads(run_md["config"]).get("sources", 1))
-    except (KeyError, TypeError, ValueError, AttributeError):
-        M = 1  # (an unusable config is refused by _config, with its own message)
+        M = _config(p, run_md).sources
+    except LogError:
+        M = 1  # (an unusable config is refused after the walk, with this message)
     return tuple(
         find_channel(chunk.records, p, chunk.offset, topic=slot_topic(m, M),
                      encoding=MESSAGE_ENCODING, schema=SLOT_SCHEMA_NAME)
