@@ -80,6 +80,9 @@ def ran(tmp_path_factory: pytest.TempPathFactory) -> dict[str, subprocess.Comple
         ("corraoi policies", 0),
         ("corraoi record --policy eps_greedy.py:EpsilonGreedy --param epsilon=0.05", 0),
         ("corraoi sweep -i I1,I2 -p ucb,sw-ucb --param window=100,1000 -o grid", 0),
+        ("corraoi record -p rhorand-cucb --sources 3", 0),
+        ("corraoi sweep -p rhorand-ucb,mctopm-ucb --sources 1,2,3,4 -o sources", 0),
+        ("corraoi reproduce decentralized -o dec", 0),
         ("corraoi --help", 0),
         ("corraoi record --help", 0),
     ]
@@ -138,6 +141,13 @@ def test_the_commands_do_what_the_readme_says(ran):
     assert "eps-greedy (epsilon=0.05) on I1" in ran[
         "corraoi record --policy eps_greedy.py:EpsilonGreedy --param epsilon=0.05"].stdout
     assert (where / "grid" / "I2" / "summary.json").is_file()
+    three = ran["corraoi record -p rhorand-cucb --sources 3"].stdout
+    assert (where / "runs/rhorand-cucb-I1-m3-s0.mcap").is_file(), three
+    assert re.search(r"3 sources: AoI regret at slot 10000: -?\d+ \(pathwise, summed; by "
+                     r"source -?\d+, -?\d+, -?\d+\), \d+ collisions", three), three
+    cells = json.loads((where / "sources" / "summary.json").read_text())["policies"]
+    assert len(cells) == 8 and "mctopm-ucb(M=4)" in cells, list(cells)  # 2 policies x M 1..4
+    assert (where / "dec" / "regret-vs-sources.png").is_file()
     assert "Start with:" in ran["corraoi --help"].stdout
     assert "--from SWEEP" in ran["corraoi record --help"].stdout
     assert "cut short" in ran["corraoi info runs/long.mcap.partial"].stdout

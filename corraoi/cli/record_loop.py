@@ -34,6 +34,15 @@ def report(session: Session, *, as_json: bool) -> None:
                     "regret": r.regret,
                     "estimator": r.estimator,
                     "pulls": r.pulls,
+                    **(
+                        {
+                            "sources": r.plan.config.sources,
+                            "regret_by_source": list(r.summary.regret_by_source or ()),
+                            "collisions": r.summary.collisions,
+                        }
+                        if r.plan.config.sources > 1 and r.summary is not None
+                        else {}
+                    ),
                     "mcap": str(r.mcap) if r.mcap else None,
                     "rrd": str(r.rrd) if r.rrd else None,
                     "wall_s": round(r.wall, 4),
@@ -65,6 +74,14 @@ def report(session: Session, *, as_json: bool) -> None:
             )
             pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
             click.echo(f"  pulls per arm: {pulls}")
+        elif c.sources > 1 and r.summary is not None and r.regret is not None:
+            each = ", ".join(str(v) for v in r.summary.regret_by_source or ())
+            click.echo(
+                f"  {c.sources} sources: AoI regret at slot {r.slots}: {r.regret} (pathwise, "
+                f"summed; by source {each}), {r.summary.collisions} collisions"
+            )
+            pulls = "  ".join(f"{k + 1}: {n}" for k, n in enumerate(r.pulls))
+            click.echo(f"  pulls per arm (all sources): {pulls}")
         click.echo(f"  MCAP log:        {safe_text(r.mcap)}")
         if r.rrd is not None:
             click.echo(f"  Rerun recording: {safe_text(r.rrd)}")
