@@ -158,14 +158,7 @@ class McapSink(Sink[RunBlock]):
             return
         if block.mu_hat.shape != (n, K):
             raise ValueError(f"block has {block.mu_hat.shape[1]} arms, the run has {K}")
-        first = int(block.t[0])
-        if first != self.slots + 1 or int(block.t[-1]) != self.slots + n:
-            raise ValueError(
-                f"block covers slots {first}..{int(block.t[-1])}, expected to start at "
-                f"{self.slots + 1} with consecutive slots"
-            )
-        if self.slots + n > self.config.horizon:
-            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+        self._check_span(block.t)
         t = block.t.astype(np.uint64)
         times = t * np.uint64(NS_PER_SLOT)  # no overflow: the horizon is at most MAX_SLOT
         sequences = t & np.uint64(0xFFFFFFFF)  # MCAP sequence is 32-bit: t modulo 2**32
@@ -191,6 +184,17 @@ class McapSink(Sink[RunBlock]):
         self.slots += n
         self._last = block
 
+    def _check_span(self, t: np.ndarray) -> None:
+        """The block's slots ``t`` follow those written, one by one, within the horizon."""
+        n, first, last = len(t), int(t[0]), int(t[-1])
+        if first != self.slots + 1 or last != self.slots + n:
+            raise ValueError(
+                f"block covers slots {first}..{last}, expected to start at "
+                f"{self.slots + 1} with consecutive slots"
+            )
+        if self.slots + n > self.config.horizon:
+            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+
     def _write_sources(self, block: SourcesBlock) -> None:
         """The messages of a run of several sources: slot by slot, source 1..M within a
         slot (their log time the slot's), a chunk ending after each slot t with
@@ -199,14 +203,7 @@ class McapSink(Sink[RunBlock]):
         for part in block.sources:
             if part.mu_hat.shape != (n, K) or not np.array_equal(part.t, block.t):
                 raise ValueError(f"a source's block has other slots or arms than the run's {K}")
-        first = int(block.t[0])
-        if first != self.slots + 1 or int(block.t[-1]) != self.slots + n:
-            raise ValueError(
-                f"block covers slots {first}..{int(block.t[-1])}, expected to start at "
-                f"{self.slots + 1} with consecutive slots"
-            )
-        if self.slots + n > self.config.horizon:
-            raise ValueError(f"block goes past the horizon {self.config.horizon}")
+        self._check_span(block.t)
         messages: list[bytes] = [b""] * (n * M)
         for m, part in enumerate(block.sources):
             messages[m::M] = self._encoder.encode(part)
