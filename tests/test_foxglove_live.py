@@ -249,9 +249,10 @@ def test_a_stalled_client_neither_stalls_the_run_nor_grows_memory(make_config, e
     assert grown * 1024 < 40 * 2**20, f"grew {grown} KiB for ~{total_bytes >> 20} MiB sent"
     ts = [_t(p) for p in client.slots()]
     assert ts == sorted(ts) and len(set(ts)) == len(ts)
-    # what it got: at most the SDK's backlog plus what the sockets held; the rest it missed,
-    # and the gaps in t count them
-    assert len(ts) < n_blocks * 1000 // 4
+    # what it got: the SDK's backlog plus whatever the SDK's writer and both sockets held, an
+    # amount that depends on the kernel's buffer autotuning (30,000 to 80,000 of the 300,000
+    # measured); the rest it missed, and the gaps in t count them
+    assert len(ts) < n_blocks * 1000 // 2
     assert missed(ts) > 0 and ts[-1] == n_blocks * 1000  # the newest survive
     assert BACKLOG <= n_blocks * 1000
 
