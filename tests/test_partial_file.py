@@ -213,3 +213,30 @@ def test_an_export_a_killed_export_left_is_made_again(tmp_path: Path):
     assert out.read_text().count("\n") == 201 and not partial_path(out).exists()
     res = CliRunner().invoke(main, ["export", str(log), "-o", str(out)])
     assert res.exit_code == 2 and "already exists (use --force" in res.output
+
+
+def test_an_interrupt_a_library_masks_while_cleaning_up_stays_an_interrupt(tmp_path: Path):
+    """Ctrl-C landing in a library's write whose clean-up then fails: numpy's ``savez``
+    interrupted between ``ZipFile.open(name, "w")`` and the block that closes the member
+    closes the zip in its ``finally``, which raises ValueError ("an open writing handle")
+    in place of the KeyboardInterrupt (the shape of it here, as Python chains it). Through
+    PartialFile the interrupt comes out, and nothing is left at either name."""
+    target = tmp_path / "part.npz"
+    with pytest.raises(KeyboardInterrupt), PartialFile(target) as out:
+        try:
+            out.file.write(b"half")
+            raise KeyboardInterrupt
+        finally:
+            raise ValueError("Can't close the ZIP file while there is an open writing handle")
+    assert not target.exists() and not partial_path(target).exists()
+    # an OSError so raised (a close that failed) is the interrupt too, not a WriteError
+    with pytest.raises(KeyboardInterrupt), PartialFile(target) as out:
+        try:
+            raise KeyboardInterrupt
+        finally:
+            raise OSError(errno.EIO, "Input/output error")
+    # an error with no interrupt behind it is left as it is
+    with pytest.raises(ValueError, match="plain"), PartialFile(target) as out:
+        raise ValueError("plain")
+    assert not partial_path(target).exists()
+    assert partial_file.masked_interrupt(ValueError("plain")) is None

@@ -381,6 +381,9 @@ class PartialFile:
             self.publish()
             return
         self.discard()
+        interrupt = masked_interrupt(exc)
+        if interrupt is not None:
+            raise interrupt
         if isinstance(exc, OSError):  # a write failed (disk full, ...): one line, the file named
             raise WriteError(f"{self.partial}: cannot write the {self.what}: {reason(exc)}")
 
@@ -395,4 +398,24 @@ class PartialFile:
         return out.path
 
 
-__all__ = ["PARTIAL_SUFFIX", "PartialFile", "check_target", "fdopen", "partial_path", "reason"]
+def masked_interrupt(exc: object) -> BaseException | None:
+    """The Ctrl-C (or SIGTERM, SIGHUP: :mod:`corraoi._signals`) that ``exc`` replaced, if
+    any: an error a library raised while cleaning up after a KeyboardInterrupt landed inside
+    it. numpy's ``savez`` is one: interrupted between ``ZipFile.open(name, "w")`` and the
+    block that closes the member, its ``finally`` calls ``ZipFile.close()``, which raises
+    ValueError ("an open writing handle"). A writer then re-raises the interrupt, so that
+    Ctrl-C stays Ctrl-C."""
+    if not isinstance(exc, BaseException) or isinstance(exc, (KeyboardInterrupt, SystemExit)):
+        return None
+    seen: set[int] = set()
+    cause = exc.__context__
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__context__
+    return None
+
+
+__all__ = ["PARTIAL_SUFFIX", "PartialFile", "check_target", "fdopen", "masked_interrupt",
+           "partial_path", "reason"]  # fmt: skip
