@@ -36,8 +36,17 @@ def children(pid: int) -> list[int]:
     return found
 
 
+def _plain(text: str) -> str:
+    """``text`` without terminal colour codes (IPython colours its tracebacks)."""
+    import re
+
+    return re.sub(r"\x1b\[[0-9;]*m", "", text)
+
+
 class Kernel:
     """An IPython kernel in ``cwd`` and a blocking client to it."""
+
+    traceback = ""  # the last error's traceback, for a failing assertion's message
 
     def __init__(self, cwd: Path | None) -> None:
         if cwd is None:  # a client handed in afterwards (tests of this class)
@@ -66,6 +75,7 @@ class Kernel:
                 out.append(msg["content"]["text"])
             elif msg["msg_type"] == "error":
                 out.append(msg["content"]["ename"])
+                self.traceback = _plain("\n".join(msg["content"].get("traceback", [])))
             elif msg["msg_type"] == "status" and msg["content"]["execution_state"] == "idle":
                 break
         return self.reply(msg_id, deadline)["content"], "".join(out)
@@ -132,7 +142,8 @@ def test_an_interrupted_record_leaves_the_kernel_usable_and_the_log_cut_short(tm
     kernel.interrupt_when(lambda: partial.exists() and partial.stat().st_size > 200_000,
                           "the log's first chunks")  # fmt: skip
     content, out = kernel.result(msg)
-    assert content["status"] == "error" and content["ename"] == "KeyboardInterrupt", out
+    assert content["status"] == "error" and content["ename"] == "KeyboardInterrupt", (
+        f"{out}\n{kernel.traceback}")  # fmt: skip
     assert "\n" in out or out == "KeyboardInterrupt"
     # the kernel goes on; nothing of the run is left running
     assert kernel.run("print(6 * 7)") == "42\n"
@@ -155,7 +166,8 @@ def test_an_interrupted_sweep_leaves_the_kernel_usable_and_resumable(tmp_path, k
     kernel.interrupt_when(lambda: parts.is_dir() and len(list(parts.iterdir())) >= 2,
                           "the sweep's first chunks")  # fmt: skip
     content, out = kernel.result(msg)
-    assert content["status"] == "error" and content["ename"] == "KeyboardInterrupt", out
+    assert content["status"] == "error" and content["ename"] == "KeyboardInterrupt", (
+        f"{out}\n{kernel.traceback}")  # fmt: skip
     assert kernel.run("print('still here')") == "still here\n"
     assert no_children_soon(kernel) == []
     import json
