@@ -75,12 +75,6 @@ def _bernoulli(means, name="bern"):
     return Instance(name, p, Y)
 
 
-#: Bases whose sweep kernel of many sources the test below does not compile (about 40 s each
-#: here): the sweep kernel is the record kernel's template with the recording cut out, and
-#: aoi-aware-cts, checked, runs the AoI-aware override of these three as well
-UNSWEPT = ("aoi-aware-ucb", "aoi-aware-cucb", "aoi-aware-ts")
-
-
 @pytest.mark.parametrize("base", BASES)
 def test_one_source_of_every_rhorand_form_is_its_base_policy(base):
     for inst in (load_instance("I1"), load_instance("I2")):
@@ -91,8 +85,6 @@ def test_one_source_of_every_rhorand_form_is_its_base_policy(base):
                   "mu_hat", "pulls", "candidates", "override", "estimator"):  # fmt: skip
             assert np.array_equal(one.column(f), ref.column(f), equal_nan=f == "score"), f
         assert one.equals(ref)
-        if base in UNSWEPT:
-            continue
         totals = simulate_sources(inst, make_policy(f"rhorand-{base}"), [7, 8], 700, 1)
         sim = Simulation(inst, make_policy(base), [7, 8], 700)
         sim.advance_to(700)
