@@ -77,10 +77,11 @@ class Param:
             return "must be finite"
         if self.integer and value != int(value):
             return "must be a whole number"
+        inside = "must be " + ("" if self.integer else "in ") + self.range_text()
         if self.low is not None and (value < self.low or (self.open_low and value == self.low)):
-            return f"must be in {self.range_text()}"
+            return inside
         if self.high is not None and (value > self.high or (self.open_high and value == self.high)):
-            return f"must be in {self.range_text()}"
+            return inside
         return None
 
 
@@ -205,7 +206,8 @@ class CompiledPolicy(PolicyBase):
     #: The AoI-aware override: play argmax mu_hat when the age exceeds 1 / max mu_hat.
     aoi_aware: ClassVar[bool] = False
     #: The rule that shares the channels among several sources (docs/model.md, "Many
-    #: sources"): "rhorand", "mctopm" or "centralized"; "" for a single-source policy.
+    #: sources"): "rhorand", "mctopm", "centralized" or "chairs"; "" for a single-source
+    #: policy.
     #: Its hooks are the base policy's, run once per source.
     multi_source: ClassVar[str] = ""
 

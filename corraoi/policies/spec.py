@@ -207,6 +207,10 @@ def make_policy(token: str, **params: float | None) -> PolicySpec:
     values: dict[str, float] = {}
     for pname, decl in cls.params.items():
         given = params.get(pname)
+        if given is not None and (isinstance(given, bool)
+                                  or not isinstance(given, (int, float, np.number))):
+            raise PolicyError(f"policy {policy_name(cls)}: parameter {pname}={given!r}: "
+                              "expected a number")  # fmt: skip
         value = float(decl.default if given is None else given)
         problem = decl.check(value)
         if problem is not None:
