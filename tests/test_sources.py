@@ -131,7 +131,7 @@ def test_the_collision_rule_and_the_oracle_on_hand_checked_slots():
         assert np.array_equal(src.success, (Y[src.arm, blk.x] == 1) & ~src.collided)
 
 
-@pytest.mark.parametrize("rule", ["rhorand", "mctopm", "centralized"])
+@pytest.mark.parametrize("rule", ["rhorand", "mctopm", "centralized", "chairs"])
 @pytest.mark.parametrize("base", ["ucb", "ts", "cucb"])
 def test_each_family_settles_on_an_orthogonal_assignment(rule, base):
     inst = _bernoulli([0.9, 0.1, 0.75, 0.2], "easy")
@@ -159,7 +159,7 @@ def test_a_source_count_outside_1_to_K_is_one_error(bad):
 
 def test_a_single_source_policy_with_several_sources_names_its_multi_source_forms():
     want = (r"^policy cucb is single-source; with sources 2 use one of its multi-source "
-            r"forms: rhorand-cucb, mctopm-cucb, centralized-cucb$")  # fmt: skip
+            r"forms: rhorand-cucb, mctopm-cucb, centralized-cucb, chairs-cucb$")  # fmt: skip
     with pytest.raises(ConfigError, match=want):
         RunConfig(load_instance("I1"), make_policy("cucb"), 0, 100, sources=2)
     with pytest.raises(ConfigError, match=want):
@@ -251,3 +251,42 @@ def test_many_runs_slot_columns_are_each_seeds_recorded_run():
             assert np.array_equal(r.collided[:, m], s.collided)
             assert np.array_equal(r.success[:, m], s.success)
     assert not np.array_equal(runs[0].arm, runs[1].arm)
+
+
+def test_musical_chairs_learns_uniformly_then_sits_for_good_on_its_first_free_channel():
+    inst = _bernoulli([0.9, 0.1, 0.75, 0.2, 0.5], "chairs")
+    M, t0, T = 3, 120, 3000
+    for seed in range(4):
+        blk = SourcesBlock.concat(list(simulate_run_sources(
+            inst, make_policy("chairs-ucb", t0=t0), seed, T, M, block=1000)))  # fmt: skip
+        arms = np.stack([s.arm for s in blk.sources])  # (M, T)
+        coll = np.stack([s.collided for s in blk.sources])
+        # learning: uniform channels, whatever the index says (the index would play each
+        # arm once, then mostly arm 0)
+        learn = arms[:, :t0]
+        assert all(len(set(a.tolist())) == inst.K for a in learn)
+        assert not any(blk.sources[m].forced[:t0].any() for m in range(M))
+        for m in range(M):
+            after = np.flatnonzero(~coll[m, t0:])
+            assert after.size, "never seated"
+            sat = t0 + int(after[0])  # the first collision-free slot after learning
+            chair = arms[m, sat]
+            # unseated until then: each choice one of its M best by its index that slot
+            # (UCB's scores, recorded); seated from then on: that channel, for good
+            assert (arms[m, sat:] == chair).all()
+            score = blk.sources[m].score
+            for t in range(t0, sat + 1):
+                above = (score[t] > score[t, arms[m, t]]).sum()
+                assert above < M, (m, t, score[t], arms[m, t])
+        # seated sources on distinct channels: no collision once all sat
+        assert not coll[:, -100:].any()
+        assert len(set(arms[:, -1].tolist())) == M
+    # the sweep kernel agrees with the record kernel
+    totals = simulate_sources(inst, make_policy("chairs-ucb", t0=t0), [3], T, M)
+    assert np.array_equal(totals.regret[0], [s.regret[-1] for s in blk.sources])
+
+
+@pytest.mark.parametrize(("t0", "says"), [(-1, "t0"), (2.5, "t0"), ("x", "t0")])
+def test_musical_chairs_refuses_a_bad_learning_phase_naming_t0(t0, says):
+    with pytest.raises(PolicyError, match=says):
+        make_policy("chairs-ucb", t0=t0)

@@ -32,7 +32,11 @@ channel:
   a source not seated moves to a uniform one of its M best; a slot without collision seats
   it (a seated source ignores collisions);
 - ``RULE_CENTRAL`` (the coordinated baseline): sources pick in order, each the base
-  policy's choice among the channels the sources before it left free, so no one collides.
+  policy's choice among the channels the sources before it left free, so no one collides;
+- ``RULE_CHAIRS`` (Musical Chairs, Rosenski, Shamir & Szlak 2016): for the first ``learn``
+  slots a uniform channel (its counts learn from it as from any play); then, until seated, a
+  uniform one of its M best (as MCTopM ranks them); the first of those plays without a
+  collision seats it on that channel for the rest of the run.
 
 A forced arm is played as it is, but for a first pull (UCB's round of every arm), which
 among several sources is a uniform arm never pulled (as SMPyBandits' +inf indices tied at
@@ -66,7 +70,7 @@ _forced = inlined(_forced)
 _score = inlined(_score)
 _update = inlined(_update)
 
-RULE_RHORAND, RULE_MCTOPM, RULE_CENTRAL = 0, 1, 2
+RULE_RHORAND, RULE_MCTOPM, RULE_CENTRAL, RULE_CHAIRS = 0, 1, 2, 3
 
 
 @njit(inline="always", cache=True)
@@ -231,7 +235,8 @@ def advance(
     oracle,  # (M,) int64: the channel the orthogonal oracle gives each source
     correlated,  # bool: restrict to the correlated candidate set
     aware,  # bool: AoI-aware override
-    rule,  # int: RULE_RHORAND / RULE_MCTOPM / RULE_CENTRAL
+    rule,  # int: RULE_RHORAND / RULE_MCTOPM / RULE_CENTRAL / RULE_CHAIRS
+    learn,  # int: Musical Chairs' learning slots (a uniform channel each); 0 for the others
     params,  # (P,) float64 the policy's parameters
     t0,  # int: slots already simulated
     nslots,  # int: slots to simulate now
@@ -242,8 +247,8 @@ def advance(
     xprev,  # (R,) int64 previous hidden state (-1 before slot 1)
     pulls,  # (R, M, K) int64
     succ,  # (R, M, K) int64: the channel ON when the source played it (sensed)
-    rank,  # (R, M) int64: rhoRand's rank - 1, MCTopM's chosen arm (-1: none yet)
-    seated,  # (R, M) bool: MCTopM's chair
+    rank,  # (R, M) int64: rhoRand's rank - 1, MCTopM's and Musical Chairs' arm (-1: none)
+    seated,  # (R, M) bool: MCTopM's and Musical Chairs' chair
     worst,  # (R, M, K) bool: MCTopM's arms not above the chosen one at its last choice
     aoi,  # (R, M) int64 current age
     oaoi,  # (R, M) int64 oracle's current age
@@ -334,7 +339,13 @@ def advance(
                                   has1, has2, pst, M)  # fmt: skip
                 override = aware and maxmu > 0.0 and aoi[r, m] * maxmu > 1.0
                 scored = False
-                if override or forced < 0:
+                if rule == RULE_CHAIRS and (t <= learn or seated[r, m]):
+                    # learning: a uniform channel; seated: its chair, for good
+                    arm = rank[r, m] if seated[r, m] else integer(pst, K)
+                    override = False
+                    forced = -1
+                    byscore[m] = False
+                elif override or forced < 0:
                     if override:
                         for k in range(K):
                             vals[k] = muhat[k]
@@ -381,6 +392,9 @@ def advance(
                             arm = rank_pick(vals, mask, n1, muhat, rk, pst, K, tier2, top)
                     elif rule == RULE_CENTRAL:
                         arm = free_best(vals, mask, muhat, allowed, pst, K, tier1, tier2)
+                    elif rule == RULE_CHAIRS:  # not seated yet: a uniform one of its M best
+                        best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
+                        arm = uniform_in(mbest, pst, K)
                     else:  # MCTopM
                         chosen = rank[r, m]
                         moved = True
@@ -461,8 +475,10 @@ def advance(
                         rank[r, m] = integer(pol[r, m], M)
                     elif rule == RULE_MCTOPM and not seated[r, m]:
                         rank[r, m] = -2 if byscore[m] else -1  # moves at its next choice
-                elif rule == RULE_MCTOPM and byscore[m]:
-                    seated[r, m] = True
+                elif (rule == RULE_MCTOPM or rule == RULE_CHAIRS) and byscore[m]:
+                    seated[r, m] = True  # Musical Chairs' chair: byscore only when unseated
+                    if rule == RULE_CHAIRS:
+                        rank[r, m] = arm
                 age = 1 if sensed == 1 and not hit else aoi[r, m] + 1
                 oage = 1 if Y[oracle[m], x] == 1 else oaoi[r, m] + 1
                 aoi[r, m] = age

@@ -51,7 +51,9 @@ __all__ = [
 
 #: The rule codes of the kernel (``_sources_kernel.RULE_*``), by ``multi_source`` name; a
 #: single-source policy run as one source is rhoRand's rank 1: the base policy itself.
-RULES = {"rhorand": 0, "mctopm": 1, "centralized": 2, "": 0}
+RULES = {"rhorand": 0, "mctopm": 1, "centralized": 2, "chairs": 3, "": 0}
+#: Musical Chairs' parameter: its learning slots (``corraoi.policies.multi_source``).
+LEARN_PARAM = "t0"
 
 #: The per-source fields the kernel buffers, in its argument order (after ``x``).
 SOURCE_FIELDS = ("arm", "success", "collided", "aoi", "oracle_aoi", "regret", "override",
@@ -85,7 +87,7 @@ def warm_args(K: int = 2, M: int = 2) -> tuple[Any, ...]:
     return (
         np.ones((1, 2), f8), 0, np.zeros(1, i8), np.zeros((K, 2), np.int8),
         np.zeros((K, 8, 1), np.uint64), np.zeros((K, K), np.int8), np.zeros(M, i8), False,
-        False, 0, np.zeros(0, f8), 0, 0,
+        False, 0, 0, np.zeros(0, f8), 0, 0,
         np.zeros((R, 4), np.uint64), np.zeros((R, M, 4), np.uint64), np.zeros((R, M, 2), f8),
         np.zeros((R, M, 1), f8), np.full(R, -1, i8), np.zeros((R, M, K), i8),
         np.zeros((R, M, K), i8), np.zeros((R, M), i8), np.zeros((R, M), b1),
@@ -144,8 +146,11 @@ class SourcesSimulation:
         rule = getattr(pb.cls, "multi_source", "")
         if rule not in RULES:
             raise PolicyError(f"policy {policy.name}: multi_source {rule!r}; expected one of "
-                              "rhorand, mctopm, centralized (or none)")  # fmt: skip
+                              f"{', '.join(r for r in RULES if r)} (or none)")  # fmt: skip
         self.rule = RULES[rule]
+        declared = list(pb.cls.params)
+        self.learn = (int(pb.params[declared.index(LEARN_PARAM)])
+                      if rule == "chairs" and LEARN_PARAM in declared else 0)  # fmt: skip
         self.oracle = oracle_channels(pb.theory.mu, M)
         #: each source's oracle channel mean (the estimator's mu*)
         self.oracle_mu = np.asarray(pb.theory.mu, dtype=np.float64)[self.oracle]
@@ -199,7 +204,7 @@ class SourcesSimulation:
                 n, slices = nslots, [(0, R)]
             common = (pb.cdf_rows, pb.kind, pb.trace, pb.Y, self._comb, pb.pclass, self.oracle,
                       bool(self.cls.correlated), bool(self.cls.aoi_aware), self.rule,
-                      pb.params, self.t + done, n)  # fmt: skip
+                      self.learn, pb.params, self.t + done, n)  # fmt: skip
 
             def run(a: int, b: int, common: tuple[Any, ...] = common) -> None:
                 kernel(*common, *(x[a:b] for x in per_run), record,

@@ -12,6 +12,10 @@ which documents each rule):
 * ``centralized-<base>``: a coordinator gives each source in turn the best of its indices
   among the channels still free: no collision ever, what decentralization is measured
   against.
+* ``chairs-<base>``: Musical Chairs (Rosenski, Shamir and Szlak 2016; SMPyBandits'
+  ``MusicalChair``): a uniform channel for the first ``t0`` slots, then a uniform one of its
+  M best indices until one plays without a collision, that channel then kept for good. Each
+  source is told M (the paper estimates it from the learning phase's collisions).
 
 The bases: UCB and TS, their correlated forms CUCB and CTS, and the AoI-aware form of each
 (the AoI-aware rule per source, with the source's own age and means). docs/model.md, "Many
@@ -20,7 +24,7 @@ sources", pins the model and the feedback each rule uses.
 
 from __future__ import annotations
 
-from .api import CompiledPolicy
+from .api import CompiledPolicy, Param
 from .paper import POLICIES
 from .registry import register
 
@@ -38,7 +42,17 @@ RULES: dict[str, tuple[str, str]] = {
         "centralized: each source in turn takes its best index among the free channels",
         "a coordinated baseline (no collisions)",
     ),
+    "chairs": (
+        "Musical Chairs: uniform channels for t0 slots, then a uniform one of its M best "
+        "until one is free, kept for good",
+        "Rosenski, Shamir, Szlak (2016), ICML; SMPyBandits MusicalChair",
+    ),
 }
+#: Musical Chairs' learning phase (its T0). The paper's T0 depends on the gap between the
+#: M-th and (M+1)-th means, which the sources do not know; 500 slots is our default (the
+#: ``t0`` parameter changes it). SMPyBandits' MusicalChair takes a quarter of the horizon.
+T0_PARAM = Param(500.0, "Musical Chairs' learning slots: a uniform channel each, before the "
+                 "chairs", low=0.0, integer=True)  # fmt: skip
 #: The single-source policies that have multi-source forms.
 BASES = ("ucb", "cucb", "aoi-aware-ucb", "aoi-aware-cucb", "ts", "cts", "aoi-aware-ts",
          "aoi-aware-cts")  # fmt: skip
@@ -59,6 +73,8 @@ def multi_form(base: type[CompiledPolicy], rule: str) -> type[CompiledPolicy]:
         "__module__": __name__,
         "__doc__": base.__doc__,
     }
+    if rule == "chairs":  # after the base's own, which its hooks read by position
+        attrs["params"] = {**base.params, "t0": T0_PARAM}
     cls_name = "".join(w.capitalize() for w in name.replace("-", " ").split())
     return type(cls_name, (base,), attrs)
 
