@@ -62,7 +62,7 @@ def multi_form(base: type[CompiledPolicy], rule: str) -> type[CompiledPolicy]:
     """``base`` shared among sources by ``rule`` (a subclass: the same hooks and flags)."""
     what, ref = RULES[rule]
     name = f"{rule}-{base.name}"
-    attrs = {
+    attrs: dict[str, object] = {
         "name": name,
         "multi_source": rule,
         "gpu": None,
