@@ -625,3 +625,99 @@ def test_the_front_settles_before_the_server_stops_until_its_queue_has_gone_out(
     finally:
         front.close()
         backend.close()
+
+
+def _log_messages(path: Path) -> dict[str, list[bytes]]:
+    """Every slot message of a log, by topic (one per source for a run of several)."""
+    out: dict[str, list[bytes]] = {}
+    with open(path, "rb") as f:
+        for _, channel, m in make_reader(f).iter_messages():
+            if channel.topic.startswith(TOPIC):
+                out.setdefault(channel.topic, []).append(m.data)
+    return out
+
+
+def test_a_run_of_several_sources_streams_each_sources_messages_on_its_topic(tmp_path):
+    # the log's channels, live: source m's messages on /corraoi/slot/m, every one (a paced
+    # run waits for the client), the same bytes as the log's, and a replay of that log too
+    topics = tuple(f"{TOPIC}/{m}" for m in (1, 2, 3))
+    proc, url = _start(["record", "-p", "rhorand-ucb", "--sources", "3", "-T", "2000",
+                        "--no-rrd", "-o", "m.mcap", "--foxglove", "127.0.0.1:0", "--pace",
+                        "4000"], tmp_path)  # fmt: skip
+    client = Client(url, topics)
+    client.pump(until=lambda: proc.poll() is not None, timeout=60)
+    client.pump(idle=0.5)
+    client.close()
+    _, err = proc.communicate(timeout=30)
+    _no_traceback(err)
+    assert proc.returncode == 0, err
+    assert ("after publishing 2000 on /corraoi/slot/1, 2000 on /corraoi/slot/2, 2000 on "
+            "/corraoi/slot/3") in err  # fmt: skip
+    file = _log_messages(tmp_path / "m.mcap")
+    assert sorted(file) == list(topics)
+    for m, topic in enumerate(topics, 1):
+        assert client.slots(topic) == file[topic] and len(file[topic]) == 2000
+        assert client.channels[topic]["metadata"] == {"format_version": "4", "source": str(m)}
+        assert client.channels[topic]["schemaName"] == "corraoi.SlotEvent"
+    # the sources of a slot arrive in order, the slot's messages before the next slot's
+    order = [(lt, int(tp.rsplit("/", 1)[1])) for tp, lt, _ in client.messages if tp in topics]
+    assert order == sorted(order)
+    # the same log replayed: the same messages on the same topics
+    proc, url = _start(["replay", "m.mcap", "--foxglove", "127.0.0.1:0", "--pace", "4000"],
+                       tmp_path)  # fmt: skip
+    again = Client(url, topics)
+    again.pump(until=lambda: proc.poll() is not None, timeout=60)
+    again.pump(idle=0.5)
+    again.close()
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    for topic in topics:
+        assert again.slots(topic) == file[topic]
+
+
+def test_a_labelled_run_of_several_sources_keeps_its_label_before_the_source(make_config):
+    from corraoi.engine.block import RunConfig
+    from corraoi.model.instance import load_instance
+    from corraoi.policies import make_policy
+
+    config = RunConfig(load_instance("I1"), make_policy("mctopm-ts"), 0, 100, sources=2)
+    with FoxgloveServer(LOOPBACK) as server:
+        sink = server.slot_sink(config, label="a")
+        assert sink.topics == [f"{TOPIC}/a/1", f"{TOPIC}/a/2"] and sink.topic == f"{TOPIC}/a/1"
+        single = server.slot_sink(make_config("ucb"), label="b")
+        assert single.topics == [f"{TOPIC}/b"]
+
+
+def test_a_paced_stream_that_fell_behind_makes_up_at_most_catch_up_seconds(monkeypatch):
+    # a replay stalls reading its next block (or the machine is busy): sending everything
+    # that fell due at once overflowed a client's backlog of 1,024 messages (a run of three
+    # sources at 4,000 slots/s lost 146 slots); the stream now resumes at its pace
+    from corraoi.recorder.live import foxglove
+
+    class Clock:
+        now = 100.0
+
+        def monotonic(self) -> float:
+            return self.now
+
+        def sleep(self, seconds: float) -> None:
+            self.now += seconds
+
+    clock = Clock()
+    monkeypatch.setattr(foxglove, "time", clock)
+    pacer = Pacer(1000.0)
+    assert pacer.wait(1) and clock.now == 100.001  # slot n is due n ms after the start
+    clock.now += 0.5  # a stall: slots 2..501 fell due meanwhile
+    burst = 0
+    while True:
+        before = clock.now
+        assert pacer.wait(2 + burst)
+        if clock.now > before:
+            break
+        burst += 1
+    # at once: CATCH_UP s of slots (50 here, and the one due now), not the 500 due
+    assert round(foxglove.CATCH_UP * 1000) <= burst <= round(foxglove.CATCH_UP * 1000) + 1
+    start = clock.now
+    for n in range(3 + burst, 103 + burst):  # then 1,000 slots a second again
+        assert pacer.wait(n)
+    assert abs(clock.now - start - 0.1) < 0.002

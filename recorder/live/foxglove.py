@@ -36,11 +36,11 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from corraoi.engine.block import RunConfig, SlotBlock
+from corraoi.engine.block import RunBlock, RunConfig, SourcesBlock
 from corraoi.errors import FoxgloveError, MissingExtraError, UsageError
 from corraoi.recorder.sink import Sink
 from corraoi.recorder.slotlog.encode import BlockEncoder, run_metadata, schema_bytes
-from corraoi.recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC
+from corraoi.recorder.vocab import NS_PER_SLOT, RUN_METADATA, SWEEP_TOPIC, slot_topic
 from corraoi.recorder.vocab import SLOT_SCHEMA_NAME as SCHEMA_NAME
 from corraoi.recorder.vocab import SLOT_TOPIC as TOPIC
 
@@ -55,6 +55,8 @@ DEFAULT_PORT = 8765
 DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 #: Messages the SDK queues per client before it drops the oldest.
 BACKLOG = 1024
+#: Seconds of slots a paced stream that fell behind sends at once (Pacer).
+CATCH_UP = 0.05
 #: Topic of the run metadata record.
 RUN_TOPIC = "/corraoi/run"
 #: Seconds a paced stream waits for a first client before its first slot.
@@ -117,7 +119,10 @@ class Pacer:
     """Holds a stream to ``rate`` slots per second (None: as fast as it comes).
 
     ``wait(n)`` returns once ``n`` slots in all may have gone out; it sleeps in short
-    steps and returns False at once when ``stop()`` says so.
+    steps and returns False at once when ``stop()`` says so. A stream that fell behind (the
+    log's next block read, a busy machine) makes up at most :data:`CATCH_UP` s of it: a
+    longer burst would overflow a client's backlog (:data:`BACKLOG` messages; a run of M
+    sources sends M a slot), and the SDK would drop the oldest.
     """
 
     def __init__(self, rate: float | None, *, stop: Callable[[], bool] | None = None) -> None:
@@ -134,6 +139,9 @@ class Pacer:
         if self._start is None:
             self._start = now
         due = self._start + n / self.rate
+        if now - due > CATCH_UP:  # behind: the time lost is not made up in one burst
+            self._start += now - due - CATCH_UP
+            due = now - CATCH_UP
         while now < due:
             if self.stop():
                 return False
@@ -250,13 +258,18 @@ class FoxgloveServer:
         self.stop()
 
 
-class FoxgloveSlotSink(Sink[SlotBlock]):
+class FoxgloveSlotSink(Sink[RunBlock]):
     """Streams a run's slot blocks to a :class:`FoxgloveServer`: ``write(block)``.
 
     The messages are :class:`corraoi.recorder.slotlog.encode.BlockEncoder`'s, the MCAP log's bytes;
     ``log_time`` is ``t`` seconds. ``pace``: at most that many slots per second (the
-    writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C).
+    writer waits); ``stop()`` true ends a paced ``write`` early (Ctrl-C). A run of M >= 2
+    sources (:class:`SourcesBlock` s) goes out as its log holds it: source m's messages on
+    ``/corraoi/slot/m`` (``/corraoi/slot/<label>/m`` with a label), the sources of a slot in
+    order; :attr:`topic` is source 1's, :attr:`topics` all of them.
     """
+
+    takes_sources = True  # a run of several sources too (Sink.takes_sources)
 
     def __init__(
         self, server: FoxgloveServer, config: RunConfig, *, label: str | None = None,
@@ -266,20 +279,29 @@ class FoxgloveSlotSink(Sink[SlotBlock]):
 
         self.server = server
         suffix = f"/{label}" if label else ""
-        self.topic = TOPIC + suffix
+        M = config.sources
+        #: the slots' topics, one per source (the log's channels: vocab.slot_topic)
+        self.topics = [TOPIC + suffix + slot_topic(m, M).removeprefix(TOPIC)
+                       for m in range(1, M + 1)]  # fmt: skip
+        self.topic = self.topics[0]
         self.run_topic = RUN_TOPIC + suffix
         meta = run_metadata(config)
         schema = Schema(name=SCHEMA_NAME, encoding="jsonschema", data=schema_bytes(config))
-        self._slots = server.channel(
-            self.topic, schema, metadata={"format_version": meta["format_version"]}
-        )
+        version = {"format_version": meta["format_version"]}
+        self._channels = [
+            server.channel(topic, schema,
+                           metadata=version if M == 1 else {**version, "source": str(m)})
+            for m, topic in enumerate(self.topics, 1)
+        ]  # fmt: skip
+        self._slots = self._channels[0]
         self._run = server.channel(self.run_topic, _run_schema(meta))
         self._run_message = json.dumps(meta).encode()
         self._encoder = BlockEncoder(config.K)
         self._pacer = Pacer(pace, stop=stop)
         self._waited = False
         self.sent = 0
-        server.published.setdefault(self.topic, 0)
+        for topic in self.topics:
+            server.published.setdefault(topic, 0)
         self._send_run(0)
 
     def _send_run(self, t: int) -> None:
@@ -289,10 +311,12 @@ class FoxgloveSlotSink(Sink[SlotBlock]):
         """Whether a client subscribes to the slots' topic now."""
         return bool(self._slots.has_sinks())
 
-    def write(self, block: SlotBlock) -> int:
+    def write(self, block: RunBlock) -> int:
         """Publish the block's slots; returns how many went out (fewer if stopped)."""
         if len(block) == 0:
             return 0
+        if isinstance(block, SourcesBlock):
+            return self._write_sources(block)
         messages = self._encoder.encode(block)
         ts = block.t.tolist()
         paced = self._pacer.rate is not None
@@ -309,6 +333,30 @@ class FoxgloveSlotSink(Sink[SlotBlock]):
             self.sent += 1
             done += 1
         self.server.published[self.topic] += done
+        return done
+
+    def _write_sources(self, block: SourcesBlock) -> int:
+        """Publish a run of several sources' slots: each slot's messages, source 1..M, each
+        on its source's topic; the pace counts slots. Returns the slots that went out."""
+        per_source = [self._encoder.encode(part) for part in block.sources]
+        ts = block.t.tolist()
+        paced = self._pacer.rate is not None
+        if paced and not self._waited:
+            self._waited = True
+            self.server.wait_for_subscriber(self.topic, FIRST_CLIENT_WAIT, self._pacer.stop)
+        self._send_run(ts[0])
+        logs = [channel.log for channel in self._channels]
+        done = 0
+        for i, t in enumerate(ts):
+            if paced and not self._pacer.wait(self.sent + 1):
+                break
+            at = t * NS_PER_SLOT
+            for log, messages in zip(logs, per_source, strict=True):
+                log(messages[i], log_time=at)
+            self.sent += 1
+            done += 1
+        for topic in self.topics:
+            self.server.published[topic] += done
         return done
 
     def stop_when(self, stop: Callable[[], bool]) -> None:
