@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar
 
 if TYPE_CHECKING:
     from typing_extensions import Self
@@ -36,7 +36,15 @@ class Sink(Generic[Item]):
     into place); leaving it through an exception calls :meth:`abort` (the file is finished
     as far as it got and left at its ``.partial`` name). Both are safe to call twice.
     Writers that treat Ctrl-C differently override ``__exit__``.
+
+    A run of several sources is handed as :class:`~corraoi.engine.block.SourcesBlock` s, to
+    the sinks that say they take them (:attr:`takes_sources`) only.
     """
+
+    #: Whether ``write`` also takes a run of several sources' ``SourcesBlock`` (the MCAP log,
+    #: the Rerun recording and Foxglove live do); a run refuses, before it starts, a sink
+    #: that does not.
+    takes_sources: ClassVar[bool] = False
 
     def write(self, item: Item, /) -> object:
         """Take the next item: a block of slots, or a sweep's point."""
@@ -77,6 +85,8 @@ class RunRecording(Sink["RunBlock"]):
     it; Ctrl-C closes with the slots so far; any other exception aborts (discarding a file
     that holds no slot) and is the one raised, not the abort's own.
     """
+
+    takes_sources = True  # a run of several sources too (Sink.takes_sources)
 
     #: the ``.rrd`` file's final path, None without one
     path: Path | None = None

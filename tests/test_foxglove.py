@@ -200,11 +200,17 @@ def test_the_shipped_layout_reads_fields_that_exist(written_files: dict[str, Pat
             for tab in config[pid]["tabs"]:
                 ids += _panel_ids(tab["layout"])
     assert sorted(ids) == sorted(config), "every panel in the layout has a config and back"
+    from corraoi.engine.block import RunConfig
+    from corraoi.recorder.slotlog.encode import schema_bytes
+
+    several = RunConfig(load_instance("I1"), make_policies(["rhorand-ucb"])[0], 0, 10, sources=2)
     fields = {
         "/corraoi/slot": dict(schemas_of(written_files["slot log"]))["corraoi.SlotEvent"],
         "/corraoi/sweep": dict(schemas_of(written_files["sweep log"]))[SCHEMA_NAME],
+        # a run of several sources: source m's topic /corraoi/slot/m (the sources tab)
+        "/corraoi/slot/m": json.loads(schema_bytes(several)),
     }
-    used: dict[str, set[str]] = {"/corraoi/slot": set(), "/corraoi/sweep": set()}
+    used: dict[str, set[str]] = {topic: set() for topic in fields}
     policies = set()
     kinds = set()
     for pid, panel in config.items():
@@ -218,6 +224,9 @@ def test_the_shipped_layout_reads_fields_that_exist(written_files: dict[str, Pat
                 policies.add(filt[len('policy=="') : -1])
             else:
                 field = rest.split(".", 1)[1]
+            if topic.startswith("/corraoi/slot/"):
+                assert topic.removeprefix("/corraoi/slot/") in ("1", "2", "3", "4"), topic
+                topic = "/corraoi/slot/m"
             if field.endswith("[:]"):  # every arm's value: a plot against the array index
                 field = field[:-3]
                 assert panel["xAxisVal"] == "index", pid
@@ -228,6 +237,7 @@ def test_the_shipped_layout_reads_fields_that_exist(written_files: dict[str, Pat
     assert {"aoi", "oracle_aoi", "regret", "arm", "success", "mu_hat", "pulls"} <= \
         used["/corraoi/slot"]  # fmt: skip
     assert "regret_mean" in used["/corraoi/sweep"]
+    assert {"aoi", "regret", "arm", "collided"} <= used["/corraoi/slot/m"]
     assert policies == set(paper_names())
     assert {"Plot", "StateTransitions", "Tab"} <= kinds
     arm_panel = next(v for k, v in config.items() if k.startswith("StateTransitions!"))

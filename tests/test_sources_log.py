@@ -342,3 +342,39 @@ def test_record_with_the_engine_of_several_sources(tmp_path):
     run = corraoi.load(tmp_path / "r.mcap")
     assert run.summary.regret == sum(run.summary.regret_by_source)
     assert (tmp_path / "r.rrd").stat().st_size > 0
+
+
+def test_a_run_of_several_sources_goes_to_the_sinks_that_take_it_and_refuses_the_others(
+        tmp_path):  # fmt: skip
+    from corraoi.errors import ConfigError
+    from corraoi.recorder.sink import Sink
+
+    class Single(Sink):  # takes a single source's blocks only (the default)
+        def write(self, block):
+            raise AssertionError("a block of several sources reached it")
+
+        def close(self):
+            pass
+
+    class Several(Sink):
+        takes_sources = True
+
+        def __init__(self):
+            self.blocks = []
+
+        def write(self, block):
+            self.blocks.append(block)
+
+        def close(self):
+            pass
+
+    with pytest.raises(ConfigError, match=r"2 sources .* Single takes a single source's"):
+        corraoi.record("rhorand-ucb", "I1", horizon=300, sources=2, path=tmp_path / "a.mcap",
+                       rrd=False, sinks=[Several(), Single()])  # fmt: skip
+    assert list(tmp_path.iterdir()) == []  # refused before anything was written
+    taker = Several()
+    run = corraoi.record("rhorand-ucb", "I1", horizon=2500, sources=2, path=tmp_path / "b.mcap",
+                         rrd=False, sinks=[taker])  # fmt: skip
+    got = SourcesBlock.concat(taker.blocks)
+    assert isinstance(taker.blocks[0], SourcesBlock) and got.M == 2 and len(got) == 2500
+    assert tuple(int(s.regret[-1]) for s in got.sources) == run.summary.regret_by_source

@@ -88,20 +88,19 @@ def record_run(
     its process (the same file), else it is written in this one. ``sinks``: further
     :class:`~corraoi.recorder.sink.Sink` s (a Foxglove live server's, your own) that take every
     block after those two, closed with the run, or aborted when it fails (a run of several
-    sources goes to its log and recording only: it refuses ``sinks``).
+    sources refuses those that do not take its blocks: ``Sink.takes_sources``).
 
     ``expect``: (slot, regret) pairs the run must give (a sweep's row, ``record --from``);
     the first difference stops it with :class:`corraoi.experiments.drill.SweepMismatch`, the log
     finished as failed with that line. ``notes`` go into the log's provenance."""
-    from corraoi.engine.block import SlotBlock
-
     from .slots import slots_of
 
-    if config.sources > 1 and sinks:
+    single = [s for s in sinks if not s.takes_sources]
+    if config.sources > 1 and single:
         raise ConfigError(
-            f"{config.label}: a run of {config.sources} sources is recorded to its log and "
-            "Rerun recording only; expected no further sinks (Foxglove live, your own), "
-            "which take a single source's slots"
+            f"{config.label}: a run of {config.sources} sources goes to sinks that take its "
+            f"blocks of several sources only; {type(single[0]).__name__} takes a single "
+            "source's (expected a Sink with takes_sources = True)"
         )
     if expect:  # a drill-down's check (the module is not imported by a plain record)
         from corraoi.experiments.drill import row_mismatch
@@ -134,9 +133,8 @@ def record_run(
             for block in slots_of(config):  # the engine's, or a GPU sweep's own run
                 for sink in every:
                     sink.write(block)
-                if isinstance(block, SlotBlock):  # (a run of several sources has no others)
-                    for other in others:
-                        other.write(block)
+                for other in others:  # (each takes a run of several sources, if it is one)
+                    other.write(block)  # type: ignore[arg-type]
                 slots = int(block.t[-1])
                 # a run of several sources: its regret summed over them, as the sweep's row
                 mismatch = row_mismatch(expect, block) if expect else None

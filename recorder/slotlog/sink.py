@@ -75,6 +75,8 @@ class McapSink(Sink[RunBlock]):
     reader recovers its complete chunks). Closing twice is safe.
     """
 
+    takes_sources = True  # a run of several sources too (Sink.takes_sources)
+
     def __init__(
         self,
         path: str | os.PathLike[str],
