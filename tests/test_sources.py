@@ -290,3 +290,18 @@ def test_musical_chairs_learns_uniformly_then_sits_for_good_on_its_first_free_ch
 def test_musical_chairs_refuses_a_bad_learning_phase_naming_t0(t0, says):
     with pytest.raises(PolicyError, match=says):
         make_policy("chairs-ucb", t0=t0)
+
+
+def test_no_two_mctopm_sources_keep_one_channel_as_their_seat():
+    """The AoI-aware override puts off UCB's first pulls past the first seats; a forced pull
+    then moved a seated source without unseating it, and two sources seated on one channel
+    collided there for good (I1, seed 2: ages of 2,000 slots, regret near 2e6)."""
+    inst = load_instance("I1")
+    for name in ("mctopm-aoi-aware-ucb", "mctopm-aoi-aware-cucb", "mctopm-ucb"):
+        sim = SourcesSimulation(inst, make_policy(name), list(range(12)), 2000, 3)
+        for _ in range(20):
+            sim.advance(100, record=False)
+            for r in range(12):
+                seats = sim.rank[r][sim.seated[r]].tolist()
+                assert len(seats) == len(set(seats)), (name, r, sim.t, seats)
+        assert sim.aoi.max() < 200, (name, sim.aoi.max())

@@ -30,7 +30,8 @@ channel:
   the source's M best (same order, ties by lowest index); otherwise move to one of the M
   best whose index was not above the chosen arm's at the previous choice; after a collision
   a source not seated moves to a uniform one of its M best; a slot without collision seats
-  it (a seated source ignores collisions);
+  it (a seated source ignores collisions); a forced arm other than its chosen one (a first
+  pull the AoI-aware override had put off) unseats it;
 - ``RULE_CENTRAL`` (the coordinated baseline): sources pick in order, each the base
   policy's choice among the channels the sources before it left free, so no one collides;
 - ``RULE_CHAIRS`` (Musical Chairs, Rosenski, Shamir & Szlak 2016): for the first ``learn``
@@ -445,6 +446,8 @@ def advance(
                     arm = forced
                     byscore[m] = False
                     if rule == RULE_MCTOPM:
+                        if rank[r, m] != forced:  # a forced move leaves its seat: seated
+                            seated[r, m] = False  # elsewhere, two sources could share one
                         rank[r, m] = forced
                 arms[m] = arm
                 taken[arm] += 1
