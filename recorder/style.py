@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from corraoi.policies import AOI_PREFIX, RGB
+from corraoi.policies.multi_source import RULES as MULTI_SOURCE_RULES
 from corraoi.text import safe_text
 
 #: Units, in brackets after a quantity's name (view titles, series names, axis labels).
@@ -133,13 +134,36 @@ BAR_TRUE_COLOR: RGB = (50, 50, 50)
 REFERENCE_COLOR: RGB = (130, 130, 130)
 
 
+#: The marker of a multi-source rule's curves in a figure (the first rule's: none), beside
+#: the base policy's colour and the AoI-aware dash: ``rhorand-ucb`` and ``chairs-ucb`` of a
+#: sweep are told apart. The rules are corraoi.policies.multi_source's, in its order.
+RULE_MARKERS = dict(zip(MULTI_SOURCE_RULES, ("", "s", "^", "o", "D", "v", "P", "X"),
+                        strict=False))  # fmt: skip
+
+
+def rule_of(name: str) -> str:
+    """The multi-source rule a policy's name starts with (``chairs-ucb`` -> ``chairs``), or
+    "" (corraoi.policies.multi_source: ``<rule>-<base>``)."""
+    head = name.split("-", 1)[0]
+    return head if head in RULE_MARKERS and "-" in name else ""
+
+
+def rule_marker(name: str) -> str:
+    """The marker of a policy's curves (:data:`RULE_MARKERS`; "" for none)."""
+    return RULE_MARKERS.get(rule_of(name), "")
+
+
 def base_policy(name: str) -> str:
-    """``aoi-aware-cts`` -> ``cts``; any other name unchanged."""
-    return name.removeprefix(AOI_PREFIX)
+    """``aoi-aware-cts`` -> ``cts``, ``mctopm-aoi-aware-cts`` -> ``cts``; any other name
+    unchanged."""
+    rule = rule_of(name)
+    return name.removeprefix(f"{rule}-" if rule else "").removeprefix(AOI_PREFIX)
 
 
 def is_aoi_aware(name: str) -> bool:
-    return name.startswith(AOI_PREFIX)
+    """``aoi-aware-cts`` and its multi-source forms (``rhorand-aoi-aware-cts``)."""
+    rule = rule_of(name)
+    return name.removeprefix(f"{rule}-" if rule else "").startswith(AOI_PREFIX)
 
 
 def policy_color(name: str, color: Sequence[int] | None = None) -> RGB:
@@ -321,6 +345,8 @@ __all__ = [
     "config_colors",
     "darker",
     "is_aoi_aware",
+    "rule_marker",
+    "rule_of",
     "lighter",
     "lines_for",
     "mpl",

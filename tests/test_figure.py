@@ -346,3 +346,28 @@ def test_bad_extension_or_dpi_is_one_line_and_no_file(tmp_path, log_path, name, 
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(UsageError, match="cannot tell the figure format"):
         draw_figure(read_sweep(log_path), tmp_path / "x.gif")
+
+
+def test_the_rules_of_several_sources_are_told_apart_by_marker(tmp_path: Path, monkeypatch):
+    # rhorand-ucb and chairs-ucb share UCB's colour (and its shades by M): a marker per rule
+    # tells their curves apart, the AoI-aware dash still marks the AoI-aware form
+    pytest.importorskip("matplotlib")
+    import corraoi
+    from corraoi.recorder.style import is_aoi_aware, rule_marker
+
+    names = ["rhorand-ucb", "chairs-ucb", "mctopm-aoi-aware-ucb", "centralized-ucb"]
+    corraoi.sweep("I1", names, runs=3, horizon=300, sources=2, out=tmp_path / "s")
+    saved = capture_figures(monkeypatch)
+    draw_figure(read_sweep(tmp_path / "s" / "sweep.mcap"), tmp_path / "fig.png")
+    (fig,) = saved
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    label = {n: f"{n}(M=2)" if f"{n}(M=2)" in lines else n for n in names}
+    assert sorted(lines) == sorted(label.values())
+    assert [lines[label[n]].get_marker() for n in names] == ["None", "o", "s", "^"]
+    assert len({lines[label[n]].get_color() for n in names}) == 1  # UCB's, for every rule
+    assert lines[label["mctopm-aoi-aware-ucb"]].get_linestyle() == "--"
+    assert lines[label["chairs-ucb"]].get_linestyle() == "-"
+    legend = fig.axes[0].get_legend()
+    assert [h.get_marker() for h in legend.legend_handles[:4]] == ["None", "o", "s", "^"]
+    assert is_aoi_aware("mctopm-aoi-aware-ucb") and not is_aoi_aware("chairs-ucb")
+    assert rule_marker("ucb") == "" and rule_marker("sw-ucb") == ""

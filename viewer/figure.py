@@ -31,6 +31,7 @@ from corraoi.recorder.style import (
     is_aoi_aware,
     mpl,
     policy_color,
+    rule_marker,
 )
 from corraoi.recorder.sweeplog.read import SweepCurve, SweepLog
 
@@ -38,6 +39,8 @@ from corraoi.recorder.sweeplog.read import SweepCurve, SweepLog
 FIGSIZE = (10.0, 6.0)
 FIGSIZE_SPLIT = (14.0, 6.0)
 DPI = 150
+#: Markers per curve of a multi-source rule that has them (recorder.style.RULE_MARKERS).
+MARKS = 12
 #: Resolutions ``--dpi`` accepts.
 DPI_RANGE = (20, 1200)
 #: Extensions a figure may have, and the matplotlib format each one means.
@@ -191,6 +194,9 @@ def _draw_curves(ax: Any, curves: Sequence[SweepCurve], total: int, colors: dict
             linewidth=1.6,
             label=c.policy,
             zorder=3,
+            marker=rule_marker(c.policy) or None,
+            markevery=max(1, len(t) // MARKS),
+            markersize=4.5,
         )
         band = np.isfinite(c.regret_ci95)
         if band.any():
@@ -213,7 +219,8 @@ def _legend(ax: Any, curves: Sequence[SweepCurve], colors: dict[str, RGB]) -> No
 
     handles: list[object] = [
         Line2D([], [], color=mpl(colors[c.policy]), linewidth=1.6, label=c.policy,
-               linestyle=DASH_AOI_AWARE if is_aoi_aware(c.policy) else "-")
+               linestyle=DASH_AOI_AWARE if is_aoi_aware(c.policy) else "-",
+               marker=rule_marker(c.policy) or None, markersize=4.5)
         for c in curves
     ]  # fmt: skip
     handles.append(Patch(facecolor=(0.5, 0.5, 0.5), alpha=0.3, label="95% confidence band"))
