@@ -27,6 +27,7 @@ from corraoi.errors import ConfigError, PolicyError
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
+from corraoi.policies.multi_source import CHAIRS_LEARN
 from corraoi.policies.spec import PolicySpec, check_sources, make_policy
 
 from . import threads
@@ -52,8 +53,6 @@ __all__ = [
 #: The rule codes of the kernel (``_sources_kernel.RULE_*``), by ``multi_source`` name; a
 #: single-source policy run as one source is rhoRand's rank 1: the base policy itself.
 RULES = {"rhorand": 0, "mctopm": 1, "centralized": 2, "chairs": 3, "": 0}
-#: Musical Chairs' parameter: its learning slots (``corraoi.policies.multi_source``).
-LEARN_PARAM = "t0"
 
 #: The per-source fields the kernel buffers, in its argument order (after ``x``).
 SOURCE_FIELDS = ("arm", "success", "collided", "aoi", "oracle_aoi", "regret", "override",
@@ -149,8 +148,8 @@ class SourcesSimulation:
                               f"{', '.join(r for r in RULES if r)} (or none)")  # fmt: skip
         self.rule = RULES[rule]
         declared = list(pb.cls.params)
-        self.learn = (int(pb.params[declared.index(LEARN_PARAM)])
-                      if rule == "chairs" and LEARN_PARAM in declared else 0)  # fmt: skip
+        self.learn = (int(pb.params[declared.index(CHAIRS_LEARN)])
+                      if rule == "chairs" and CHAIRS_LEARN in declared else 0)  # fmt: skip
         self.oracle = oracle_channels(pb.theory.mu, M)
         #: each source's oracle channel mean (the estimator's mu*)
         self.oracle_mu = np.asarray(pb.theory.mu, dtype=np.float64)[self.oracle]

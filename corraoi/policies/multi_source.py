@@ -48,6 +48,8 @@ RULES: dict[str, tuple[str, str]] = {
         "Rosenski, Shamir, Szlak (2016), ICML; SMPyBandits MusicalChair",
     ),
 }
+#: Musical Chairs' parameter: its learning slots (read by the engine of many sources).
+CHAIRS_LEARN = "t0"
 #: Musical Chairs' learning phase (its T0). The paper's T0 depends on the gap between the
 #: M-th and (M+1)-th means, which the sources do not know; 500 slots is our default (the
 #: ``t0`` parameter changes it). SMPyBandits' MusicalChair takes a quarter of the horizon.
@@ -74,7 +76,7 @@ def multi_form(base: type[CompiledPolicy], rule: str) -> type[CompiledPolicy]:
         "__doc__": base.__doc__,
     }
     if rule == "chairs":  # after the base's own, which its hooks read by position
-        attrs["params"] = {**base.params, "t0": T0_PARAM}
+        attrs["params"] = {**base.params, CHAIRS_LEARN: T0_PARAM}
     cls_name = "".join(w.capitalize() for w in name.replace("-", " ").split())
     return type(cls_name, (base,), attrs)
 
