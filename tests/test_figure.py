@@ -371,3 +371,25 @@ def test_the_rules_of_several_sources_are_told_apart_by_marker(tmp_path: Path, m
     assert [h.get_marker() for h in legend.legend_handles[:4]] == ["None", "o", "s", "^"]
     assert is_aoi_aware("mctopm-aoi-aware-ucb") and not is_aoi_aware("chairs-ucb")
     assert rule_marker("ucb") == "" and rule_marker("sw-ucb") == ""
+
+
+def test_a_legend_of_dozens_of_curves_goes_into_columns_and_leaves_the_axes_whole(
+        tmp_path: Path, monkeypatch):  # fmt: skip
+    # reproduce decentralized draws 48 curves: in one column at the usual type the legend
+    # was taller than the figure and constrained layout squeezed the axes to a strip
+    pytest.importorskip("matplotlib")
+    import corraoi
+
+    names = [f"{rule}-{base}" for rule in ("rhorand", "mctopm", "centralized", "chairs")
+             for base in ("ucb", "cucb")]  # fmt: skip
+    corraoi.sweep("I1", names, runs=2, horizon=200, sources=[1, 2, 3, 4], out=tmp_path / "s")
+    saved = capture_figures(monkeypatch)
+    draw_figure(read_sweep(tmp_path / "s" / "sweep.mcap"), tmp_path / "fig.png")
+    (fig,) = saved
+    ax = fig.axes[0]
+    assert len(ax.get_lines()) == 32
+    legend = ax.get_legend()
+    renderer = fig.canvas.get_renderer()
+    columns = {round(t.get_window_extent(renderer).x0) for t in legend.get_texts()}
+    assert len(columns) == 2
+    assert ax.get_position().height > 0.6 and ax.get_position().width > 0.4

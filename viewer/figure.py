@@ -41,6 +41,9 @@ FIGSIZE_SPLIT = (14.0, 6.0)
 DPI = 150
 #: Markers per curve of a multi-source rule that has them (recorder.style.RULE_MARKERS).
 MARKS = 12
+#: Legend entries that fit one column beside the axes, at the usual type and a smaller one.
+LEGEND_ROWS = 24
+LEGEND_ROWS_SMALL = 30
 #: Resolutions ``--dpi`` accepts.
 DPI_RANGE = (20, 1200)
 #: Extensions a figure may have, and the matplotlib format each one means.
@@ -228,12 +231,16 @@ def _legend(ax: Any, curves: Sequence[SweepCurve], colors: dict[str, RGB]) -> No
         handles.append(
             Line2D([], [], color="0.3", linestyle=DASH_AOI_AWARE, label="dashed: AoI-aware variant")
         )
+    # a long legend (reproduce decentralized: 48 curves) in columns of a smaller type: one
+    # column of them was taller than the figure and squeezed the axes to a strip
+    many = len(handles) > LEGEND_ROWS
     ax.legend(
         handles=handles,
         loc="upper left",
         bbox_to_anchor=(1.01, 1.0),
         borderaxespad=0.0,
-        fontsize=9,
+        fontsize=7.5 if many else 9,
+        ncols=-(-len(handles) // LEGEND_ROWS_SMALL) if many else 1,
         frameon=False,
         title="policy",
         title_fontsize=9,
