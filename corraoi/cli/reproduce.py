@@ -8,16 +8,14 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any
 
 import click
 
-from corraoi import limits
 from corraoi.text import safe_text
 
 from .common import handle_errors
 from .options import RUNS, WORKERS, backend_option, horizon_option, output_option, seed_option
-from .sweep_run import run_grid, settle_backend
+from .sweep_run import interrupted_or
 from .sweep_table import print_table
 
 
@@ -65,62 +63,27 @@ def reproduce(
       corraoi reproduce -o paper && open paper/I1/figure.png
       corraoi reproduce decentralized -o dec && open dec/regret-vs-sources.png
     """
-    from corraoi.face.sweeps import paper_grid, write_paper_summary
+    from corraoi.face.sweeps import reproduce_from_options
+
+    from .common import keep_pandas_out, warn
+    from .reading import progress
 
     out = output if output is not None else Path(which)
-    if which == "decentralized":
-        from corraoi.face.decentralized import RUNS
-
-        _decentralized(out, runs if runs is not None else RUNS, horizon, seed,
-                       workers, force, backend, as_json)  # fmt: skip
-        return
-    runs = runs if runs is not None else 200
-    limits.check_seed(seed, runs=runs, name="--seed")
-    grid = paper_grid(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu")
-    grid = settle_backend(grid)
-    limits.check_sweep_memory(runs, 4, policies=1,
-                              checkpoints=grid.checkpoints if grid.backend == "cpu" else 0)
     start = time.perf_counter()
-    outcome = run_grid(grid, out=out, scheduler=None, resume=False, force=force, workers=workers,
-                   label="reproduce")  # fmt: skip
-    summaries: dict[str, Any] = {}
-    for summary in outcome.summaries:
-        summaries[summary["instance"]["name"]] = summary
-        if not as_json:
-            print_table(summary, output)
-            click.echo("")
-    instances = write_paper_summary(out, outcome.summaries, runs=runs, horizon=horizon,
-                                    seed=seed)  # fmt: skip
+    done = interrupted_or(reproduce_from_options(
+        which, out=out, runs=runs, horizon=horizon, seed=seed, workers=workers, force=force,
+        backend=backend, warn=warn, say=lambda line: click.echo(line, err=True),
+        progress=progress, before_folder=keep_pandas_out))  # fmt: skip
     if as_json:
-        click.echo(json.dumps({"output": str(out), "instances": summaries}, indent=2))
+        key, value = (("instances", {s["instance"]["name"]: s for s in done.summaries})
+                      if which == "paper" else ("summary", done.summaries[0]))  # fmt: skip
+        click.echo(json.dumps({"output": str(out), key: value}, indent=2))
     else:
-        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(f"{n}/" for n in instances)
-                   + ", summary.md")  # fmt: skip
-    click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)
-
-
-def _decentralized(out: Path, runs: int, horizon: int, seed: int, workers: int | None,
-                   force: bool, backend: str | None, as_json: bool) -> None:  # fmt: skip
-    from corraoi.face.decentralized import write_decentralized
-    from corraoi.face.sweeps import decentralized_grid
-
-    from .common import warn
-
-    limits.check_seed(seed, runs=runs, name="--seed")
-    grid = settle_backend(decentralized_grid(runs=runs, horizon=horizon, seed=seed,
-                                             backend=backend or "cpu"))  # fmt: skip
-    start = time.perf_counter()
-    outcome = run_grid(grid, out=out, scheduler=None, resume=False, force=force,
-                       workers=workers, label="reproduce decentralized")  # fmt: skip
-    (summary,) = outcome.summaries
-    if not as_json:
-        print_table(summary, out)
-    files = write_decentralized(out, summary, grid, runs=runs, horizon=horizon, seed=seed,
-                                warn=warn)  # fmt: skip
-    if as_json:
-        click.echo(json.dumps({"output": str(out), "summary": summary}, indent=2))
-    else:
-        click.echo(f"wrote {safe_text(out)}/: the sweep folder, " + ", ".join(files))
+        for summary in done.summaries:
+            print_table(summary, out if which == "decentralized" else output)
+            if which == "paper":
+                click.echo("")
+        click.echo(f"wrote {safe_text(out)}/: " + ", ".join(done.wrote))
     click.echo(f"total wall time {time.perf_counter() - start:.2f} s", err=True)
 
 

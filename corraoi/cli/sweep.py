@@ -165,7 +165,7 @@ def sweep(
         say=lambda line: click.echo(line, err=True), progress=progress,
         before_folder=keep_pandas_out, label="sweep",
     )  # fmt: skip
-    outcome = interrupted_or(done)
+    outcome = interrupted_or(done).outcome
     if as_json:
         if len(outcome.summaries) == 1:
             click.echo(json.dumps(outcome.summaries[0], indent=2))

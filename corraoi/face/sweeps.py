@@ -645,6 +645,74 @@ def sweep_from_options(
     return done
 
 
+@dataclass
+class ReproduceRun:
+    """What :func:`reproduce_from_options` did: the grid run, each sweep's summary (one per
+    instance of the paper; the one of ``decentralized``), the files and folders it wrote
+    beside the sweeps, and, when Ctrl-C stopped it, what was kept (one line)."""
+
+    grid: Grid
+    summaries: list[dict[str, Any]]
+    wrote: list[str]
+    interrupted: str | None = None
+
+
+def reproduce_from_options(
+    which: str,
+    *,
+    out: Path,
+    runs: int | None = None,
+    horizon: int = 10_000,
+    seed: int = 0,
+    workers: int | None = None,
+    force: bool = False,
+    backend: str | None = None,
+    warn: Callable[[str], None] | None = None,
+    say: Callable[[str], None] | None = None,
+    progress: Callable[[int, str], Any] | None = None,
+    before_folder: Callable[[], None] | None = None,
+) -> ReproduceRun:
+    """``corraoi reproduce [paper|decentralized]`` from its parsed options: the grid
+    (:func:`paper_grid`, 200 runs unless told; :func:`decentralized_grid`, its own count),
+    its backend settled (``say`` hears the GPU's name), run into ``out`` with
+    ``progress(total, label)`` as the bar (:func:`run_with_progress`), then ``paper``'s
+    ``out/summary.md`` (:func:`write_paper_summary`) or ``decentralized``'s figure and
+    table (:func:`corraoi.face.decentralized.write_decentralized`)."""
+    from corraoi import limits
+
+    from .decentralized import RUNS as DECENTRALIZED_RUNS
+    from .decentralized import write_decentralized
+
+    if which not in ("paper", "decentralized"):
+        raise UsageError(f"reproduce {which!r}: expected paper or decentralized")
+    paper = which == "paper"
+    runs = runs if runs is not None else 200 if paper else DECENTRALIZED_RUNS
+    limits.check_seed(seed, runs=runs, name="--seed")
+    make = paper_grid if paper else decentralized_grid
+    grid = settle_backend(make(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu"),
+                          warn=warn)  # fmt: skip
+    name = device_name(grid)
+    if name is not None and say is not None:
+        say(f"backend gpu: {name}")
+    if paper:
+        limits.check_sweep_memory(runs, 4, policies=1,
+                                  checkpoints=grid.checkpoints if grid.backend == "cpu" else 0)
+    done = run_with_progress(grid, out=out, force=force, workers=workers, warn=warn,
+                             progress=progress, before_folder=before_folder,
+                             label="reproduce" if paper else "reproduce decentralized")  # fmt: skip
+    if done.outcome is None:
+        return ReproduceRun(grid, [], [], interrupted=done.interrupted)
+    summaries = list(done.outcome.summaries)
+    if paper:
+        wrote = [f"{n}/" for n in write_paper_summary(out, summaries, runs=runs,
+                                                      horizon=horizon, seed=seed)]  # fmt: skip
+        wrote.append("summary.md")
+    else:
+        wrote = ["the sweep folder", *write_decentralized(
+            out, summaries[0], grid, runs=runs, horizon=horizon, seed=seed, warn=warn)]  # fmt: skip
+    return ReproduceRun(grid, summaries, wrote)
+
+
 def run_with_progress(
     grid: Grid,
     *,
@@ -814,8 +882,8 @@ def sweep(
 
 
 __all__ = [
-    "SAY_SIZE_FROM", "Sweep", "SweepRun", "check_grid", "decentralized_grid", "device_name",
-    "draw_sweep_figure", "grid_from_options", "grid_notes", "kept_code", "paper_grid",
-    "record_each_from", "run_grid", "run_with_progress", "settle_backend", "sweep",
-    "sweep_from_options", "write_paper_summary", "wrote_line",
+    "SAY_SIZE_FROM", "ReproduceRun", "Sweep", "SweepRun", "check_grid", "decentralized_grid",
+    "device_name", "draw_sweep_figure", "grid_from_options", "grid_notes", "kept_code",
+    "paper_grid", "record_each_from", "reproduce_from_options", "run_grid", "run_with_progress",
+    "settle_backend", "sweep", "sweep_from_options", "write_paper_summary", "wrote_line",
 ]  # fmt: skip
