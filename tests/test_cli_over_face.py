@@ -140,8 +140,8 @@ def _counting_face_calls(monkeypatch) -> list[str]:
 
 def test_record_sweep_and_reproduce_call_the_face_once(tmp_path, monkeypatch):
     """``record`` (given runs, runs up to date, runs ``--from`` a sweep), ``sweep`` (a
-    table, a folder) and ``reproduce`` (the paper, decentralized) each parse, make one call
-    into the face, and print."""
+    table, a folder) and ``reproduce`` each parse, make one call into the face, and
+    print."""
     from click.testing import CliRunner
 
     from corraoi.cli import main
@@ -156,9 +156,9 @@ def test_record_sweep_and_reproduce_call_the_face_once(tmp_path, monkeypatch):
         ["sweep", "-p", "ucb", "-n", "3", "-T", "40", "-o", sweep],
         ["record", "--from", sweep, "--run", "worst", "--no-rrd", "-o",
          str(tmp_path / "{from}.mcap")],
+        # (reproduce decentralized takes the same face call: its sweep's kernels of many
+        # sources cost minutes to compile here, once)
         ["reproduce", "-n", "2", "-T", "40", "-o", str(tmp_path / "paper")],
-        ["reproduce", "decentralized", "-n", "2", "-T", "40", "-o", str(tmp_path / "dec"),
-         "--json"],
     ]  # fmt: skip
     made = {}
     for args in commands:

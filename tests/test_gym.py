@@ -151,7 +151,7 @@ def test_import_corraoi_does_not_import_gymnasium():
 
 def test_the_vector_form_steps_each_sub_environments_own_paired_run():
     N, H = 5, 300
-    envs = gymnasium.make_vec("corraoi/CorrelatedAoI-v0", num_envs=N, instance="I1", horizon=H,
+    envs = gymnasium.make_vec(MAKE, num_envs=N, instance="I1", horizon=H,
                               vectorization_mode="vector_entry_point")  # fmt: skip
     obs, info = envs.reset(seed=40)
     assert info["seed"].tolist() == [40, 41, 42, 43, 44] and obs.shape == (N, 2)
