@@ -359,6 +359,16 @@ def _start(args: list[str], cwd: Path) -> tuple[subprocess.Popen[str], str]:
     raise AssertionError(f"no server line: {proc.communicate()}")
 
 
+def _read_until_it_ends(proc: subprocess.Popen[str], client: Client) -> str:
+    """Read what the command's server sends until the command exits and the stream goes
+    quiet; close the client; the command's stderr."""
+    client.pump(until=lambda: proc.poll() is not None, timeout=60)
+    client.pump(idle=0.5)
+    client.close()
+    _, err = proc.communicate(timeout=30)
+    return err
+
+
 def _no_traceback(err: str) -> None:
     assert "Traceback" not in err and "Exception ignored" not in err, err
 
@@ -367,10 +377,7 @@ def test_record_streams_the_logs_messages_to_a_client_in_order(tmp_path):
     proc, url = _start(["record", "-p", "cucb", "-T", "4000", "--no-rrd", "-o", "a.mcap",
                         "--foxglove", "127.0.0.1:0", "--pace", "4000"], tmp_path)  # fmt: skip
     client = Client(url)
-    client.pump(until=lambda: proc.poll() is not None, timeout=60)
-    client.pump(idle=0.5)
-    client.close()
-    out, err = proc.communicate(timeout=30)
+    err = _read_until_it_ends(proc, client)
     _no_traceback(err)
     assert proc.returncode == 0, err
     assert "foxglove: stopped" in err and "after publishing 4000 on /corraoi/slot" in err
@@ -389,10 +396,7 @@ def test_a_client_of_either_subprotocol_gets_every_slot_of_a_paced_run(tmp_path,
                         "--foxglove", "127.0.0.1:0", "--pace", "3000"], tmp_path)  # fmt: skip
     client = Client(url, subprotocols=offer)
     assert client.ws.subprotocol == offer[0]  # the name it offered, answered
-    client.pump(until=lambda: proc.poll() is not None, timeout=60)
-    client.pump(idle=0.5)
-    client.close()
-    out, err = proc.communicate(timeout=30)
+    err = _read_until_it_ends(proc, client)
     _no_traceback(err)
     assert proc.returncode == 0, err
     assert "Error" not in err, err  # the SDK saw every connection end with its handshake
@@ -645,10 +649,7 @@ def test_a_run_of_several_sources_streams_each_sources_messages_on_its_topic(tmp
                         "--no-rrd", "-o", "m.mcap", "--foxglove", "127.0.0.1:0", "--pace",
                         "4000"], tmp_path)  # fmt: skip
     client = Client(url, topics)
-    client.pump(until=lambda: proc.poll() is not None, timeout=60)
-    client.pump(idle=0.5)
-    client.close()
-    _, err = proc.communicate(timeout=30)
+    err = _read_until_it_ends(proc, client)
     _no_traceback(err)
     assert proc.returncode == 0, err
     assert ("after publishing 2000 on /corraoi/slot/1, 2000 on /corraoi/slot/2, 2000 on "
@@ -666,10 +667,7 @@ def test_a_run_of_several_sources_streams_each_sources_messages_on_its_topic(tmp
     proc, url = _start(["replay", "m.mcap", "--foxglove", "127.0.0.1:0", "--pace", "4000"],
                        tmp_path)  # fmt: skip
     again = Client(url, topics)
-    again.pump(until=lambda: proc.poll() is not None, timeout=60)
-    again.pump(idle=0.5)
-    again.close()
-    _, err = proc.communicate(timeout=30)
+    err = _read_until_it_ends(proc, again)
     assert proc.returncode == 0, err
     for topic in topics:
         assert again.slots(topic) == file[topic]

@@ -496,6 +496,16 @@ def settle_backend(grid: Grid, warn: Callable[[str], None] | None = None) -> Gri
     return settle(grid, None, warn=warn)
 
 
+def _settle_and_say(grid: Grid, *, warn: Callable[[str], None] | None = None,
+                   say: Callable[[str], None] | None = None) -> Grid:  # fmt: skip
+    """:func:`settle_backend`, then ``say`` hears the GPU's name when one runs it."""
+    grid = settle_backend(grid, warn=warn)
+    name = device_name(grid)
+    if name is not None and say is not None:
+        say(f"backend gpu: {name}")
+    return grid
+
+
 def check_grid(grid: Grid, out: Path | None, *, allow_huge: bool = False) -> str:
     """Refuse, before anything runs, a grid that cannot be simulated or would not fit in
     memory, or one too large without ``allow_huge``; returns its size in words."""
@@ -626,10 +636,7 @@ def sweep_from_options(
             (hold or stack.enter_context)(kept_code(out))
         grid = grid_from_options(experiment, options, params=params, scalars=scalars,
                                  warn=warn)  # fmt: skip
-        grid = settle_backend(grid, warn=warn)
-        name = device_name(grid)
-        if name is not None and say is not None:
-            say(f"backend gpu: {name}")
+        grid = _settle_and_say(grid, warn=warn, say=say)
         size = check_grid(grid, out, allow_huge=allow_huge)
         run_slots = sum(int(c.horizon) for c in grid.cells) * int(grid.runs)
         if run_slots >= SAY_SIZE_FROM and say is not None:
@@ -689,11 +696,8 @@ def reproduce_from_options(
     runs = runs if runs is not None else 200 if paper else DECENTRALIZED_RUNS
     limits.check_seed(seed, runs=runs, name="--seed")
     make = paper_grid if paper else decentralized_grid
-    grid = settle_backend(make(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu"),
-                          warn=warn)  # fmt: skip
-    name = device_name(grid)
-    if name is not None and say is not None:
-        say(f"backend gpu: {name}")
+    grid = _settle_and_say(make(runs=runs, horizon=horizon, seed=seed, backend=backend or "cpu"),
+                          warn=warn, say=say)  # fmt: skip
     if paper:
         limits.check_sweep_memory(runs, 4, policies=1,
                                   checkpoints=grid.checkpoints if grid.backend == "cpu" else 0)

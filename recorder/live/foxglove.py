@@ -293,7 +293,6 @@ class FoxgloveSlotSink(Sink[RunBlock]):
                            metadata=version if M == 1 else {**version, "source": str(m)})
             for m, topic in enumerate(self.topics, 1)
         ]  # fmt: skip
-        self._slots = self._channels[0]
         self._run = server.channel(self.run_topic, _run_schema(meta))
         self._run_message = json.dumps(meta).encode()
         self._encoder = BlockEncoder(config.K)
@@ -309,39 +308,19 @@ class FoxgloveSlotSink(Sink[RunBlock]):
 
     def subscribed(self) -> bool:
         """Whether a client subscribes to the slots' topic now."""
-        return bool(self._slots.has_sinks())
+        return bool(self._channels[0].has_sinks())
 
     def write(self, block: RunBlock) -> int:
-        """Publish the block's slots; returns how many went out (fewer if stopped)."""
+        """Publish the block's slots; returns how many went out (fewer if stopped). A slot
+        of several sources is its sources' messages, 1..M, each on its source's topic; the
+        pace counts slots."""
         if len(block) == 0:
             return 0
-        if isinstance(block, SourcesBlock):
-            return self._write_sources(block)
-        messages = self._encoder.encode(block)
+        parts = block.sources if isinstance(block, SourcesBlock) else [block]
+        per_source = [self._encoder.encode(part) for part in parts]
         ts = block.t.tolist()
         paced = self._pacer.rate is not None
         if paced and not self._waited:  # a client started with the run sees every slot
-            self._waited = True
-            self.server.wait_for_subscriber(self.topic, FIRST_CLIENT_WAIT, self._pacer.stop)
-        self._send_run(ts[0])
-        log = self._slots.log
-        done = 0
-        for t, message in zip(ts, messages, strict=True):
-            if paced and not self._pacer.wait(self.sent + 1):
-                break
-            log(message, log_time=t * NS_PER_SLOT)
-            self.sent += 1
-            done += 1
-        self.server.published[self.topic] += done
-        return done
-
-    def _write_sources(self, block: SourcesBlock) -> int:
-        """Publish a run of several sources' slots: each slot's messages, source 1..M, each
-        on its source's topic; the pace counts slots. Returns the slots that went out."""
-        per_source = [self._encoder.encode(part) for part in block.sources]
-        ts = block.t.tolist()
-        paced = self._pacer.rate is not None
-        if paced and not self._waited:
             self._waited = True
             self.server.wait_for_subscriber(self.topic, FIRST_CLIENT_WAIT, self._pacer.stop)
         self._send_run(ts[0])
