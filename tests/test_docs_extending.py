@@ -25,6 +25,11 @@ def test_first_python_block_is_the_eps_greedy_plugin_file():
     assert "class EpsilonGreedy(Policy)" in first and "Param(0.1" in first
 
 
+def test_the_many_sources_example_is_the_tested_plugin_byte_for_byte():
+    shown = next(b for b in blocks("python") if b.startswith("# selfish_ucb.py\n"))
+    assert shown == (ROOT / "tests" / "plugins" / "selfish_ucb.py").read_text()
+
+
 @pytest.mark.slow
 def test_every_command_runs_as_shown(tmp_path: Path):
     for code in blocks("python"):
@@ -56,6 +61,7 @@ def test_every_command_runs_as_shown(tmp_path: Path):
             if command.startswith("corraoi policies"):
                 assert re.search(r"^eps-greedy\s", res.stdout, flags=re.M), res.stdout
     assert (tmp_path / "ep.mcap").exists() and (tmp_path / "cucb-on-trace.mcap").exists()
+    assert (tmp_path / "selfish.mcap").exists()
 
 
 def test_the_doc_test_example_passes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):

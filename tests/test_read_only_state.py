@@ -27,6 +27,9 @@ WRITES = {
     "mu_hat": "state.mu_hat[...] = 1",
     "aoi": "state.aoi += 1",
     "rng": "state.rng = None",
+    "source": "state.source = 2",
+    "sources": "state.sources = 3",
+    "collided": "state.collided[0] = True",
 }
 
 
@@ -60,7 +63,7 @@ def test_a_write_into_the_state_ends_the_run_failed(tmp_path: Path, field: str):
         corraoi.record(_writer(field, "select", WRITES[field]), "I1", horizon=50, path=path,
                        rrd=False)  # fmt: skip
     text = str(info.value)
-    verb = "set" if field in ("t", "runs", "arms", "rng") else "wrote into"
+    verb = "set" if field in ("t", "runs", "arms", "rng", "source", "sources") else "wrote into"
     assert text.startswith(f"policy writes-{field}, slot 3: select {verb} state.{field}, "
                            "which is read-only"), text  # fmt: skip
     assert "\n" not in text and text.endswith("marked failed")

@@ -171,7 +171,8 @@ def test_a_single_source_policy_with_several_sources_names_its_multi_source_form
     with pytest.raises(ConfigError, match="simulate_run"):
         next(simulate_run_sources(load_instance("I1"), make_policy("rhorand-ucb"), 0, 10, 1))
     plain = make_policy(f"{PLUGINS / 'eps_greedy.py'}:EpsilonGreedy")
-    with pytest.raises(ConfigError, match="plain-Python policy runs as one source only"):
+    with pytest.raises(ConfigError, match=r'^policy eps-greedy is single-source; with sources '
+                       r'2 a plain-Python policy declares multi_source = "own" '):  # fmt: skip
         simulate_sources(load_instance("I1"), plain, [1], 10, 2)
 
 

@@ -73,6 +73,39 @@ def apply_slot(arms, x, Y, best, pulls, succ, mu, aoi, oaoi, regret, aoisum, rew
 
 
 @njit(cache=True)
+def apply_sources_slot(arms, x, Y, oracle, pulls, succ, mu, aoi, oaoi, regret, aoisum, coll,
+                       collided, sensed):  # fmt: skip
+    """One slot of every run of M sources after each chose its channel (``arms`` (M, R)):
+    collisions (a channel two sources picked delivers to none), what each source senses (its
+    channel's state, counted delivered or not), ages against the source's oracle channel
+    ``oracle[m]``, regret and collision counts, per source (M, R[, K]) -- the plain-Python
+    tier's bookkeeping of docs/model.md, "Many sources", as the kernel of many sources does
+    it."""
+    M, R, K = pulls.shape
+    taken = np.zeros(K, dtype=np.int64)
+    for r in range(R):
+        for m in range(M):
+            taken[arms[m, r]] += 1
+        for m in range(M):
+            a = arms[m, r]
+            s = Y[a, x[r]]
+            hit = taken[a] > 1
+            sensed[m, r] = s
+            collided[m, r] = hit
+            pulls[m, r, a] += 1
+            succ[m, r, a] += s
+            mu[m, r, a] = succ[m, r, a] / pulls[m, r, a]
+            if hit:
+                coll[m, r] += 1
+            aoi[m, r] = 1 if s == 1 and not hit else aoi[m, r] + 1
+            oaoi[m, r] = 1 if Y[oracle[m], x[r]] == 1 else oaoi[m, r] + 1
+            regret[m, r] += aoi[m, r] - oaoi[m, r]
+            aoisum[m, r] += aoi[m, r]
+        for m in range(M):
+            taken[arms[m, r]] = 0
+
+
+@njit(cache=True)
 def _argmax_all(pol, vals, out):
     K = vals.shape[1]
     mask = np.ones(K, dtype=np.bool_)
@@ -327,6 +360,17 @@ def construct(cls: Any, spec: Any) -> Any:
                                  + (f": {detail}" if detail else "")) from None  # fmt: skip
 
 
+def call_policy(name: str, t: int, state: RunState, func: Any, *args: Any) -> Any:
+    """Call a plug-in's method; any exception becomes one line naming the policy and slot
+    (and the field of ``state`` for a write into it)."""
+    try:
+        return func(*args)
+    except (CorraoiError, KeyboardInterrupt):
+        raise
+    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
+        raise policy_raised(name, t, func, exc, state) from exc
+
+
 def policy_raised(name: str, t: int, func: Any, exc: BaseException,
                   state: RunState) -> PolicyRuntimeError:  # fmt: skip
     """What a plain-Python policy's method raised, as one line naming the policy and the
@@ -347,7 +391,7 @@ def policy_raised(name: str, t: int, func: Any, exc: BaseException,
 
 
 #: The array fields of :class:`~corraoi.policies.api.RunState`.
-ARRAY_FIELDS = ("pulls", "successes", "mu_hat", "aoi", "seeds")
+ARRAY_FIELDS = ("pulls", "successes", "mu_hat", "aoi", "seeds", "collided")
 _NUMPY_DIR = str(Path(np.__file__).parent)
 
 

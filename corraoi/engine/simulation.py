@@ -31,6 +31,7 @@ from .problem import Problem
 from .pyengine import (
     Streams,
     apply_slot,
+    call_policy,
     check_arms,
     construct,
     counts_written,
@@ -38,7 +39,6 @@ from .pyengine import (
     hook_raised,
     hook_wrote,
     not_by_score,
-    policy_raised,
 )
 from .seeds import streams_for_seeds
 
@@ -295,7 +295,7 @@ class Simulation:
         mu = self._mu
         if self.t == 0:
             try:
-                _call(name, 0, state, policy.reset, state)
+                call_policy(name, 0, state, policy.reset, state)
             except PolicyRuntimeError as exc:
                 return 0, exc
         si = 0
@@ -303,7 +303,7 @@ class Simulation:
             t = self.t + j + 1
             self._clock[0] = t
             try:
-                picked = _call(name, t, state, policy.select, t, state)
+                picked = call_policy(name, t, state, policy.select, t, state)
                 arms, cand, scores = check_arms(picked, runs=R, arms=K, name=name, t=t,
                                                 who=self.run_name)  # fmt: skip
             except PolicyRuntimeError as exc:
@@ -336,7 +336,7 @@ class Simulation:
             played = arms.view()
             played.flags.writeable = False
             try:
-                _call(name, t, state, policy.update, t, played, rew, state)
+                call_policy(name, t, state, policy.update, t, played, rew, state)
             except PolicyRuntimeError as exc:
                 return j + 1, exc  # the slot itself happened
         return nslots, None
@@ -493,14 +493,3 @@ def simulate_run(
     """One run, block by block (what ``corraoi record`` streams to its sinks)."""
     for b in simulate(instance, policy, [seed], horizon, block=block, channel=channel):
         yield b.run(0)
-
-
-def _call(name: str, t: int, state: RunState, func: Any, *args: Any) -> Any:
-    """Call a plug-in's method; any exception becomes one line naming the policy and slot
-    (and the field of ``state`` for a write into it)."""
-    try:
-        return func(*args)
-    except (CorraoiError, KeyboardInterrupt):
-        raise
-    except BaseException as exc:  # sys.exit in select is the plug-in's failure, not ours
-        raise policy_raised(name, t, func, exc, state) from exc

@@ -23,17 +23,27 @@ from typing import Any
 
 import numpy as np
 
-from corraoi.errors import ConfigError, PolicyError
+from corraoi.errors import ConfigError, PolicyError, PolicyRuntimeError
 from corraoi.model.candidates import candidate_bitsets
 from corraoi.model.channels import Channel
 from corraoi.model.instance import Instance
-from corraoi.policies.multi_source import CHAIRS_LEARN
+from corraoi.policies.api import RunState
+from corraoi.policies.multi_source import CHAIRS_LEARN, OWN
 from corraoi.policies.spec import PolicySpec, check_sources, make_policy
 
 from . import threads
+from ._kernel import draw_states
 from .block import SlotBlock, SourcesBlock
 from .problem import Problem
-from .pyengine import hook_fault
+from .pyengine import (
+    Streams,
+    apply_sources_slot,
+    call_policy,
+    check_arms,
+    construct,
+    hook_fault,
+    not_by_score,
+)
 from .seeds import streams_for_seeds
 from .simulation import DEFAULT_BLOCK, check_seeds
 from .slot_record import BY_NAME
@@ -124,18 +134,16 @@ def check_source_count(sources: Any, K: int) -> int:
 
 
 class SourcesSimulation:
-    """The state of R runs of M sources of one multi-source policy, advanced in the
-    compiled kernel of many sources."""
+    """The state of R runs of M sources of one multi-source policy: a compiled policy's
+    advanced in the compiled kernel of many sources, a plain-Python policy's
+    (``multi_source = "own"``) slot by slot, one instance of it per source, vectorised over
+    runs (the plain-Python tier's parts: :mod:`corraoi.engine.pyengine`)."""
 
     def __init__(self, instance: Instance, policy: PolicySpec,
                  seeds: Sequence[int] | np.ndarray, horizon: int, sources: int, *,
                  channel: Channel | None = None) -> None:  # fmt: skip
         pb = Problem.of(instance, policy, horizon, channel)
         M = check_source_count(sources, pb.K)
-        if not pb.compiled:
-            raise ConfigError(f"policy {policy.name}: a plain-Python policy runs as one source "
-                              "only; several sources need a compiled policy's multi-source "
-                              "form (e.g. rhorand-ucb)")  # fmt: skip
         check_sources(policy, M, pb.cls)
         seed_arr = check_seeds(seeds)
         R, K = seed_arr.size, pb.K
@@ -143,37 +151,51 @@ class SourcesSimulation:
         self.M, self.t = M, 0
         self.cls: Any = pb.cls
         rule = getattr(pb.cls, "multi_source", "")
-        if rule not in RULES:
+        if pb.compiled and rule not in RULES:
             raise PolicyError(f"policy {policy.name}: multi_source {rule!r}; expected one of "
-                              f"{', '.join(r for r in RULES if r)} (or none)")  # fmt: skip
-        self.rule = RULES[rule]
-        declared = list(pb.cls.params)
-        self.learn = (int(pb.params[declared.index(CHAIRS_LEARN)])
-                      if rule == "chairs" and CHAIRS_LEARN in declared else 0)  # fmt: skip
+                              f"{', '.join(r for r in RULES if r)} (or none; \"{OWN}\" is a "
+                              "plain-Python policy's)")  # fmt: skip
+        if not pb.compiled and rule not in ("", OWN):
+            raise PolicyError(f"policy {policy.name}: multi_source {rule!r}; a plain-Python "
+                              f"policy's is \"{OWN}\" (each source an instance of its own; "
+                              f"the rules {', '.join(r for r in RULES if r)} are compiled "
+                              "policies')")  # fmt: skip
         self.oracle = oracle_channels(pb.theory.mu, M)
         #: each source's oracle channel mean (the estimator's mu*)
         self.oracle_mu = np.asarray(pb.theory.mu, dtype=np.float64)[self.oracle]
         assert self.oracle[0] == pb.theory.best_arm, "the oracle's first channel is the best"
         self.lat, self.pol = source_streams(seed_arr, M)
-        self.ncache = np.zeros((R, M, 2))
-        self.pstate = np.zeros((R, M, max(pb.state_size, 1)))
         self.xprev = np.full(R, -1, dtype=np.int64)
-        self.pulls = np.zeros((R, M, K), dtype=np.int64)
-        self.succ = np.zeros((R, M, K), dtype=np.int64)
-        self.rank = np.full((R, M), -1, dtype=np.int64)
-        self.seated = np.zeros((R, M), dtype=np.bool_)
-        self.worst = np.zeros((R, M, K), dtype=np.bool_)
-        self.aoi = np.ones((R, M), dtype=np.int64)
-        self.oracle_aoi = np.ones((R, M), dtype=np.int64)
-        self.regret = np.zeros((R, M), dtype=np.int64)
-        self.aoisum = np.zeros((R, M), dtype=np.int64)
-        self.collisions = np.zeros((R, M), dtype=np.int64)
-        self._err = np.zeros((R, 3), dtype=np.int64)
-        self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
-        self._kernels: dict[bool, Any] = {}
-        self._rate: float | None = None
+        if pb.compiled:
+            self.rule = RULES[rule]
+            declared = list(pb.cls.params)
+            self.learn = (int(pb.params[declared.index(CHAIRS_LEARN)])
+                          if rule == "chairs" and CHAIRS_LEARN in declared else 0)  # fmt: skip
+            self.ncache = np.zeros((R, M, 2))
+            self.pstate = np.zeros((R, M, max(pb.state_size, 1)))
+            self.pulls = np.zeros((R, M, K), dtype=np.int64)
+            self.succ = np.zeros((R, M, K), dtype=np.int64)
+            self.rank = np.full((R, M), -1, dtype=np.int64)
+            self.seated = np.zeros((R, M), dtype=np.bool_)
+            self.worst = np.zeros((R, M, K), dtype=np.bool_)
+            self.aoi = np.ones((R, M), dtype=np.int64)
+            self.oracle_aoi = np.ones((R, M), dtype=np.int64)
+            self.regret = np.zeros((R, M), dtype=np.int64)
+            self.aoisum = np.zeros((R, M), dtype=np.int64)
+            self.collisions = np.zeros((R, M), dtype=np.int64)
+            self._err = np.zeros((R, 3), dtype=np.int64)
+            self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
+            self._kernels: dict[bool, Any] = {}
+            self._rate: float | None = None
+            self._py: _PythonSources | None = None
+        else:
+            self._py = _PythonSources(self, R, M, K)
 
     def kernel(self, record: bool) -> Any:
+        """The compiled kernel of many sources this run uses (None for a plain-Python
+        policy's): compiled or loaded from the cache on first use."""
+        if self._py is not None:
+            return None
         kernel = self._kernels.get(record)
         if kernel is None:
             from .kernels import kernel_for
@@ -184,18 +206,37 @@ class SourcesSimulation:
 
     def advance(self, nslots: int, *, record: bool = True) -> list[list[SlotBlock]] | None:
         """Simulate the next ``nslots`` slots (capped at the horizon) of every run; with
-        ``record``, each run's slots as one :class:`SlotBlock` per source."""
+        ``record``, each run's slots as one :class:`SlotBlock` per source. A plain-Python
+        policy's failure is one PolicyRuntimeError whose ``done`` and ``partial`` (when
+        recording) are the slots before it."""
         nslots = min(int(nslots), self.horizon - self.t)
         if nslots <= 0:
             return None
         R, M, K = self.pulls.shape
         out = SourceOutputs(R, M, nslots if record else 0, K)
+        aoisum_before = self.aoisum.copy()
+        failure = None
+        if self._py is None:
+            self._advance_compiled(nslots, record, out)
+            done = nslots
+        else:
+            done, failure = self._py.advance(nslots, record, out)
+        t = np.arange(self.t + 1, self.t + done + 1, dtype=np.int64)
+        self.t += done
+        runs = self._blocks(out, t, aoisum_before) if record and done > 0 else None
+        if failure is not None:
+            failure.done, failure.partial = done, runs
+            raise failure
+        return runs
+
+    def _advance_compiled(self, nslots: int, record: bool, out: SourceOutputs) -> None:
+        R = self.pulls.shape[0]
+        K = self.pulls.shape[2]
         kernel = self.kernel(record)
         pb = self.problem
         per_run = (self.lat, self.pol, self.ncache, self.pstate, self.xprev, self.pulls,
                    self.succ, self.rank, self.seated, self.worst, self.aoi, self.oracle_aoi,
                    self.regret, self.aoisum, self.collisions, self._err)  # fmt: skip
-        aoisum_before = self.aoisum.copy()
         done = 0
         while done < nslots:
             n, slices = threads.plan(self._rate, R, nslots - done)
@@ -220,31 +261,141 @@ class SourcesSimulation:
                 raise hook_fault(self.policy.name, slot, what, value, K,
                                  f"run {r} (seed {int(self.seeds[r])})")  # fmt: skip
             done += n
-        t = np.arange(self.t + 1, self.t + nslots + 1, dtype=np.int64)
-        self.t += nslots
-        if not record:
-            return None
+
+    def _blocks(self, out: SourceOutputs, t: np.ndarray,
+                aoisum_before: np.ndarray) -> list[list[SlotBlock]]:  # fmt: skip
+        """Each run's first ``len(t)`` slots in ``out``, a SlotBlock per source."""
+        R, M = self.aoisum.shape
+        n = t.size
         with np.errstate(divide="ignore"):
             inv = 1.0 / self.oracle_mu
-        aware = bool(self.cls.aoi_aware)
+        compiled = self._py is None
+        aware = compiled and bool(self.cls.aoi_aware)
+        scored = compiled or self._py is not None and self._py.scored
         runs: list[list[SlotBlock]] = []
-        x = out["x"].astype(np.int64)
+        x = out["x"][:, :n].astype(np.int64)
         for r in range(R):
             blocks = []
             for m in range(M):
-                col = {f: out[f][r, m] for f in SOURCE_FIELDS}
+                col = {f: out[f][r, m, :n] for f in SOURCE_FIELDS}
                 estimator = aoisum_before[r, m] + np.cumsum(col["aoi"]) - t * inv[m]
                 blocks.append(SlotBlock(
                     t=t, x=x[r], arm=col["arm"].astype(np.int64), success=col["success"],
                     aoi=col["aoi"], oracle_aoi=col["oracle_aoi"], regret=col["regret"],
                     estimator=estimator, override=col["override"], mu_hat=col["mu_hat"],
-                    pulls=col["pulls"], candidates=col["candidates"], forced=col["forced"],
+                    pulls=col["pulls"], candidates=col["candidates"],
+                    forced=col["forced"] if scored else None,
                     collided=col["collided"] if M > 1 else None,
                     override_threshold=col["override_threshold"] if aware else None,
-                    score=col["score"],
+                    score=col["score"] if scored else None,
                 ))  # fmt: skip
             runs.append(blocks)
         return runs
+
+
+class _PythonSources:
+    """The plain-Python tier of many sources: one instance of the policy per source, each
+    seeing its own :class:`~corraoi.policies.api.RunState` (its counts, age, collisions
+    and policy stream: source 1's is the single-source run's), called source by source each
+    slot; the collisions, ages and regret of the slot in one compiled call
+    (:func:`~corraoi.engine.pyengine.apply_sources_slot`). Its arrays are (M, R, ...), each
+    source's contiguous; the simulation's (R, M, ...) fields are views of them."""
+
+    def __init__(self, sim: SourcesSimulation, R: int, M: int, K: int) -> None:
+        self.sim = sim
+        name = sim.policy.name
+        self.names = [name if M == 1 else f"{name}, source {m + 1}" for m in range(M)]
+        self.policies = [construct(sim.cls, sim.policy) for _ in range(M)]
+        self.pulls = np.zeros((M, R, K), dtype=np.int64)
+        self.succ = np.zeros((M, R, K), dtype=np.int64)
+        self.mu = np.zeros((M, R, K))
+        self.aoi = np.ones((M, R), dtype=np.int64)
+        self.oracle_aoi = np.ones((M, R), dtype=np.int64)
+        self.regret = np.zeros((M, R), dtype=np.int64)
+        self.aoisum = np.zeros((M, R), dtype=np.int64)
+        self.collisions = np.zeros((M, R), dtype=np.int64)
+        self.collided = np.zeros((M, R), dtype=np.bool_)
+        self.clock = np.zeros(1, dtype=np.int64)
+        #: some source gave scores (Choice(..., scores=...)) at some slot
+        self.scored = False
+        pols = [np.ascontiguousarray(sim.pol[:, m]) for m in range(M)]
+        self.states = [
+            RunState(runs=R, arms=K, seeds=sim.seeds, rng=Streams(pols[m], np.zeros((R, 2))),
+                     pulls=self.pulls[m], successes=self.succ[m], mu_hat=self.mu[m],
+                     aoi=self.aoi[m], clock=self.clock, source=m + 1, sources=M,
+                     collided=self.collided[m])
+            for m in range(M)
+        ]  # fmt: skip
+        # the simulation's fields (R, M, ...), as the compiled tier's
+        sim.pulls = self.pulls.transpose(1, 0, 2)
+        sim.succ = self.succ.transpose(1, 0, 2)
+        for field in ("aoi", "oracle_aoi", "regret", "aoisum", "collisions"):
+            setattr(sim, field, getattr(self, field).T)
+
+    def run_name(self, r: int) -> str:
+        return f"run {r} (seed {int(self.sim.seeds[r])})"
+
+    def advance(self, nslots: int, record: bool,
+                out: SourceOutputs) -> tuple[int, PolicyRuntimeError | None]:  # fmt: skip
+        """Advance every run slot by slot, writing each slot's columns into ``out`` when
+        recording; returns (slots done, the plug-in's failure or None)."""
+        sim, pb = self.sim, self.sim.problem
+        M, R, K = self.pulls.shape
+        xs = np.empty((R, nslots), dtype=np.int64)
+        draw_states(pb.cdf_rows, pb.kind, pb.trace, sim.lat, sim.xprev, sim.t, nslots, xs)
+        try:
+            if sim.t == 0:
+                for m, (policy, state) in enumerate(zip(self.policies, self.states, strict=True)):
+                    call_policy(self.names[m], 0, state, policy.reset, state)
+        except PolicyRuntimeError as exc:
+            return 0, exc
+        arms = np.empty((M, R), dtype=np.int64)
+        for j in range(nslots):
+            t = sim.t + j + 1
+            self.clock[0] = t
+            picks = []
+            try:
+                for m, (policy, state) in enumerate(zip(self.policies, self.states, strict=True)):
+                    picked = call_policy(self.names[m], t, state, policy.select, t, state)
+                    picks.append(check_arms(picked, runs=R, arms=K, name=self.names[m], t=t,
+                                            who=self.run_name))  # fmt: skip
+            except PolicyRuntimeError as exc:
+                return j, exc
+            for m, (a, _, _) in enumerate(picks):
+                arms[m] = a
+            x = xs[:, j]
+            sensed = np.empty((M, R), dtype=np.int8)  # new each slot: a policy may keep it
+            apply_sources_slot(arms, x, pb.Y, sim.oracle, self.pulls, self.succ, self.mu,
+                               self.aoi, self.oracle_aoi, self.regret, self.aoisum,
+                               self.collisions, self.collided, sensed)  # fmt: skip
+            if record:
+                out["x"][:, j] = x
+                for m, (a, cand, scores) in enumerate(picks):
+                    out["arm"][:, m, j] = a
+                    out["success"][:, m, j] = (sensed[m] == 1) & ~self.collided[m]
+                    out["collided"][:, m, j] = self.collided[m]
+                    out["aoi"][:, m, j] = self.aoi[m]
+                    out["oracle_aoi"][:, m, j] = self.oracle_aoi[m]
+                    out["regret"][:, m, j] = self.regret[m]
+                    out["override"][:, m, j] = False
+                    out["candidates"][:, m, j] = True if cand is None else cand
+                    out["pulls"][:, m, j] = self.pulls[m]
+                    out["mu_hat"][:, m, j] = self.mu[m]
+                    if scores is not None:
+                        self.scored = True
+                    out["score"][:, m, j] = np.nan if scores is None else scores
+                    out["forced"][:, m, j] = (True if scores is None
+                                              else not_by_score(scores, a))  # fmt: skip
+            sensed.flags.writeable = False
+            try:
+                for m, (policy, state) in enumerate(zip(self.policies, self.states, strict=True)):
+                    played = arms[m].copy()
+                    played.flags.writeable = False
+                    call_policy(self.names[m], t, state, policy.update, t, played, sensed[m],
+                                state)  # fmt: skip
+            except PolicyRuntimeError as exc:
+                return j + 1, exc  # the slot itself happened
+        return nslots, None
 
 
 def source_blocks(instance: Instance, policy: PolicySpec, seed: int, horizon: int, sources: int,
@@ -255,7 +406,12 @@ def source_blocks(instance: Instance, policy: PolicySpec, seed: int, horizon: in
         raise ConfigError(f"block size {block!r}: expected an integer >= 1")
     sim = SourcesSimulation(instance, policy, [seed], horizon, sources, channel=channel)
     while True:
-        out = sim.advance(block)
+        try:
+            out = sim.advance(block)
+        except PolicyRuntimeError as exc:
+            if exc.partial is not None:  # hand over the slots before the failure first
+                yield tuple(exc.partial[0])
+            raise
         if out is None:
             return
         yield tuple(out[0])

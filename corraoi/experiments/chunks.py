@@ -134,7 +134,7 @@ def _run_sources_chunk(task: dict[str, Any], cfg: Any, channel: Any, stops: Sequ
     seed0 = int(task["seed"]) + int(task["start"])
     sim = SourcesSimulation(inst, cfg.policy, range(seed0, seed0 + n), cfg.horizon,
                             cfg.sources, channel=channel)  # fmt: skip
-    sim.kernel(False)  # compiled or loaded now: a chunk's wall_s is its runs
+    sim.kernel(False)  # compiled or loaded now (a compiled policy's): wall_s is its runs
     S, M = len(stops), cfg.sources
     regret = np.empty((n, S))
     estimator = np.empty((n, S))

@@ -129,6 +129,12 @@ class PolicyBase:
     theorem: ClassVar[str | None] = None
     #: In ``--policy all``: the paper's twelve policies.
     paper: ClassVar[bool] = False
+    #: How several sources share the channels (docs/model.md, "Many sources"); "" for a
+    #: single-source policy. A compiled policy names the engine's rule that picks each
+    #: source's channel from its scores ("rhorand", "mctopm", "centralized" or "chairs"),
+    #: its hooks run once per source; a plain-Python policy says "own": each source is an
+    #: instance of its own that picks its channel from its own state.
+    multi_source: ClassVar[str] = ""
     tier: ClassVar[str] = ""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -205,12 +211,6 @@ class CompiledPolicy(PolicyBase):
     correlated: ClassVar[bool] = False
     #: The AoI-aware override: play argmax mu_hat when the age exceeds 1 / max mu_hat.
     aoi_aware: ClassVar[bool] = False
-    #: The rule that shares the channels among several sources (docs/model.md, "Many
-    #: sources"): "rhorand", "mctopm", "centralized" or "chairs"; "" for a single-source
-    #: policy.
-    #: Its hooks are the base policy's, run once per source.
-    multi_source: ClassVar[str] = ""
-
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:
         """Per-run float64 state entries the hooks need (``ps``); 0 by default."""
@@ -253,7 +253,11 @@ class RunState:
     ``t`` the current slot (1-based; 0 in ``reset``); ``runs``, ``arms`` (K); ``seeds``
     (runs,); ``pulls`` and ``successes`` (runs, K) int64 before this slot; ``mu_hat``
     (runs, K) their ratio (0 for unpulled arms); ``aoi`` (runs,) the current age; ``rng`` the
-    runs' streams.
+    runs' streams. In a run of several sources (a policy with ``multi_source = "own"``) each
+    source has a state of its own: ``source`` (1..``sources``) says whose, its counts and age
+    are that source's, and ``collided`` (runs,) bool says whether its last play collided
+    (always False with one source). ``successes`` counts the slots its channel was ON when it
+    played it, delivered or not (collision sensing).
 
     The arrays are read-only views of the engine's own: they follow the run as it advances
     (keep ``state.pulls.copy()`` for a snapshot), and a write into one (``state.mu_hat[0] =
@@ -264,9 +268,10 @@ class RunState:
 
     #: The fields a policy reads (each read-only).
     FIELDS: ClassVar[tuple[str, ...]] = ("t", "runs", "arms", "seeds", "pulls", "successes",
-                                         "mu_hat", "aoi", "rng")  # fmt: skip
+                                         "mu_hat", "aoi", "rng", "source", "sources",
+                                         "collided")  # fmt: skip
     __slots__ = ("_clock", "runs", "arms", "seeds", "rng", "pulls", "successes", "mu_hat",
-                 "aoi")  # fmt: skip
+                 "aoi", "source", "sources", "collided")  # fmt: skip
     _clock: np.ndarray
     runs: int
     arms: int
@@ -276,12 +281,16 @@ class RunState:
     successes: np.ndarray
     mu_hat: np.ndarray
     aoi: np.ndarray
+    source: int
+    sources: int
+    collided: np.ndarray
 
     def __init__(self, *, runs: int, arms: int, seeds: np.ndarray, rng: RunStreams,
                  pulls: np.ndarray, successes: np.ndarray, mu_hat: np.ndarray,
-                 aoi: np.ndarray, clock: np.ndarray) -> None:  # fmt: skip
+                 aoi: np.ndarray, clock: np.ndarray, source: int = 1, sources: int = 1,
+                 collided: np.ndarray | None = None) -> None:  # fmt: skip
         """The engine's arrays, each shown through a read-only view (``clock``: a (1,) array
-        whose entry is the current slot)."""
+        whose entry is the current slot; ``collided`` None: never, for one source)."""
         put = object.__setattr__
         put(self, "_clock", read_only(clock))
         put(self, "runs", int(runs))
@@ -292,6 +301,10 @@ class RunState:
         put(self, "successes", read_only(successes))
         put(self, "mu_hat", read_only(mu_hat))
         put(self, "aoi", read_only(aoi))
+        put(self, "source", int(source))
+        put(self, "sources", int(sources))
+        put(self, "collided", read_only(np.zeros(int(runs), dtype=np.bool_) if collided is None
+                                        else collided))  # fmt: skip
 
     @property
     def t(self) -> int:

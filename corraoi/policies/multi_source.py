@@ -48,6 +48,10 @@ RULES: dict[str, tuple[str, str]] = {
         "Rosenski, Shamir, Szlak (2016), ICML; SMPyBandits MusicalChair",
     ),
 }
+#: A plain-Python policy's ``multi_source``: each source is an instance of the class of its
+#: own, whose ``select`` picks that source's channel from that source's state
+#: (docs/extending.md, "Many sources").
+OWN = "own"
 #: Musical Chairs' parameter: its learning slots (read by the engine of many sources).
 CHAIRS_LEARN = "t0"
 #: Musical Chairs' learning phase (its T0). The paper's T0 depends on the gap between the

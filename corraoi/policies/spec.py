@@ -166,7 +166,7 @@ def multi_source_forms(name: str) -> list[str]:
     """The built-in multi-source forms of the policy ``name`` (``rhorand-ucb``, ... for
     ``ucb``; none for most)."""
     return [n for n, cls in builtins(multi=True).items()
-            if getattr(cls, "multi_source", "") and n == f"{cls.multi_source}-{name}"]  # type: ignore[attr-defined]  # fmt: skip
+            if getattr(cls, "multi_source", "") and n == f"{cls.multi_source}-{name}"]  # fmt: skip
 
 
 def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None = None) -> None:
@@ -184,6 +184,10 @@ def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None =
             return
     if getattr(cls, "multi_source", ""):
         return
+    if getattr(cls, "tier", "") == "python":
+        raise ConfigError(f"policy {spec.name} is single-source; with sources {sources} a "
+                          'plain-Python policy declares multi_source = "own" (each source an '
+                          'instance of its own; docs/extending.md, "Many sources")')  # fmt: skip
     forms = multi_source_forms(spec.name)
     rules = sorted({getattr(c, "multi_source", "") for c in builtins(multi=True).values()} - {""})
     bases = sorted({n.split("-", 1)[1] for n, c in builtins(multi=True).items()
