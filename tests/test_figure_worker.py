@@ -174,3 +174,36 @@ def test_a_figure_another_process_is_writing_is_refused_and_left_alone(tmp_path:
         holder.wait()
     assert draw_figure(log, out).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # then it is ours
     assert not (tmp_path / "fig.png.partial").exists()
+
+
+_BROKEN = r"""
+import sys
+import corraoi.viewer.figure as figure
+def broken(*args, **kwargs):
+    raise ValueError("the data broke\nthe drawing")
+figure.draw_figure = broken  # read when each figure is drawn, in the worker or here
+sys.argv = ["corraoi", "sweep", "-i", "I1,I2", "-p", "ucb", "-T", "200", "-n", "4", "-o",
+            sys.argv[1]]
+from corraoi.cli import run; run()
+"""
+
+
+def test_a_figure_that_fails_to_draw_is_one_line_after_the_folder_is_complete(tmp_path: Path):
+    # it was the drawing's own traceback, and the folder was left without its manifest's
+    # "complete" nor its kept plug-ins though every result was written
+    folder = tmp_path / "s"
+    done = subprocess.run([sys.executable, "-c", _BROKEN, str(folder)], capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    line = done.stderr.strip()
+    assert "\n" not in line, line
+    assert line == (f"corraoi: error: {folder / 'I1' / 'figure.png'} not written: ValueError: "
+                    "the data broke the drawing (the sweep's results are complete; redraw it: "
+                    f"corraoi figure {folder / 'I1' / 'sweep.mcap'} -o "
+                    f"{folder / 'I1' / 'figure.png'}); and 1 more figure")  # fmt: skip
+    assert json.loads((folder / "manifest.json").read_text())["status"] == "complete"
+    for group in ("I1", "I2"):
+        assert (folder / group / "sweep.rrd").exists()
+        assert (folder / group / "summary.json").exists()
+        assert not (folder / group / "figure.png").exists()
+    assert not list(folder.rglob("*.partial"))

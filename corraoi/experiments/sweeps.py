@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from corraoi.errors import ConfigError, DamagedPart
+from corraoi.errors import ConfigError, DamagedPart, WriteError
 
 from . import backends
 from .folder import (
@@ -144,7 +144,8 @@ class SweepOutputs(Protocol):
 
     def finish(self, *, warn: Callable[[str], None] | None) -> None:
         """Every file complete (outputs written meanwhile by other processes waited for),
-        before the manifest says the folder is."""
+        before the manifest says the folder is. A WriteError here is an output that could
+        not be made (a figure): the sweep marks the folder complete, then raises it."""
 
 
 @dataclass
@@ -351,11 +352,17 @@ def _sweep(
                 outputs.write_group(dirs[key], grid, joined, summary, warn=warn)
             write_text(dirs[key] / "summary.json", json.dumps(summary, indent=2) + "\n")
             write_text(dirs[key] / "summary.md", summary_markdown(summary))
+        unfinished: WriteError | None = None
         if outputs is not None:
-            outputs.finish(warn=warn)
+            try:
+                outputs.finish(warn=warn)
+            except WriteError as exc:  # a figure not drawn: the results are complete
+                unfinished = exc
         prov = folder_provenance(grid)
         keep_sources(folder, prov)
         write_manifest(folder, grid, "complete", provenance_entry(folder, prov))
+        if unfinished is not None:
+            raise unfinished
     return SweepOutcome(grid, summaries, [dirs[k] for k, _ in joined_groups] if dirs else [],
                         total, skipped)  # fmt: skip
 

@@ -137,19 +137,29 @@ class FolderOutputs:
         write_group_recording(folder, config, cells, summary)
 
     def finish(self, *, warn: Callable[[str], None] | None) -> None:
-        """Every figure written (waited for when a worker draws them); a figure that could
-        not be drawn is a warning (without matplotlib) or its error."""
-        from corraoi.errors import FigureUnavailable
+        """Every figure written (waited for when a worker draws them). A figure that could
+        not be drawn is a warning without matplotlib; any other failure to draw one is a
+        WriteError (one line: the figure, the error, how to redraw it) once every figure was
+        tried, which the sweep raises after its folder is complete."""
+        from corraoi.errors import FigureUnavailable, WriteError
 
         drawn, self._drawn = self._drawn, []
         if self._figures is not None:
             drawn += self._figures.results()
+        failed: list[tuple[str, BaseException]] = []
         for figure, failure in drawn:
             if isinstance(failure, FigureUnavailable):
                 if warn is not None:
                     warn(f"{figure} not written: {failure}")
             elif failure is not None:
-                raise failure
+                detail = " ".join(f"{type(failure).__name__}: {failure}".split())[:300]
+                redraw = f"corraoi figure {figure.parent / 'sweep.mcap'} -o {figure}"
+                failed.append((f"{figure} not written: {detail} (the sweep's results are "
+                               f"complete; redraw it: {redraw})", failure))  # fmt: skip
+        if failed:
+            n = len(failed) - 1
+            more = f"; and {n} more figure{'s' if n > 1 else ''}" if n else ""
+            raise WriteError(failed[0][0] + more) from failed[0][1]
 
 
 __all__ = ["FolderOutputs", "group_config", "write_group_log", "write_group_recording",
