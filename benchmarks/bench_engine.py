@@ -23,6 +23,10 @@ this checkout, each side in fresh processes that alternate (before, after, after
 (docs/performance.md, the hook checks of issue 32).
 
     python benchmarks/bench_engine.py --against HEAD~1 --repeat 7
+
+``--instance k16`` runs that table on bench_sources.py's pinned instance of 16 channels
+instead of I1 (or any instance name or file ``load_instance`` reads): where the correlated
+policies' candidate set costs most.
 """
 
 from __future__ import annotations
@@ -83,7 +87,12 @@ _SIDE = (
     "from corraoi.model.instance import load_instance\n"
     "from corraoi.policies import make_policy\n"
     "names, runs, horizon = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])\n"
-    "inst = load_instance('I1')\n"
+    "if sys.argv[4] == 'k16':\n"
+    "    sys.path.insert(0, sys.argv[5])\n"
+    "    from bench_sources import instance_k16\n"
+    "    inst = instance_k16()\n"
+    "else:\n"
+    "    inst = load_instance(sys.argv[4])\n"
     "set_workers(None)\n"
     "out = {}\n"
     "for name in names:\n"
@@ -96,11 +105,12 @@ _SIDE = (
     "        s, c = time.perf_counter() - s, time.process_time() - c\n"
     "        best = [min(best[0], s), min(best[1], c)]\n"
     "    out[name] = best\n"
-    "print(json.dumps(out))\n"
+    "import corraoi\n"
+    "print(json.dumps({'code': corraoi.__file__, 'times': out}))\n"
 )
 
 
-def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
+def against(rev: str, runs: int, horizon: int, repeat: int, instance: str = "I1") -> None:
     """Table 1 for the code at ``rev`` and for this checkout, alternated (module docstring)."""
     from corraoi.policies import paper_names
 
@@ -113,15 +123,24 @@ def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
                                  capture_output=True, check=True)  # fmt: skip
         subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
     sides = {"before": (tmp, tmp / "cache"), "after": (ROOT, ROOT / ".cache-corraoi")}
+    # each side starts in an empty folder: python -c puts its working folder first on
+    # sys.path, and a folder holding the other side's corraoi/ would be imported instead
+    # (both sides then timed the same code)
+    empty = tmp / "cwd"
+    empty.mkdir()
 
     def run(side: str) -> dict[str, list[float]]:
         path, cache = sides[side]
         env = {**os.environ, "PYTHONPATH": str(path), "CORRAOI_CACHE_DIR": str(cache)}
         out = subprocess.run([sys.executable, "-c", _SIDE, json.dumps(names), str(runs),
-                              str(horizon)], env=env, capture_output=True, text=True,
-                             check=True, cwd=tmp)  # fmt: skip
-        found: dict[str, list[float]] = json.loads(out.stdout.splitlines()[-1])
-        return found
+                              str(horizon), instance, str(Path(__file__).parent)], env=env,
+                             capture_output=True, text=True, check=True, cwd=empty)  # fmt: skip
+        found = json.loads(out.stdout.splitlines()[-1])
+        code = Path(found["code"]).resolve()
+        if not code.is_relative_to(path.resolve()):
+            raise SystemExit(f"the {side} side ran {code}, not the code in {path}")
+        times: dict[str, list[float]] = found["times"]
+        return times
 
     run("before")  # both kernel caches warm: nothing below compiles
     run("after")
@@ -133,7 +152,8 @@ def against(rev: str, runs: int, horizon: int, repeat: int) -> None:
     # per row: the best wall time and the best CPU time (every thread's) of the repeats
     best = {s: {n: [min(v[0] for v in t[n]), min(v[1] for v in t[n])] for n in names}
             for s, t in times.items()}  # fmt: skip
-    print(f"\nthe engine at {rev} (before) and this checkout (after): I1, {runs} runs, horizon "
+    print(f"\nthe engine at {rev} (before) and this checkout (after): {instance}, {runs} runs, "
+          f"horizon "
           f"{horizon}, fresh processes alternated, best of {repeat} each (each the best of 3 "
           "advances in its process); wall and CPU seconds (CPU: every thread's, which a "
           "loaded machine disturbs less)")  # fmt: skip
@@ -235,12 +255,15 @@ def main() -> None:
     ap.add_argument("--skip-memory", action="store_true")
     ap.add_argument("--against", metavar="REV", default=None,
                     help="only: table 1 for the code at REV and this checkout, alternated")
+    ap.add_argument("--instance", default="I1",
+                    help="with --against: the instance (a name or file, or k16: "
+                         "bench_sources.py's 16 channels)")  # fmt: skip
     args = ap.parse_args()
     load = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
           f"load average {load:.2f} at start")  # fmt: skip
     if args.against is not None:
-        against(args.against, args.runs, args.horizon, args.repeat)
+        against(args.against, args.runs, args.horizon, args.repeat, args.instance)
         print(f"load average {os.getloadavg()[0]:.2f} at the end")
         return
     per_policy(args.runs, args.horizon, args.repeat, args.all_builtins)

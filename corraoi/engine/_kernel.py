@@ -96,9 +96,6 @@ class NoAliasCompiler(Compiler):
         flags.noalias = True
         super().__init__(typingctx, targetctx, library, args, return_type, flags, locals)
 
-#: Up to this many arms the candidate set tests every pair; beyond, it unions bitsets.
-SMALL_K = 16
-
 
 @njit(inline="always", cache=True)
 def draw_state(cdf_rows, kind, trace, lst, xprev, t):
@@ -133,8 +130,7 @@ def draw_state(cdf_rows, kind, trace, lst, xprev, t):
 
 
 @njit(inline="always", cache=True)
-def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has1, has2, pst,
-                  depth):  # fmt: skip
+def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1, has2, pst, depth):
     """The correlated candidate set A_t + {k_emp} of one run (or source) at slot ``t`` into
     ``cand`` (``in_s`` and ``fail`` are scratch); returns k_emp. Shared by the single-source
     kernel (``depth`` 1) and the kernel of many sources (:mod:`corraoi.engine._sources_kernel`),
@@ -166,41 +162,25 @@ def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has
                 break
     # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
     # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
-    # pseudo-rewards (pclass). Few arms: test each pair (K^2 cheap tests); many
-    # arms: the arms failing for l are a union of precomputed bitsets (K^2 / 64).
-    if K <= SMALL_K:
-        for k in range(K):
-            ok = True
-            for l in range(K):
-                if not in_s[l] or npull[l] == 0:
-                    continue
-                c = pclass[k, l]
-                if c == 0:
-                    ok = target <= 0.0
-                elif c == 1:
-                    ok = (npull[l] - nsucc[l]) / npull[l] >= target
-                elif c == 2:
-                    ok = muhat[l] >= target
-                if not ok:
-                    break
-            cand[k] = ok
-    else:
-        for w in range(W):
-            fail[w] = np.uint64(0)
-        drop0 = 1 if target > 0.0 else 0
-        for l in range(K):
-            if not in_s[l] or npull[l] == 0:
-                continue
-            code = drop0
-            if has1[l] and (npull[l] - nsucc[l]) / npull[l] < target:
-                code |= 2
-            if has2[l] and muhat[l] < target:  # muhat[l] = S_l / n_l
-                code |= 4
-            if code != 0:
-                for w in range(W):
-                    fail[w] |= comb[l, code, w]
-        for k in range(K):
-            cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
+    # pseudo-rewards (pclass): the arms failing for l are a union of precomputed bitsets,
+    # one per l (K / 64 words each; at K = 16 twice as fast as testing every pair, which
+    # recomputed l's rates K times and ran longer the lower the target)
+    for w in range(W):
+        fail[w] = np.uint64(0)
+    drop0 = 1 if target > 0.0 else 0
+    for l in range(K):
+        if not in_s[l] or npull[l] == 0:
+            continue
+        code = drop0
+        if has1[l] and (npull[l] - nsucc[l]) / npull[l] < target:
+            code |= 2
+        if has2[l] and muhat[l] < target:  # muhat[l] = S_l / n_l
+            code |= 4
+        if code != 0:
+            for w in range(W):
+                fail[w] |= comb[l, code, w]
+    for k in range(K):
+        cand[k] = ((fail[k >> 6] >> np.uint64(k & 63)) & np.uint64(1)) == 0
     cand[kemp] = True
     if depth > 1:
         for k in range(K):
@@ -244,7 +224,6 @@ def advance(
     Y,  # (K, n) int8 rewards
     comb,  # (K, 8, W) uint64: per pulled arm l, the arms k that fall below the target when
     # it exceeds 0 (bit 0 of the code), l's failure rate (bit 1), l's success rate (bit 2)
-    pclass,  # (K, K) int8: phi_{k,l} is 0, l's failure rate, l's success rate or 1 (0..3)
     best,  # int: index of the best arm (for the oracle)
     correlated,  # bool: restrict to the correlated candidate set
     aware,  # bool: AoI-aware override
@@ -334,7 +313,7 @@ def advance(
                     f_value = forced
                 forced = -1
             if correlated and forced < 0:
-                candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass, has1,
+                candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1,
                               has2, pst, 1)  # fmt: skip
             override = aware and maxmu > 0.0 and age * maxmu > 1.0
             if override or forced < 0:

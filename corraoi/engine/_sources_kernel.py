@@ -232,7 +232,6 @@ def advance(
     trace,  # (T,) int64 hidden path for CHANNEL_TRACE (else unused)
     Y,  # (K, n) int8 rewards
     comb,  # (K, 8, W) uint64: the candidate set's bitsets (corraoi.engine._kernel)
-    pclass,  # (K, K) int8 pseudo-reward classes
     oracle,  # (M,) int64: the channel the orthogonal oracle gives each source
     correlated,  # bool: restrict to the correlated candidate set
     aware,  # bool: AoI-aware override
@@ -336,7 +335,7 @@ def advance(
                         pick[k] = npull[k] == 0
                     forced = uniform_in(pick, pst, K)
                 if correlated and forced < 0:
-                    candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, pclass,
+                    candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb,
                                   has1, has2, pst, M)  # fmt: skip
                 override = aware and maxmu > 0.0 and aoi[r, m] * maxmu > 1.0
                 scored = False

@@ -178,7 +178,7 @@ def warm_args(K: int = 2) -> tuple[Any, ...]:
     f8, i8 = np.float64, np.int64
     return (
         np.ones((1, 2), f8), 0, np.zeros(1, i8), np.zeros((K, 2), np.int8),
-        np.zeros((K, 8, 1), np.uint64), np.zeros((K, K), np.int8), 0, False, False,
+        np.zeros((K, 8, 1), np.uint64), 0, False, False,
         np.zeros(0, f8), 0, 0,
         np.zeros((R, 4), np.uint64), np.zeros((R, 4), np.uint64), np.zeros((R, 2), f8),
         np.zeros((R, 1), f8), np.full(R, -1, i8), np.zeros((R, K), i8), np.zeros((R, K), i8),

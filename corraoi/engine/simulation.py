@@ -147,7 +147,6 @@ class Simulation:
             # built-ins are not: no cost)
             self._given: np.ndarray | None = None if pb.policy.builtin else pb.params.copy()
             self.pstate = np.zeros((R, max(pb.state_size, 1)))
-            self._pclass = pb.pclass
             self._comb = np.require(candidate_bitsets(pb.pclass), np.uint64, ["C", "W"])
             self._py: Any = None
             self._rate: float | None = None  # run-slots per second per thread, measured
@@ -268,8 +267,8 @@ class Simulation:
                    self.succ, self.aoi, self.oracle_aoi, self.regret, self.aoisum,
                    self._err)  # fmt: skip
         outputs = out.buffers()
-        common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self._pclass,
-                  self.best, bool(self.cls.correlated), bool(self.cls.aoi_aware),
+        common = (self._cdf_rows, self._kind, self._trace, self._Y, self._comb, self.best,
+                  bool(self.cls.correlated), bool(self.cls.aoi_aware),
                   self._params, t0, nslots)  # fmt: skip
 
         def run(a: int, b: int) -> None:

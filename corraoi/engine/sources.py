@@ -95,7 +95,7 @@ def warm_args(K: int = 2, M: int = 2) -> tuple[Any, ...]:
     f8, i8, b1 = np.float64, np.int64, np.bool_
     return (
         np.ones((1, 2), f8), 0, np.zeros(1, i8), np.zeros((K, 2), np.int8),
-        np.zeros((K, 8, 1), np.uint64), np.zeros((K, K), np.int8), np.zeros(M, i8), False,
+        np.zeros((K, 8, 1), np.uint64), np.zeros(M, i8), False,
         False, 0, 0, np.zeros(0, f8), 0, 0,
         np.zeros((R, 4), np.uint64), np.zeros((R, M, 4), np.uint64), np.zeros((R, M, 2), f8),
         np.zeros((R, M, 1), f8), np.full(R, -1, i8), np.zeros((R, M, K), i8),
@@ -242,7 +242,7 @@ class SourcesSimulation:
             n, slices = threads.plan(self._rate, R, nslots - done)
             if record:  # the record path: one call into `out`
                 n, slices = nslots, [(0, R)]
-            common = (pb.cdf_rows, pb.kind, pb.trace, pb.Y, self._comb, pb.pclass, self.oracle,
+            common = (pb.cdf_rows, pb.kind, pb.trace, pb.Y, self._comb, self.oracle,
                       bool(self.cls.correlated), bool(self.cls.aoi_aware), self.rule,
                       self.learn, pb.params, self.t + done, n)  # fmt: skip
 
