@@ -85,17 +85,20 @@ __all__ = [
 
 @dataclass
 class PolicyCase:
-    """One policy on one random instance: what each ``check_*`` function examines. The batch
-    of runs is simulated once, on first use, and shared by the checks of the case."""
+    """One policy on one random instance (with ``sources`` sharing its channels): what each
+    ``check_*`` function examines. The batch of runs is simulated once, on first use, and
+    shared by the checks of the case."""
 
     policy: Any
     spec: Any
     instance: Any
     seeds: list[int]
     horizon: int
+    sources: int = 1
 
-    def __str__(self) -> str:  # the pytest id: eps-greedy-K3
-        return f"{self.spec.name}-K{self.instance.K}"
+    def __str__(self) -> str:  # the pytest id: eps-greedy-K3 (selfish-ucb-K8-M3)
+        return f"{self.spec.name}-K{self.instance.K}" + (
+            f"-M{self.sources}" if self.sources > 1 else "")
 
     @property
     def name(self) -> str:
@@ -103,15 +106,36 @@ class PolicyCase:
 
     @cached_property
     def batch(self) -> Any:
-        """Every run of the case in one block (``RunsBlock``)."""
-        from corraoi.engine.simulation import simulate
+        """Every run of the case in one block (``RunsBlock``; with several sources, a row per
+        run and source: run r's source m is row ``r * sources + m - 1``)."""
+        return self.simulate(self.seeds, block=self.horizon)
 
-        return next(simulate(self.instance, self.spec, self.seeds, self.horizon,
-                             block=self.horizon))  # fmt: skip
+    def simulate(self, seeds: Sequence[int], *, block: int) -> Any:
+        """The runs of ``seeds``, simulated ``block`` slots at a time, as one ``RunsBlock``
+        (rows as :attr:`batch`'s)."""
+        from corraoi.engine.simulation import RunsBlock, simulate
+
+        if self.sources == 1:
+            return RunsBlock.concat(list(simulate(self.instance, self.spec, seeds,
+                                                  self.horizon, block=block)))  # fmt: skip
+        import numpy as np
+
+        from corraoi.engine.block import SlotBlock
+        from corraoi.engine.sources import SourcesSimulation
+
+        sim = SourcesSimulation(self.instance, self.spec, seeds, self.horizon, self.sources)
+        parts = []
+        while (part := sim.advance(block)) is not None:
+            parts.append(part)
+        rows = [SlotBlock.concat([p[r][m] for p in parts])
+                for r in range(len(seeds)) for m in range(self.sources)]  # fmt: skip
+        return RunsBlock(t=rows[0].t, **{f: np.stack([b.column(f) for b in rows])
+                                         for f in rows[0].fields() if f != "t"})  # fmt: skip
 
     def where(self) -> str:
         what = self.policy if isinstance(self.policy, str) else self.name
-        return f"{what} (K={self.instance.K})"
+        return f"{what} (K={self.instance.K}" + (
+            f", {self.sources} sources)" if self.sources > 1 else ")")
 
 
 def policy_cases(
@@ -122,13 +146,16 @@ def policy_cases(
     horizon: int = 300,
     runs: int = 4,
     seed: int = 0,
+    sources: int = 1,
 ) -> list[PolicyCase]:
     """``policy`` (a class, an instance of one, or what ``--policy`` takes) with ``params`` on
-    one random instance per number of ``arms`` (some arm always has a positive mean)."""
+    one random instance per number of ``arms`` (some arm always has a positive mean), run by
+    ``sources`` sources (the numbers of arms below it are left out: M sources need M
+    channels)."""
     import numpy as np
 
     from corraoi import arguments, limits
-    from corraoi.errors import InstanceError, PolicyError
+    from corraoi.errors import ConfigError, InstanceError, PolicyError
     from corraoi.face.resolve import policies
     from corraoi.model.instance import Instance
 
@@ -144,18 +171,29 @@ def policy_cases(
     horizon = limits.check_horizon(horizon, floats=True)
     runs = limits.check_int(runs, name="runs", lo=1, hi=limits.MAX_RUNS, floats=True)
     seed = limits.check_seed(seed, runs=runs, floats=True)
+    sources = arguments.integer(sources, name="sources", lo=1, kind=ConfigError,
+                                why="sources share the channels: 1 or more")  # fmt: skip
+    if max(arms) < sources:
+        raise arguments.wrong_value(InstanceError, "arms", arms,
+                                    f"a number of arms of at least sources ({sources})",
+                                    "every one is smaller")  # fmt: skip
     if isinstance(policy, (list, tuple)):
         raise arguments.wrong_type(PolicyError, "policy", policy, "one policy")
     spec = policies(policy, params)[0]
+    if sources > 1:
+        from corraoi.policies.spec import check_sources
+
+        check_sources(spec, sources, spec.resolve())
     cases = []
-    for K in arms:
+    for K in (K for K in arms if K >= sources):
         rng = np.random.default_rng([seed, K])
         n = max(2, K)
         p = rng.dirichlet(np.ones(n))
         Y = (rng.random((K, n)) < 0.5).astype(np.int64)
         Y[int(rng.integers(K)), int(np.argmax(p))] = 1
         inst = Instance(f"check-K{K}", p, Y)
-        cases.append(PolicyCase(policy, spec, inst, list(range(seed, seed + runs)), horizon))
+        cases.append(PolicyCase(policy, spec, inst, list(range(seed, seed + runs)), horizon,
+                                sources))  # fmt: skip
     return cases
 
 
@@ -163,10 +201,7 @@ def check_deterministic(case: PolicyCase, tmp_path: Any = None) -> None:
     """Two simulations of the same seeds are equal slot by slot, whatever the block size."""
     import numpy as np
 
-    from corraoi.engine.simulation import RunsBlock, simulate
-
-    again = RunsBlock.concat(list(simulate(case.instance, case.spec, case.seeds, case.horizon,
-                                           block=max(1, case.horizon // 3))))  # fmt: skip
+    again = case.simulate(case.seeds, block=max(1, case.horizon // 3))
     assert case.batch.fields() == again.fields(), f"{case.where()}: fields differ"
     for f in case.batch.fields():  # every field of the slot record the run logs
         nan = case.batch.column(f).dtype.kind == "f"
@@ -183,12 +218,16 @@ def check_arms_in_range(case: PolicyCase, tmp_path: Any = None) -> None:
 
 
 def check_counts_follow_the_arms(case: PolicyCase, tmp_path: Any = None) -> None:
-    """Successes follow the table Y on the hidden state; pulls add up to the slots."""
+    """Successes follow the table Y on the hidden state (and, with several sources, no
+    collision); pulls add up to the slots."""
     import numpy as np
 
     a, inst = case.batch, case.instance
-    assert np.array_equal(a.success, inst.Y[a.arm, a.x] == 1), f"{case.where()}: wrong successes"
-    assert np.array_equal(a.pulls[:, -1].sum(axis=1), np.full(len(case.seeds), case.horizon)), (
+    on = inst.Y[a.arm, a.x] == 1
+    delivered = on if a.collided is None else on & ~a.collided
+    assert np.array_equal(a.success, delivered), f"{case.where()}: wrong successes"
+    rows = len(case.seeds) * case.sources
+    assert np.array_equal(a.pulls[:, -1].sum(axis=1), np.full(rows, case.horizon)), (
         f"{case.where()}: pulls do not add up to the horizon"
     )
 
@@ -198,11 +237,9 @@ def check_runs_use_their_own_streams(case: PolicyCase, tmp_path: Any = None) -> 
     mixes runs fails here)."""
     import numpy as np
 
-    from corraoi.engine.simulation import simulate
-
     last = case.seeds[-1]
-    single = next(simulate(case.instance, case.spec, [last], case.horizon, block=case.horizon))
-    assert np.array_equal(single.arm[0], case.batch.arm[-1]), (
+    single = case.simulate([last], block=case.horizon)
+    assert np.array_equal(single.arm, case.batch.arm[-case.sources:]), (
         f"{case.where()}: run {len(case.seeds) - 1} of a batch differs from the single run "
         f"with seed {last}: decisions must use each run's own stream (state.rng) only"
     )
@@ -218,7 +255,8 @@ def check_hidden_path(case: PolicyCase, tmp_path: Any = None) -> None:
 
     ref = next(simulate(case.instance, make_policies(["ucb"])[0], case.seeds, case.horizon,
                         block=case.horizon))  # fmt: skip
-    assert np.array_equal(ref.x, case.batch.x), f"{case.where()}: not the built-ins' hidden path"
+    assert np.array_equal(np.repeat(ref.x, case.sources, axis=0), case.batch.x), (
+        f"{case.where()}: not the built-ins' hidden path")
 
 
 def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
@@ -226,13 +264,16 @@ def check_log_round_trip(case: PolicyCase, tmp_path: Any = None) -> None:
     (nothing to do without ``tmp_path``)."""
     if tmp_path is None:
         return
-    from corraoi.engine.block import RunConfig
+    from corraoi.engine.block import RunConfig, SourcesBlock
     from corraoi.recorder.slotlog.reader import open_log
     from corraoi.recorder.slotlog.sink import McapSink
 
-    path = Path(tmp_path) / f"check-{case.spec.name}-K{case.instance.K}.mcap"
-    config = RunConfig(case.instance, case.spec, case.seeds[0], case.horizon)
-    run = case.batch.run(0)
+    path = Path(tmp_path) / f"check-{case}.mcap"
+    config = RunConfig(case.instance, case.spec, case.seeds[0], case.horizon,
+                       sources=case.sources)  # fmt: skip
+    run: Any = case.batch.run(0)
+    if case.sources > 1:
+        run = SourcesBlock(tuple(case.batch.run(m) for m in range(case.sources)))
     with McapSink(path, config, overwrite=True, fsync=False) as sink:
         sink.write(run)
     log = open_log(path)
@@ -272,6 +313,7 @@ def check_policy(
     horizon: int = 300,
     runs: int = 4,
     seed: int = 0,
+    sources: int = 1,
     tmp_path: str | os.PathLike[str] | None = None,
 ) -> None:
     """The conformance check a plug-in author runs in their own tests (raises AssertionError):
@@ -284,8 +326,10 @@ def check_policy(
     policy is deterministic for a seed; plays arms in range, with successes and pulls
     consistent with them; decides each run from that run's own stream (run i of a batch
     equals the single run with seed ``seed + i``); sees the hidden path built-ins see on the
-    same seed; and round-trips through a slot log, when ``tmp_path`` is given. One test per
-    check, with readable ids: :func:`parametrize_with_checks`.
+    same seed; and round-trips through a slot log, when ``tmp_path`` is given. With
+    ``sources`` M > 1 (a policy of many sources) it checks the same of every source, on the
+    instances of at least M arms, and that a source delivers only without a collision. One
+    test per check, with readable ids: :func:`parametrize_with_checks`.
 
     Raises the errors of :func:`corraoi.record` for arguments that are not accepted
     (:class:`~corraoi.errors.PolicyError`, ``ConfigError``, ``InstanceError`` for ``arms``,
@@ -296,6 +340,6 @@ def check_policy(
 
     arguments.optional(arguments.path, tmp_path, name="tmp_path", what="a folder's path")
     for case in policy_cases(policy, params=params, arms=arms, horizon=horizon, runs=runs,
-                             seed=seed):  # fmt: skip
+                             seed=seed, sources=sources):  # fmt: skip
         for check in CHECKS:
             check(case, tmp_path)

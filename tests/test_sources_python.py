@@ -225,3 +225,27 @@ def test_the_command_line_records_a_plain_python_policy_of_many_sources(tmp_path
     assert res.stderr.strip().count("\n") == 0
     assert 'declares multi_source = "own"' in res.stderr
     assert not (tmp_path / "e.mcap").exists() and not (tmp_path / "e.mcap.partial").exists()
+
+
+def test_the_conformance_checks_run_every_source_and_catch_a_policy_of_many_sources(
+        tmp_path: Path):  # fmt: skip
+    from corraoi.testing import CHECKS, check_policy, policy_cases
+
+    check_policy(SELFISH, sources=3, tmp_path=tmp_path)  # every check, every source
+    check_policy("rhorand-ucb", sources=2, arms=(2, 5), horizon=120)
+    cases = policy_cases(SELFISH, sources=3)
+    assert [str(c) for c in cases] == ["selfish-ucb-K3-M3", "selfish-ucb-K8-M3",
+                                       "selfish-ucb-K64-M3"]  # K = 2 < 3 sources: left out
+    assert cases[0].batch.arm.shape == (4 * 3, 300)  # a row per run and source
+    assert list((tmp_path).glob("check-selfish-ucb-K*-M3.mcap"))
+    # a source that draws from numpy's global stream: not the same run twice
+    global_rng = _bad("global-rng", "return np.random.randint(0, state.arms, state.runs)")
+    with pytest.raises(AssertionError, match=r"global-rng \(K=3, 3 sources\): not "
+                       "deterministic"):  # fmt: skip
+        CHECKS[0](policy_cases(global_rng, sources=3, arms=(3,))[0])
+    # a source that decides from every run of the batch: run i is not the seed's single run
+    mixed = _bad("batch-mixer", "return np.full(state.runs, int(state.rng.random().sum() * "
+                 "state.arms) % state.arms)")  # fmt: skip
+    case = policy_cases(mixed, sources=2, arms=(4,))[0]
+    with pytest.raises(AssertionError, match="decisions must use each run's own stream"):
+        next(c for c in CHECKS if c.__name__ == "check_runs_use_their_own_streams")(case)
