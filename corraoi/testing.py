@@ -129,8 +129,9 @@ class PolicyCase:
             parts.append(part)
         rows = [SlotBlock.concat([p[r][m] for p in parts])
                 for r in range(len(seeds)) for m in range(self.sources)]  # fmt: skip
-        return RunsBlock(t=rows[0].t, **{f: np.stack([b.column(f) for b in rows])
-                                         for f in rows[0].fields() if f != "t"})  # fmt: skip
+        columns: dict[str, Any] = {f: np.stack([b.column(f) for b in rows])
+                                   for f in rows[0].fields() if f != "t"}  # fmt: skip
+        return RunsBlock(t=rows[0].t, **columns)
 
     def where(self) -> str:
         what = self.policy if isinstance(self.policy, str) else self.name
