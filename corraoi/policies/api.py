@@ -211,6 +211,7 @@ class CompiledPolicy(PolicyBase):
     correlated: ClassVar[bool] = False
     #: The AoI-aware override: play argmax mu_hat when the age exceeds 1 / max mu_hat.
     aoi_aware: ClassVar[bool] = False
+
     @classmethod
     def state_size(cls, K: int, params: Mapping[str, float]) -> int:
         """Per-run float64 state entries the hooks need (``ps``); 0 by default."""
