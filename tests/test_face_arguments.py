@@ -359,6 +359,11 @@ TABLE: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("check_policy", {"runs": "4"}, ConfigTypeError, "runs '4': not an integer"),
     ("check_policy", {"seed": None}, ConfigTypeError, "seed None: not an integer"),
     ("check_policy", {"tmp_path": 3}, OutputTypeError, "tmp_path 3: expected a folder's path"),
+    ("check_policy", {"sources": 2.5}, ConfigTypeError, "sources 2.5: not an integer"),
+    ("check_policy", {"sources": 3}, InstanceValueError, "expected a number of arms of at least "
+     "sources (3)"),
+    ("check_policy", {"sources": 2}, ConfigValueError, "policy ucb is single-source; with "
+     "sources 2"),
     ("corraoi_run", {"policy": 3}, PolicyTypeError, "policy 3: expected a policy name"),
     ("corraoi_run", {"seed": 0.5}, ConfigTypeError, "seed 0.5: not an integer"),
     ("corraoi_run", {"horizon": 0}, ConfigValueError, "horizon 0: out of range, expected 1.."),

@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from corraoi._version import __version__
-from corraoi.errors import CodeChanged, ConfigError, PolicyError
+from corraoi.errors import CodeChanged, ConfigValueError, PolicyError
 
 from .api import BUILTIN_PREFIX, RGB, PolicyBase
 from .registry import (
@@ -170,7 +170,7 @@ def multi_source_forms(name: str) -> list[str]:
 
 
 def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None = None) -> None:
-    """A ConfigError (one line naming its multi-source forms) when a single-source policy is
+    """A ConfigValueError (one line naming its multi-source forms) when a single-source policy is
     given several sources. A multi-source form takes any number (one source is its base
     policy); ``cls`` is the resolved class, else a built-in's is looked up (a plug-in's is
     checked when it runs) and a loop logged by ``corraoi.Logger`` is not checked."""
@@ -185,9 +185,10 @@ def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None =
     if getattr(cls, "multi_source", ""):
         return
     if getattr(cls, "tier", "") == "python":
-        raise ConfigError(f"policy {spec.name} is single-source; with sources {sources} a "
-                          'plain-Python policy declares multi_source = "own" (each source an '
-                          'instance of its own; docs/extending.md, "Many sources")')  # fmt: skip
+        raise ConfigValueError(f"policy {spec.name} is single-source; with sources {sources} "
+                               'a plain-Python policy declares multi_source = "own" (each '
+                               'source an instance of its own; docs/extending.md, "Many '
+                               'sources")')  # fmt: skip
     forms = multi_source_forms(spec.name)
     rules = sorted({getattr(c, "multi_source", "") for c in builtins(multi=True).values()} - {""})
     bases = sorted({n.split("-", 1)[1] for n, c in builtins(multi=True).items()
@@ -195,7 +196,8 @@ def check_sources(spec: PolicySpec, sources: int, cls: type[PolicyBase] | None =
     hint = (f"use one of its multi-source forms: {', '.join(forms)}" if forms else
             f"it has no multi-source form ({'-, '.join(rules)}-<policy> exist for "
             f"{', '.join(bases)})")  # fmt: skip
-    raise ConfigError(f"policy {spec.name} is single-source; with sources {sources} {hint}")
+    raise ConfigValueError(f"policy {spec.name} is single-source; with sources {sources} "
+                           f"{hint}")
 
 
 def make_policy(token: str, **params: float | None) -> PolicySpec:
