@@ -153,17 +153,22 @@ def rule_marker(name: str) -> str:
     return RULE_MARKERS.get(rule_of(name), "")
 
 
+def _without_rule(name: str) -> str:
+    """The single-source policy a multi-source form is made of (``mctopm-aoi-aware-cts``
+    -> ``aoi-aware-cts``); any other name unchanged."""
+    rule = rule_of(name)
+    return name.removeprefix(f"{rule}-") if rule else name
+
+
 def base_policy(name: str) -> str:
     """``aoi-aware-cts`` -> ``cts``, ``mctopm-aoi-aware-cts`` -> ``cts``; any other name
     unchanged."""
-    rule = rule_of(name)
-    return name.removeprefix(f"{rule}-" if rule else "").removeprefix(AOI_PREFIX)
+    return _without_rule(name).removeprefix(AOI_PREFIX)
 
 
 def is_aoi_aware(name: str) -> bool:
     """``aoi-aware-cts`` and its multi-source forms (``rhorand-aoi-aware-cts``)."""
-    rule = rule_of(name)
-    return name.removeprefix(f"{rule}-" if rule else "").startswith(AOI_PREFIX)
+    return _without_rule(name).startswith(AOI_PREFIX)
 
 
 def policy_color(name: str, color: Sequence[int] | None = None) -> RGB:

@@ -269,9 +269,9 @@ class SourcesSimulation:
         n = t.size
         with np.errstate(divide="ignore"):
             inv = 1.0 / self.oracle_mu
-        compiled = self._py is None
-        aware = compiled and bool(self.cls.aoi_aware)
-        scored = compiled or self._py is not None and self._py.scored
+        # a plain-Python policy has no AoI-aware override, and scores only once it gave some
+        aware = self._py is None and bool(self.cls.aoi_aware)
+        scored = self._py is None or self._py.scored
         runs: list[list[SlotBlock]] = []
         x = out["x"][:, :n].astype(np.int64)
         for r in range(R):
