@@ -126,9 +126,12 @@ def free_best(vals, mask, muhat, allowed, pst, K, tier1, tier2):
         tier2[k] = allowed[k] and not mask[k]
         if tier1[k]:
             n1 += 1
-    if n1 > 0:
-        return argmax_random(vals, tier1, pst, K)
-    return argmax_random(muhat, tier2, pst, K)
+    values = vals
+    tier = tier1
+    if n1 == 0:
+        values = muhat
+        tier = tier2
+    return argmax_random(values, tier, pst, K)  # one call site: one inlined copy
 
 
 @njit(inline="always", cache=True)
@@ -149,13 +152,17 @@ def rank_pick(vals, mask, n1, muhat, r, pst, K, tier2, top):
     """rhoRand's pick: the arm of rank ``r`` (0-based) in the source's order, the ``n1`` arms
     of ``mask`` by ``vals``, then the others by ``muhat``; ties uniformly at random (rank 0
     is ``argmax_random`` itself: the single-source kernel's draws)."""
-    if r < n1:
-        if r == 0:
-            return argmax_random(vals, mask, pst, K)
-        return at_rank(vals, mask, r, pst, K, top)
-    for k in range(K):
-        tier2[k] = not mask[k]
-    return at_rank(muhat, tier2, min(r - n1, K - n1 - 1), pst, K, top)
+    if r == 0 and n1 > 0:
+        return argmax_random(vals, mask, pst, K)
+    values = vals
+    tier = mask
+    if r >= n1:
+        for k in range(K):
+            tier2[k] = not mask[k]
+        values = muhat
+        tier = tier2
+        r = min(r - n1, K - n1 - 1)
+    return at_rank(values, tier, r, pst, K, top)
 
 
 @njit(inline="always", cache=True)
@@ -163,6 +170,7 @@ def at_rank(values, tier, r, pst, K, top):
     """A uniform arm of ``tier`` whose value is the r-th largest there (0-based, counting
     repeats): that of an arm with at most r above it and more than r at or above it, found
     by branch-free counts (which the compiler vectorizes); ``nth_value`` for NaNs."""
+    v = np.nan
     for a in range(K):
         if not tier[a]:
             continue
@@ -173,8 +181,11 @@ def at_rank(values, tier, r, pst, K, top):
             gt += tier[k] & (values[k] > va)
             ge += tier[k] & (values[k] >= va)
         if gt <= r < ge:
-            return equal_at(values, tier, va, pst, K)
-    return equal_at(values, tier, nth_value(values, tier, r, top, K), pst, K)
+            v = va
+            break
+    if v != v:
+        v = nth_value(values, tier, r, top, K)
+    return equal_at(values, tier, v, pst, K)
 
 
 @njit(inline="always", cache=True)
@@ -212,17 +223,21 @@ def take_top(values, tier, need, out, top, K):
 def best_m(vals, mask, muhat, M, K, out, tier1, tier2, top):
     """``out``: the M best arms (the candidates by score, then the others by mean; ties by
     lowest index)."""
+    n1 = 0
     for k in range(K):
         out[k] = False
         tier1[k] = mask[k]
         tier2[k] = not mask[k]
-    n1 = 0
-    for k in range(K):
-        if tier1[k]:
-            n1 += 1
-    take_top(vals, tier1, min(M, n1), out, top, K)
-    if M > n1:
-        take_top(muhat, tier2, min(M - n1, K - n1), out, top, K)
+        n1 += mask[k]
+    for second in range(2):  # one call site of take_top: each inlined copy costs compile time
+        values = vals
+        tier = tier1
+        need = min(M, n1)
+        if second == 1:
+            values = muhat
+            tier = tier2
+            need = min(M - n1, K - n1)
+        take_top(values, tier, need, out, top, K)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", pipeline_class=NoAliasCompiler)  # KERNEL
@@ -392,18 +407,12 @@ def advance(
                             arm = rank_pick(vals, mask, n1, muhat, rk, pst, K, tier2, top)
                     elif rule == RULE_CENTRAL:
                         arm = free_best(vals, mask, muhat, allowed, pst, K, tier1, tier2)
-                    elif rule == RULE_CHAIRS:  # not seated yet: a uniform one of its M best
-                        best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
-                        arm = uniform_in(mbest, pst, K)
-                    else:  # MCTopM
-                        chosen = rank[r, m]
+                    else:  # MCTopM, or Musical Chairs not seated yet
+                        chosen = rank[r, m] if rule == RULE_MCTOPM else -2
                         moved = True
                         if chosen == -1:  # its first choice: the base policy's
                             chosen = argmax_random(vals, mask, pst, K)
-                        elif chosen == -2:  # it collided unseated: any of its M best
-                            best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
-                            chosen = uniform_in(mbest, pst, K)
-                        else:  # is its chosen arm still among its M best?
+                        elif chosen >= 0:  # is its chosen arm still among its M best?
                             nbetter = 0
                             if full:  # by score alone
                                 va = vals[chosen]
@@ -422,18 +431,28 @@ def advance(
                                 moved = False
                                 for k in range(K):
                                     worst[r, m, k] = pick[k]
-                            else:  # it left them: one of them not above it last time
+                            else:  # it left them
                                 seated[r, m] = False
-                                best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
-                                for k in range(K):
-                                    pick[k] = mbest[k] and worst[r, m, k]
-                                chosen = uniform_in(pick, pst, K)
-                                if chosen < 0:
-                                    chosen = uniform_in(mbest, pst, K)
-                        if moved:  # the arms not above the new choice, for its next move
+                                chosen = -3
+                        if chosen < -1:
+                            # -2: it collided unseated (or sits on no chair yet): a uniform
+                            # one of its M best; -3: it left them: one of them not above it
+                            # last time, else any (one call of each helper: each inlined
+                            # copy costs seconds of compile time)
+                            best_m(vals, mask, muhat, M, K, mbest, tier1, tier2, top)
+                            some = False
                             for k in range(K):
-                                worst[r, m, k] = not above(vals, mask, muhat, chosen, k)
-                        rank[r, m] = chosen
+                                pick[k] = mbest[k] and (chosen == -2 or worst[r, m, k])
+                                some |= pick[k]
+                            if not some:
+                                for k in range(K):
+                                    pick[k] = mbest[k]
+                            chosen = uniform_in(pick, pst, K)
+                        if rule == RULE_MCTOPM:
+                            if moved:  # the arms not above the new choice, for its next move
+                                for k in range(K):
+                                    worst[r, m, k] = not above(vals, mask, muhat, chosen, k)
+                            rank[r, m] = chosen
                         arm = chosen
                     byscore[m] = True
                 elif rule == RULE_CENTRAL and taken[forced] > 0:
