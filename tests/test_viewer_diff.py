@@ -74,6 +74,14 @@ def test_ucb_against_cucb_same_x_path_first_divergence_in_arm(record_mcap):
     assert "policy.name: ucb != cucb" in text
     assert f"first divergence at slot {slot} ({field})" in text
     assert text.splitlines()[-1] == report.verdict()
+    # the per-field table's columns line up for every field, override_threshold included
+    lines = str(report).splitlines()
+    top = lines.index("per field:") + 1
+    rows = lines[top:lines.index("final figures:")]
+    assert [r.split()[0] for r in rows[1:]] == list(report.fields)
+    assert "override_threshold" in report.fields
+    ends = {r.index(" of 3000") + 8 for r in rows[1:]}  # "N of 3000" right-aligned
+    assert ends == {rows[0].index("slots differing") + len("slots differing")}
 
 
 def test_different_seeds_differ_in_x_from_the_first_differing_state(record_mcap):

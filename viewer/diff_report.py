@@ -219,17 +219,18 @@ class DiffReport:
             )
         tol = f" (float fields within atol {self.atol:g})" if self.atol else ""
         lines.append(f"per field{tol}:")
-        lines.append(f"  {'field':<12} {'first slot':>10} {'slots differing':>18}  values there")
+        w = max([12, *map(len, self.fields)])  # override_threshold is longer than 12
+        lines.append(f"  {'field':<{w}} {'first slot':>10} {'slots differing':>18}  values there")
         for name, f in self.fields.items():
             if not f.comparable:
-                lines.append(f"  {name:<12} {'-':>10} {'not comparable':>18}  (different arms)")
+                lines.append(f"  {name:<{w}} {'-':>10} {'not comparable':>18}  (different arms)")
                 continue
             first = "-" if f.first_slot is None else str(f.first_slot)
             count = f"{f.slots_differing} of {f.compared}"
             where = "" if f.first_slot is None else f"a={_fmt(f.a_value)} b={_fmt(f.b_value)}"
             if f.source is not None and f.first_slot is not None:
                 where = f"source {f.source}: {where}"
-            lines.append(f"  {name:<12} {first:>10} {count:>18}  {where}".rstrip())
+            lines.append(f"  {name:<{w}} {first:>10} {count:>18}  {where}".rstrip())
         lines.append("final figures:")
         lines.append(f"  {'':<22} {'a':>12} {'b':>12} {'b - a':>12}")
         for name, va, vb, d in self.finals():
