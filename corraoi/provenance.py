@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import importlib.metadata
 import json
 import os
 import platform
@@ -126,6 +125,8 @@ def versions() -> dict[str, str]:
         out["git"] = commit
     out["kernel_sources"] = kernel_sources_hash()
     out["python"] = platform.python_version()
+    import importlib.metadata  # ~15 ms: only a command that writes provenance pays it
+
     for name in PACKAGES:
         try:
             out[name] = importlib.metadata.version(name)

@@ -31,16 +31,16 @@ def pytest_configure(config: pytest.Config) -> None:
     if hasattr(config, "workerinput"):
         return
     _compile_bytecode()
-    from corraoi.engine import kernel_pool, kernels
+    from corraoi.engine import kernel_cache, kernel_pool
     from corraoi.policies import builtins
 
     classes = [make_policy(name).resolve() for name in builtins()]
     notes: list[str] = []
-    previous, kernels.on_compile = kernels.on_compile, notes.append
+    previous, kernel_cache.on_compile = kernel_cache.on_compile, notes.append
     try:
         kernel_pool.prepare(classes, record=(True, False))
     finally:
-        kernels.on_compile = previous
+        kernel_cache.on_compile = previous
     if notes:
         print(f"corraoi: {notes[0]}")
 

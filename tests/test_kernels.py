@@ -88,12 +88,12 @@ def test_set_workers_rejects_zero():
 
 _RUN = """
 import sys, json
-from corraoi.engine import kernels
+from corraoi.engine import kernel_cache
 from corraoi.engine.simulation import Simulation
 from corraoi.model.instance import load_instance
 from corraoi.policies import make_policy
 notes = []
-kernels.on_compile = notes.append
+kernel_cache.on_compile = notes.append
 sim = Simulation(load_instance('I1'), make_policy(sys.argv[1]), [0, 1], 300)
 sim.advance_to(300)
 stats = sim.kernel(False).stats
@@ -179,10 +179,10 @@ def test_a_damaged_cache_entry_is_rebuilt_with_one_notice(tmp_path: Path, which:
 
 _PREPARE = """
 import sys, json
-from corraoi.engine import kernel_pool, kernels
+from corraoi.engine import kernel_cache, kernel_pool
 from corraoi.policies import make_policy
 notes = []
-kernels.on_compile = notes.append
+kernel_cache.on_compile = notes.append
 classes = [make_policy(n).resolve() for n in sys.argv[1:]]
 kernel_pool.prepare(classes, record=False)
 print(json.dumps({"notes": notes}))
@@ -231,7 +231,7 @@ def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path,
 
     monkeypatch.setattr(kernel_pool.subprocess, "Popen", Done)
     notes: list[str] = []
-    monkeypatch.setattr(kernels, "on_compile", notes.append)
+    monkeypatch.setattr(kernel_cache, "on_compile", notes.append)
     classes = [make_policy(n).resolve() for n in ("ucb", "cucb", "ts")]  # two families
     kernel_pool.prepare(classes, record=(True, False))
     assert [n.split("_")[1] for n in started] == ["sweep", "sweep", "record", "record"]

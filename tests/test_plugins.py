@@ -235,12 +235,12 @@ def test_bad_plugins_and_parameters_get_one_line(plugdir: Path, args: list[str],
 def test_composed_kernels_load_from_the_disk_cache_in_a_new_process(tmp_path: Path):
     code = (
         "import sys\n"
-        "from corraoi.engine import kernels\n"
+        "from corraoi.engine import kernel_cache\n"
         "from corraoi.engine.simulation import Simulation\n"
         "from corraoi.model.instance import load_instance\n"
         "from corraoi.policies import make_policy\n"
         "notes = []\n"
-        "kernels.on_compile = notes.append\n"
+        "kernel_cache.on_compile = notes.append\n"
         "sim = Simulation(load_instance('I1'), make_policy('cts-gauss'), [0], 10)\n"
         "sim.advance(10)\n"
         "stats = sim.kernel(True).stats\n"

@@ -35,6 +35,12 @@ from corraoi._version import __version__
 from corraoi.errors import KernelError
 
 Say = Callable[[str], None] | None
+
+#: Called with a one-line notice before a kernel is compiled (not when it loads from cache),
+#: by every user of this cache. The CLI prints it; the library stays quiet. It lives here,
+#: not in :mod:`corraoi.engine.kernels`, so that a command that runs no kernel (``info``,
+#: ``diff``) can set it without importing the engine.
+on_compile: Say = None
 #: the kernels loaded in this process, by module name (a test swaps in an empty one to be
 #: as a fresh process)
 LOADED: dict[str, Any] = {}

@@ -3,10 +3,11 @@
 A first ``corraoi sweep --policy all`` (or a first test run) needs several families' kernels,
 each compiled in seconds by one core. :func:`prepare` compiles the ones the cache lacks in
 worker processes, one kernel each and one per core at a time, with one notice and a progress
-line (through :data:`corraoi.engine.kernels.on_compile`). The caller then loads each from the cache;
-a kernel a worker could not compile is compiled in-process when it is needed, and reported
-there with its policy's name. Kernel locks (:mod:`corraoi.engine.kernel_cache`) make a kernel that
-two processes need at once compile once.
+line (through :data:`corraoi.engine.kernel_cache.on_compile`). The caller then loads each
+from the cache; a kernel a worker could not compile is compiled in-process when it is
+needed, and reported there with its policy's name. Kernel locks
+(:mod:`corraoi.engine.kernel_cache`) make a kernel that two processes need at once compile
+once.
 
 (Workers that each compile kernel after kernel, paying numba's import once per core rather
 than once per kernel, were measured: all 24 built-ins' 14 kernels from an empty cache in
@@ -67,7 +68,7 @@ def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bo
     start = time.perf_counter()
     names = sorted({name for _, name in todo.values()})
     cores = min(len(todo), os.cpu_count() or 1)
-    say = kernels.on_compile
+    say = kernel_cache.on_compile
     if say is not None:
         what = "" if len(todo) == len(names) else f", {len(todo)} kernels"
         say(f"compiling the engine for {len(names)} policy families ({', '.join(names)}{what}; "

@@ -37,10 +37,6 @@ from corraoi.policies.api import CompiledPolicy
 from . import kernel_cache
 from .block import Outputs
 
-#: Called with a one-line notice before a kernel is compiled (not when it loads from cache).
-#: The CLI prints it; the library stays quiet.
-on_compile: Callable[[str], None] | None = None
-
 _TEMPLATE = Path(__file__).with_name("_kernel.py")
 #: The kernel of many sources (issue 43): a sibling template that calls _kernel's shared
 #: functions, composed with the same hooks (its docstring says why it is not _kernel's).
@@ -198,6 +194,6 @@ def kernel_for(policy: type[CompiledPolicy], *, record: bool,
     modname, source = kernel_source(policy, record=record, sources=sources is not None)
     kernel, took = kernel_cache.kernel(modname, source, policy.name,
                                        warm=warm_args if sources is None else sources,
-                                       say=on_compile)  # fmt: skip
+                                       say=kernel_cache.on_compile)  # fmt: skip
     compile_seconds += took
     return kernel

@@ -19,10 +19,10 @@ if TYPE_CHECKING:
 def say_compiles(say: Callable[[str], None]) -> None:
     """``say(message)`` when the first use of a policy family compiles its kernel (seconds);
     Rerun's own log lines are silenced (its problems are reported as one line of ours)."""
-    from corraoi.engine import kernels
+    from corraoi.engine import kernel_cache
 
     os.environ.setdefault("RUST_LOG", "off")
-    kernels.on_compile = say
+    kernel_cache.on_compile = say
 
 
 @dataclass(frozen=True)

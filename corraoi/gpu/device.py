@@ -302,7 +302,7 @@ class EmulatedDevice(Device):
         """The emulation library for ``K`` arms (``capture``: the capture module): from the
         kernel cache when intact, else compiled once (one process compiles, the others wait
         for it)."""
-        from corraoi.engine import kernel_cache, kernels
+        from corraoi.engine import kernel_cache
 
         text = source()
         flags = (*self.FLAGS, *self._defines, f"-DKARMS={K}",
@@ -316,9 +316,9 @@ class EmulatedDevice(Device):
             if _intact(lib):
                 return lib
             if lib.exists():
-                if kernels.on_compile is not None:
-                    kernels.on_compile(f"the cached GPU-emulation library {lib.name} is damaged "
-                                       "or unverified; rebuilding it")  # fmt: skip
+                if kernel_cache.on_compile is not None:
+                    kernel_cache.on_compile(f"the cached GPU-emulation library {lib.name} is "
+                                            "damaged or unverified; rebuilding it")  # fmt: skip
             return self.compile_to(lib, flags)
 
     def compile_to(self, lib: Path, flags: tuple[str, ...]) -> Path:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
-import importlib.metadata
 import importlib.util
 import os
 import sys
@@ -450,6 +449,8 @@ def _class_text(cls: type) -> str | None:
 
 
 def module_version(modname: str) -> str:
+    import importlib.metadata  # ~15 ms: only when a plug-in's version is asked
+
     top = modname.split(".")[0]
     for dist in importlib.metadata.packages_distributions().get(top, []):
         try:
