@@ -377,6 +377,40 @@ def test_rerun_recording_holds_the_curves(tmp_path: Path, sweep: Sweep):
     assert static["/sweep/pulls/cts/3"]["SeriesLines:names"] == [["arm 3"]]
 
 
+def test_the_rules_of_several_sources_carry_their_markers_in_the_recording(
+        tmp_path: Path, sweep: Sweep):  # fmt: skip
+    # the rules of one base policy share its colour (as in the sweep figure): each rule's
+    # curves carry its marker, an AoI-aware form the rule's marker and the thinner line
+    import dataclasses
+
+    import rerun as rr
+
+    from corraoi.recorder.style import RULE_MARKERS
+    from corraoi.recorder.sweeplog.recording import RULE_SHAPES, open_sweep_recording
+
+    config, points = sweep
+    names = {"ucb": "rhorand-ucb", "cucb": "mctopm-cucb",
+             "aoi-aware-cucb": "chairs-aoi-aware-cucb", "cts": "centralized-cts"}  # fmt: skip
+    renamed = {**config, "policies": [{**e, "name": names[e["name"]]}
+                                      for e in config["policies"]]}  # fmt: skip
+    path = tmp_path / "rules.rrd"
+    with open_sweep_recording(path, renamed, flush_every=7) as sink:
+        for pt in points:
+            sink.write(dataclasses.replace(pt, policy=names[pt.policy]))
+    _, static, _ = _rrd_contents(path)
+    shape = rr.components.MarkerShape
+    want = {"rhorand-ucb": None, "mctopm-cucb": shape.Square,
+            "chairs-aoi-aware-cucb": shape.Circle, "centralized-cts": shape.Up}  # fmt: skip
+    for name, marker in want.items():
+        got = static[f"/sweep/regret/{name}"].get("SeriesPoints:markers")
+        assert got == (None if marker is None else [[marker.value]]), (name, got)
+    assert {m for m in RULE_MARKERS.values() if m} <= set(RULE_SHAPES)  # every rule has one
+    mctopm = static["/sweep/regret/mctopm-cucb"]
+    chairs = static["/sweep/regret/chairs-aoi-aware-cucb"]
+    assert mctopm["SeriesLines:colors"] == chairs["SeriesLines:colors"]  # cucb's, both
+    assert chairs["SeriesLines:widths"][0][0] < mctopm["SeriesLines:widths"][0][0]
+
+
 def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):
     import rerun as rr
 

@@ -6,7 +6,8 @@ The entities, their paths and the default layout are :mod:`corraoi.recorder.swee
 Styling (``SeriesLines``/``SeriesPoints`` colours, names, widths) is logged once as static.
 Colours, widths and markers come from :mod:`corraoi.recorder.style`: each base policy has a colour;
 its ``aoi-aware-`` variant uses the same colour with a thinner line plus a cross marker at
-every checkpoint, since Rerun 0.41 lines cannot be dashed. Units are in the view titles
+every checkpoint, since Rerun 0.41 lines cannot be dashed; a multi-source rule's curves
+carry the rule's marker (:data:`RULE_SHAPES`), as in the sweep figure. Units are in the view titles
 and series names (Rerun 0.41 has no axis titles).
 
 No global Rerun state: everything goes through the ``RecordingStream`` passed in. With
@@ -40,6 +41,7 @@ from corraoi.recorder.style import (
     is_aoi_aware,
     lighter,
     policy_color,
+    rule_marker,
 )
 from corraoi.recorder.vocab import SWEEP_FLUSH_EVERY
 from corraoi.stats import SweepPoint
@@ -62,6 +64,18 @@ from .layout import (
 WIDTH_BASE = WIDTH_MAIN
 #: Marker of the AoI-aware variants (Rerun has no dashed lines).
 AOI_AWARE_MARKER = rr.components.MarkerShape.Cross
+#: Rerun's shape of each multi-source rule's marker (``style.RULE_MARKERS``, matplotlib's
+#: codes): the rules of one base policy share its colour, their markers tell them apart; a
+#: rule's AoI-aware form keeps the rule's marker and the thinner line.
+RULE_SHAPES = {
+    "s": rr.components.MarkerShape.Square,
+    "^": rr.components.MarkerShape.Up,
+    "o": rr.components.MarkerShape.Circle,
+    "D": rr.components.MarkerShape.Diamond,
+    "v": rr.components.MarkerShape.Down,
+    "P": rr.components.MarkerShape.Plus,
+    "X": rr.components.MarkerShape.Asterisk,
+}
 AOI_AWARE_MARKER_SIZE = MARKER_AOI_AWARE
 #: Widths of the pull-share lines of the arms shown, first arm widest, the last one
 #: thinnest: where two arms' shares coincide, the thinner line lies inside the wider one
@@ -193,13 +207,14 @@ class SweepRerunSink(Sink[SweepPoint]):
         paths = [regret_path(name), estimator_path(name)]
         if self._many:  # the collisions of a sweep of several sources, policy by policy
             paths.append(collisions_path(name))
+        shape = RULE_SHAPES.get(rule_marker(name)) or (AOI_AWARE_MARKER if aware else None)
         for path in paths:
             parts: list[Any] = [line(color, width, name)]
-            if aware:
+            if shape is not None:
                 parts.append(
                     rr.SeriesPoints.columns(
                         colors=[color],
-                        markers=[AOI_AWARE_MARKER],
+                        markers=[shape],
                         marker_sizes=[AOI_AWARE_MARKER_SIZE],
                         names=[name],
                     )
