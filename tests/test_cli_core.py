@@ -132,6 +132,14 @@ def test_sweep_bad_input():
                          (("--horizon", "1e99"), "'1e99' is not a valid integer")):
         res = run("sweep", *args)
         assert res.exit_code == 2 and needle in res.output, res.output
+    # an option given empty (a shell variable that was empty) never runs the default
+    for args, needle in ((("-T", ""), "no horizon given"), (("-T", ","), "no horizon given"),
+                         (("-i", ""), "no instance given"),
+                         (("-p", "rhorand-ucb", "--sources", ""), "--sources '': no value given"),
+                         (("-p", "rhorand-ucb", "--sources", " , "), "no value given")):
+        res = run("sweep", "-n", "2", *args)
+        assert res.exit_code == 2 and needle in res.output, (args, res.output)
+        assert "Traceback" not in res.output and "total wall time" not in res.output
 
 
 def test_sweep_json_has_theory_bounds_and_ranking():

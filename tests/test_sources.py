@@ -293,6 +293,19 @@ def test_musical_chairs_refuses_a_bad_learning_phase_naming_t0(t0, says):
         make_policy("chairs-ucb", t0=t0)
 
 
+def test_a_learning_phase_past_the_horizon_learns_for_the_whole_run():
+    # t0 = 1e30 is a valid whole number: it overflowed the kernel's int64 (OverflowError);
+    # any t0 past the horizon is the horizon, a uniform channel every slot
+    inst = load_instance("I1")
+    T, M = 400, 2
+    huge = simulate_sources(inst, make_policy("chairs-ucb", t0=1e30), range(3), T, M)
+    whole = simulate_sources(inst, make_policy("chairs-ucb", t0=T), range(3), T, M)
+    assert np.array_equal(huge.regret, whole.regret) and np.array_equal(huge.pulls, whole.pulls)
+    blk = SourcesBlock.concat(list(simulate_run_sources(
+        inst, make_policy("chairs-ucb", t0=1e30), 0, T, M, block=T)))  # fmt: skip
+    assert all(not s.forced.any() and len(set(s.arm.tolist())) == inst.K for s in blk.sources)
+
+
 def test_no_two_mctopm_sources_keep_one_channel_as_their_seat():
     """The AoI-aware override puts off UCB's first pulls past the first seats; a forced pull
     then moved a seated source without unseating it, and two sources seated on one channel

@@ -145,6 +145,9 @@ def sweep(
     if kept_code and (not resume or out is None):
         raise ConfigError("--kept-code: only with --resume -o DIR (the sweep whose copies "
                           "of its plug-ins run)")  # fmt: skip
+    if instance and not split_list(instance):  # -i '' (an empty shell variable)
+        raise click.BadParameter("no instance given (expected a built-in, a file path or a "
+                                 "comma list)", param_hint="'--instance' / '-i'")  # fmt: skip
     options = {
         "instances": split_list(instance) or None,
         "policies": list(policy) or None,
@@ -195,6 +198,9 @@ def _horizons(values: tuple[str, ...]) -> list[int]:
             raise click.BadParameter(f"{h} is not in the range 1<=x<={limits.MAX_HORIZON}",
                                      param_hint="'--horizon' / '-T'")  # fmt: skip
         out.append(h)
+    if values and not out:  # -T '' (an empty shell variable): never the default horizon
+        raise click.BadParameter("no horizon given (expected slots, or a comma list)",
+                                 param_hint="'--horizon' / '-T'")  # fmt: skip
     return out
 
 

@@ -169,7 +169,9 @@ class SourcesSimulation:
         if pb.compiled:
             self.rule = RULES[rule]
             declared = list(pb.cls.params)
-            self.learn = (int(pb.params[declared.index(CHAIRS_LEARN)])
+            # t0 past the horizon learns for the whole run: it is the horizon to the kernel
+            # (whose int64 a t0 of 1e30 overflowed)
+            self.learn = (int(min(pb.params[declared.index(CHAIRS_LEARN)], self.horizon))
                           if rule == "chairs" and CHAIRS_LEARN in declared else 0)  # fmt: skip
             self.ncache = np.zeros((R, M, 2))
             self.pstate = np.zeros((R, M, max(pb.state_size, 1)))

@@ -345,6 +345,7 @@ def check_sources_list(values: Sequence[Any] | None) -> list[int]:
 def parse_sources(words: Iterable[str]) -> list[int] | None:
     """``--sources M[,M...]`` words as integers (None: none given), else a ConfigError naming
     the word."""
+    words = list(words)
     out: list[int] = []
     for word in split_list(words):
         try:
@@ -352,6 +353,9 @@ def parse_sources(words: Iterable[str]) -> list[int] | None:
         except ValueError:
             raise ConfigError(f"--sources {word!r}: expected an integer from 1 to the number "
                               "of arms (a comma list sweeps each)") from None  # fmt: skip
+    if words and not out:  # --sources '' (an empty shell variable): never the default
+        raise ConfigError(f"--sources {','.join(words)!r}: no value given (expected an "
+                          "integer from 1 to the number of arms; a comma list sweeps each)")
     return out or None
 
 
