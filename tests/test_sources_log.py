@@ -225,6 +225,24 @@ def test_compare_and_replay_of_a_multi_source_log(recorded, tmp_path):
     assert played.slots == 1200 and (tmp_path / "a.rrd").stat().st_size > 0
 
 
+def test_compare_of_a_run_of_several_sources_beside_a_run_of_one(recorded, tmp_path):
+    # their summaries have different figures (regret per source, collisions; the paper's
+    # estimator): every figure is a row, "-" for a run without it (an IndexError before)
+    a, _ = recorded
+    one = corraoi.record("ucb", "I1", seed=1, horizon=1200, path=tmp_path / "one.mcap",
+                         rrd=False)  # fmt: skip
+    res = CliRunner().invoke(main, ["compare", str(a.path), str(one.path), "-o",
+                                    str(tmp_path / "mixed.rrd")])  # fmt: skip
+    assert res.exit_code == 0 and "Traceback" not in res.output, res.output
+    rows = {line[:25].strip(): line[25:].split() for line in res.output.splitlines()
+            if line[:25].strip()}  # fmt: skip
+    assert rows["regret per source"] == [*map(str, a.summary.regret_by_source), "-"]
+    assert rows["collisions"][-1] == "-" and rows["collisions"][0] == str(a.summary.collisions)
+    assert rows["paper's estimator"][0] == "-"
+    assert rows["paper's estimator"][1] == f"{one.summary.estimator:.6g}"
+    assert (tmp_path / "mixed.rrd").stat().st_size > 0
+
+
 def test_the_recording_of_several_sources_draws_each_source_and_the_collisions(recorded, tmp_path):
     a, _ = recorded
     ref = sources_run(load_instance("I1"), 1, 1200, 3)

@@ -304,19 +304,24 @@ def compare(
 
 
 def _rows(runs: Sequence[ComparedRun]) -> tuple[list[str], list[list[str]]]:
-    names = ["policy", "instance", "seed", "slots"]
-    cells: list[list[str]] = []
+    """The row names and each run's column. Runs of one source and of several have
+    different figures (regret per source, collisions): every figure any run has is a row,
+    "-" in the columns of the runs without it."""
+    head = ["policy", "instance", "seed", "slots"]
+    names = list(head)
+    columns: list[dict[str, str]] = []
     for r in runs:
         s = r.summary
         assert s is not None
         status = "" if not r.log.cut_short else f" of {r.config.horizon} (cut short)"
-        col = [r.config.policy.name, r.config.instance_name, str(r.config.seed),
-               f"{s.slots}{status}"]  # fmt: skip
-        rows = summary_rows(s)
-        col += [v for _, v in rows]
-        cells.append(col)
-    names += [k for k, _ in summary_rows(runs[0].summary)] if runs[0].summary else []
-    return names, cells
+        col = dict(zip(head, [r.config.policy.name, r.config.instance_name,
+                               str(r.config.seed), f"{s.slots}{status}"], strict=True))  # fmt: skip
+        for name, value in summary_rows(s):
+            col[name] = value
+            if name not in names:
+                names.append(name)
+        columns.append(col)
+    return names, [[col.get(name, "-") for name in names] for col in columns]
 
 
 def summary_table(runs: Sequence[ComparedRun]) -> str:
