@@ -18,19 +18,24 @@ _PROBE = f"""
 import json, sys
 from corraoi.cli import main
 try:
-    main(sys.argv[1:])
+    main(sys.argv[2:])
 except SystemExit as exc:
     code = exc.code
 else:
     code = 0
-heavy = sorted(m for m in {HEAVY!r} if m in sys.modules)
+also = tuple(filter(None, sys.argv[1].split(",")))
+heavy = sorted(m for m in {HEAVY!r} + also if m in sys.modules)
 print("\\nIMPORTS " + json.dumps({{"code": code, "heavy": heavy}}))
 """
+#: not heavy, but a command that runs no kernel has no use for them (15-25 ms each)
+ENGINE = ("corraoi.engine.kernels", "importlib.metadata")
 
 
-def _heavy(args: list[str], cwd: Path) -> list[str]:
-    proc = subprocess.run([sys.executable, "-c", _PROBE, *args], cwd=cwd, capture_output=True,
-                          text=True, env=dict(os.environ), timeout=300)  # fmt: skip
+def _heavy(args: list[str], cwd: Path, also: tuple[str, ...] = ()) -> list[str]:
+    """The modules of HEAVY (and ``also``) that ``corraoi ARGS`` left imported."""
+    proc = subprocess.run([sys.executable, "-c", _PROBE, ",".join(also), *args], cwd=cwd,
+                          capture_output=True, text=True, env=dict(os.environ),
+                          timeout=300)  # fmt: skip
     line = [x for x in proc.stdout.splitlines() if x.startswith("IMPORTS ")]
     assert line, proc.stdout + proc.stderr
     out = json.loads(line[-1][len("IMPORTS ") :])
@@ -62,6 +67,12 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> Path:
 )
 def test_light_commands_import_nothing_heavy(logs: Path, args: list[str]):
     assert _heavy(args, logs) == []
+
+
+@pytest.mark.parametrize("args", [["info", "cucb.mcap"], ["diff", "ucb.mcap", "cucb.mcap"]],
+                         ids=lambda a: a[0])  # fmt: skip
+def test_reading_a_log_imports_neither_the_kernels_nor_package_metadata(logs: Path, args):
+    assert _heavy(args, logs, ENGINE) == []
 
 
 def test_info_of_a_sweep_folder_imports_nothing_heavy(logs: Path):

@@ -41,6 +41,7 @@ Say = Callable[[str], None] | None
 #: not in :mod:`corraoi.engine.kernels`, so that a command that runs no kernel (``info``,
 #: ``diff``) can set it without importing the engine.
 on_compile: Say = None
+
 #: the kernels loaded in this process, by module name (a test swaps in an empty one to be
 #: as a fresh process)
 LOADED: dict[str, Any] = {}
