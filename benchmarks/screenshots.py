@@ -11,9 +11,10 @@ Makes (each from a fresh recording, seeds fixed):
   (its "why this arm" view; beyond 64 arms the score is off by default);
 * ``compare-screenshot.png``: ``compare`` of ucb, ts and cts-gauss on I1, seed 2, 1,500 slots;
 * ``sweep.png``: the sweep recording of ``sweep -i I1 -p ucb,cucb,cts -n 100 -T 10000``;
-* asked by name only (``--only sources-m3-k4``; not in the defaults until the engine of
-  several sources lands, issue 43): ``sources-mM-kK.png``, ``record -p rhorand-ucb
-  --sources M`` on I1 (K = 4) or the random instance of K arms, 10,000 slots.
+* asked by name only (``--only sources-m3-k4,sweep-sources``; the docs show none of them):
+  ``sources-mM-kK.png``, ``record -p rhorand-ucb --sources M`` on I1 (K = 4) or the random
+  instance of K arms, 10,000 slots; ``sweep-sources.png``, the sweep recording of the four
+  rules of UCB with 2 sources (one colour, a marker per rule), 50 runs x 10,000 slots.
 
 Needs Debian's ``chromium``; the browser and the viewers run on 127.0.0.1 and are stopped
 at the end. Run from the checkout: it imports ``tests/browser.py``.
@@ -82,6 +83,11 @@ def recording(name: str, work: Path) -> Path:
             logs.append(f"{policy}.mcap")
         corraoi("compare", *logs, "-o", "compare.rrd", "--force", cwd=work)
         return work / "compare.rrd"
+    if name == "sweep-sources":
+        corraoi("sweep", "-i", "I1", "-p", "rhorand-ucb,mctopm-ucb,chairs-ucb,centralized-ucb",
+                "--sources", "2", "-n", "50", "-T", "10000", "-o", "sources-sweep", "--force",
+                cwd=work)  # fmt: skip
+        return work / "sources-sweep" / "sweep.rrd"
     corraoi("sweep", "-i", "I1", "-p", "ucb,cucb,cts", "-n", "100", "-T", "10000",
             "-o", "I1-sweep", "--force", cwd=work)  # fmt: skip
     return work / "I1-sweep" / "sweep.rrd"

@@ -35,10 +35,13 @@ def pytest_configure(config: pytest.Config) -> None:
     from corraoi.policies import builtins
 
     classes = [make_policy(name).resolve() for name in builtins()]
+    # the kernels of many sources of the built-in families (rhorand-ucb's serves every rule
+    # of ucb, cucb and their AoI-aware forms; rhorand-ts's those of ts and cts)
+    many = [make_policy(name).resolve() for name in ("rhorand-ucb", "rhorand-ts")]
     notes: list[str] = []
     previous, kernel_cache.on_compile = kernel_cache.on_compile, notes.append
     try:
-        kernel_pool.prepare(classes, record=(True, False))
+        kernel_pool.prepare(classes, record=(True, False), many=many)
     finally:
         kernel_cache.on_compile = previous
     if notes:

@@ -239,6 +239,34 @@ def test_prepare_puts_both_kinds_in_one_pool_sweep_kernels_first(tmp_path: Path,
     assert [n.split()[0] for n in notes[1:]] == ["1/4", "2/4", "3/4", "4/4"]
 
 
+def test_prepare_queues_the_kernels_of_many_sources_first_in_the_same_pool(
+        tmp_path: Path, monkeypatch):  # fmt: skip
+    """A sweep or a record of several sources compiles the kernel of many sources of each
+    family in the pool as well (two families at once), each kind's first (they compile two
+    to four times longer), each worker told which kernel's arguments warm it."""
+    from corraoi.engine import kernel_cache, kernel_pool
+
+    monkeypatch.setenv("CORRAOI_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(kernel_cache, "LOADED", {})
+    started: list[tuple[str, str]] = []
+
+    class Done:
+        def __init__(self, argv: list[str], **_: object) -> None:
+            kind = argv[4].removeprefix("corraoi_").rsplit("_", 1)[0]  # sources_sweep, ...
+            started.append((kind, argv[6]))  # and the worker's "one" or "many"
+
+        def poll(self) -> int:
+            return 0
+
+    monkeypatch.setattr(kernel_pool.subprocess, "Popen", Done)
+    one = [make_policy("ucb").resolve()]
+    many = [make_policy(n).resolve() for n in ("rhorand-ucb", "mctopm-cucb", "rhorand-ts")]
+    kernel_pool.prepare(one, record=(True, False), many=many)  # mctopm-cucb: ucb's family
+    assert started == [("sources_sweep", "many"), ("sources_sweep", "many"), ("sweep", "one"),
+                       ("sources_record", "many"), ("sources_record", "many"),
+                       ("record", "one")]  # fmt: skip
+
+
 @njit
 def _plain_hook(t, K, npull, nsucc, params, ps, pst):
     return -1

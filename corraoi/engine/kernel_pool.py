@@ -31,42 +31,51 @@ from corraoi.policies.loading import PLUGIN_MODULE_PREFIX
 
 from . import kernel_cache, kernels
 
-# A worker: compile one generated kernel module into the shared cache. A failure is left to
-# the parent (module docstring).
+# A worker: compile one generated kernel module into the shared cache, warmed with the
+# arguments of the single-source kernel ("one") or of the kernel of many sources ("many").
+# A failure is left to the parent (module docstring).
 _WORKER = (
     "import sys\n"
     "from pathlib import Path\n"
     "from corraoi.engine import kernel_cache, kernels\n"
+    "if sys.argv[4] == 'many':\n"
+    "    from corraoi.engine.sources import warm_args as warm\n"
+    "else:\n"
+    "    warm = kernels.warm_args\n"
     "kernel_cache.load(Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), sys.argv[2],\n"
-    "                  warm=kernels.warm_args)\n"
+    "                  warm=warm)\n"
 )
 
 
-def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bool, ...]) -> None:
+def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bool, ...],
+            many: Iterable[type[CompiledPolicy]] = ()) -> None:  # fmt: skip
     """Compile the kernels ``policies`` need that are not cached yet, concurrently (module
     docstring). Families whose hooks a fresh process cannot import (a plug-in loaded from a
     file) compile in-process later, as before. ``record``: the record kernels (True), the
     sweep kernels (False) or both (``(True, False)``: one pool, the sweep kernels first as
-    they take longest, so that no core waits for the other at the end)."""
+    they take longest, so that no core waits for the other at the end). ``many``: policies
+    whose kernel of many sources (:mod:`corraoi.engine._sources_kernel`) is wanted, in the
+    same pool (each kind's first: they compile two to four times longer)."""
     kinds = sorted({record} if isinstance(record, bool) else set(record))  # False first
     folder = kernel_cache.folder()
-    todo: dict[str, tuple[Path, str]] = {}
-    policies = list(policies)
+    todo: dict[str, tuple[Path, str, bool]] = {}
+    wanted = [(p, True) for p in many] + [(p, False) for p in policies]
     for kind in kinds:
-        for policy in policies:
+        for policy, sources in wanted:
             try:
-                modname, source = kernels.kernel_source(policy, record=kind)
+                modname, source = kernels.kernel_source(policy, record=kind, sources=sources)
             except KernelError:
                 continue  # reported by kernel_for with the policy's name
             if modname in todo or kernel_cache.ready(folder, modname):
                 continue
             if not all(_importable(ref) for ref in kernels.hooks_of(policy)):
                 continue
-            todo[modname] = (kernel_cache.write_source(folder, modname, source), policy.name)
+            path = kernel_cache.write_source(folder, modname, source)
+            todo[modname] = (path, policy.name, sources)
     if len(todo) < 2:
         return  # one kernel compiles as fast in this process
     start = time.perf_counter()
-    names = sorted({name for _, name in todo.values()})
+    names = sorted({name for _, name, _ in todo.values()})
     cores = min(len(todo), os.cpu_count() or 1)
     say = kernel_cache.on_compile
     if say is not None:
@@ -79,10 +88,11 @@ def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bo
     try:
         while pending or running:
             while pending and len(running) < cores:
-                modname, (path, _) = pending.pop(0)
+                modname, (path, _, sources) = pending.pop(0)
                 running.append(
                     subprocess.Popen(
-                        [sys.executable, "-c", _WORKER, str(folder), modname, str(path)],
+                        [sys.executable, "-c", _WORKER, str(folder), modname, str(path),
+                         "many" if sources else "one"],
                         stdout=subprocess.DEVNULL,
                         stderr=subprocess.DEVNULL,
                     )

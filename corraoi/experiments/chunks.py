@@ -166,15 +166,15 @@ def _run_sources_chunk(task: dict[str, Any], cfg: Any, channel: Any, stops: Sequ
 
 
 def prepare_kernels(cells: Sequence[Cell]) -> None:
-    """Compile the sweep kernels the cells need and the cache lacks, concurrently."""
+    """Compile the sweep kernels the cells need and the cache lacks, concurrently: the
+    single-source kernel of a cell of one source, the kernel of many sources of the others."""
     from corraoi.engine.kernel_pool import prepare
     from corraoi.policies.api import CompiledPolicy
 
-    classes = {}
+    one: dict[str, type[CompiledPolicy]] = {}
+    many: dict[str, type[CompiledPolicy]] = {}
     for cell in cells:
         cls = cell.policy.resolve()
-        if cell.many:  # the kernel of many sources compiles as its first chunk starts
-            continue
         if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            classes[cls.name] = cls
-    prepare(classes.values(), record=False)
+            (many if cell.many else one)[cls.name] = cls
+    prepare(one.values(), record=False, many=many.values())

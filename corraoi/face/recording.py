@@ -373,18 +373,20 @@ class Recorded:
 
 def prepare_kernels(plans: Sequence[Plan]) -> None:
     """Several policy families to record for the first time: compile their record kernels
-    at once, one worker process per core, before the first run starts."""
+    at once, one worker process per core, before the first run starts (a run of several
+    sources: the record kernel of many sources)."""
     from corraoi.engine import kernel_pool
     from corraoi.policies.api import CompiledPolicy
 
-    classes = {}
+    one: dict[str, type[CompiledPolicy]] = {}
+    many: dict[str, type[CompiledPolicy]] = {}
     for plan in plans:
         if plan.config.streams != "cpu":  # a GPU sweep's run: the GPU kernel decides it
             continue
         cls = plan.config.policy.resolve()
         if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            classes[cls.name] = cls
-    kernel_pool.prepare(classes.values(), record=True)
+            (many if plan.config.sources > 1 else one)[cls.name] = cls
+    kernel_pool.prepare(one.values(), record=True, many=many.values())
 
 
 def record_plans(
