@@ -95,6 +95,9 @@ MARKER_STATE = 3.0
 MARKER_CANDIDATE = 3.0
 MARKER_TRUE_MEAN = 3.0
 MARKER_AOI_AWARE = 2.5
+#: a multi-source rule's marker in Rerun (RULE_MARKERS): large enough that a square, a
+#: circle and a triangle are told apart on a curve
+MARKER_RULE = 4.0
 #: matplotlib dash pattern of the AoI-aware variants in figures.
 DASH_AOI_AWARE: tuple[int, tuple[float, float]] = (0, (5, 2.5))
 

@@ -385,7 +385,7 @@ def test_the_rules_of_several_sources_carry_their_markers_in_the_recording(
 
     import rerun as rr
 
-    from corraoi.recorder.style import RULE_MARKERS
+    from corraoi.recorder.style import MARKER_RULE, RULE_MARKERS
     from corraoi.recorder.sweeplog.recording import RULE_SHAPES, open_sweep_recording
 
     config, points = sweep
@@ -409,6 +409,8 @@ def test_the_rules_of_several_sources_carry_their_markers_in_the_recording(
     chairs = static["/sweep/regret/chairs-aoi-aware-cucb"]
     assert mctopm["SeriesLines:colors"] == chairs["SeriesLines:colors"]  # cucb's, both
     assert chairs["SeriesLines:widths"][0][0] < mctopm["SeriesLines:widths"][0][0]
+    # large enough to tell a square from a circle: larger than the AoI-aware cross
+    assert mctopm["SeriesPoints:marker_sizes"] == [[MARKER_RULE]] and MARKER_RULE > 2.5
 
 
 def test_rerun_sink_on_a_caller_recording_and_single_run(tmp_path: Path):

@@ -531,6 +531,25 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
     assert widths[0] - widths[-1] >= 3  # a thin line inside a wide one where shares meet
 
 
+def test_the_sweep_overlay_leaves_out_every_notable_run_of_several_sources():
+    # a cell of several sources marks its run of most collisions too: one storm of 2,300
+    # flattened the means in the overlay, drawn there as the worst run was before
+    from corraoi.recorder.sweeplog.layout import NOTABLE_KINDS, regret_path, sweep_blueprint
+
+    names = ["rhorand-ucb(M=2)", "chairs-ucb(M=2)"]
+    config = {"instance": {"Y": [[1, 0], [0, 1], [1, 1]], "p": [0.5, 0.5]},
+              "policies": [{"name": n} for n in names], "runs": 5, "horizon": 100,
+              "sources": [2], "notable": {"cells": {n: {} for n in names}}}  # fmt: skip
+    found = views(sweep_blueprint(config))
+    overlay = next(v for v in found if str(v.name).startswith("AoI regret"))
+    assert "most-collisions" in NOTABLE_KINDS
+    for n in names:
+        for kind in NOTABLE_KINDS:
+            assert f"- {regret_path(n)}/{kind}" in overlay.contents, (n, kind)
+    watch = [str(v.name) for v in found if str(v.name).endswith("most collisions")]
+    assert watch == [f"{n}: mean, worst, median, best run, most collisions" for n in names]
+
+
 def test_a_sweep_of_many_arms_draws_bars_and_the_arms_that_matter(tmp_path):
     from corraoi.recorder.sweeplog.layout import shown_arms, sweep_blueprint
     from corraoi.recorder.sweeplog.recording import SweepRerunSink

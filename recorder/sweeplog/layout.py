@@ -44,8 +44,9 @@ ROOT = "sweep"
 #: More policies than this: the regret view opens as small multiples (base policies beside
 #: their AoI-aware forms), each legend short enough to fit.
 SMALL_MULTIPLES_FROM = 6
-#: The named runs of a cell drawn over its mean (corraoi.experiments.notable).
-NOTABLE_KINDS = ("worst", "median", "best")
+#: The named runs of a cell drawn over its mean (corraoi.experiments.notable): a cell of
+#: several sources has its run of most collisions too.
+NOTABLE_KINDS = ("worst", "median", "best", "most-collisions")
 
 
 def entity_part(name: str) -> str:
@@ -171,7 +172,9 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
                               name="collisions (mean over runs, summed over the sources)")]
           if config.get("sources") else []),
         *([rrb.Grid(*(rrb.TimeSeriesView(origin=regret_path(p), axis_x=axis, plot_legend=legend,
-                                         name=f"{p}: mean, worst, median, best run")
+                                         name=f"{p}: mean, worst, median, best run"
+                                         + (", most collisions" if config.get("sources")
+                                            else ""))
                       for p in notable), name="runs worth watching")] if notable else []),
         active_tab=0,
     )  # fmt: skip

@@ -32,6 +32,7 @@ from corraoi.recorder.rerun.output import check_rrd, finish_recording, first_lin
 from corraoi.recorder.sink import Sink
 from corraoi.recorder.style import (
     MARKER_AOI_AWARE,
+    MARKER_RULE,
     WIDTH_AOI_AWARE,
     WIDTH_BAND,
     WIDTH_MAIN,
@@ -207,7 +208,9 @@ class SweepRerunSink(Sink[SweepPoint]):
         paths = [regret_path(name), estimator_path(name)]
         if self._many:  # the collisions of a sweep of several sources, policy by policy
             paths.append(collisions_path(name))
-        shape = RULE_SHAPES.get(rule_marker(name)) or (AOI_AWARE_MARKER if aware else None)
+        shape, size = RULE_SHAPES.get(rule_marker(name)), MARKER_RULE
+        if shape is None and aware:
+            shape, size = AOI_AWARE_MARKER, AOI_AWARE_MARKER_SIZE
         for path in paths:
             parts: list[Any] = [line(color, width, name)]
             if shape is not None:
@@ -215,7 +218,7 @@ class SweepRerunSink(Sink[SweepPoint]):
                     rr.SeriesPoints.columns(
                         colors=[color],
                         markers=[shape],
-                        marker_sizes=[AOI_AWARE_MARKER_SIZE],
+                        marker_sizes=[size],
                         names=[name],
                     )
                 )
