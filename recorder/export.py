@@ -64,6 +64,8 @@ def export(
     if is_sweep_path(src):
         sweep = SweepData(src)
         table = read_results_table(sweep.results_path)
+        if fmt == "csv":  # CSV has no lists: regret_by_source is regret_by_source_1 .. _M
+            table = _lists_as_columns(table)
         rows = _write(target, fmt, table.schema, table.to_batches())
         return Exported(out_p, "runs", rows, fmt)
     run = RunData(src)
@@ -93,6 +95,30 @@ def _write(
         finally:
             writer.close()
     return rows
+
+
+def _lists_as_columns(table: pa.Table) -> pa.Table:
+    """``table`` with each list column (a sweep of several sources' ``regret_by_source``)
+    as one column per position, ``<name>_1 .. <name>_M`` (numbered from 1, as ``mu_hat_1``
+    is; M the longest list; empty where a row's list is shorter: a cell of fewer sources)."""
+    import numpy as np
+    import pyarrow as pa
+
+    for i, field in reversed(list(enumerate(table.schema))):
+        if not pa.types.is_list(field.type):
+            continue
+        col = table.column(i).combine_chunks()
+        starts = col.offsets.to_numpy()[:-1]
+        lengths = col.value_lengths().fill_null(0).to_numpy(zero_copy_only=False)
+        values = col.values.to_numpy(zero_copy_only=False)  # offsets index it as they are
+        table = table.remove_column(i)
+        for m in range(int(lengths.max(initial=0))):
+            held = lengths > m
+            out = np.zeros(len(col), dtype=values.dtype)
+            out[held] = values[starts[held] + m]
+            named = pa.field(f"{field.name}_{m + 1}", field.type.value_type)
+            table = table.add_column(i + m, named, pa.array(out, mask=~held))
+    return table
 
 
 def _nonempty(batches: Iterable[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:

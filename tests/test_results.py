@@ -168,6 +168,28 @@ def test_export_round_trips_sweep_results(ext: str, tmp_path: Path, swept):
     pd.testing.assert_frame_equal(back, want)
 
 
+def test_csv_export_of_a_sweep_of_several_sources_spreads_each_sources_regret(tmp_path: Path):
+    # results.parquet holds regret_by_source as a list, which CSV cannot (a pyarrow
+    # traceback): one column per source, empty in the rows of a cell of fewer sources
+    out = tmp_path / "many"
+    res = run("sweep", "-p", "rhorand-ucb", "--sources", "1,2", "-n", "4", "-T", "200",
+              "--checkpoints", "5", "-o", str(out))  # fmt: skip
+    assert res.exit_code == 0, res.output
+    res = run("export", str(out), "-o", str(tmp_path / "runs.csv"))
+    assert res.exit_code == 0 and "Traceback" not in res.output, res.output
+    back = pd.read_csv(tmp_path / "runs.csv")
+    want = read_results(out / "results.parquet")
+    lists = want.pop("regret_by_source")
+    assert list(back.columns) == [*want.columns, "regret_by_source_1", "regret_by_source_2"]
+    for m in (0, 1):
+        got = back[f"regret_by_source_{m + 1}"].to_numpy()
+        assert np.array_equal(got, [v[m] if len(v) > m else np.nan for v in lists],
+                              equal_nan=True)  # fmt: skip
+    assert set(back.loc[back["sources"] == 1, "regret_by_source_2"].isna()) == {True}
+    assert not back.loc[back["sources"] == 2, "regret_by_source_2"].isna().any()
+    assert np.array_equal(back["regret"], want["regret"])
+
+
 def test_export_refusals_are_one_line(tmp_path: Path, record_mcap: Callable[..., Recorded]):
     path, _, _ = record_mcap("ucb", horizon=1000)
     res = run("export", str(path), "-o", str(tmp_path / "x.xlsx"))
