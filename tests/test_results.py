@@ -168,13 +168,32 @@ def test_export_round_trips_sweep_results(ext: str, tmp_path: Path, swept):
     pd.testing.assert_frame_equal(back, want)
 
 
-def test_csv_export_of_a_sweep_of_several_sources_spreads_each_sources_regret(tmp_path: Path):
-    # results.parquet holds regret_by_source as a list, which CSV cannot (a pyarrow
-    # traceback): one column per source, empty in the rows of a cell of fewer sources
-    out = tmp_path / "many"
+@pytest.fixture(scope="module")
+def swept_many(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A sweep folder of rhorand-ucb with one and with two sources."""
+    out = tmp_path_factory.mktemp("many") / "I1"
     res = run("sweep", "-p", "rhorand-ucb", "--sources", "1,2", "-n", "4", "-T", "200",
               "--checkpoints", "5", "-o", str(out))  # fmt: skip
     assert res.exit_code == 0, res.output
+    return out
+
+
+def test_info_of_a_sweep_of_several_sources_lines_up_its_runs_worth_watching(swept_many):
+    # "most-collisions" is longer than the kind column was (7): its rows were pushed right
+    res = run("info", str(swept_many))
+    assert res.exit_code == 0, res.output
+    named = ("worst", "best", "median", "most-collisions")
+    rows = [line for line in res.output.splitlines()
+            if len(line.split()) > 1 and line.split()[1] in named]  # fmt: skip
+    assert {line.split()[1] for line in rows} == set(named)
+    assert len({line.index(" run ") for line in rows}) == 1  # one column for the regrets
+
+
+def test_csv_export_of_a_sweep_of_several_sources_spreads_each_sources_regret(
+        tmp_path: Path, swept_many: Path):  # fmt: skip
+    # results.parquet holds regret_by_source as a list, which CSV cannot (a pyarrow
+    # traceback): one column per source, empty in the rows of a cell of fewer sources
+    out = swept_many
     res = run("export", str(out), "-o", str(tmp_path / "runs.csv"))
     assert res.exit_code == 0 and "Traceback" not in res.output, res.output
     back = pd.read_csv(tmp_path / "runs.csv")

@@ -272,9 +272,13 @@ def sweep_info_text(info: dict[str, Any]) -> str:
         if info["backend"] == "gpu":
             lines.append("    (a GPU sweep: its runs cannot be recorded again on the CPU)")
         lines.append("    runs worth watching (final regret), and the command that records each:")
-        for label, runs in notable["cells"].items():
+        cells = notable["cells"].items()
+        # columns as wide as their longest entry (most-collisions, a long plug-in's label)
+        wl = max([20, *(len(safe_text(label)) for label, _ in cells)])
+        wk = max([7, *(len(k) for _, runs in cells for k in runs)])
+        for label, runs in cells:
             for k, v in runs.items():
-                lines.append(f"    {safe_text(label):<20} {k:<7} {v['regret']:>9g}  run "
+                lines.append(f"    {safe_text(label):<{wl}} {k:<{wk}} {v['regret']:>9g}  run "
                              f"{v['run']:<6} {safe_text(v['command'])}")  # fmt: skip
         for gap in notable["pairs"]:
             a, b = (safe_text(n) for n in gap["policies"])
