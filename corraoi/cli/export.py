@@ -22,7 +22,8 @@ def export(log: Path, out: Path, force: bool) -> None:
 
     LOG is a slot log (runs/cucb-I1-s0.mcap), a sweep folder written by `corraoi sweep -o
     DIR`, or its sweep.mcap. The columns are those of corraoi.load (docs/analysis.md);
-    arms and states are numbered from 1. Needs the analysis extra
+    arms and states are numbered from 1. CSV has no lists: a sweep of several sources'
+    regret_by_source becomes regret_by_source_1 .. _M there. Needs the analysis extra
     (pip install "corraoi[analysis]").
 
     \b
