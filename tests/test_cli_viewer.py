@@ -186,6 +186,9 @@ def test_info_of_a_finished_and_of_a_cut_short_log(tmp_path, record_mcap):
     assert data["summary"]["pulls"] == [int(v) for v in ref.pulls[-1]]
     text = run("info", path).stdout
     assert "complete: 3000 of 3000 slots" in text and "aoi-aware-ucb" in text
+    assert f"3000 (in {data['chunks']} chunks)" in text and data["chunks"] > 1
+    one, _, _ = record_mcap("ucb", seed=6, horizon=300)  # one chunk: not "1 chunks"
+    assert "300 (in 1 chunk)\n" in run("info", one).stdout
 
     data = bytearray(path.read_bytes())
     cut = tmp_path / "cut.mcap"

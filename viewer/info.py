@@ -100,7 +100,8 @@ def info_text(info: dict[str, Any]) -> str:
         *([f"  {'sources':<22} {cfg['sources']} sharing the channels"]
           if cfg.get("sources", 1) > 1 else []),
         f"  {'horizon':<22} {horizon_text(cfg['horizon'])}",
-        f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} chunks)",
+        f"  {'slots recorded':<22} {info['slots']} (in {info['chunks']} "
+        f"chunk{'' if info['chunks'] == 1 else 's'})",
         *([f"  {'fields absent':<22} {', '.join(info['absent'])}"] if info.get("absent") else []),
         f"  {'corraoi version':<22} {cfg['version']}",
     ]
