@@ -153,10 +153,9 @@ def against(rev: str, runs: int, horizon: int, repeat: int, instance: str = "I1"
     best = {s: {n: [min(v[0] for v in t[n]), min(v[1] for v in t[n])] for n in names}
             for s, t in times.items()}  # fmt: skip
     print(f"\nthe engine at {rev} (before) and this checkout (after): {instance}, {runs} runs, "
-          f"horizon "
-          f"{horizon}, fresh processes alternated, best of {repeat} each (each the best of 3 "
-          "advances in its process); wall and CPU seconds (CPU: every thread's, which a "
-          "loaded machine disturbs less)")  # fmt: skip
+          f"horizon {horizon}, fresh processes alternated, best of {repeat} each (each the "
+          "best of 3 advances in its process); wall and CPU seconds (CPU: every thread's, "
+          "which a loaded machine disturbs less)")  # fmt: skip
     print(f"{'policy':22s} {'wall before':>11} {'after':>7} {'ratio':>6} {'CPU before':>11} "
           f"{'after':>7} {'ratio':>6}")  # fmt: skip
     rows = [(n, best["before"][n], best["after"][n]) for n in names if n != COMPILED]

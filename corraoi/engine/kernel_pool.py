@@ -111,6 +111,18 @@ def prepare(policies: Iterable[type[CompiledPolicy]], *, record: bool | tuple[bo
     kernels.compile_seconds += time.perf_counter() - start
 
 
+def prepare_for(wanted: Iterable[tuple[Any, bool]], *, record: bool) -> None:
+    """:func:`prepare` for ``(resolved policy class, of many sources)`` pairs, as a sweep's
+    cells or a record's plans give them: the compiled ones, each family once (a plain-Python
+    policy has no kernel)."""
+    one: dict[str, type[CompiledPolicy]] = {}
+    many: dict[str, type[CompiledPolicy]] = {}
+    for cls, sources in wanted:
+        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
+            (many if sources else one)[cls.name] = cls
+    prepare(one.values(), record=record, many=many.values())
+
+
 def _importable(ref: Any) -> bool:
     """Whether a fresh process can import the hook ``ref`` by its module's name."""
     if isinstance(ref, str):

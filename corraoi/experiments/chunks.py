@@ -168,13 +168,6 @@ def _run_sources_chunk(task: dict[str, Any], cfg: Any, channel: Any, stops: Sequ
 def prepare_kernels(cells: Sequence[Cell]) -> None:
     """Compile the sweep kernels the cells need and the cache lacks, concurrently: the
     single-source kernel of a cell of one source, the kernel of many sources of the others."""
-    from corraoi.engine.kernel_pool import prepare
-    from corraoi.policies.api import CompiledPolicy
+    from corraoi.engine.kernel_pool import prepare_for
 
-    one: dict[str, type[CompiledPolicy]] = {}
-    many: dict[str, type[CompiledPolicy]] = {}
-    for cell in cells:
-        cls = cell.policy.resolve()
-        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            (many if cell.many else one)[cls.name] = cls
-    prepare(one.values(), record=False, many=many.values())
+    prepare_for(((cell.policy.resolve(), cell.many) for cell in cells), record=False)

@@ -376,17 +376,10 @@ def prepare_kernels(plans: Sequence[Plan]) -> None:
     at once, one worker process per core, before the first run starts (a run of several
     sources: the record kernel of many sources)."""
     from corraoi.engine import kernel_pool
-    from corraoi.policies.api import CompiledPolicy
 
-    one: dict[str, type[CompiledPolicy]] = {}
-    many: dict[str, type[CompiledPolicy]] = {}
-    for plan in plans:
-        if plan.config.streams != "cpu":  # a GPU sweep's run: the GPU kernel decides it
-            continue
-        cls = plan.config.policy.resolve()
-        if isinstance(cls, type) and issubclass(cls, CompiledPolicy):
-            (many if plan.config.sources > 1 else one)[cls.name] = cls
-    kernel_pool.prepare(one.values(), record=True, many=many.values())
+    kernel_pool.prepare_for(((p.config.policy.resolve(), p.config.sources > 1) for p in plans
+                             if p.config.streams == "cpu"),  # a GPU sweep's run: its kernel
+                            record=True)  # fmt: skip
 
 
 def record_plans(
