@@ -130,27 +130,33 @@ def draw_state(cdf_rows, kind, trace, lst, xprev, t):
 
 
 @njit(inline="always", cache=True)
-def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1, has2, pst, depth):
+def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1, has2, pst, depth,
+                  hint):
     """The correlated candidate set A_t + {k_emp} of one run (or source) at slot ``t`` into
-    ``cand`` (``in_s`` and ``fail`` are scratch); returns k_emp. Shared by the single-source
-    kernel (``depth`` 1) and the kernel of many sources (:mod:`corraoi.engine._sources_kernel`),
-    whose sources look for the M best arms (``depth`` M): the target is then the M-th best
-    empirical mean of S_t and the M best of S_t are candidates too."""
+    ``cand`` (``in_s`` and ``fail`` are scratch); returns the arm whose mean is the target
+    (k_emp at ``depth`` 1). Shared by the single-source kernel (``depth`` 1) and the kernel of
+    many sources (:mod:`corraoi.engine._sources_kernel`), whose sources look for the M best
+    arms (``depth`` M): the target is then the M-th best empirical mean of S_t and the M best
+    of S_t are candidates too. ``hint``: an arm to try first for that target (the one this
+    returned a slot ago, which usually still is: one count instead of half the arms'; -1 for
+    none); the target is the same whatever the hint."""
     W = comb.shape[2]
     # S_t: arms pulled at least (t-1)/K times; k_emp: the best of them
     for k in range(K):
         in_s[k] = npull[k] * K >= t - 1
     kemp = argmax_random(muhat, in_s, pst, K)
     target = muhat[kemp]
+    at = kemp
     if depth > 1:  # the depth-th best mean of S_t (its lowest when S_t holds fewer arms)
         n = 0
         for k in range(K):
             n += in_s[k]
         d = min(depth, n) - 1
-        for a in range(K):
+        for i in range(K + 1):  # the hint first, then every arm
             if d <= 0:
                 break
-            if not in_s[a]:
+            a = hint if i == 0 else i - 1
+            if a < 0 or not in_s[a]:
                 continue
             gt = 0
             ge = 0
@@ -159,6 +165,7 @@ def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1, has2,
                 ge += in_s[k] & (muhat[k] >= muhat[a])
             if gt <= d < ge:
                 target = muhat[a]
+                at = a
                 break
     # A_t: arms k with phi_hat_{k,l} >= mu_hat[k_emp] for every pulled l in S_t.
     # phi_hat_{k,l} is 0, l's failure rate, l's success rate or 1, by the 0/1
@@ -186,7 +193,7 @@ def candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1, has2,
         for k in range(K):
             if in_s[k] and muhat[k] >= target:
                 cand[k] = True
-    return kemp
+    return at
 
 
 @njit(inline="always", cache=True)
@@ -314,7 +321,7 @@ def advance(
                 forced = -1
             if correlated and forced < 0:
                 candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb, has1,
-                              has2, pst, 1)  # fmt: skip
+                              has2, pst, 1, -1)  # fmt: skip
             override = aware and maxmu > 0.0 and age * maxmu > 1.0
             if override or forced < 0:
                 # one argmax for both (each inlined site costs compile time): the override

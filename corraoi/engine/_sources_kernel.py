@@ -311,6 +311,9 @@ def advance(
         taken = np.empty(K, dtype=np.int64)  # np.zeros would become a parfor (the sweep
         mbest = np.empty(K, dtype=np.bool_)  # kernel's decorator): each is set before use
         byscore = np.empty(M, dtype=np.bool_)
+        target = np.empty(M, dtype=np.int64)  # the arm of each source's depth-M target
+        for m in range(M):  # (candidate_set's hint; any arm gives the same target)
+            target[m] = -1
         xp = xprev[r]
         for j in range(nslots):
             t = t0 + j + 1
@@ -350,8 +353,8 @@ def advance(
                         pick[k] = npull[k] == 0
                     forced = uniform_in(pick, pst, K)
                 if correlated and forced < 0:
-                    candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail, comb,
-                                  has1, has2, pst, M)  # fmt: skip
+                    target[m] = candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail,
+                                              comb, has1, has2, pst, M, target[m])
                 override = aware and maxmu > 0.0 and aoi[r, m] * maxmu > 1.0
                 scored = False
                 if rule == RULE_CHAIRS and (t <= learn or seated[r, m]):
