@@ -5,8 +5,10 @@ For each multi-source form and M in --sources, on a pinned random instance of K 
 channels and 64 hidden states: the sweep kernel of many sources
 (``corraoi.engine.sources.simulate_sources``) over --runs runs of --horizon slots, against
 the single-source sweep kernel of its base policy on the same seeds (``Simulation``), best
-of --repeat each, kernels compiled or loaded before timing. Prints the table; the ratio
-column is t(M sources) / (M x t(one source)), the target <= 1.20.
+of --repeat each, kernels compiled or loaded before timing. The single-source run and each M
+are timed alternately, round after round (the machine's speed drifts: each ratio compares
+times taken side by side). Prints the table; the ratio column is
+t(M sources) / (M x t(one source)), the target <= 1.20.
 
     python benchmarks/bench_sources.py [--runs 200] [--horizon 10000] [--repeat 3]
 
@@ -17,6 +19,7 @@ the wall clock (one engine thread: the two are the same work).
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 
 import numpy as np
@@ -35,13 +38,15 @@ def instance_k16():
     return Instance("k16", p, Y)
 
 
-def best_of(repeat: int, work, clock=time.perf_counter) -> float:
-    times = []
+def best_alternating(repeat: int, works: dict, clock=time.perf_counter) -> dict:
+    """The best of ``repeat`` times of each of ``works``, timed in turn round after round."""
+    best = dict.fromkeys(works, float("inf"))
     for _ in range(repeat):
-        start = clock()
-        work()
-        times.append(clock() - start)
-    return min(times)
+        for key, work in works.items():
+            start = clock()
+            work()
+            best[key] = min(best[key], clock() - start)
+    return best
 
 
 def main() -> None:
@@ -83,13 +88,14 @@ def main() -> None:
         def single(base=base) -> None:
             Simulation(inst, base, seeds, T).advance(T, record=False)
 
-        t1 = best_of(args.repeat, single, clock)
+        def many(M: int, spec=spec) -> None:
+            simulate_sources(inst, spec, seeds, T, M)
+
+        works = {1: single} | {M: functools.partial(many, M) for M in args.sources}
+        best = best_alternating(args.repeat, works, clock)
+        t1 = best[1]
         for M in args.sources:
-
-            def many(M=M, spec=spec) -> None:
-                simulate_sources(inst, spec, seeds, T, M)
-
-            tm = best_of(args.repeat, many, clock)
+            tm = best[M]
             ratio = tm / (M * t1)
             worst = max(worst, ratio)
             print(
