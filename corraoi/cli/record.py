@@ -114,7 +114,9 @@ def record(
 
     Each slot is logged with the hidden state, the channel played, success, AoI, the
     oracle's AoI, the pathwise regret, the paper's estimator, mu_hat and pulls per arm, the
-    candidate set and the AoI-aware override flag. Several policies run on the same seed,
+    candidate set, the AoI-aware override flag and why the channel was played (each arm's
+    score, whether the arm was forced, the override's threshold; docs/log-format.md lists
+    every field). Several policies run on the same seed,
     so their hidden paths are the same (paired runs); each gets its own pair of files.
     Ctrl-C (or SIGTERM) stops at the next block and leaves both files finished with the
     slots simulated so far (exit status 130).
