@@ -10,6 +10,12 @@ from typing import Any
 
 import numpy as np
 
+#: The runs of a sweep's cell worth watching, by name: the worst, best and median run by
+#: final regret, and in a cell of several sources the run of most collisions.
+#: ``corraoi.experiments.notable`` chooses them, the sweep log stores them and its recording
+#: draws them apart from the means (``corraoi.recorder.sweeplog.layout``).
+CELL_RUNS = ("worst", "best", "median", "most-collisions")
+
 # Student t 0.975 quantiles for 1..30 degrees of freedom.
 _T975 = (
     12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,

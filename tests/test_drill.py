@@ -93,6 +93,19 @@ def test_ties_go_to_the_lowest_run_and_the_median_is_the_lower_one() -> None:
     assert named["median"] == {"run": 0, "seed": 10, "regret": 3.0}  # sorted: 1 1 3 5 7 7
 
 
+def test_a_cells_named_runs_are_the_ones_the_sweep_recording_draws_apart() -> None:
+    # one list of a cell's runs (corraoi.stats.CELL_RUNS): what notable names, what --run
+    # takes, what the sweep recording leaves out of its overlay of means
+    from corraoi.experiments.notable import CHOICES
+    from corraoi.stats import CELL_RUNS
+
+    named = cell_runs(np.array([3.0, 7.0, 1.0]), seed=0, collisions=np.array([5, 2, 9]))
+    assert list(named) == list(CELL_RUNS)
+    assert named["most-collisions"] == {"run": 2, "seed": 2, "regret": 1.0, "collisions": 9}
+    assert list(cell_runs(np.array([3.0, 7.0]), seed=0)) == list(CELL_RUNS[:3])
+    assert set(CHOICES) == set(CELL_RUNS) | {"widest-gap"}
+
+
 def test_pairs_against_a_baseline_and_none_for_a_large_grid_without_one() -> None:
     rng = np.random.default_rng(1)
     finals = [rng.normal(size=20) for _ in range(4)]

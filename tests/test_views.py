@@ -534,7 +534,8 @@ def test_the_sweep_recording_is_named_and_tells_pull_shares_apart(tmp_path):
 def test_the_sweep_overlay_leaves_out_every_notable_run_of_several_sources():
     # a cell of several sources marks its run of most collisions too: one storm of 2,300
     # flattened the means in the overlay, drawn there as the worst run was before
-    from corraoi.recorder.sweeplog.layout import NOTABLE_KINDS, regret_path, sweep_blueprint
+    from corraoi.recorder.sweeplog.layout import regret_path, sweep_blueprint
+    from corraoi.stats import CELL_RUNS
 
     names = ["rhorand-ucb(M=2)", "chairs-ucb(M=2)"]
     config = {"instance": {"Y": [[1, 0], [0, 1], [1, 1]], "p": [0.5, 0.5]},
@@ -542,9 +543,8 @@ def test_the_sweep_overlay_leaves_out_every_notable_run_of_several_sources():
               "sources": [2], "notable": {"cells": {n: {} for n in names}}}  # fmt: skip
     found = views(sweep_blueprint(config))
     overlay = next(v for v in found if str(v.name).startswith("AoI regret"))
-    assert "most-collisions" in NOTABLE_KINDS
     for n in names:
-        for kind in NOTABLE_KINDS:
+        for kind in CELL_RUNS:
             assert f"- {regret_path(n)}/{kind}" in overlay.contents, (n, kind)
     watch = [str(v.name) for v in found if str(v.name).endswith("most collisions")]
     assert watch == [f"{n}: mean, worst, median, best run, most collisions" for n in names]

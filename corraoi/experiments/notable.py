@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
-#: What ``--run`` accepts besides a run index.
-CHOICES = ("worst", "best", "median", "widest-gap", "most-collisions")
+from corraoi.stats import CELL_RUNS
+
+#: What ``--run`` accepts besides a run index: a cell's runs, or a pair's widest gap.
+CHOICES = (*CELL_RUNS[:3], "widest-gap", *CELL_RUNS[3:])
 
 #: Cells in a group above which pairs are named only against a baseline.
 MAX_PAIRED_CELLS = 24

@@ -39,14 +39,12 @@ import rerun.blueprint as rrb
 from corraoi.recorder import style
 from corraoi.recorder.rerun.names import TIMELINE
 from corraoi.recorder.style import REGRET_UNIT, is_aoi_aware
+from corraoi.stats import CELL_RUNS
 
 ROOT = "sweep"
 #: More policies than this: the regret view opens as small multiples (base policies beside
 #: their AoI-aware forms), each legend short enough to fit.
 SMALL_MULTIPLES_FROM = 6
-#: The named runs of a cell drawn over its mean (corraoi.experiments.notable): a cell of
-#: several sources has its run of most collisions too.
-NOTABLE_KINDS = ("worst", "median", "best", "most-collisions")
 
 
 def entity_part(name: str) -> str:
@@ -135,7 +133,7 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
     # the runs worth watching (SweepRerunSink.mark) have a tab of their own: one worst run
     # of 1,400 would flatten means of 20 in the overlay
     notable = [p for p in names if p in ((config.get("notable") or {}).get("cells") or {})]
-    hidden = [f"- {regret_path(p)}/{k}" for p in notable for k in NOTABLE_KINDS]
+    hidden = [f"- {regret_path(p)}/{k}" for p in notable for k in CELL_RUNS]
     overlay = rrb.TimeSeriesView(
         origin=f"{ROOT}/regret", contents=[f"+ {ROOT}/regret/**", *hidden], name=title,
         plot_legend=legend, axis_x=axis,
@@ -220,7 +218,6 @@ def sweep_blueprint(config: dict[str, Any]) -> rrb.Blueprint:
 
 
 __all__ = [
-    "NOTABLE_KINDS",
     "ROOT",
     "SMALL_MULTIPLES_FROM",
     "collisions_path",
