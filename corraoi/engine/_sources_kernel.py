@@ -354,7 +354,7 @@ def advance(
                     forced = uniform_in(pick, pst, K)
                 if correlated and forced < 0:
                     target[m] = candidate_set(t, K, npull, nsucc, muhat, cand, in_s, fail,
-                                              comb, has1, has2, pst, M, target[m])
+                                              comb, has1, has2, pst, M, target[m])  # fmt: skip
                 override = aware and maxmu > 0.0 and aoi[r, m] * maxmu > 1.0
                 scored = False
                 if rule == RULE_CHAIRS and (t <= learn or seated[r, m]):
