@@ -62,6 +62,23 @@ def test_a_grid_is_the_product_of_its_lists():
     assert {c.policy.params["window"] for c in group if c.policy.name == "sw-ucb"} == {10, 50}
 
 
+def test_a_value_given_twice_is_one_cell_in_python_as_on_the_command_line():
+    # corraoi.sweep(["I1", "I1"]) and horizon=[50, 50] ended in "the grid names the same
+    # cell twice" (no argument named), while -i I1,I1, -T 50,50, a policy or a number of
+    # sources given twice ran each once
+    grid = build_grid(instances=["I1", "I2", "I1"], policies=["ucb", "cucb", "ucb"],
+                      horizons=[60, 50, 60], runs=3)  # fmt: skip
+    cells = [(c.instance.name, c.policy.name, c.horizon) for c in grid.cells]
+    assert len(cells) == len(set(cells)) == 2 * 2 * 2
+    assert cells[:4] == [("I1", "ucb", 60), ("I1", "cucb", 60), ("I1", "ucb", 50),
+                         ("I1", "cucb", 50)]  # fmt: skip
+    runner = CliRunner()
+    out = runner.invoke(main, ["sweep", "-i", "I1,I1", "-p", "ucb", "-T", "40,40", "-n", "2"])
+    assert out.exit_code == 0, out.output
+    assert out.output.count("instance I1, 2 runs") == 1  # one cell: one table,
+    assert out.output.count("\nucb ") == 2  # its row and its runs worth watching
+
+
 def test_chunks_cover_the_missing_runs():
     grid = build_grid(instances=["I1"], policies=["ucb"], horizons=[10], runs=10, chunk=4)
     cell = grid.cells[0]

@@ -317,6 +317,12 @@ def build_grid(
             for spec in specs:
                 for m in counts:
                     cells.append(Cell(inst, spec, int(h), chan, m))
+    # a value given twice (-i I1,I1, horizons [50, 50], one instance by two spellings) is one
+    # cell, as a policy or a number of sources given twice already were
+    first: dict[str, Cell] = {}
+    for c in cells:
+        first.setdefault(c.key, c)
+    cells = list(first.values())
     if baseline is not None and baseline not in {s.name for s in specs}:
         raise ConfigError(
             f"--baseline {baseline}: not one of the swept policies "
