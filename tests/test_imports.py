@@ -75,6 +75,13 @@ def test_reading_a_log_imports_neither_the_kernels_nor_package_metadata(logs: Pa
     assert _heavy(args, logs, ENGINE) == []
 
 
+def test_a_record_already_up_to_date_asks_no_package_its_version(logs: Path):
+    # it compares the log's engine-sources hash with this corraoi's: versions() gave it, and
+    # imported importlib.metadata (20 ms) and asked every package for its version
+    assert _heavy(["record", "--policy", "cucb", "-T", "300", "--no-rrd", "-o", "cucb.mcap"],
+                  logs, ("importlib.metadata",)) == []  # fmt: skip
+
+
 def test_info_of_a_sweep_folder_imports_nothing_heavy(logs: Path):
     folder = logs / "sweep"
     subprocess.run([sys.executable, "-m", "corraoi.cli", "sweep", "-p", "ucb,cucb", "-T", "200",

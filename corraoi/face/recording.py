@@ -259,7 +259,7 @@ def stale(plan: Plan) -> str | None:
     plug-in source's sha256), each compared with the run asked for, as the code is now: a
     policy edited and defined again in this session is other code."""
     from corraoi.errors import LogError
-    from corraoi.provenance import short, versions
+    from corraoi.provenance import kernel_sources_hash, short, sources_of
     from corraoi.recorder.slotlog.reader import open_log
 
     if not plan.mcap.is_file():
@@ -276,14 +276,14 @@ def stale(plan: Plan) -> str | None:
     if had != want:
         return f"another run ({_first_difference(had, want)})"
     then = log.provenance.get("kernel_sources")
-    now = versions()["kernel_sources"]
+    now = kernel_sources_hash()  # versions()'s, without asking the packages theirs
     if then != now:
         made = (f"engine sources {short(then)}" if then else
                 "no hash of its engine sources")  # fmt: skip
         return (f"this run as another corraoi made it ({made}, this corraoi's are "
                 f"{short(now)}: its numbers may differ)")  # fmt: skip
     logged = sorted(p["sha256"] for p in Provenance.read(log.provenance)["plugins"])
-    ran = sorted(s.sha256 for s in Provenance.of([plan.config.policy]).sources)
+    ran = sorted(s.sha256 for s in sources_of(plan.config.policy))
     if logged != ran:
         return "another run (the policy's plug-in sources differ from its log's)"
     return None
