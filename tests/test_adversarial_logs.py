@@ -346,7 +346,9 @@ def test_info_on_a_missing_log_points_to_its_partial(tmp_path):
 def test_info_on_a_log_being_written_names_its_writer(tmp_path):
     config = _config()
     blocks = list(simulate_run(config.instance, config.policy, 0, T))
-    with McapSink(tmp_path / "live.mcap", config, fsync=False) as sink:
+    # chunks written before write() returns (a background writer's last chunk may still be
+    # on its way when info reads)
+    with McapSink(tmp_path / "live.mcap", config, fsync=False, background=False) as sink:
         for b in blocks[:2]:
             sink.write(b)
         res = cli("info", tmp_path / "live.mcap.partial", "--json")

@@ -188,6 +188,20 @@ def test_ctrl_c_closes_the_log_interrupted_with_every_slot_given(tmp_path):
     assert got.status == "interrupted" and got.finished and got.n_slots == 1500
 
 
+def test_a_chunk_is_on_disk_when_its_last_slot_returns(tmp_path):
+    """A Logger's slots cannot be run again: the chunk that slot 1000 closes is written by
+    the time log.slot returns (not left to a thread, as `corraoi record` does)."""
+    import threading
+
+    path = tmp_path / "now.mcap"
+    with corraoi.Logger(path, instance="I1", horizon=5000) as log:
+        for t in range(1, 1001):
+            log.slot(2 if t % 3 else 1, t % 3 != 0)
+        assert not [t for t in threading.enumerate() if t.name == "corraoi-mcap-chunks"]
+        assert open_log(Path(f"{path}.partial")).n_slots == 1000
+    assert open_log(path).n_slots == 1000
+
+
 _WRITER = textwrap.dedent(
     """
     import sys, time, corraoi

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import struct
+import threading
 
 import numpy as np
 import orjson
@@ -48,9 +49,10 @@ def _reference(messages: list[tuple[int, bytes]], every: int) -> bytes:
 
 
 def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3,
-          framed: int = 0) -> bytes:  # fmt: skip
+          framed: int = 0, background: bool = False) -> bytes:  # fmt: skip
     """ChunkWriter's file: a message an ``add_messages`` call, or (``framed`` > 0) that many
-    messages a ``frame`` call, added a message at a time (``add_framed`` of its slices)."""
+    messages a ``frame`` call, added a message at a time (``add_framed`` of its slices);
+    ``background``: its chunks written by its thread."""
     buf = io.BytesIO()
     w = ChunkWriter(
         buf,
@@ -60,6 +62,7 @@ def _ours(messages: list[tuple[int, bytes]], every: int, zstd_level: int = 3,
         ),  # fmt: skip
         library="corraoi/test",
         zstd_level=zstd_level,
+        background=background,
     )
     w.start()
     w.add_metadata("a", {"k": "v"})
@@ -87,6 +90,7 @@ def test_same_bytes_as_the_mcap_writer_without_its_empty_group(count):
     values = rng.integers(0, 10**6, count).tolist()
     messages = [(t, b'{"v":%d}' % v * (1 + t % 3)) for t, v in enumerate(values, start=1)]
     assert _ours(messages, every=10, zstd_level=3) == _reference(messages, every=10)
+    assert _ours(messages, every=10, zstd_level=3, background=True) == _reference(messages, 10)
     ours = _ours(messages, every=10, zstd_level=ZSTD_LEVEL)  # what McapSink writes
     reader = make_reader(io.BytesIO(ours), validate_crcs=True)
     got = [(m.log_time, m.publish_time, m.sequence, m.data) for _, _, m in reader.iter_messages()]
@@ -102,6 +106,7 @@ def test_framed_messages_are_the_same_bytes(framed):
     messages = [(t, b'{"v":%d}' % v * (1 + t % 3))
                 for t, v in enumerate(rng.integers(0, 10**6, 30).tolist(), start=1)]  # fmt: skip
     assert _ours(messages, every=10, framed=framed) == _ours(messages, every=10)
+    assert _ours(messages, every=10, framed=framed, background=True) == _ours(messages, 10)
     assert _ours(messages, every=10, zstd_level=3, framed=framed) == _reference(messages, 10)
     buf = io.BytesIO()
     w = ChunkWriter(buf, schema=Schema(id=1, name="s", encoding="jsonschema", data=b"{}"),
@@ -172,6 +177,63 @@ def test_bytes_do_not_depend_on_the_block_size(tmp_path, make_config, engine, bl
         paths.append(path)
     assert paths[0].read_bytes() == paths[1].read_bytes()
     assert open_log(paths[1]).read_all().equals(SlotBlock.concat(engine(config)))
+
+
+def _chunk_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "corraoi-mcap-chunks"]
+
+
+@pytest.mark.parametrize("background", [True, False])
+def test_a_log_written_in_the_background_is_the_same_file(tmp_path, make_config, engine,
+                                                          background):  # fmt: skip
+    """McapSink's chunks compressed and written by a thread (``background``, what
+    ``corraoi record`` does on more than one core) make the same bytes; the thread ends
+    with the file."""
+    config = make_config("aoi-aware-cucb", horizon=3 * FLUSH_EVERY + 5)
+    paths = []
+    for bg in (False, background):
+        path = tmp_path / f"{bg}-{len(paths)}.mcap"
+        with McapSink(path, config, fsync=False, background=bg) as sink:
+            for b in engine(config, block=700):
+                sink.write(b)
+                assert len(_chunk_threads()) == (1 if bg and sink.slots >= FLUSH_EVERY else 0)
+        assert not _chunk_threads()
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+
+
+class _FullDisk(io.BytesIO):
+    """A stream that refuses every write past ``room`` bytes, as a full disk does."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__()
+        self.room = room
+
+    def write(self, data) -> int:  # type: ignore[no-untyped-def, override]
+        if self.tell() + len(data) > self.room:
+            raise OSError(28, "No space left on device")
+        return super().write(data)
+
+
+def test_a_chunk_that_fails_in_the_background_raises_in_the_writer():
+    """A full disk met by the thread is raised by the writer's next call that writes
+    (and by finish()), never lost; the thread ends."""
+    schema = Schema(id=1, name="s", encoding="jsonschema", data=b"{}")
+    channel = Channel(id=1, topic="/x", message_encoding="json", schema_id=1, metadata={})
+    w = ChunkWriter(_FullDisk(600), schema=schema, channel=channel, library="corraoi/test",
+                    background=True)  # fmt: skip
+    w.start()
+    rng = np.random.default_rng(0)
+    with pytest.raises(OSError, match="No space left"):  # by a later flush()
+        for t in range(1, 200):
+            w.add_messages(np.array([t], dtype=np.uint64), np.array([t]),
+                           [b'{"v":%d}' % rng.integers(10**9)])  # fmt: skip
+            w.flush()
+    assert t < 199
+    with pytest.raises(OSError, match="No space left"):
+        w.finish()
+    w.stop()
+    assert not _chunk_threads()
 
 
 #: The per-slot template the encoder used before it joined whole columns: the reference.

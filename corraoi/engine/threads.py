@@ -17,8 +17,14 @@ import numpy as np
 from corraoi._signals import raise_if_asked
 from corraoi.errors import ConfigError
 
+
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity), at least 1."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+
+
 #: Threads that share a kernel call's runs (set_workers); every core by default.
-_workers = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+_workers = cores()
 #: Below this many run-slots a call stays on the calling thread (a thread's start costs more).
 _THREAD_MIN_WORK = 200_000
 #: A kernel call (one slice of runs, some slots) takes about this long at most, so that
@@ -54,7 +60,7 @@ def shutdown() -> None:
 def set_workers(workers: int | None) -> int:
     """Use ``workers`` threads per kernel call (default: every core). Returns the count used."""
     global _workers
-    top = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+    top = cores()
     if workers is None:
         workers = top
     if workers < 1:

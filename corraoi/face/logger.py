@@ -403,7 +403,10 @@ class Logger:
                     LocalRecording(self.config, rrd_path=self.rrd, overwrite=self.overwrite)
                 )
             self._log = stack.enter_context(
-                McapSink(self.path, self.config, overwrite=self.overwrite, provenance=provenance)
+                # each chunk written before the next slot is taken: slots that cannot be
+                # run again are lost to a kill only after the last multiple of flush_every
+                McapSink(self.path, self.config, overwrite=self.overwrite, provenance=provenance,
+                         background=False)  # fmt: skip
             )
             self._every = [self._log, *([recording] if recording is not None else []),
                            *(stack.enter_context(s) for s in self._sinks)]  # fmt: skip

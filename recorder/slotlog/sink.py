@@ -4,8 +4,9 @@ several sources: one per slot and source, each source on its own channel).
 The file is written as ``<path>.partial`` and renamed to ``<path>`` when it is finished,
 so a file at ``<path>`` is always complete. Every :data:`~corraoi.recorder.vocab.SLOT_FLUSH_EVERY`
 slots the current chunk is closed and handed to the operating system, so a writer killed
-with SIGKILL loses at most that many slots: the reader recovers every complete chunk of
-the ``.partial`` file and says the log was cut short.
+with SIGKILL loses at most that many slots (and the chunk before them, if it was still
+being written in the background): the reader recovers every complete chunk of the
+``.partial`` file and says the log was cut short.
 
 The chunks are framed by :class:`corraoi.recorder.slotlog.chunks.ChunkWriter` (whole chunks built
 with numpy; see there why), not by ``mcap.writer.Writer`` one message at a time.
@@ -23,6 +24,7 @@ import numpy as np
 from mcap.records import Channel, Schema
 
 from corraoi.engine.block import RunBlock, RunConfig, SlotBlock, SourcesBlock
+from corraoi.engine.threads import cores
 from corraoi.errors import ConfigError, CorraoiError, WriteError
 from corraoi.files.partial import PartialFile, reason
 from corraoi.provenance import Provenance
@@ -73,6 +75,12 @@ class McapSink(Sink[RunBlock]):
     normally or by KeyboardInterrupt finishes the file with the slots written so far and
     renames it into place; any other exception leaves the ``.partial`` file as it is (the
     reader recovers its complete chunks). Closing twice is safe.
+
+    ``background``: each finished chunk is compressed and written by a thread while the
+    next slots are encoded (:class:`ChunkWriter`), so a writer killed outright may also
+    lose the chunk being written, ``flush_every`` slots more. None (the default): when
+    this process may use more than one core. A log of slots that cannot be run again
+    (``corraoi.Logger``) says False.
     """
 
     takes_sources = True  # a run of several sources too (Sink.takes_sources)
@@ -86,6 +94,7 @@ class McapSink(Sink[RunBlock]):
         flush_every: int = FLUSH_EVERY,
         fsync: bool = True,
         provenance: Provenance | None = None,
+        background: bool | None = None,
     ) -> None:
         if flush_every < 1:
             raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
@@ -128,6 +137,7 @@ class McapSink(Sink[RunBlock]):
                 channel=channels[0],
                 more_channels=channels[1:],
                 library=library_name(config.version),
+                background=cores() > 1 if background is None else background,
             )
             self._writer.start()
             self._writer.add_metadata(RUN_METADATA, run_metadata(config, flush_every=flush_every))
@@ -296,6 +306,7 @@ class McapSink(Sink[RunBlock]):
             try:
                 if not self._torn:
                     self._writer.flush()
+                self._writer.stop()
             except OSError:
                 pass
             if self.slots == 0 and not self._torn:
@@ -307,6 +318,12 @@ class McapSink(Sink[RunBlock]):
 
     def _close_file(self) -> None:
         """Keep the ``.partial`` file as it is and release its lock (safe twice)."""
+        writer = getattr(self, "_writer", None)
+        if writer is not None:
+            try:  # the chunk being written is written first
+                writer.stop()
+            except OSError:
+                pass  # already cut off: the file is kept as it is
         self._out.leave()
 
     def _write_error(self, exc: OSError) -> WriteError:
