@@ -1,9 +1,10 @@
 """What bench_record.py and bench_replay.py share: the instance for ``--arms K`` and the
 ``--baseline DIR`` rounds (this checkout and another one, alternately, in child processes).
 
-The children run the benchmark script of this checkout with ``--json`` and the packages of
-the checkout being timed first on PYTHONPATH (``git worktree add /tmp/base <commit>`` or
-``git archive <commit> | tar -x -C /tmp/base``), each with a kernel cache of its own; the
+The children run the benchmark script of this checkout with ``--json`` and the code of the
+checkout being timed (``git worktree add /tmp/base <commit>`` or ``git archive <commit> |
+tar -x -C /tmp/base``; ``checkouts.pythonpath``: its corraoi, recorder and viewer, in
+either layout, never the installed ones), each with a kernel cache of its own; the
 two alternate, round after round, so that both see the same machine, and each row keeps
 its best time.
 """
@@ -16,6 +17,8 @@ import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+from checkouts import pythonpath
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -53,7 +56,7 @@ def alternate(script: Path, argv: list[str], baseline: Path, rounds: int,
     for i in range(rounds):
         # which goes first changes every round: the first of a pair ran faster here
         for key, root in list(roots.items())[:: 1 if i % 2 == 0 else -1]:
-            env = {**os.environ, "PYTHONPATH": str(root),
+            env = {**os.environ, "PYTHONPATH": pythonpath(root),
                    "CORRAOI_CACHE_DIR": str(work / f"cache-{key}"), "RUST_LOG": "off"}
             proc = subprocess.run([sys.executable, str(script), *argv, "--json"], env=env,
                                   capture_output=True, text=True)  # fmt: skip

@@ -17,7 +17,8 @@ then peak memory (max RSS of a fresh process) at T = 10,000 and 1,000,000.
 
 With ``--against REV`` it prints one table instead: table 1's rows (the paper's twelve, their
 total, and the compiled plug-in) for the code at REV (``git archive`` into a temporary
-folder, its own kernel cache; or REV a folder holding that code's ``corraoi/``) and for
+folder, its own kernel cache; or REV a folder holding that code's ``corraoi/``, with its
+``recorder/`` and ``viewer/``; run by ``checkouts.pythonpath``, never the installed code) and for
 this checkout, each side in fresh processes that alternate (before, after, after, before,
 ...), ``--repeat`` of each, best per row: what a change to the engine costs
 (docs/performance.md, the hook checks of issue 32).
@@ -41,6 +42,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from checkouts import MAPPED, pythonpath
 
 ROOT = Path(__file__).resolve().parent.parent
 PLUGIN = ROOT / "tests" / "plugins" / "eps_greedy.py"
@@ -117,9 +120,11 @@ def against(rev: str, runs: int, horizon: int, repeat: int, instance: str = "I1"
     names = [*paper_names(), COMPILED]
     tmp = Path(tempfile.mkdtemp(prefix="corraoi-bench-"))
     if Path(rev, "corraoi").is_dir():  # a folder that holds the other code's corraoi/
-        shutil.copytree(Path(rev, "corraoi"), tmp / "corraoi")
+        for pkg in ("corraoi", *MAPPED):
+            if Path(rev, pkg).is_dir():
+                shutil.copytree(Path(rev, pkg), tmp / pkg)
     else:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi"],
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "corraoi", *MAPPED],
                                  capture_output=True, check=True)  # fmt: skip
         subprocess.run(["tar", "-x", "-C", str(tmp)], input=archive.stdout, check=True)
     sides = {"before": (tmp, tmp / "cache"), "after": (ROOT, ROOT / ".cache-corraoi")}
@@ -131,7 +136,7 @@ def against(rev: str, runs: int, horizon: int, repeat: int, instance: str = "I1"
 
     def run(side: str) -> dict[str, list[float]]:
         path, cache = sides[side]
-        env = {**os.environ, "PYTHONPATH": str(path), "CORRAOI_CACHE_DIR": str(cache)}
+        env = {**os.environ, "PYTHONPATH": pythonpath(path), "CORRAOI_CACHE_DIR": str(cache)}
         out = subprocess.run([sys.executable, "-c", _SIDE, json.dumps(names), str(runs),
                               str(horizon), instance, str(Path(__file__).parent)], env=env,
                              capture_output=True, text=True, check=True, cwd=empty)  # fmt: skip

@@ -2,9 +2,10 @@
 
 Times each command as a user types it, best of --repeat (and the median), warm kernel cache
 unless the row says "empty cache". With ``--baseline DIR`` (another checkout, for example
-``git worktree add /tmp/base <commit>``) every command is also timed with that checkout on
-PYTHONPATH, alternating the two so that both see the same machine; the table then has a
-column for each.
+``git worktree add /tmp/base <commit>``) every command is also timed with that checkout's
+code (``checkouts.pythonpath``: its corraoi, recorder and viewer in either layout, never the
+installed ones; this checkout's likewise), alternating the two so that both see the same
+machine; the table then has a column for each.
 
     python benchmarks/bench_start.py [--repeat 5] [--baseline /tmp/base | --against REV]
                                      [--skip-cold] [--no-workers] [--only ROW,ROW] [--keep DIR]
@@ -43,6 +44,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from checkouts import pythonpath
+
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ["sweep", "-i", "I1", "-p", "all", "--runs", "200", "-T", "10000", "--json"]
 BUILTINS = ("ucb,ts,ts-gauss,cucb,cts,cts-gauss,q-ucb,cq-ucb,q-ts,cq-ts,sw-ucb,d-ts,aoi-aware-ucb,"
@@ -60,7 +63,7 @@ def corraoi(
     ok: tuple[int, ...] = (0,),
     env_extra: dict[str, str] | None = None,
 ) -> tuple[float, float]:
-    env = {**os.environ, "PYTHONPATH": str(root), "CORRAOI_CACHE_DIR": str(cache),
+    env = {**os.environ, "PYTHONPATH": pythonpath(root), "CORRAOI_CACHE_DIR": str(cache),
            **(env_extra or {})}  # fmt: skip
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
