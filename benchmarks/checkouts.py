@@ -19,6 +19,7 @@ itself. :func:`where` says, in a child, where each of the three came from.
 from __future__ import annotations
 
 import hashlib
+import os
 import tempfile
 from pathlib import Path
 
@@ -104,7 +105,7 @@ def pythonpath(root: Path) -> str:
         tmp = folder / f".sitecustomize.{key}.tmp"
         tmp.write_text(shim, encoding="utf-8")
         tmp.replace(folder / "sitecustomize.py")
-    return f"{folder}:{root}"
+    return os.pathsep.join([str(folder), str(root)])
 
 
 #: A child's report of its code: run with ``python -c WHERE``, it prints one JSON object.
