@@ -13,7 +13,7 @@ the one-package layout (224f28d, 2347ea6) imports them as top-level ``recorder``
 ``sitecustomize.py`` that puts a finder first in ``sys.meta_path``, mapping ``corraoi``,
 ``corraoi.recorder`` and ``corraoi.viewer`` onto the checkout's folders (in the older layout,
 ``corraoi.recorder`` and ``corraoi.viewer`` onto its top-level packages), then the checkout
-itself. :func:`where` says, in a child, where each of the three came from.
+itself.
 """
 
 from __future__ import annotations
@@ -54,14 +54,12 @@ class _Alias(importlib.abc.Loader):
 
 class _Checkout(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
+        sub = name.split(".")
         if name == "corraoi":
             folder = ROOT + "/corraoi"
-        elif name.partition(".")[0] != "corraoi" or name.count(".") == 0:
-            return None
+        elif sub[0] != "corraoi" or sub[1] not in MAPPED:
+            return None  # another package, or corraoi's own subpackages (its __path__)
         else:
-            sub = name.split(".")
-            if len(sub) < 2 or sub[1] not in MAPPED:
-                return None
             if OLD_LAYOUT:
                 old = ".".join(sub[1:])
                 spec = importlib.util.find_spec(old)
@@ -108,12 +106,4 @@ def pythonpath(root: Path) -> str:
     return os.pathsep.join([str(folder), str(root)])
 
 
-#: A child's report of its code: run with ``python -c WHERE``, it prints one JSON object.
-WHERE = (
-    "import json, corraoi, corraoi.recorder, corraoi.viewer\n"
-    "print(json.dumps({m.__name__: m.__file__ for m in (corraoi, corraoi.recorder,"
-    " corraoi.viewer)}))\n"
-)
-
-
-__all__ = ["MAPPED", "WHERE", "old_layout", "pythonpath"]
+__all__ = ["MAPPED", "old_layout", "pythonpath"]

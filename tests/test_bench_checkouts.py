@@ -35,11 +35,11 @@ def test_a_copy_of_this_checkout_runs_its_own_recorder_and_viewer(tmp_path):
     for pkg in ("corraoi", *checkouts.MAPPED):
         shutil.copytree(ROOT / pkg, copy / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     assert not checkouts.old_layout(copy)
-    code = checkouts.WHERE.replace(
-        "corraoi.viewer)}))",
-        "corraoi.viewer, __import__('corraoi.recorder.slotlog.chunks').recorder.slotlog.chunks,"
-        " __import__('corraoi.viewer.diffs').viewer.diffs)}))",
-    )
+    code = ("import json, corraoi, corraoi.recorder, corraoi.viewer\n"
+            "import corraoi.recorder.slotlog.chunks, corraoi.viewer.diffs\n"
+            "mods = (corraoi, corraoi.recorder, corraoi.viewer,\n"
+            "        corraoi.recorder.slotlog.chunks, corraoi.viewer.diffs)\n"
+            "print(json.dumps({m.__name__: m.__file__ for m in mods}))\n")  # fmt: skip
     found = _child(checkouts.pythonpath(copy), code, tmp_path)
     assert set(found) == {"corraoi", "corraoi.recorder", "corraoi.viewer",
                           "corraoi.recorder.slotlog.chunks", "corraoi.viewer.diffs"}  # fmt: skip
